@@ -1,0 +1,1 @@
+//! psao-eval

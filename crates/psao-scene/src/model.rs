@@ -1,0 +1,230 @@
+//! The in-memory scene: meshes, materials, node hierarchy, instances, skins and animations.
+
+use glam::{Affine3A, Mat4, Quat, Vec2, Vec3, Vec4};
+
+/// A triangle mesh in its own local space (one glTF primitive or one OBJ object).
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    /// Human-readable name (from the file, or generated).
+    pub name: String,
+    /// Vertex positions in mesh-local space, metres.
+    pub positions: Vec<Vec3>,
+    /// Unit vertex normals, one per position (computed when the file has none).
+    pub normals: Vec<Vec3>,
+    /// Texture coordinates, one per position, or empty when the file has none.
+    pub uvs: Vec<Vec2>,
+    /// Triangles as counter-clockwise (front-facing) vertex index triples.
+    pub indices: Vec<[u32; 3]>,
+    /// Index into [`Scene::materials`].
+    pub material: usize,
+    /// Skinning joints (indices into the skin's joint list), one per position; empty when not skinned.
+    pub joints: Vec<[u16; 4]>,
+    /// Skinning weights, one per position, renormalised to sum to 1; empty when not skinned.
+    pub weights: Vec<[f32; 4]>,
+}
+
+/// How a material treats alpha (glTF `alphaMode`).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum AlphaMode {
+    /// Fully opaque.
+    #[default]
+    Opaque,
+    /// Alpha-tested with the given cutoff; rays skip such geometry (DESIGN §2).
+    Mask {
+        /// Texels with alpha below this are cut out.
+        cutoff: f32,
+    },
+    /// Alpha-blended (treated as opaque for AO).
+    Blend,
+}
+
+/// Surface properties psao needs: colour for base shading and flags for AO and corrections.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name from the file, or generated.
+    pub name: String,
+    /// Linear RGBA base colour factor.
+    pub base_color: Vec4,
+    /// Whether both faces are rendered and receive points.
+    pub double_sided: bool,
+    /// Alpha handling.
+    pub alpha_mode: AlphaMode,
+    /// glTF metallic factor (0 for OBJ).
+    pub metallic: f32,
+    /// glTF roughness factor (1 for OBJ).
+    pub roughness: f32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Self {
+            name: "default".into(),
+            base_color: Vec4::new(0.8, 0.8, 0.8, 1.0),
+            double_sided: false,
+            alpha_mode: AlphaMode::Opaque,
+            metallic: 0.0,
+            roughness: 1.0,
+        }
+    }
+}
+
+impl Material {
+    /// True for glossy or metallic surfaces that a purely diffuse solution cannot shade.
+    pub fn is_non_diffuse(&self) -> bool {
+        self.metallic > 0.5 || self.roughness < 0.3
+    }
+    /// True when AO rays pass through this material's geometry.
+    pub fn skipped_by_rays(&self) -> bool {
+        matches!(self.alpha_mode, AlphaMode::Mask { .. })
+    }
+}
+
+/// A node of the flattened-but-kept hierarchy, used by animation to recompute instance transforms.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Node {
+    /// Name from the file.
+    pub name: String,
+    /// Parent node index, `None` for roots.
+    pub parent: Option<usize>,
+    /// Local translation.
+    pub translation: Vec3,
+    /// Local rotation.
+    pub rotation: Quat,
+    /// Local scale.
+    pub scale: Vec3,
+}
+
+impl Node {
+    /// The node's local transform (T·R·S).
+    pub fn local_transform(&self) -> Affine3A {
+        Affine3A::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
+    }
+}
+
+/// One placed copy of a mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    /// Index into [`Scene::meshes`].
+    pub mesh: usize,
+    /// The node that places it, when it comes from a hierarchy.
+    pub node: Option<usize>,
+    /// Mesh-local to world transform at scene time 0 (for skinned meshes: the skeleton's space).
+    pub transform: Affine3A,
+    /// Index into [`Scene::skins`] when the mesh is skinned.
+    pub skin: Option<usize>,
+}
+
+/// A glTF skin: the joints that deform a mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Skin {
+    /// Name from the file.
+    pub name: String,
+    /// Joint node indices.
+    pub joints: Vec<usize>,
+    /// One inverse bind matrix per joint.
+    pub inverse_bind: Vec<Mat4>,
+}
+
+/// What an animation channel drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AnimatedProperty {
+    /// Node translation (3 floats per key).
+    Translation,
+    /// Node rotation quaternion x, y, z, w (4 floats per key).
+    Rotation,
+    /// Node scale (3 floats per key).
+    Scale,
+}
+
+/// Keyframe interpolation (glTF sampler interpolation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interpolation {
+    /// Hold the previous key.
+    Step,
+    /// Linear (slerp for rotations).
+    Linear,
+    /// Cubic Hermite spline with in/out tangents stored around each value.
+    CubicSpline,
+}
+
+/// One animated property of one node.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Channel {
+    /// Target node index.
+    pub node: usize,
+    /// Target property.
+    pub property: AnimatedProperty,
+    /// Interpolation between keys.
+    pub interpolation: Interpolation,
+    /// Key times in seconds, increasing.
+    pub times: Vec<f32>,
+    /// Flat key values; for cubic spline, (in-tangent, value, out-tangent) per key.
+    pub values: Vec<f32>,
+}
+
+/// A named animation clip.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Animation {
+    /// Clip name.
+    pub name: String,
+    /// Its channels.
+    pub channels: Vec<Channel>,
+}
+
+impl Animation {
+    /// Length of the clip in seconds (last key time over all channels).
+    pub fn duration(&self) -> f32 {
+        self.channels
+            .iter()
+            .filter_map(|c| c.times.last().copied())
+            .fold(0.0, f32::max)
+    }
+}
+
+/// A whole scene ready for tracing and rasterizing.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// Meshes, shared by instances.
+    pub meshes: Vec<Mesh>,
+    /// Materials, indexed by [`Mesh::material`].
+    pub materials: Vec<Material>,
+    /// Node hierarchy (may be empty for OBJ).
+    pub nodes: Vec<Node>,
+    /// Placed meshes.
+    pub instances: Vec<Instance>,
+    /// Skins.
+    pub skins: Vec<Skin>,
+    /// Animation clips.
+    pub animations: Vec<Animation>,
+    /// Indices into [`Scene::animations`] that play.
+    pub playing: Vec<usize>,
+    /// AO ray length in scene units (DESIGN §2 default 0.6).
+    pub ao_radius: f32,
+}
+
+/// Default AO radius in metres (DESIGN §2).
+pub const DEFAULT_AO_RADIUS: f32 = 0.6;
+
+impl Scene {
+    /// Total triangle count over all instances.
+    pub fn instanced_triangle_count(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|i| self.meshes[i.mesh].indices.len())
+            .sum()
+    }
+
+    /// World-space bounds (min, max) of all instances at their current transforms.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for inst in &self.instances {
+            for p in &self.meshes[inst.mesh].positions {
+                let w = inst.transform.transform_point3(*p);
+                lo = lo.min(w);
+                hi = hi.max(w);
+            }
+        }
+        (lo, hi)
+    }
+}
