@@ -34,12 +34,12 @@ impl Camera {
 
     /// World-to-view matrix (right-handed, camera looks down −z).
     pub fn view(&self) -> Mat4 {
-        Mat4::look_at_rh(self.position, self.target, self.up)
+        glam::camera::rh::view::look_at_mat4(self.position, self.target, self.up)
     }
 
     /// View-to-clip matrix for an image of the given aspect (width / height), depth in [0, 1].
     pub fn projection(&self, aspect: f32) -> Mat4 {
-        Mat4::perspective_rh(self.fov_y, aspect, self.near, self.far)
+        glam::camera::rh::proj::directx::perspective(self.fov_y, aspect, self.near, self.far)
     }
 
     /// World-space direction of the primary ray through pixel coordinates (`px`, `py`)
