@@ -1,0 +1,167 @@
+//! Triangle setup: clip, project to fixed-point screen coordinates, and build edge functions
+//! with the top-left fill rule.
+
+use glam::{Vec3, Vec4};
+
+use crate::clip::{ClipVolume, MAX_VERTS};
+use crate::view::View;
+
+/// Sub-pixel precision in bits.
+const SUBPIXEL_BITS: u32 = 8;
+/// One pixel in fixed point.
+const ONE: i64 = 1 << SUBPIXEL_BITS;
+/// Half a pixel in fixed point (pixel centres sit at half-integers).
+const HALF: i64 = ONE / 2;
+/// Largest supported image side; larger requests are clamped.
+pub const MAX_DIMENSION: u32 = 1 << 14;
+/// Guard band around the image in pixels. Image side plus guard band stays below 2^16 pixels,
+/// so fixed-point coordinates fit in 25 bits and edge-function products in 52 bits.
+const GUARD_PIXELS: f32 = (1 << 15) as f32;
+
+/// A screen-space triangle ready for scan conversion.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SetupTri {
+    /// Pixel bounding box (inclusive), clamped to the image.
+    pub min_x: u32,
+    /// See `min_x`.
+    pub min_y: u32,
+    /// See `min_x`.
+    pub max_x: u32,
+    /// See `min_x`.
+    pub max_y: u32,
+    /// Biased edge functions at the centre of pixel (`min_x`, `min_y`); a pixel is covered when
+    /// all three are ≥ 0.
+    pub edge: [i64; 3],
+    /// Edge-function increment per pixel step in x.
+    pub step_x: [i64; 3],
+    /// Edge-function increment per pixel step in y.
+    pub step_y: [i64; 3],
+    /// 1/depth = a·x + b·y + c at the centre of pixel (x, y).
+    pub inv_depth: [f64; 3],
+    /// Global triangle id.
+    pub id: u32,
+}
+
+/// Converts world-space triangles into [`SetupTri`]s for one view.
+pub(crate) struct TriangleSetup<'a> {
+    view: &'a View,
+    volume: ClipVolume,
+    cull_backfaces: bool,
+}
+
+impl<'a> TriangleSetup<'a> {
+    /// Setup for `view`, culling back faces (counter-clockwise = front) when asked.
+    pub fn new(view: &'a View, cull_backfaces: bool) -> Self {
+        let volume = ClipVolume {
+            near: view.near,
+            gx: 1.0 + 2.0 * GUARD_PIXELS / view.width as f32,
+            gy: 1.0 + 2.0 * GUARD_PIXELS / view.height as f32,
+        };
+        Self {
+            view,
+            volume,
+            cull_backfaces,
+        }
+    }
+
+    /// Appends the screen triangles of world triangle `world` (clip coordinates `clip`) to `out`.
+    /// `cull` enables back-face culling for this triangle (combined with the setup's flag).
+    pub fn push(
+        &self,
+        id: u32,
+        world: [Vec3; 3],
+        clip: [Vec4; 3],
+        cull: bool,
+        out: &mut Vec<SetupTri>,
+    ) {
+        if !clip.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        let Some(poly) = self.volume.clip(clip) else {
+            return;
+        };
+        let Some(inv_depth) = self.view.inverse_depth_plane(world) else {
+            return;
+        };
+        let verts = poly.verts();
+        let mut fixed = [[0i64; 2]; MAX_VERTS];
+        for (f, &v) in fixed.iter_mut().zip(verts) {
+            *f = self.to_fixed(v);
+        }
+        for i in 1..verts.len() - 1 {
+            let tri = [fixed[0], fixed[i], fixed[i + 1]];
+            if let Some(t) = self.edges(tri, inv_depth, id, cull && self.cull_backfaces) {
+                out.push(t);
+            }
+        }
+    }
+
+    /// Perspective divide and viewport transform to fixed-point pixels (y down).
+    fn to_fixed(&self, v: Vec4) -> [i64; 2] {
+        let limit = 2.0 * GUARD_PIXELS + MAX_DIMENSION as f32;
+        let x = (v.x / v.w * 0.5 + 0.5) * self.view.width as f32;
+        let y = (0.5 - v.y / v.w * 0.5) * self.view.height as f32;
+        // Round half away from zero (in f64, exact at these magnitudes) without a libm call.
+        let snap = |p: f32| {
+            let v = f64::from(p.clamp(-limit, limit)) * ONE as f64;
+            (v + 0.5f64.copysign(v)) as i64
+        };
+        [snap(x), snap(y)]
+    }
+
+    /// Edge functions and bounds of one screen triangle, `None` when it covers no pixel centre.
+    fn edges(
+        &self,
+        mut t: [[i64; 2]; 3],
+        inv_depth: [f64; 3],
+        id: u32,
+        cull: bool,
+    ) -> Option<SetupTri> {
+        let area =
+            (t[1][0] - t[0][0]) * (t[2][1] - t[0][1]) - (t[1][1] - t[0][1]) * (t[2][0] - t[0][0]);
+        // With y pointing down, a front-facing (counter-clockwise) triangle has negative area.
+        if area == 0 || (cull && area > 0) {
+            return None;
+        }
+        if area < 0 {
+            t.swap(1, 2);
+        }
+        let lo = |k: usize| t.iter().map(|p| p[k]).min().unwrap_or(0);
+        let hi = |k: usize| t.iter().map(|p| p[k]).max().unwrap_or(0);
+        // Pixel x is sampled at x·ONE + HALF.
+        let first = |v: i64| -(-(v - HALF)).div_euclid(ONE);
+        let last = |v: i64| (v - HALF).div_euclid(ONE);
+        let min_x = first(lo(0)).max(0);
+        let min_y = first(lo(1)).max(0);
+        let max_x = last(hi(0)).min(self.view.width as i64 - 1);
+        let max_y = last(hi(1)).min(self.view.height as i64 - 1);
+        if min_x > max_x || min_y > max_y {
+            return None;
+        }
+        let (px, py) = (min_x * ONE + HALF, min_y * ONE + HALF);
+        let mut edge = [0i64; 3];
+        let mut step_x = [0i64; 3];
+        let mut step_y = [0i64; 3];
+        for i in 0..3 {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            // Inside is where the edge function is positive; pixels exactly on an edge belong to
+            // the triangle only for top edges (horizontal, interior below) and left edges.
+            let top_left = dy < 0 || (dy == 0 && dx > 0);
+            edge[i] = dx * (py - a[1]) - dy * (px - a[0]) - i64::from(!top_left);
+            step_x[i] = -dy * ONE;
+            step_y[i] = dx * ONE;
+        }
+        Some(SetupTri {
+            min_x: min_x as u32,
+            min_y: min_y as u32,
+            max_x: max_x as u32,
+            max_y: max_y as u32,
+            edge,
+            step_x,
+            step_y,
+            inv_depth,
+            id,
+        })
+    }
+}
