@@ -1,7 +1,18 @@
 //! Scene data model and import: glTF 2.0, OBJ, scene files, the built-in default scene and camera paths.
 
+pub mod builtin;
 pub mod camera;
+mod error;
+mod geometry;
+pub mod gltf;
+mod load;
 pub mod model;
+pub mod obj;
+pub mod path;
+pub mod scene_file;
 
 pub use camera::Camera;
+pub use error::{SceneError, MAX_ELEMENTS};
+pub use load::{load, load_scene, LoadedScene};
 pub use model::*;
+pub use path::{CameraKey, CameraPath, PATH_HZ};

@@ -1,0 +1,321 @@
+//! Scene files: TOML that composes assets into one scene.
+//!
+//! ```toml
+//! ao_radius = 0.6                       # optional, default model::DEFAULT_AO_RADIUS
+//! camera_paths = ["../paths/x.toml"]    # optional, relative to the scene file
+//! [[asset]]
+//! file = "../data/sponza.obj"           # relative to the scene file; "builtin:default" = built-in scene
+//! translation = [0.0, 0.0, 0.0]         # optional
+//! rotation_deg = [0.0, 0.0, 0.0]        # optional: about X, then Y, then Z (fixed axes)
+//! scale = 1.0                           # optional, number or [x, y, z]
+//! animations = ["Walk"]                 # optional: clip names or "all"; default: the asset's playing clips
+//! ```
+//!
+//! Each asset that has a node hierarchy gets a new root node carrying the asset transform,
+//! parent of all its former roots; node-less instances get the transform baked in.
+
+use std::path::Path;
+
+use glam::{Quat, Vec3};
+use serde::Deserialize;
+
+use crate::error::{read_file, toml_message, SceneError};
+use crate::load::{load_asset, LoadedScene};
+use crate::model::{Node, Scene, DEFAULT_AO_RADIUS};
+
+/// The `file` value naming the built-in default scene.
+pub const BUILTIN_DEFAULT: &str = "builtin:default";
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    ao_radius: Option<f32>,
+    #[serde(default)]
+    camera_paths: Vec<String>,
+    #[serde(default)]
+    asset: Vec<AssetEntry>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AssetEntry {
+    file: String,
+    #[serde(default)]
+    translation: [f32; 3],
+    #[serde(default)]
+    rotation_deg: [f32; 3],
+    scale: Option<Scale>,
+    animations: Option<Vec<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum Scale {
+    Uniform(f32),
+    PerAxis([f32; 3]),
+}
+
+/// Loads a scene file and every asset it lists (camera paths are resolved, checked to
+/// exist, but not parsed).
+pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
+    let bad = |message: String| SceneError::parse(path, "scene file", message);
+    let bytes = read_file(path)?;
+    let text = String::from_utf8(bytes).map_err(|_| bad("file is not UTF-8 text".into()))?;
+    let file: SceneFile = toml::from_str(&text).map_err(|e| bad(toml_message(&text, &e)))?;
+    let dir = path.parent().unwrap_or_else(|| Path::new(""));
+
+    let ao_radius = file.ao_radius.unwrap_or(DEFAULT_AO_RADIUS);
+    if !(ao_radius.is_finite() && ao_radius > 0.0) {
+        return Err(bad(format!(
+            "ao_radius must be a positive number, got {ao_radius}"
+        )));
+    }
+    if file.asset.is_empty() {
+        return Err(bad("no [[asset]] entries".into()));
+    }
+    let mut scene = Scene {
+        ao_radius,
+        ..Default::default()
+    };
+    for (i, entry) in file.asset.iter().enumerate() {
+        let (translation, rotation, scale) =
+            entry_trs(entry).map_err(|m| bad(format!("asset {i} ({}): {m}", entry.file)))?;
+        let asset = if entry.file == BUILTIN_DEFAULT {
+            crate::builtin::default_scene()
+        } else {
+            let asset_path = dir.join(&entry.file);
+            let is_scene_file = asset_path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+            if is_scene_file {
+                return Err(SceneError::unsupported(
+                    path,
+                    format!(
+                        "asset {i} ({}): scene files cannot include scene files",
+                        entry.file
+                    ),
+                ));
+            }
+            load_asset(&asset_path).map_err(|e| SceneError::Asset {
+                scene: path.to_path_buf(),
+                source: Box::new(e),
+            })?
+        };
+        let playing = select_clips(&asset, entry.animations.as_deref())
+            .map_err(|m| bad(format!("asset {i} ({}): {m}", entry.file)))?;
+        let wrapper = Node {
+            name: format!("asset:{}", entry.file),
+            parent: None,
+            translation,
+            rotation,
+            scale,
+        };
+        append(&mut scene, asset, wrapper, playing);
+    }
+
+    let mut camera_paths = Vec::with_capacity(file.camera_paths.len());
+    for p in &file.camera_paths {
+        let resolved = dir.join(p);
+        if !resolved.is_file() {
+            return Err(bad(format!(
+                "camera path file '{}' not found",
+                resolved.display()
+            )));
+        }
+        camera_paths.push(resolved);
+    }
+    Ok(LoadedScene {
+        scene,
+        camera_paths,
+    })
+}
+
+/// Validated asset transform as (translation, rotation, scale).
+fn entry_trs(e: &AssetEntry) -> Result<(Vec3, Quat, Vec3), String> {
+    let t = Vec3::from_array(e.translation);
+    let [rx, ry, rz] = e.rotation_deg.map(f32::to_radians);
+    let r = Quat::from_rotation_z(rz) * Quat::from_rotation_y(ry) * Quat::from_rotation_x(rx);
+    let s = match e.scale {
+        None => Vec3::ONE,
+        Some(Scale::Uniform(s)) => Vec3::splat(s),
+        Some(Scale::PerAxis(s)) => Vec3::from_array(s),
+    };
+    if !(t.is_finite() && r.is_finite() && s.is_finite()) {
+        return Err("non-finite transform".into());
+    }
+    if s.cmpeq(Vec3::ZERO).any() {
+        return Err("scale must not be zero".into());
+    }
+    Ok((t, r, s))
+}
+
+/// Indices (into the asset's clips) of the clips that play.
+fn select_clips(asset: &Scene, names: Option<&[String]>) -> Result<Vec<usize>, String> {
+    let Some(names) = names else {
+        return Ok(asset.playing.clone());
+    };
+    let mut out = Vec::new();
+    for name in names {
+        if name == "all" {
+            out.extend(0..asset.animations.len());
+            continue;
+        }
+        match asset.animations.iter().position(|a| &a.name == name) {
+            Some(i) => out.push(i),
+            None => {
+                let known: Vec<&str> = asset.animations.iter().map(|a| a.name.as_str()).collect();
+                return Err(format!("no animation named '{name}' (clips: {known:?})"));
+            }
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    Ok(out)
+}
+
+/// Appends `src` to `dst` under the asset transform `wrapper`, offsetting every index;
+/// `playing` indexes `src.animations`.
+fn append(dst: &mut Scene, src: Scene, wrapper: Node, playing: Vec<usize>) {
+    let asset = wrapper.local_transform();
+    let mesh_base = dst.meshes.len();
+    let material_base = dst.materials.len();
+    let skin_base = dst.skins.len();
+    let anim_base = dst.animations.len();
+    let root = (!src.nodes.is_empty()).then(|| {
+        dst.nodes.push(wrapper);
+        dst.nodes.len() - 1
+    });
+    let node_base = dst.nodes.len();
+
+    dst.nodes.extend(src.nodes.into_iter().map(|mut n| {
+        n.parent = n.parent.map(|p| p + node_base).or(root);
+        n
+    }));
+    dst.meshes.extend(src.meshes.into_iter().map(|mut m| {
+        m.material += material_base;
+        m
+    }));
+    dst.materials.extend(src.materials);
+    dst.instances.extend(src.instances.into_iter().map(|mut i| {
+        i.mesh += mesh_base;
+        i.node = i.node.map(|n| n + node_base);
+        i.skin = i.skin.map(|s| s + skin_base);
+        i.transform = asset * i.transform;
+        i
+    }));
+    dst.skins.extend(src.skins.into_iter().map(|mut s| {
+        s.joints.iter_mut().for_each(|j| *j += node_base);
+        s
+    }));
+    dst.animations
+        .extend(src.animations.into_iter().map(|mut a| {
+            a.channels.iter_mut().for_each(|c| c.node += node_base);
+            a
+        }));
+    dst.playing
+        .extend(playing.into_iter().map(|p| p + anim_base));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{
+        AnimatedProperty, Animation, Channel, Instance, Interpolation, Material, Mesh, Skin,
+    };
+    use glam::{Affine3A, Mat4};
+
+    fn small_asset() -> Scene {
+        let node = |parent| Node {
+            name: "n".into(),
+            parent,
+            translation: Vec3::X,
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        };
+        Scene {
+            meshes: vec![Mesh {
+                positions: vec![Vec3::ZERO],
+                material: 0,
+                ..Default::default()
+            }],
+            materials: vec![Material::default()],
+            nodes: vec![node(None), node(Some(0))],
+            instances: vec![Instance {
+                mesh: 0,
+                node: Some(1),
+                transform: Affine3A::from_translation(Vec3::new(2.0, 0.0, 0.0)),
+                skin: Some(0),
+            }],
+            skins: vec![Skin {
+                name: "s".into(),
+                joints: vec![0, 1],
+                inverse_bind: vec![Mat4::IDENTITY; 2],
+            }],
+            animations: vec![Animation {
+                name: "a".into(),
+                channels: vec![Channel {
+                    node: 1,
+                    property: AnimatedProperty::Translation,
+                    interpolation: Interpolation::Linear,
+                    times: vec![0.0],
+                    values: vec![0.0; 3],
+                }],
+            }],
+            playing: vec![0],
+            ao_radius: DEFAULT_AO_RADIUS,
+        }
+    }
+
+    #[test]
+    fn append_offsets_every_index_and_wraps_roots() {
+        let mut dst = small_asset();
+        let wrapper = Node {
+            name: "w".into(),
+            parent: None,
+            translation: Vec3::new(0.0, 5.0, 0.0),
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        };
+        append(&mut dst, small_asset(), wrapper, vec![0]);
+        assert_eq!(dst.nodes.len(), 5);
+        assert_eq!(dst.nodes[2].name, "w");
+        assert_eq!(dst.nodes[3].parent, Some(2));
+        assert_eq!(dst.nodes[4].parent, Some(3));
+        let inst = &dst.instances[1];
+        assert_eq!((inst.mesh, inst.node, inst.skin), (1, Some(4), Some(1)));
+        assert_eq!(dst.meshes[1].material, 1);
+        assert_eq!(dst.skins[1].joints, vec![3, 4]);
+        assert_eq!(dst.animations[1].channels[0].node, 4);
+        assert_eq!(dst.playing, vec![0, 1]);
+        let moved = inst.transform.transform_point3(Vec3::ZERO);
+        assert!((moved - Vec3::new(2.0, 5.0, 0.0)).length() < 1e-6);
+    }
+
+    #[test]
+    fn clip_selection_by_name_and_all() {
+        let asset = small_asset();
+        assert_eq!(select_clips(&asset, None).unwrap(), vec![0]);
+        assert_eq!(
+            select_clips(&asset, Some(&["all".into()])).unwrap(),
+            vec![0]
+        );
+        assert!(select_clips(&asset, Some(&[])).unwrap().is_empty());
+        let err = select_clips(&asset, Some(&["Walk".into()])).unwrap_err();
+        assert!(err.contains("Walk") && err.contains("\"a\""), "{err}");
+    }
+
+    #[test]
+    fn rotation_is_x_then_y_then_z() {
+        let e = AssetEntry {
+            file: String::new(),
+            translation: [0.0; 3],
+            rotation_deg: [90.0, 90.0, 0.0],
+            scale: Some(Scale::Uniform(2.0)),
+            animations: None,
+        };
+        let (_, r, s) = entry_trs(&e).unwrap();
+        // X first maps +Y to +Z, then Y maps +Z to +X.
+        assert!((r * Vec3::Y - Vec3::X).length() < 1e-6);
+        assert_eq!(s, Vec3::splat(2.0));
+    }
+}
