@@ -4,7 +4,7 @@
 use crate::setup::SetupTri;
 
 /// Rows per band; each band is rasterized by one task that owns its pixels.
-pub(crate) const BAND_ROWS: u32 = 8;
+pub(crate) const BAND_ROWS: u32 = 16;
 
 /// Triangles overlapping each band, in submission order.
 #[derive(Default)]
@@ -18,7 +18,9 @@ pub(crate) struct Bins {
 impl Bins {
     /// Bins `tris` into `bands` bands of [`BAND_ROWS`] rows, reusing the storage.
     pub fn rebuild(&mut self, tris: &[SetupTri], bands: usize) {
-        let range = |t: &SetupTri| (t.min_y / BAND_ROWS) as usize..=(t.max_y / BAND_ROWS) as usize;
+        let range = |t: &SetupTri| {
+            (u32::from(t.min_y) / BAND_ROWS) as usize..=(u32::from(t.max_y) / BAND_ROWS) as usize
+        };
         self.starts.clear();
         self.starts.resize(bands + 1, 0);
         for t in tris {
@@ -85,15 +87,17 @@ pub(crate) fn rasterize_band(
     vis.key.resize((rows * width) as usize, 0);
     for &i in items {
         let t = &tris[i as usize];
-        let ys = t.min_y.max(y0)..=t.max_y.min(y0 + rows - 1);
+        let (step_x, step_y) = t.steps();
+        let (min_x, min_y) = (u32::from(t.min_x), u32::from(t.min_y));
+        let ys = min_y.max(y0)..=u32::from(t.max_y).min(y0 + rows - 1);
         for y in ys {
-            let dy = i64::from(y - t.min_y);
-            let e = [0, 1, 2].map(|k| t.edge[k] + t.step_y[k] * dy);
+            let dy = i64::from(y - min_y);
+            let e = [0, 1, 2].map(|k| t.edge[k] + step_y[k] * dy);
             let len = i64::from(t.max_x - t.min_x);
             let span = if len < NARROW {
-                row_span_by_stepping(e, t.step_x, len)
+                row_span_by_stepping(e, step_x, len)
             } else {
-                row_span(e, t.step_x, len)
+                row_span(e, step_x, len)
             };
             let Some((lo, hi)) = span else {
                 continue;
@@ -101,10 +105,7 @@ pub(crate) fn rasterize_band(
             let row = ((y - y0) * width) as usize;
             let [a, b, c] = t.inv_depth;
             let row_inv = b * y as f64 + c;
-            let (x0, x1) = (
-                t.min_x as usize + lo as usize,
-                t.min_x as usize + hi as usize,
-            );
+            let (x0, x1) = (min_x as usize + lo as usize, min_x as usize + hi as usize);
             for (x, key) in (x0..=x1).zip(&mut vis.key[row + x0..=row + x1]) {
                 let inv = a * x as f64 + row_inv;
                 // Also rejects negative and NaN values, whose f32 bits would sort wrongly.

@@ -28,12 +28,13 @@ struct Triangle {
     triangle: u32,
     /// World-space vertices.
     p: [Vec3; 3],
-    /// With ray direction d: u = d·bu / d·den, v = d·bv / d·den (Möller–Trumbore rearranged
-    /// so that everything but the dot products is per triangle).
-    bu: Vec3,
-    /// See `bu`.
-    bv: Vec3,
-    /// See `bu`.
+    /// Numerator of u as an affine function of the pixel (see [`View::pixel_affine`]):
+    /// Möller–Trumbore rearranged so that u and v at pixel (x, y) are ratios of affine
+    /// functions of x and y.
+    u_num: Vec3,
+    /// Numerator of v, see `u_num`.
+    v_num: Vec3,
+    /// Common denominator of u and v, see `u_num`.
     den: Vec3,
     /// Unit face normal turned towards the eye (`None` for a degenerate triangle).
     face_normal: Option<Vec3>,
@@ -68,20 +69,22 @@ impl Resolver<'_> {
                     cached = self.triangle(id);
                 }
                 match &cached {
-                    Some(tri) => self.shade(tri, self.view.pixel_ray(x as u32, y), band, p),
+                    Some(tri) => self.shade(tri, x as u32, y, band, p),
                     None => band.clear(p),
                 }
             }
         }
     }
 
-    /// Writes pixel `p` of `band`, which shows `tri` through the eye ray with direction `dir`.
-    fn shade(&self, tri: &Triangle, dir: Vec3, band: &mut BandMut<'_>, p: usize) {
-        let barycentric = barycentrics(tri, dir);
+    /// Writes pixel `p` of `band`, which shows `tri` at image pixel (`x`, `y`).
+    fn shade(&self, tri: &Triangle, x: u32, y: u32, band: &mut BandMut<'_>, p: usize) {
+        let barycentric = barycentrics(tri, x as f32, y as f32);
         let (u, v) = (barycentric.x, barycentric.y);
         let w = 1.0 - u - v;
         let position = w * tri.p[0] + u * tri.p[1] + v * tri.p[2];
-        let geometric_normal = tri.face_normal.unwrap_or_else(|| -dir.normalize());
+        let geometric_normal = tri
+            .face_normal
+            .unwrap_or_else(|| -self.view.pixel_ray(x, y).normalize());
         let normal = match tri.shading {
             Shading::Flat(n) => n,
             Shading::Smooth([n0, n1, n2]) => {
@@ -138,19 +141,21 @@ impl Resolver<'_> {
             instance: instance as u32,
             triangle,
             p,
-            bu: e2.cross(s),
-            bv: s.cross(e1),
-            den: e2.cross(e1),
+            u_num: self.view.pixel_affine(e2.cross(s)),
+            v_num: self.view.pixel_affine(s.cross(e1)),
+            den: self.view.pixel_affine(e2.cross(e1)),
             face_normal,
             shading,
         })
     }
 }
 
-/// Barycentrics (u, v) of where the ray with direction `dir` from the eye meets the plane of
-/// `tri`, clamped into the triangle (the centroid when the ray is parallel to the plane).
-fn barycentrics(tri: &Triangle, dir: Vec3) -> Vec2 {
-    let uv = Vec2::new(dir.dot(tri.bu), dir.dot(tri.bv)) * dir.dot(tri.den).recip();
+/// Barycentrics (u, v) of where the eye ray through the centre of pixel (`x`, `y`) meets the
+/// plane of `tri`, clamped into the triangle (the centroid when the ray is parallel to the
+/// plane).
+fn barycentrics(tri: &Triangle, x: f32, y: f32) -> Vec2 {
+    let at = |f: Vec3| f.x + f.y * x + f.z * y;
+    let uv = Vec2::new(at(tri.u_num), at(tri.v_num)) * at(tri.den).recip();
     if !uv.is_finite() {
         return Vec2::splat(1.0 / 3.0);
     }

@@ -14,32 +14,44 @@ const ONE: i64 = 1 << SUBPIXEL_BITS;
 const HALF: i64 = ONE / 2;
 /// Largest supported image side; larger requests are clamped.
 pub const MAX_DIMENSION: u32 = 1 << 14;
-/// Guard band around the image in pixels. Image side plus guard band stays below 2^16 pixels,
-/// so fixed-point coordinates fit in 25 bits and edge-function products in 52 bits.
+/// Guard band around the image in pixels. Coordinates stay within ±(2·guard + image side)
+/// < 2^17 pixels, so fixed-point coordinates and their differences fit in i32 (2^25) and
+/// edge-function products in i64; pixel indices (< MAX_DIMENSION) fit in u16.
 const GUARD_PIXELS: f32 = (1 << 15) as f32;
 
-/// A screen-space triangle ready for scan conversion.
+/// A screen-space triangle ready for scan conversion (kept small: binning reads many).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SetupTri {
-    /// Pixel bounding box (inclusive), clamped to the image.
-    pub min_x: u32,
-    /// See `min_x`.
-    pub min_y: u32,
-    /// See `min_x`.
-    pub max_x: u32,
-    /// See `min_x`.
-    pub max_y: u32,
     /// Biased edge functions at the centre of pixel (`min_x`, `min_y`); a pixel is covered when
     /// all three are ≥ 0.
     pub edge: [i64; 3],
-    /// Edge-function increment per pixel step in x.
-    pub step_x: [i64; 3],
-    /// Edge-function increment per pixel step in y.
-    pub step_y: [i64; 3],
     /// 1/depth = a·x + b·y + c at the centre of pixel (x, y).
     pub inv_depth: [f64; 3],
+    /// Edge-function increments per pixel step in x, in units of one pixel (see
+    /// [`SetupTri::steps`]).
+    step_x: [i32; 3],
+    /// Edge-function increments per pixel step in y, in units of one pixel.
+    step_y: [i32; 3],
+    /// Pixel bounding box (inclusive), clamped to the image.
+    pub min_x: u16,
+    /// See `min_x`.
+    pub min_y: u16,
+    /// See `min_x`.
+    pub max_x: u16,
+    /// See `min_x`.
+    pub max_y: u16,
     /// Global triangle id.
     pub id: u32,
+}
+
+impl SetupTri {
+    /// Edge-function increments per pixel step in x and in y.
+    pub fn steps(&self) -> ([i64; 3], [i64; 3]) {
+        (
+            self.step_x.map(|s| i64::from(s) * ONE),
+            self.step_y.map(|s| i64::from(s) * ONE),
+        )
+    }
 }
 
 /// Converts world-space triangles into [`SetupTri`]s for one view.
@@ -86,7 +98,10 @@ impl<'a> TriangleSetup<'a> {
         let verts = poly.verts();
         let mut fixed = [[0i64; 2]; MAX_VERTS];
         for (f, &v) in fixed.iter_mut().zip(verts) {
-            *f = self.to_fixed(v);
+            let Some(p) = self.to_fixed(v) else {
+                return;
+            };
+            *f = p;
         }
         for i in 1..verts.len() - 1 {
             let tri = [fixed[0], fixed[i], fixed[i + 1]];
@@ -97,16 +112,20 @@ impl<'a> TriangleSetup<'a> {
     }
 
     /// Perspective divide and viewport transform to fixed-point pixels (y down).
-    fn to_fixed(&self, v: Vec4) -> [i64; 2] {
+    /// `None` when the result is not finite.
+    fn to_fixed(&self, v: Vec4) -> Option<[i64; 2]> {
         let limit = 2.0 * GUARD_PIXELS + MAX_DIMENSION as f32;
         let x = (v.x / v.w * 0.5 + 0.5) * self.view.width as f32;
         let y = (0.5 - v.y / v.w * 0.5) * self.view.height as f32;
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
         // Round half away from zero (in f64, exact at these magnitudes) without a libm call.
         let snap = |p: f32| {
             let v = f64::from(p.clamp(-limit, limit)) * ONE as f64;
             (v + 0.5f64.copysign(v)) as i64
         };
-        [snap(x), snap(y)]
+        Some([snap(x), snap(y)])
     }
 
     /// Edge functions and bounds of one screen triangle, `None` when it covers no pixel centre.
@@ -140,8 +159,8 @@ impl<'a> TriangleSetup<'a> {
         }
         let (px, py) = (min_x * ONE + HALF, min_y * ONE + HALF);
         let mut edge = [0i64; 3];
-        let mut step_x = [0i64; 3];
-        let mut step_y = [0i64; 3];
+        let mut step_x = [0i32; 3];
+        let mut step_y = [0i32; 3];
         for i in 0..3 {
             let (a, b) = (t[i], t[(i + 1) % 3]);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
@@ -149,18 +168,19 @@ impl<'a> TriangleSetup<'a> {
             // the triangle only for top edges (horizontal, interior below) and left edges.
             let top_left = dy < 0 || (dy == 0 && dx > 0);
             edge[i] = dx * (py - a[1]) - dy * (px - a[0]) - i64::from(!top_left);
-            step_x[i] = -dy * ONE;
-            step_y[i] = dx * ONE;
+            // Coordinates lie within ±2^25, so their differences fit in i32.
+            step_x[i] = -dy as i32;
+            step_y[i] = dx as i32;
         }
         Some(SetupTri {
-            min_x: min_x as u32,
-            min_y: min_y as u32,
-            max_x: max_x as u32,
-            max_y: max_y as u32,
             edge,
+            inv_depth,
             step_x,
             step_y,
-            inv_depth,
+            min_x: min_x as u16,
+            min_y: min_y as u16,
+            max_x: max_x as u16,
+            max_y: max_y as u16,
             id,
         })
     }

@@ -3,6 +3,9 @@
 use glam::{Mat4, Vec3};
 use psao_scene::Camera;
 
+/// Smallest near distance used; smaller (or invalid) camera near distances are raised to it.
+const MIN_NEAR: f32 = 1e-6;
+
 /// A camera prepared for one image size.
 pub(crate) struct View {
     /// Image width in pixels.
@@ -47,7 +50,8 @@ impl View {
             view_proj: camera.projection(aspect) * camera.view(),
             origin: camera.position,
             forward,
-            near: camera.near,
+            // A clearly positive near distance keeps clip-space w well above 0 after clipping.
+            near: camera.near.max(MIN_NEAR),
             inv_far: if inv_far.is_finite() && inv_far > 0.0 {
                 inv_far
             } else {
@@ -63,6 +67,11 @@ impl View {
     /// that its component along [`View::forward`] is 1 (ray parameter = view depth).
     pub fn pixel_ray(&self, x: u32, y: u32) -> Vec3 {
         self.ray00 + x as f32 * self.ray_dx + y as f32 * self.ray_dy
+    }
+
+    /// Coefficients (c, a, b) with `pixel_ray(x, y)·v = c + a·x + b·y`.
+    pub fn pixel_affine(&self, v: Vec3) -> Vec3 {
+        Vec3::new(self.ray00.dot(v), self.ray_dx.dot(v), self.ray_dy.dot(v))
     }
 
     /// Coefficients (a, b, c) with 1/depth = a·x + b·y + c at the centre of pixel (x, y) for the

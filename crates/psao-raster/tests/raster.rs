@@ -4,7 +4,9 @@ mod common;
 
 use common::{intersect, pixel_ray, scene_of, unproject};
 use glam::{Affine3A, Vec2, Vec3};
-use psao_raster::{rasterize, rasterize_posed, GBuffer, InstancePose, PoseError, RasterOptions};
+use psao_raster::{
+    rasterize, rasterize_posed, GBuffer, InstancePose, PoseError, RasterOptions, Rasterizer,
+};
 use psao_scene::Camera;
 
 const W: u32 = 64;
@@ -377,6 +379,20 @@ fn degenerate_huge_and_invalid_input_does_not_panic() {
     assert_eq!(rasterize(&missing, &cam, &opts()).covered_count(), 0);
     let degenerate = Camera::look_at(Vec3::ONE, Vec3::ONE, 60.0);
     assert_eq!(rasterize(&scene, &degenerate, &opts()).covered_count(), 0);
+
+    // A zero near distance with a triangle crossing the eye plane still rasterizes the visible part.
+    let zero_near = Camera {
+        near: 0.0,
+        ..Camera::look_at(Vec3::ZERO, Vec3::new(0.0, 0.0, -1.0), 60.0)
+    };
+    let crossing = [
+        Vec3::new(-5.0, -1.0, 5.0),
+        Vec3::new(5.0, -1.0, 5.0),
+        Vec3::new(0.0, -1.0, -5.0),
+    ];
+    let g = rasterize(&scene_of(&[crossing]), &zero_near, &opts());
+    assert!(g.covered_count() > 0);
+    assert!(g.depth.iter().all(|&d| d > 0.0));
 }
 
 #[test]
@@ -452,4 +468,27 @@ fn posed_rasterization_moves_and_deforms_instances() {
             ..
         })
     ));
+}
+
+#[test]
+fn reused_rasterizer_and_buffer_match_fresh_results_across_sizes() {
+    let cam = camera();
+    let a = screen_tri(
+        &cam,
+        [(5.0, 5.0, 4.0), (10.0, 40.0, 4.0), (60.0, 20.0, 4.0)],
+    );
+    let b = screen_tri(
+        &cam,
+        [(-5.0, 30.0, 3.0), (70.0, 47.0, 6.0), (30.0, 2.0, 9.0)],
+    );
+    let (one, two) = (scene_of(&[a]), scene_of(&[a, b]));
+    let mut rasterizer = Rasterizer::new();
+    let mut out = GBuffer::empty(0, 0);
+    for (scene, w, h) in [(&two, W, H), (&one, 32, 16), (&two, 20, 70), (&one, W, H)] {
+        let opts = RasterOptions::new(w, h);
+        rasterizer.rasterize(scene, &cam, &opts, &mut out);
+        let fresh = rasterize(scene, &cam, &opts);
+        assert!(fresh.covered_count() > 0);
+        assert!(out == fresh, "{w}x{h}");
+    }
 }
