@@ -1,11 +1,12 @@
 //! CPU G-buffer rasterizer.
 //!
 //! Pipeline: transform every instance's vertices (in a given pose) to world and clip space;
-//! set up triangles (homogeneous near-plane and guard-band clipping, 8-bit sub-pixel fixed-point
-//! edge functions with the top-left fill rule); bin them into horizontal bands of rows; then,
-//! one rayon task per band, keep the nearest triangle id per pixel centre (a visibility buffer,
-//! depth-tested on the exact plane depth a ray cast through the pixel centre would find) and
-//! resolve its attributes by intersecting the pixel-centre ray with that triangle.
+//! set up triangles (homogeneous near-plane and guard-band clipping, 12-bit sub-pixel
+//! fixed-point edge functions with the top-left fill rule); bin them into horizontal bands of
+//! rows; then, one rayon task per band, keep the nearest triangle id per pixel centre (a
+//! visibility buffer, depth-tested on the exact plane depth a ray cast through the pixel centre
+//! would find) and resolve its attributes by intersecting the pixel-centre ray with that
+//! triangle. Use a [`Rasterizer`] and one [`GBuffer`] per view in frame loops to reuse memory.
 //!
 //! Both windings are rasterized unless [`RasterOptions::cull_backfaces`]; fragments beyond the
 //! camera's far distance are dropped.

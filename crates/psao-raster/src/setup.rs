@@ -6,17 +6,19 @@ use glam::{Vec3, Vec4};
 use crate::clip::{ClipVolume, MAX_VERTS};
 use crate::view::View;
 
-/// Sub-pixel precision in bits.
-const SUBPIXEL_BITS: u32 = 8;
+/// Sub-pixel precision in bits (vertices snap to 1/4096 pixel, so coverage differs from exact
+/// ray casting only for pixel centres within that distance of an edge).
+const SUBPIXEL_BITS: u32 = 12;
 /// One pixel in fixed point.
 const ONE: i64 = 1 << SUBPIXEL_BITS;
 /// Half a pixel in fixed point (pixel centres sit at half-integers).
 const HALF: i64 = ONE / 2;
 /// Largest supported image side; larger requests are clamped.
 pub const MAX_DIMENSION: u32 = 1 << 14;
-/// Guard band around the image in pixels. Coordinates stay within ±(2·guard + image side)
-/// < 2^17 pixels, so fixed-point coordinates and their differences fit in i32 (2^25) and
-/// edge-function products in i64; pixel indices (< MAX_DIMENSION) fit in u16.
+/// Guard band around the image in pixels. Snapped coordinates are clamped to
+/// ±(2·guard + MAX_DIMENSION) < 2^16.4 pixels, i.e. < 2^28.4 in fixed point, so their
+/// differences fit in i32 and edge-function products (< 2^59) in i64; pixel indices
+/// (< MAX_DIMENSION) fit in u16.
 const GUARD_PIXELS: f32 = (1 << 15) as f32;
 
 /// A screen-space triangle ready for scan conversion (kept small: binning reads many).
@@ -168,7 +170,7 @@ impl<'a> TriangleSetup<'a> {
             // the triangle only for top edges (horizontal, interior below) and left edges.
             let top_left = dy < 0 || (dy == 0 && dx > 0);
             edge[i] = dx * (py - a[1]) - dy * (px - a[0]) - i64::from(!top_left);
-            // Coordinates lie within ±2^25, so their differences fit in i32.
+            // See GUARD_PIXELS for why these fit.
             step_x[i] = -dy as i32;
             step_y[i] = dx as i32;
         }

@@ -380,7 +380,7 @@ fn degenerate_huge_and_invalid_input_does_not_panic() {
     let degenerate = Camera::look_at(Vec3::ONE, Vec3::ONE, 60.0);
     assert_eq!(rasterize(&scene, &degenerate, &opts()).covered_count(), 0);
 
-    // A zero near distance with a triangle crossing the eye plane still rasterizes the visible part.
+    // A zero near distance with a triangle crossing the eye plane: the visible part remains.
     let zero_near = Camera {
         near: 0.0,
         ..Camera::look_at(Vec3::ZERO, Vec3::new(0.0, 0.0, -1.0), 60.0)

@@ -78,7 +78,7 @@ fn sponza_visibility_matches_ray_casting() {
         let n = (w * h) as usize;
         let rate = (agree + ties) as f64 / n as f64;
         println!(
-            "camera at {}: {hits} ray hits, {agree} agree, {ties} ties, {} differ ({:.3}% agreement)",
+            "camera at {}: {hits} ray hits, {agree} agree, {ties} ties, {} differ ({:.3}%)",
             cam.position,
             n - agree - ties,
             100.0 * rate
