@@ -79,13 +79,13 @@ impl<'a> TriangleSetup<'a> {
     }
 
     /// Appends the screen triangles of world triangle `world` (clip coordinates `clip`) to `out`.
-    /// `cull` enables back-face culling for this triangle (combined with the setup's flag).
+    /// Back faces are culled when the setup culls and the triangle is `single_sided`.
     pub fn push(
         &self,
         id: u32,
         world: [Vec3; 3],
         clip: [Vec4; 3],
-        cull: bool,
+        single_sided: bool,
         out: &mut Vec<SetupTri>,
     ) {
         if !clip.iter().all(|v| v.is_finite()) {
@@ -107,7 +107,7 @@ impl<'a> TriangleSetup<'a> {
         }
         for i in 1..verts.len() - 1 {
             let tri = [fixed[0], fixed[i], fixed[i + 1]];
-            if let Some(t) = self.edges(tri, inv_depth, id, cull && self.cull_backfaces) {
+            if let Some(t) = self.edges(tri, inv_depth, id, single_sided && self.cull_backfaces) {
                 out.push(t);
             }
         }
