@@ -1,1 +1,17 @@
-//! psao-trace
+//! psao-trace: one [`Tracer`] facade over a two-level ray-tracing structure (a BVH per mesh in
+//! mesh-local space, a top level over the instances), with the pure-Rust `obvhs` backend and
+//! Embree 3 behind the cargo feature `embree`; spatial ray sorting; and the [`ao`] module that
+//! defines ambient occlusion for all of psao.
+
+pub mod ao;
+#[cfg(feature = "embree")]
+mod embree_backend;
+mod geometry;
+mod obvhs_backend;
+mod sort;
+mod tracer;
+mod types;
+
+pub use sort::sort_rays_spatially;
+pub use tracer::Tracer;
+pub use types::{Backend, GeometryMode, Hit, Ray, TraceError};
