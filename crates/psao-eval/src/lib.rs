@@ -1,1 +1,13 @@
-//! psao-eval
+//! Evaluation: the per-pixel reference AO (DESIGN §2) and image quality metrics.
+//!
+//! Pure code: images come in and numbers go out; reading and writing files is the CLI's job.
+
+pub mod ao_image;
+pub mod metrics;
+pub mod reference;
+pub mod ssao;
+
+pub use ao_image::AoImage;
+pub use metrics::{compare, Metrics, MetricsError};
+pub use reference::{reference_ao, ReferenceSettings};
+pub use ssao::{ssao, SsaoSettings};

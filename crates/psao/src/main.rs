@@ -1,1 +1,71 @@
-fn main() {}
+//! `psao`: point-based split ambient occlusion — command-line entry point.
+
+mod args;
+mod bench_trace;
+mod compare;
+mod demo;
+mod png_io;
+mod progress;
+mod reference;
+mod scene_source;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+/// Split-rendered ambient occlusion: a server ray-traces AO at surface points, clients rasterize
+/// and reconstruct it per pixel.
+#[derive(Parser, Debug)]
+#[command(name = "psao", version, about, long_about = None)]
+struct Cli {
+    /// Log level filter (error, warn, info, debug, trace), or any `tracing` env-filter directive.
+    #[arg(long, global = true, default_value = "info")]
+    log: String,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Run the main job on the built-in default scene and write images and a report.
+    Demo(demo::DemoArgs),
+    /// Render per-pixel reference AO (16-bit grayscale PNGs) along a camera path.
+    Reference(reference::ReferenceArgs),
+    /// Compare two AO images: PSNR, SSIM and FLIP.
+    Compare(compare::CompareArgs),
+    /// Benchmarks.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// Trace one AO ray set through every compiled backend, unsorted and sorted, on 1 and 2 threads.
+    Trace(bench_trace::BenchTraceArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_new(&cli.log)
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    match run(cli.command) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(command: Command) -> Result<()> {
+    match command {
+        Command::Demo(a) => demo::run(&a),
+        Command::Reference(a) => reference::run(&a),
+        Command::Compare(a) => compare::run(&a),
+        Command::Bench(BenchCommand::Trace(a)) => bench_trace::run(&a),
+    }
+}

@@ -1,0 +1,97 @@
+//! Parsers for command-line values shared by several subcommands.
+
+use anyhow::{bail, Context, Result};
+use std::str::FromStr;
+
+/// Largest image side accepted on the command line.
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+
+/// An image resolution given as `WxH`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Resolution {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+impl FromStr for Resolution {
+    type Err = anyhow::Error;
+    fn from_str(s: &str) -> Result<Self> {
+        let (w, h) = s
+            .split_once(['x', 'X'])
+            .with_context(|| format!("resolution '{s}' is not of the form WIDTHxHEIGHT"))?;
+        let width: u32 = w
+            .trim()
+            .parse()
+            .with_context(|| format!("bad width in '{s}'"))?;
+        let height: u32 = h
+            .trim()
+            .parse()
+            .with_context(|| format!("bad height in '{s}'"))?;
+        if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+            bail!("resolution '{s}' out of range: each side must be 1..={MAX_IMAGE_SIDE}");
+        }
+        Ok(Self { width, height })
+    }
+}
+
+impl std::fmt::Display for Resolution {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}x{}", self.width, self.height)
+    }
+}
+
+/// A half-open range of frame numbers given as `A..B`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameRange {
+    /// First frame.
+    pub start: u32,
+    /// One past the last frame.
+    pub end: u32,
+}
+
+impl FromStr for FrameRange {
+    type Err = anyhow::Error;
+    fn from_str(s: &str) -> Result<Self> {
+        let (a, b) = s
+            .split_once("..")
+            .with_context(|| format!("frame range '{s}' is not of the form A..B"))?;
+        let start: u32 = a
+            .trim()
+            .parse()
+            .with_context(|| format!("bad start in '{s}'"))?;
+        let end: u32 = b
+            .trim()
+            .parse()
+            .with_context(|| format!("bad end in '{s}'"))?;
+        if end <= start {
+            bail!("frame range '{s}' is empty (B must be greater than A)");
+        }
+        Ok(Self { start, end })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_resolutions() {
+        let r: Resolution = "640x360".parse().unwrap();
+        assert_eq!((r.width, r.height), (640, 360));
+        assert!("640".parse::<Resolution>().is_err());
+        assert!("0x10".parse::<Resolution>().is_err());
+        assert!("100000x10".parse::<Resolution>().is_err());
+        assert!("axb".parse::<Resolution>().is_err());
+    }
+
+    #[test]
+    fn parses_frame_ranges() {
+        let f: FrameRange = "10..20".parse().unwrap();
+        assert_eq!((f.start, f.end), (10, 20));
+        assert!("5..5".parse::<FrameRange>().is_err());
+        assert!("5".parse::<FrameRange>().is_err());
+        assert!("-1..3".parse::<FrameRange>().is_err());
+    }
+}

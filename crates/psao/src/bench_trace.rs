@@ -1,0 +1,184 @@
+//! `psao bench trace`: ray-tracing throughput of every compiled backend on one AO ray set.
+
+use crate::args::Resolution;
+use crate::scene_source::SceneInput;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use psao_raster::{rasterize, RasterOptions};
+use psao_trace::{ao, sort_rays_spatially, Backend, GeometryMode, Ray, Tracer};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Rays handed to one backend call; large enough to amortise the call, small enough to balance threads.
+const RAYS_PER_CALL: usize = 4096;
+/// Camera-path frames whose visible surfaces seed the ray origins.
+const SEED_FRAMES: usize = 4;
+/// Largest accepted ray count.
+const MAX_RAYS: usize = 200_000_000;
+
+/// Arguments of `psao bench trace`.
+#[derive(Args, Debug)]
+pub struct BenchTraceArgs {
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = "default")]
+    pub scene: String,
+    /// Camera path whose views pick the visible surfaces (default: the scene's first path).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Number of AO rays in the set.
+    #[arg(long, default_value_t = 4_000_000)]
+    pub rays: usize,
+    /// Resolution of the views that pick ray origins.
+    #[arg(long, default_value = "320x180")]
+    pub res: Resolution,
+    /// Timed repetitions per case (the best is reported).
+    #[arg(long, default_value_t = 3)]
+    pub repeat: u32,
+    /// Print JSON (a list of `{backend, sorted, threads, query, mrays_per_s}`).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One measured case.
+#[derive(Serialize, Debug)]
+struct Case {
+    backend: &'static str,
+    sorted: bool,
+    threads: usize,
+    query: &'static str,
+    mrays_per_s: f64,
+}
+
+/// Runs `psao bench trace`.
+pub fn run(args: &BenchTraceArgs) -> Result<()> {
+    if args.rays == 0 || args.rays > MAX_RAYS {
+        bail!("--rays must be in 1..={MAX_RAYS}, got {}", args.rays);
+    }
+    let input = SceneInput::load(&args.scene)?;
+    let path = input.camera_path(args.path.as_ref())?;
+    let unsorted = ao_ray_set(&input, &path, args)?;
+    let order = sort_rays_spatially(&unsorted);
+    let sorted: Vec<Ray> = order.iter().map(|&i| unsorted[i as usize]).collect();
+    tracing::info!(
+        "{} AO rays (R = {}) from visible surfaces of {}",
+        unsorted.len(),
+        input.scene.ao_radius,
+        input.name
+    );
+    let mut cases = Vec::new();
+    for backend in Backend::compiled() {
+        let tracer = Tracer::new(backend, &input.scene, GeometryMode::Occlusion)
+            .with_context(|| format!("cannot build the {} backend", backend.name()))?;
+        for (is_sorted, rays) in [(false, &unsorted), (true, &sorted)] {
+            for threads in [1, 2] {
+                for query in ["occluded", "closest"] {
+                    let secs = time_case(&tracer, rays, threads, query, args.repeat.max(1))?;
+                    let case = Case {
+                        backend: backend.name(),
+                        sorted: is_sorted,
+                        threads,
+                        query,
+                        mrays_per_s: rays.len() as f64 / secs / 1e6,
+                    };
+                    tracing::info!("{case:?}");
+                    cases.push(case);
+                }
+            }
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&cases)?);
+    } else {
+        println!("| backend | rays | threads | query | Mrays/s |");
+        println!("|---|---|---|---|---:|");
+        for c in &cases {
+            let order = if c.sorted { "sorted" } else { "unsorted" };
+            println!(
+                "| {} | {order} | {} | {} | {:.2} |",
+                c.backend, c.threads, c.query, c.mrays_per_s
+            );
+        }
+    }
+    Ok(())
+}
+
+/// AO rays from the surfaces visible along the path, in a seeded random order.
+fn ao_ray_set(
+    input: &SceneInput,
+    path: &psao_scene::path::CameraPath,
+    args: &BenchTraceArgs,
+) -> Result<Vec<Ray>> {
+    let opts = RasterOptions::new(args.res.width, args.res.height);
+    let frames = path.frame_count();
+    let mut points = Vec::new();
+    for k in 0..SEED_FRAMES {
+        let camera = path.camera_at_frame(k * (frames - 1) / (SEED_FRAMES - 1).max(1));
+        let g = rasterize(&input.scene, &camera, &opts);
+        points.extend(
+            (0..g.depth.len())
+                .filter(|&i| g.covered(i))
+                .map(|i| (g.position[i], g.normal[i])),
+        );
+    }
+    if points.is_empty() {
+        bail!("the camera path sees no geometry: cannot place AO rays");
+    }
+    let spp = args.rays.div_ceil(points.len()) as u32;
+    let mut rays = Vec::with_capacity(points.len() * spp as usize);
+    for (i, &(x, n)) in points.iter().enumerate() {
+        ao::ao_rays(x, n, input.scene.ao_radius, spp, 7, i as u64, &mut rays);
+    }
+    rays.truncate(args.rays);
+    // A seeded shuffle: sort by a hash of the index, so "unsorted" means incoherent.
+    let mut keyed: Vec<(u64, Ray)> = rays
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| {
+            (
+                (i as u64 ^ 0x9e37_79b9_7f4a_7c15)
+                    .wrapping_mul(0xbf58_476d_1ce4_e5b9)
+                    .rotate_left(31),
+                r,
+            )
+        })
+        .collect();
+    keyed.sort_unstable_by_key(|(k, _)| *k);
+    Ok(keyed.into_iter().map(|(_, r)| r).collect())
+}
+
+/// Best wall time of `repeat` runs of one case.
+fn time_case(
+    tracer: &Tracer,
+    rays: &[Ray],
+    threads: usize,
+    query: &str,
+    repeat: u32,
+) -> Result<f64> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("cannot start the thread pool")?;
+    let mut best = f64::INFINITY;
+    pool.install(|| {
+        for _ in 0..repeat {
+            let start = Instant::now();
+            if query == "occluded" {
+                let mut out = vec![false; rays.len()];
+                rays.par_chunks(RAYS_PER_CALL)
+                    .zip(out.par_chunks_mut(RAYS_PER_CALL))
+                    .for_each(|(r, o)| tracer.occluded(r, o));
+                std::hint::black_box(&out);
+            } else {
+                let mut out = vec![None; rays.len()];
+                rays.par_chunks(RAYS_PER_CALL)
+                    .zip(out.par_chunks_mut(RAYS_PER_CALL))
+                    .for_each(|(r, o)| tracer.intersect(r, o));
+                std::hint::black_box(&out);
+            }
+            best = best.min(start.elapsed().as_secs_f64());
+        }
+    });
+    Ok(best)
+}

@@ -1,0 +1,146 @@
+//! `psao reference`: per-pixel reference AO along a camera path.
+
+use crate::args::{FrameRange, Resolution};
+use crate::png_io::write_ao_png;
+use crate::progress;
+use crate::scene_source::SceneInput;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use psao_eval::{reference_ao, AoImage, ReferenceSettings};
+use psao_raster::{rasterize, RasterOptions};
+use psao_scene::path::CameraPath;
+use psao_scene::Scene;
+use psao_trace::{Backend, GeometryMode, Tracer};
+use std::path::{Path, PathBuf};
+
+/// Largest accepted rays per pixel.
+pub const MAX_SPP: u32 = 1 << 16;
+
+/// Arguments of `psao reference`.
+#[derive(Args, Debug)]
+pub struct ReferenceArgs {
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = "default")]
+    pub scene: String,
+    /// Camera path file (default: the scene's first path).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// A single frame of the path (60 Hz).
+    #[arg(long, conflicts_with = "frames")]
+    pub frame: Option<u32>,
+    /// A half-open range of frames, `A..B`.
+    #[arg(long)]
+    pub frames: Option<FrameRange>,
+    /// Rays per pixel.
+    #[arg(long, default_value_t = 512)]
+    pub spp: u32,
+    /// Image size, `WxH`.
+    #[arg(long, default_value = "640x360")]
+    pub res: Resolution,
+    /// Seed of the sample pattern (each frame adds its number).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Ray-tracing backend, `obvhs` or `embree` (default: the fastest compiled in).
+    #[arg(long)]
+    pub backend: Option<Backend>,
+    /// Output folder for `ao_NNNNN.png`.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Runs `psao reference`.
+pub fn run(args: &ReferenceArgs) -> Result<()> {
+    if args.spp == 0 || args.spp > MAX_SPP {
+        bail!("--spp must be in 1..={MAX_SPP}, got {}", args.spp);
+    }
+    let input = SceneInput::load(&args.scene)?;
+    let path = input.camera_path(args.path.as_ref())?;
+    let frames = select_frames(&path, args.frame, args.frames)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let renderer = ReferenceRenderer::new(
+        &input.scene,
+        args.backend.unwrap_or_default(),
+        args.spp,
+        args.seed,
+    )?;
+    let pixels = args.res.width as u64 * args.res.height as u64;
+    let bar = progress::bar(pixels * frames.len() as u64, "reference AO", "px");
+    for &frame in &frames {
+        let image = renderer.render(&path, frame, args.res, &|n| bar.inc(n));
+        write_ao_png(&frame_file(&args.out, frame), &image)?;
+    }
+    bar.finish_and_clear();
+    tracing::info!(
+        "wrote {} reference frame(s) at {} with {} spp to {}",
+        frames.len(),
+        args.res,
+        args.spp,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The file name of frame `frame` in `dir`.
+pub fn frame_file(dir: &Path, frame: u32) -> PathBuf {
+    dir.join(format!("ao_{frame:05}.png"))
+}
+
+/// Frames chosen by `--frame`/`--frames` (default: frame 0), checked against the path length.
+fn select_frames(
+    path: &CameraPath,
+    frame: Option<u32>,
+    frames: Option<FrameRange>,
+) -> Result<Vec<u32>> {
+    let count = path.frame_count() as u32;
+    let (start, end) = match (frame, frames) {
+        (Some(f), _) => (f, f + 1),
+        (None, Some(r)) => (r.start, r.end),
+        (None, None) => (0, 1),
+    };
+    if end > count {
+        bail!("the camera path has {count} frames (0..{count}); asked for {start}..{end}");
+    }
+    Ok((start..end).collect())
+}
+
+/// Renders reference AO frames of one static scene.
+pub struct ReferenceRenderer<'a> {
+    scene: &'a Scene,
+    tracer: Tracer,
+    spp: u32,
+    seed: u64,
+}
+
+impl<'a> ReferenceRenderer<'a> {
+    /// Builds the tracer for `scene`.
+    pub fn new(scene: &'a Scene, backend: Backend, spp: u32, seed: u64) -> Result<Self> {
+        let tracer = Tracer::new(backend, scene, GeometryMode::Occlusion)
+            .context("cannot build the ray-tracing structure")?;
+        Ok(Self {
+            scene,
+            tracer,
+            spp,
+            seed,
+        })
+    }
+
+    /// Reference AO of `frame` of `path` at `res`; `progress` counts pixels.
+    pub fn render(
+        &self,
+        path: &CameraPath,
+        frame: u32,
+        res: Resolution,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> AoImage {
+        let camera = path.camera_at_frame(frame as usize);
+        let opts = RasterOptions::new(res.width, res.height);
+        let gbuffer = rasterize(self.scene, &camera, &opts);
+        let settings = ReferenceSettings {
+            spp: self.spp,
+            radius: self.scene.ao_radius,
+            seed: self.seed.wrapping_add(frame as u64),
+        };
+        reference_ao(&gbuffer, &self.tracer, &settings, progress)
+    }
+}

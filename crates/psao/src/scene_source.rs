@@ -1,0 +1,78 @@
+//! Resolving `--scene` and `--path` arguments into a loaded scene and a camera path.
+
+use anyhow::{bail, Context, Result};
+use psao_scene::path::CameraPath;
+use psao_scene::Scene;
+use std::path::{Path, PathBuf};
+
+/// The name that selects the built-in default scene.
+pub const BUILTIN_SCENE: &str = "default";
+
+/// Camera paths of the built-in scene, embedded so that it works from any directory.
+const BUILTIN_PATHS: [(&str, &str); 2] = [
+    ("default_a", include_str!("../../../paths/default_a.toml")),
+    ("default_b", include_str!("../../../paths/default_b.toml")),
+];
+
+/// A scene with the camera paths it names.
+pub struct SceneInput {
+    /// Display name (file name or `default`).
+    pub name: String,
+    /// The scene.
+    pub scene: Scene,
+    /// Camera paths that come with the scene (first = default).
+    pub paths: Vec<CameraPath>,
+}
+
+impl SceneInput {
+    /// Loads `arg` (`default`, `builtin:default`, or a .gltf/.glb/.obj/.toml file).
+    pub fn load(arg: &str) -> Result<Self> {
+        if arg == BUILTIN_SCENE || arg == "builtin:default" {
+            let paths = BUILTIN_PATHS
+                .iter()
+                .map(|(name, text)| {
+                    CameraPath::parse(text)
+                        .with_context(|| format!("built-in camera path {name} is invalid"))
+                })
+                .collect::<Result<_>>()?;
+            return Ok(Self {
+                name: BUILTIN_SCENE.into(),
+                scene: psao_scene::builtin::default_scene(),
+                paths,
+            });
+        }
+        let file = Path::new(arg);
+        let loaded = psao_scene::load(file)
+            .with_context(|| format!("cannot load scene {}", file.display()))?;
+        let paths = loaded
+            .camera_paths
+            .iter()
+            .map(|p| {
+                CameraPath::load(p).with_context(|| format!("scene {arg} names a bad camera path"))
+            })
+            .collect::<Result<_>>()?;
+        Ok(Self {
+            name: file
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| arg.to_string()),
+            scene: loaded.scene,
+            paths,
+        })
+    }
+
+    /// The camera path named by `--path` (a file), else the scene's first path.
+    pub fn camera_path(&self, path_arg: Option<&PathBuf>) -> Result<CameraPath> {
+        if let Some(p) = path_arg {
+            return CameraPath::load(p)
+                .with_context(|| format!("cannot load camera path {}", p.display()));
+        }
+        match self.paths.first() {
+            Some(p) => Ok(p.clone()),
+            None => bail!(
+                "scene '{}' names no camera path: give one with --path FILE",
+                self.name
+            ),
+        }
+    }
+}
