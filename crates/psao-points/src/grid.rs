@@ -1,0 +1,402 @@
+//! Per-instance storage: hash buckets → cells → packed points (DESIGN §3 "Grid", paper §3.2).
+//!
+//! Storage is two flat arrays so that a delta is simply "these bucket indices and these cell
+//! slots changed": `buckets[i]` holds up to [`BUCKET_ENTRIES`] (cell key, cell slot) pairs and
+//! `cells[slot]` up to [`CELL_POINTS`] packed 32-bit points. Empty entries are all-zero words
+//! (key 0, invalid bit clear), so fresh storage is zeroed memory and entries can sit anywhere
+//! in a bucket or cell (lookups check every entry; locations of points stay stable).
+
+use glam::{UVec3, Vec3};
+
+use crate::error::PointsError;
+use crate::generate::InstancePoints;
+use crate::layout::{DecodedPoint, GridLayout, BUCKET_ENTRIES, CELL_POINTS};
+use crate::pack::is_valid;
+
+/// One hash-bucket entry: which cell lives in which slot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct BucketEntry {
+    /// Cell id + 1 ([`GridLayout::cell_id`]); 0 marks an empty entry.
+    pub key: u64,
+    /// Index of the cell in the instance's cell array.
+    pub slot: u32,
+}
+
+impl BucketEntry {
+    /// Entry for cell `id` stored in `slot`.
+    pub fn new(id: u64, slot: u32) -> Self {
+        Self { key: id + 1, slot }
+    }
+
+    /// The cell id, or `None` for an empty entry.
+    pub fn cell_id(&self) -> Option<u64> {
+        self.key.checked_sub(1)
+    }
+}
+
+/// A hash bucket: up to [`BUCKET_ENTRIES`] cells whose ids hash here.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Bucket {
+    /// The entries, empty ones anywhere.
+    pub entries: [BucketEntry; BUCKET_ENTRIES],
+}
+
+impl Bucket {
+    /// Slot of the cell with id `id`, if this bucket holds it.
+    #[inline]
+    pub fn find(&self, id: u64) -> Option<u32> {
+        let key = id + 1;
+        self.entries.iter().find(|e| e.key == key).map(|e| e.slot)
+    }
+
+    /// Number of non-empty entries.
+    pub fn len(&self) -> usize {
+        self.entries.iter().filter(|e| e.key != 0).count()
+    }
+
+    /// True when no entry is used.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A cell: up to [`CELL_POINTS`] packed points (see [`crate::pack`]); 0 = empty entry.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Cell {
+    /// Packed points, empty ones anywhere.
+    pub points: [u32; CELL_POINTS],
+}
+
+impl Cell {
+    /// Number of valid points.
+    pub fn count(&self) -> usize {
+        self.points.iter().filter(|&&b| is_valid(b)).count()
+    }
+}
+
+/// Where a point is stored: its cell slot and its index inside the cell.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PointLoc {
+    /// Cell slot.
+    pub slot: u32,
+    /// Index inside the cell, `0..CELL_POINTS`.
+    pub index: u8,
+}
+
+/// The hash grid of one instance. The server builds and updates it; a client creates an empty
+/// one from the layout ([`InstanceGrid::new`]) and applies received buckets and cells with
+/// [`InstanceGrid::set_bucket`] / [`InstanceGrid::set_cell`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct InstanceGrid {
+    layout: GridLayout,
+    buckets: Vec<Bucket>,
+    cells: Vec<Cell>,
+    /// Key of the cell in each slot (0 when the slot is free).
+    slot_keys: Vec<u64>,
+    /// Free slots below `cells.len()` (server side), reused last-freed first.
+    free: Vec<u32>,
+    overflow_cells: u64,
+    overflow_points: u64,
+}
+
+impl InstanceGrid {
+    /// An empty grid: all buckets empty, no cells.
+    pub fn new(layout: GridLayout) -> Self {
+        Self {
+            buckets: vec![Bucket::default(); layout.bucket_count as usize],
+            layout,
+            cells: Vec::new(),
+            slot_keys: Vec::new(),
+            free: Vec::new(),
+            overflow_cells: 0,
+            overflow_points: 0,
+        }
+    }
+
+    /// Build a grid from (local position, local normal, AO) triples. Returns the grid and, per
+    /// input point, where it was stored (`None` when dropped). Cells are allocated in cell-id
+    /// order; within a cell, points keep their input order and the first [`CELL_POINTS`] win.
+    /// Every refused cell allocation (full bucket) counts once in [`Self::overflow_cells`];
+    /// every dropped point (full bucket, full cell, outside the grid) in
+    /// [`Self::overflow_points`].
+    pub fn build<I>(layout: GridLayout, points: I) -> (Self, Vec<Option<PointLoc>>)
+    where
+        I: IntoIterator<Item = (Vec3, Vec3, f32)>,
+    {
+        let mut grid = Self::new(layout);
+        let points: Vec<(Vec3, Vec3, f32)> = points.into_iter().collect();
+        let mut locs = vec![None; points.len()];
+        let mut keyed: Vec<(u64, UVec3, u32)> = Vec::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            match layout.cell_coord(p.0) {
+                Some(c) => keyed.push((layout.cell_id(c), c, i as u32)),
+                None => grid.overflow_points += 1,
+            }
+        }
+        keyed.sort_unstable_by_key(|&(id, _, i)| (id, i));
+        for group in keyed.chunk_by(|a, b| a.0 == b.0) {
+            let (id, coord, _) = group[0];
+            let Ok(slot) = grid.alloc_cell(id) else {
+                grid.overflow_cells += 1;
+                grid.overflow_points += group.len() as u64;
+                continue;
+            };
+            for (k, &(_, _, i)) in group.iter().enumerate() {
+                if k >= CELL_POINTS {
+                    grid.overflow_points += 1;
+                    continue;
+                }
+                let (pos, normal, ao) = points[i as usize];
+                grid.cells[slot as usize].points[k] = layout.pack(coord, pos, normal, ao);
+                locs[i as usize] = Some(PointLoc {
+                    slot,
+                    index: k as u8,
+                });
+            }
+        }
+        (grid, locs)
+    }
+
+    /// [`Self::build`] with [`GridLayout::for_points`] and the same AO for every point.
+    pub fn from_points(
+        points: &InstancePoints,
+        ao: f32,
+    ) -> Result<(Self, Vec<Option<PointLoc>>), PointsError> {
+        let layout = GridLayout::for_points(points)?;
+        Ok(Self::build(
+            layout,
+            points.points.iter().map(|p| (p.position, p.normal, ao)),
+        ))
+    }
+
+    /// The grid's layout.
+    pub fn layout(&self) -> &GridLayout {
+        &self.layout
+    }
+
+    /// All hash buckets (length = `layout().bucket_count`).
+    pub fn buckets(&self) -> &[Bucket] {
+        &self.buckets
+    }
+
+    /// All cell slots (free slots are all-zero).
+    pub fn cells(&self) -> &[Cell] {
+        &self.cells
+    }
+
+    /// Cell allocations refused because the bucket was full.
+    pub fn overflow_cells(&self) -> u64 {
+        self.overflow_cells
+    }
+
+    /// Points dropped because their bucket or cell was full or they fell outside the grid.
+    pub fn overflow_points(&self) -> u64 {
+        self.overflow_points
+    }
+
+    /// Number of allocated cells.
+    pub fn cell_count(&self) -> usize {
+        self.slot_keys.iter().filter(|&&k| k != 0).count()
+    }
+
+    /// Number of stored points.
+    pub fn point_count(&self) -> usize {
+        self.cells.iter().map(Cell::count).sum()
+    }
+
+    /// Slot of the cell at `coord`, if allocated.
+    #[inline]
+    pub fn find_cell(&self, coord: UVec3) -> Option<u32> {
+        let id = self.layout.cell_id(coord);
+        self.buckets[self.layout.bucket_of(id)].find(id)
+    }
+
+    /// Slot of the allocated cell containing local position `p`.
+    pub fn cell_of(&self, p: Vec3) -> Option<u32> {
+        self.layout.cell_coord(p).and_then(|c| self.find_cell(c))
+    }
+
+    /// The allocated cells among the 2×2×2 cells whose centres surround local position `p`,
+    /// as (cell coordinate, slot); unallocated or out-of-grid cells are `None`.
+    pub fn nearest_cells(&self, p: Vec3) -> [Option<(UVec3, u32)>; 8] {
+        let base = self.layout.nearest_base(p);
+        std::array::from_fn(|k| {
+            let offset = glam::IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
+            let c = self.layout.checked_coord(base.saturating_add(offset))?;
+            self.find_cell(c).map(|slot| (c, slot))
+        })
+    }
+
+    /// The decoded points of the cell at `coord` (nothing when it is not allocated).
+    pub fn cell_points(&self, coord: UVec3) -> impl Iterator<Item = DecodedPoint> + '_ {
+        let cell = self.find_cell(coord).map(|s| &self.cells[s as usize]);
+        cell.into_iter()
+            .flat_map(|c| c.points.iter())
+            .filter_map(move |&bits| self.layout.unpack(coord, bits))
+    }
+
+    /// The packed record at `loc`, if it holds a point.
+    pub fn point(&self, loc: PointLoc) -> Option<u32> {
+        let bits = *self
+            .cells
+            .get(loc.slot as usize)?
+            .points
+            .get(usize::from(loc.index))?;
+        is_valid(bits).then_some(bits)
+    }
+
+    /// Store a point at local position `position`. Overflow (full bucket, full cell, outside
+    /// the grid) drops the point, is counted, and is reported as the matching error.
+    pub fn insert(
+        &mut self,
+        position: Vec3,
+        normal: Vec3,
+        ao: f32,
+    ) -> Result<PointLoc, PointsError> {
+        let Some(coord) = self.layout.cell_coord(position) else {
+            self.overflow_points += 1;
+            return Err(PointsError::OutsideGrid(position));
+        };
+        let id = self.layout.cell_id(coord);
+        let slot = match self.find_cell(coord) {
+            Some(slot) => slot,
+            None => self.alloc_cell(id).inspect_err(|_| {
+                self.overflow_cells += 1;
+                self.overflow_points += 1;
+            })?,
+        };
+        let bits = self.layout.pack(coord, position, normal, ao);
+        let cell = &mut self.cells[slot as usize];
+        let Some(index) = cell.points.iter().position(|&b| !is_valid(b)) else {
+            self.overflow_points += 1;
+            return Err(PointsError::CellFull { slot });
+        };
+        cell.points[index] = bits;
+        Ok(PointLoc {
+            slot,
+            index: index as u8,
+        })
+    }
+
+    /// Remove the point at `loc`; a cell left empty is freed and its bucket entry cleared.
+    pub fn remove(&mut self, loc: PointLoc) -> Result<(), PointsError> {
+        self.point(loc).ok_or(PointsError::NoSuchPoint {
+            slot: loc.slot,
+            index: loc.index,
+        })?;
+        let slot = loc.slot as usize;
+        self.cells[slot].points[usize::from(loc.index)] = 0;
+        if self.cells[slot].count() == 0 {
+            let key = std::mem::take(&mut self.slot_keys[slot]);
+            if let Some(id) = key.checked_sub(1) {
+                let bucket = &mut self.buckets[self.layout.bucket_of(id)];
+                if let Some(e) = bucket.entries.iter_mut().find(|e| e.key == key) {
+                    *e = BucketEntry::default();
+                }
+                self.free.push(loc.slot);
+            }
+        }
+        Ok(())
+    }
+
+    /// Move/refresh the point at `loc`: rewritten in place when it stays in its cell, else
+    /// removed and re-inserted (an overflow then drops it and is reported like [`Self::insert`]).
+    pub fn update(
+        &mut self,
+        loc: PointLoc,
+        position: Vec3,
+        normal: Vec3,
+        ao: f32,
+    ) -> Result<PointLoc, PointsError> {
+        self.point(loc).ok_or(PointsError::NoSuchPoint {
+            slot: loc.slot,
+            index: loc.index,
+        })?;
+        if let Some(coord) = self.layout.cell_coord(position) {
+            if self.slot_keys[loc.slot as usize] == self.layout.cell_id(coord) + 1 {
+                let bits = self.layout.pack(coord, position, normal, ao);
+                self.cells[loc.slot as usize].points[usize::from(loc.index)] = bits;
+                return Ok(loc);
+            }
+        }
+        self.remove(loc)?;
+        self.insert(position, normal, ao)
+    }
+
+    /// Replace bucket `index` (client side: apply a received bucket). Every referenced slot
+    /// must be addressable and every key must belong to a cell of this grid that hashes to
+    /// this bucket; slots get an (empty) cell if they have none yet.
+    pub fn set_bucket(&mut self, index: usize, bucket: Bucket) -> Result<(), PointsError> {
+        if index >= self.buckets.len() {
+            return Err(PointsError::BucketOutOfRange {
+                index,
+                count: self.buckets.len(),
+            });
+        }
+        for e in bucket.entries.iter().filter(|e| e.key != 0) {
+            self.check_slot(e.slot)?;
+            let id = e.key - 1;
+            if self.layout.coord_of_id(id).is_none() || self.layout.bucket_of(id) != index {
+                return Err(PointsError::InvalidBucketEntry {
+                    bucket: index,
+                    key: e.key,
+                });
+            }
+        }
+        for e in self.buckets[index].entries {
+            if e.key != 0 && self.slot_keys.get(e.slot as usize) == Some(&e.key) {
+                self.slot_keys[e.slot as usize] = 0;
+            }
+        }
+        for e in bucket.entries.iter().filter(|e| e.key != 0) {
+            self.ensure_slot(e.slot);
+            self.slot_keys[e.slot as usize] = e.key;
+        }
+        self.buckets[index] = bucket;
+        Ok(())
+    }
+
+    /// Replace the cell in `slot` (client side: apply a received cell).
+    pub fn set_cell(&mut self, slot: u32, cell: Cell) -> Result<(), PointsError> {
+        self.check_slot(slot)?;
+        self.ensure_slot(slot);
+        self.cells[slot as usize] = cell;
+        Ok(())
+    }
+
+    fn check_slot(&self, slot: u32) -> Result<(), PointsError> {
+        let max = self.layout.max_cells();
+        if slot as usize >= max {
+            return Err(PointsError::CellSlotOutOfRange { slot, max });
+        }
+        Ok(())
+    }
+
+    fn ensure_slot(&mut self, slot: u32) {
+        let needed = slot as usize + 1;
+        if self.cells.len() < needed {
+            self.cells.resize(needed, Cell::default());
+            self.slot_keys.resize(needed, 0);
+        }
+    }
+
+    /// Allocate a cell for `id` in its bucket (server side).
+    fn alloc_cell(&mut self, id: u64) -> Result<u32, PointsError> {
+        let b = self.layout.bucket_of(id);
+        let Some(e) = self.buckets[b].entries.iter().position(|e| e.key == 0) else {
+            return Err(PointsError::BucketFull { bucket: b });
+        };
+        let slot = match self.free.pop() {
+            Some(s) => s,
+            None => {
+                let s = self.cells.len() as u32;
+                self.ensure_slot(s);
+                s
+            }
+        };
+        self.cells[slot as usize] = Cell::default();
+        self.slot_keys[slot as usize] = id + 1;
+        self.buckets[b].entries[e] = BucketEntry::new(id, slot);
+        Ok(slot)
+    }
+}

@@ -1,0 +1,35 @@
+//! The PSAO point representation (DESIGN §3; paper "PSAO: Point-Based Split Rendering for
+//! Ambient Occlusion", §3): evenly spread surface points per mesh instance, a per-instance
+//! virtual grid addressed through hash buckets, 32-bit packed points, and the client's AO
+//! reconstruction. Pure computation: no file or network I/O.
+//!
+//! Typical use:
+//! 1. [`generate_instance_points`] (or [`generate_scene_points`]) → [`InstancePoints`];
+//! 2. [`InstanceGrid::from_points`] → buckets + cells (server state, sent to clients);
+//! 3. the server writes AO with [`InstanceGrid::update`]; clients mirror buckets and cells
+//!    ([`InstanceGrid::set_bucket`], [`InstanceGrid::set_cell`]) and call [`reconstruct_ao`].
+
+mod elimination;
+mod error;
+mod generate;
+mod grid;
+mod layout;
+pub mod pack;
+mod reconstruct;
+mod rng;
+
+pub use elimination::{eliminate, max_poisson_radius};
+pub use error::PointsError;
+pub use generate::{
+    generate_instance_points, generate_scene_points, instance_seed, AlphaTest, GenerateParams,
+    InstancePoints, SceneAlphaTest, SurfacePoint, DEFAULT_DENSITY, MAX_SPAWNED,
+};
+pub use grid::{Bucket, BucketEntry, Cell, InstanceGrid, PointLoc};
+pub use layout::{
+    DecodedPoint, GridLayout, BUCKET_ENTRIES, CELLS_PER_AREA, CELL_POINTS, CELL_RADIUS_FACTOR,
+    MAX_DIM, TABLE_OVERSIZE,
+};
+pub use reconstruct::{
+    reconstruct_ao, ReconstructParams, DEFAULT_DIRECTION_THRESHOLD, DEFAULT_INTERPOLATION_FACTOR,
+    DEFAULT_NORMAL_THRESHOLD,
+};

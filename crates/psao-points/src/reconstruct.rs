@@ -1,0 +1,104 @@
+//! Client-side AO reconstruction at a shaded position (DESIGN §3, paper §3.5, Eqs. 2–4).
+
+use glam::{IVec3, Vec3};
+
+use crate::grid::InstanceGrid;
+use crate::pack::{is_valid, normal_code, normal_table, unpack_ao};
+
+/// Default interpolation factor: reconstruction radius r = 2√2 × the Poisson radius r_max.
+///
+/// The paper sets r to "the average radius computed during the Poisson disk rejection"; its
+/// authors' code weighs by squared distance within `sqrt(0.5) · cell = 2√2 · r_max` (their
+/// factor 1), and this is the reach we match. Smaller radii leave holes (no point within r,
+/// AO falls back to 1): with 2× oversampling the random candidates already contain empty
+/// disks of radius ≈ 2.2–2.5 r_max, which elimination cannot fill. Measured on a 4 m² plane
+/// at N = 1024 (40k queries, 3 seeds): holes 0.07–0.18 % at factor 2, ≤ 0.005 % at 2.5, none
+/// at 2√2. Factor 2 is the largest radius the 2×2×2 lookup covers completely (half a cell of
+/// 4·r_max); beyond it points are visited depending on where the position falls in its cell,
+/// which only affects weights below (r − 2·r_max)/r ≈ 0.29.
+pub const DEFAULT_INTERPOLATION_FACTOR: f32 = 2.0 * std::f32::consts::SQRT_2;
+/// Default T_n: points whose normal has cosine ≤ this with the surface normal are ignored.
+pub const DEFAULT_NORMAL_THRESHOLD: f32 = 0.1;
+/// Default T_d: points whose normal has squared cosine ≥ this with the direction to them are
+/// ignored (they lie in front of or behind the surface, not along it).
+pub const DEFAULT_DIRECTION_THRESHOLD: f32 = 0.7;
+
+/// Parameters of the reconstruction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReconstructParams {
+    /// Radius r = layout Poisson radius × this.
+    pub interpolation_factor: f32,
+    /// T_n of Eq. 3.
+    pub normal_threshold: f32,
+    /// T_d of Eq. 3.
+    pub direction_threshold: f32,
+}
+
+impl Default for ReconstructParams {
+    fn default() -> Self {
+        Self {
+            interpolation_factor: DEFAULT_INTERPOLATION_FACTOR,
+            normal_threshold: DEFAULT_NORMAL_THRESHOLD,
+            direction_threshold: DEFAULT_DIRECTION_THRESHOLD,
+        }
+    }
+}
+
+/// AO at local position `p` with local unit normal `n` from the points of the 2×2×2 cells
+/// nearest `p`: weights `w = max(0, (r − |p_i − p|) / r)`, zeroed when `n_i·n ≤ T_n` or
+/// `(n_i·(p_i − p)/|p_i − p|)² ≥ T_d`; returns `Σ w·AO_i / Σ w`, or 1 when `Σ w = 0`.
+/// Allocation-free; at most 8 bucket scans and 56 points.
+pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &ReconstructParams) -> f32 {
+    let layout = grid.layout();
+    let r = layout.poisson_radius * params.interpolation_factor;
+    if !(r > 0.0 && r.is_finite() && p.is_finite()) {
+        return 1.0;
+    }
+    let (r2, inv_r) = (r * r, 1.0 / r);
+    let base = layout.nearest_base(p);
+    let (buckets, cells) = (grid.buckets(), grid.cells());
+    let normals = normal_table();
+    let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
+    for k in 0..8 {
+        let offset = IVec3::new(k & 1, (k >> 1) & 1, k >> 2);
+        let Some(coord) = layout.checked_coord(base.saturating_add(offset)) else {
+            continue;
+        };
+        let id = layout.cell_id(coord);
+        let Some(cell) = buckets[layout.bucket_of(id)]
+            .find(id)
+            .and_then(|slot| cells.get(slot as usize))
+        else {
+            continue;
+        };
+        for &bits in &cell.points {
+            if !is_valid(bits) {
+                continue;
+            }
+            let delta = layout.unpack_position(coord, bits) - p;
+            let d2 = delta.length_squared();
+            if d2 >= r2 {
+                continue;
+            }
+            let ni = normals[normal_code(bits) as usize];
+            if ni.dot(n) <= params.normal_threshold {
+                continue;
+            }
+            let d = d2.sqrt();
+            if d > 0.0 {
+                let c = ni.dot(delta) / d;
+                if c * c >= params.direction_threshold {
+                    continue;
+                }
+            }
+            let w = (r - d) * inv_r;
+            w_sum += w;
+            ao_sum += w * unpack_ao(bits);
+        }
+    }
+    if w_sum > 0.0 {
+        ao_sum / w_sum
+    } else {
+        1.0
+    }
+}
