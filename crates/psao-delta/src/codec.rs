@@ -1,0 +1,27 @@
+//! The codec interface and lookup by name.
+
+use crate::{DeltaError, PaperCodec, Update};
+
+/// Names accepted by [`codec_by_name`].
+pub const CODEC_NAMES: &[&str] = &["paper"];
+
+/// Turns updates into bytes and back. Codecs may keep state between calls (e.g. the last
+/// sent state for XOR deltas), so a sender and its receiver each hold one instance and see
+/// the same sequence of updates.
+pub trait Codec: Send {
+    /// The codec's name, as accepted by [`codec_by_name`].
+    fn name(&self) -> &'static str;
+    /// Encode one update.
+    fn encode(&mut self, update: &Update) -> Vec<u8>;
+    /// Decode one update; malformed input gives an error, never a panic or an unbounded
+    /// allocation.
+    fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError>;
+}
+
+/// A fresh codec by name (`"paper"`).
+pub fn codec_by_name(name: &str) -> Result<Box<dyn Codec>, DeltaError> {
+    match name {
+        "paper" => Ok(Box::new(PaperCodec)),
+        _ => Err(DeltaError::UnknownCodec(name.to_string())),
+    }
+}

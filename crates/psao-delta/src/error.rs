@@ -1,0 +1,50 @@
+//! Typed errors of the codecs.
+
+/// Everything that can go wrong when decoding an update or choosing a codec.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DeltaError {
+    /// No codec has this name.
+    #[error("unknown codec `{0}` (known: {known})", known = crate::CODEC_NAMES.join(", "))]
+    UnknownCodec(String),
+    /// The compressed stream is not valid zstd (or fails its checksum).
+    #[error("corrupt compressed data: {0}")]
+    Decompress(String),
+    /// The compressed stream does not record its decompressed size (every encoder here does).
+    #[error("compressed data does not record its decompressed size")]
+    UnknownSize,
+    /// The stream claims to expand to more bytes than any legitimate update.
+    #[error("decompressed size {size} bytes exceeds the limit of {limit} bytes")]
+    TooLarge {
+        /// Claimed decompressed size.
+        size: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// The payload does not start with the expected format tag.
+    #[error("bad format tag {found:#010x} (expected {expected:#010x})")]
+    BadTag {
+        /// The tag read.
+        found: u32,
+        /// The tag this codec writes.
+        expected: u32,
+    },
+    /// Flag bits this format does not define.
+    #[error("unknown flag bits {0:#x}")]
+    UnknownFlags(u32),
+    /// The payload length is not a whole number of 32-bit words.
+    #[error("payload of {0} bytes is not a whole number of 32-bit words")]
+    Unaligned(usize),
+    /// A count or record runs past the end of the payload.
+    #[error("truncated {what}: needs {needed} words, {available} left")]
+    Truncated {
+        /// What was being read.
+        what: &'static str,
+        /// Words needed.
+        needed: u64,
+        /// Words remaining.
+        available: usize,
+    },
+    /// Words left over after the last record.
+    #[error("{0} trailing words after the update")]
+    Trailing(usize),
+}

@@ -1,0 +1,233 @@
+//! The `paper` codec (DESIGN §4): the paper's raw 32-bit records, zstd level 15, strategy
+//! "lazy" (§3.4 compresses the changed HashBucket and CellData buffers with off-the-shelf zstd).
+//!
+//! Payload (little-endian 32-bit words) before compression:
+//! ```text
+//! tag "PSD1" · frame (2 words, low first) · flags (bit 0 snapshot, bit 1 wide keys)
+//! transform count · per transform: instance, 12 floats (Affine3A columns)
+//! instance count · per instance: instance, bucket count, cell count,
+//!     buckets: index, 8 × (key [key high word if wide], slot)
+//!     cells:   slot, 7 packed points
+//! ```
+//! Bucket entries and cell points are compacted, empty (zero) ones last. Keys (cell id + 1)
+//! take one word unless some key in the update needs two ("wide keys").
+
+use glam::Affine3A;
+use psao_points::{Bucket, BucketEntry, Cell, BUCKET_ENTRIES, CELL_POINTS};
+use zstd::zstd_safe::{CParameter, Strategy};
+
+use crate::model::{compact_bucket, compact_cell, InstanceDelta, Update};
+use crate::words::{WordReader, WordWriter};
+use crate::{Codec, DeltaError};
+
+/// zstd compression level of the paper codec.
+pub const PAPER_LEVEL: i32 = 15;
+/// Largest decompressed payload any decoder here accepts (256 MiB): far above a snapshot of
+/// the largest scene we stream, far below what would hurt the client.
+pub const MAX_DECODED_BYTES: u64 = 256 << 20;
+
+const TAG: u32 = u32::from_le_bytes(*b"PSD1");
+const FLAG_SNAPSHOT: u32 = 1;
+const FLAG_WIDE_KEYS: u32 = 2;
+const TRANSFORM_WORDS: usize = 13;
+const INSTANCE_HEADER_WORDS: usize = 3;
+const CELL_WORDS: usize = 1 + CELL_POINTS;
+
+/// The paper's codec: raw records + zstd level 15 with the "lazy" strategy. Stateless: every
+/// update decodes on its own.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PaperCodec;
+
+impl Codec for PaperCodec {
+    fn name(&self) -> &'static str {
+        "paper"
+    }
+
+    fn encode(&mut self, update: &Update) -> Vec<u8> {
+        compress(&serialize(update))
+    }
+
+    fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError> {
+        deserialize(&decompress(bytes)?)
+    }
+}
+
+fn bucket_words(wide: bool) -> usize {
+    1 + BUCKET_ENTRIES * (if wide { 3 } else { 2 })
+}
+
+/// The uncompressed payload.
+fn serialize(update: &Update) -> Vec<u8> {
+    let wide = update
+        .instances
+        .iter()
+        .flat_map(|d| d.buckets.iter())
+        .flat_map(|(_, b)| b.entries.iter())
+        .any(|e| e.key > u64::from(u32::MAX));
+    let words = 5
+        + update.transforms.len() * TRANSFORM_WORDS
+        + update
+            .instances
+            .iter()
+            .map(|d| {
+                INSTANCE_HEADER_WORDS
+                    + d.buckets.len() * bucket_words(wide)
+                    + d.cells.len() * CELL_WORDS
+            })
+            .sum::<usize>();
+    let mut w = WordWriter::with_capacity(words);
+    w.put(TAG);
+    w.put_u64(update.frame);
+    let flags = if update.snapshot { FLAG_SNAPSHOT } else { 0 };
+    w.put(flags | if wide { FLAG_WIDE_KEYS } else { 0 });
+    w.put_len(update.transforms.len());
+    for (instance, t) in &update.transforms {
+        w.put(*instance);
+        t.to_cols_array().iter().for_each(|f| w.put(f.to_bits()));
+    }
+    w.put_len(update.instances.len());
+    for d in &update.instances {
+        w.put(d.instance);
+        w.put_len(d.buckets.len());
+        w.put_len(d.cells.len());
+        for (index, bucket) in &d.buckets {
+            w.put(*index);
+            for e in compact_bucket(bucket).entries {
+                if wide {
+                    w.put_u64(e.key);
+                } else {
+                    w.put(e.key as u32);
+                }
+                w.put(e.slot);
+            }
+        }
+        for (slot, cell) in &d.cells {
+            w.put(*slot);
+            compact_cell(cell).points.iter().for_each(|&p| w.put(p));
+        }
+    }
+    w.into_bytes()
+}
+
+/// Parse a payload; every count is checked against the words left before allocating.
+fn deserialize(bytes: &[u8]) -> Result<Update, DeltaError> {
+    let mut r = WordReader::new(bytes)?;
+    let tag = r.get("format tag")?;
+    if tag != TAG {
+        return Err(DeltaError::BadTag {
+            found: tag,
+            expected: TAG,
+        });
+    }
+    let frame = r.get_u64("frame number")?;
+    let flags = r.get("flags")?;
+    if flags & !(FLAG_SNAPSHOT | FLAG_WIDE_KEYS) != 0 {
+        return Err(DeltaError::UnknownFlags(flags));
+    }
+    let wide = flags & FLAG_WIDE_KEYS != 0;
+
+    let count = r.get("transform count")?;
+    r.require(count, TRANSFORM_WORDS, "transforms")?;
+    let mut transforms = Vec::with_capacity(count as usize);
+    for _ in 0..count {
+        let instance = r.get("transform")?;
+        let mut cols = [0.0f32; 12];
+        for c in &mut cols {
+            *c = f32::from_bits(r.get("transform")?);
+        }
+        transforms.push((instance, Affine3A::from_cols_array(&cols)));
+    }
+
+    let count = r.get("instance count")?;
+    r.require(count, INSTANCE_HEADER_WORDS, "instance deltas")?;
+    let mut instances = Vec::with_capacity(count as usize);
+    for _ in 0..count {
+        let instance = r.get("instance header")?;
+        let buckets = r.get("instance header")?;
+        let cells = r.get("instance header")?;
+        r.require(buckets, bucket_words(wide), "buckets")?;
+        let buckets = (0..buckets)
+            .map(|_| read_bucket(&mut r, wide))
+            .collect::<Result<_, _>>()?;
+        r.require(cells, CELL_WORDS, "cells")?;
+        let cells = (0..cells)
+            .map(|_| read_cell(&mut r))
+            .collect::<Result<_, _>>()?;
+        instances.push(InstanceDelta {
+            instance,
+            buckets,
+            cells,
+        });
+    }
+    r.finish()?;
+    Ok(Update {
+        frame,
+        snapshot: flags & FLAG_SNAPSHOT != 0,
+        transforms,
+        instances,
+    })
+}
+
+fn read_bucket(r: &mut WordReader<'_>, wide: bool) -> Result<(u32, Bucket), DeltaError> {
+    let index = r.get("bucket")?;
+    let mut bucket = Bucket::default();
+    for e in &mut bucket.entries {
+        let key = if wide {
+            r.get_u64("bucket")?
+        } else {
+            u64::from(r.get("bucket")?)
+        };
+        *e = BucketEntry {
+            key,
+            slot: r.get("bucket")?,
+        };
+    }
+    Ok((index, bucket))
+}
+
+fn read_cell(r: &mut WordReader<'_>) -> Result<(u32, Cell), DeltaError> {
+    let slot = r.get("cell")?;
+    let mut cell = Cell::default();
+    for p in &mut cell.points {
+        *p = r.get("cell")?;
+    }
+    Ok((slot, cell))
+}
+
+/// zstd level 15, strategy lazy, with content size and checksum recorded.
+fn compress(payload: &[u8]) -> Vec<u8> {
+    let params = [
+        CParameter::CompressionLevel(PAPER_LEVEL),
+        CParameter::Strategy(Strategy::ZSTD_lazy),
+        CParameter::ContentSizeFlag(true),
+        CParameter::ChecksumFlag(true),
+    ];
+    let result = zstd::bulk::Compressor::new(PAPER_LEVEL).and_then(|mut c| {
+        params.into_iter().try_for_each(|p| c.set_parameter(p))?;
+        c.compress(payload)
+    });
+    // Constant, valid parameters into a buffer of `compress_bound` bytes: zstd cannot fail
+    // here short of running out of memory, which aborts anyway.
+    result.expect("zstd compression with fixed valid parameters")
+}
+
+/// Decompress at most [`MAX_DECODED_BYTES`], allocating exactly the recorded size.
+fn decompress(bytes: &[u8]) -> Result<Vec<u8>, DeltaError> {
+    let size = zstd::bulk::Decompressor::upper_bound(bytes).ok_or(DeltaError::UnknownSize)?;
+    if size as u64 > MAX_DECODED_BYTES {
+        return Err(DeltaError::TooLarge {
+            size: size as u64,
+            limit: MAX_DECODED_BYTES,
+        });
+    }
+    let out = zstd::bulk::Decompressor::new()
+        .and_then(|mut d| d.decompress(bytes, size))
+        .map_err(|e| DeltaError::Decompress(e.to_string()))?;
+    if out.len() != size {
+        return Err(DeltaError::Decompress(format!(
+            "expanded to {} bytes, {size} recorded",
+            out.len()
+        )));
+    }
+    Ok(out)
+}
