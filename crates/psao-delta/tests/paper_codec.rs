@@ -186,7 +186,8 @@ fn valid_zstd_with_malformed_payload_is_rejected() {
     };
     let tag = u32::from_le_bytes(*b"PSD1");
     let mut codec = PaperCodec;
-    let cases: [(Vec<u32>, fn(&DeltaError) -> bool); 5] = [
+    type Check = fn(&DeltaError) -> bool;
+    let cases: [(Vec<u32>, Check); 5] = [
         (vec![0xdead_beef], |e| {
             matches!(e, DeltaError::BadTag { .. })
         }),
