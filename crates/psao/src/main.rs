@@ -1,12 +1,17 @@
 //! `psao`: point-based split ambient occlusion — command-line entry point.
 
 mod args;
+mod bench_client;
 mod bench_trace;
 mod compare;
 mod demo;
+mod eval;
+mod pipeline;
 mod png_io;
 mod progress;
 mod reference;
+mod report;
+mod run;
 mod scene_source;
 
 use anyhow::Result;
@@ -28,6 +33,10 @@ struct Cli {
 enum Command {
     /// Run the main job on the built-in default scene and write images and a report.
     Demo(demo::DemoArgs),
+    /// Run server and client in one process along a camera path, writing frames and stats.
+    Run(run::RunArgs),
+    /// Evaluate PSAO against the reference, SSAO and few-spp RTAO; write report.json and report.md.
+    Eval(eval::EvalArgs),
     /// Render per-pixel reference AO (16-bit grayscale PNGs) along a camera path.
     Reference(reference::ReferenceArgs),
     /// Compare two AO images: PSNR, SSIM and FLIP.
@@ -41,6 +50,8 @@ enum Command {
 enum BenchCommand {
     /// Trace one AO ray set through every compiled backend, unsorted and sorted, on 1 and 2 threads.
     Trace(bench_trace::BenchTraceArgs),
+    /// Time the client's AO reconstruction against SSAO on the same G-buffer.
+    Client(bench_client::BenchClientArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -64,8 +75,11 @@ fn main() -> std::process::ExitCode {
 fn run(command: Command) -> Result<()> {
     match command {
         Command::Demo(a) => demo::run(&a),
+        Command::Run(a) => run::run(&a),
+        Command::Eval(a) => eval::run(&a),
         Command::Reference(a) => reference::run(&a),
         Command::Compare(a) => compare::run(&a),
         Command::Bench(BenchCommand::Trace(a)) => bench_trace::run(&a),
+        Command::Bench(BenchCommand::Client(a)) => bench_client::run(&a),
     }
 }

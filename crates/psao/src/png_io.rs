@@ -15,6 +15,15 @@ pub fn write_ao_png(path: &Path, image: &AoImage) -> Result<()> {
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Writes 8-bit sRGB RGB pixels as a PNG.
+pub fn write_rgb_png(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<()> {
+    let buffer = image::RgbImage::from_raw(width, height, rgb)
+        .context("image data does not match its size")?;
+    buffer
+        .save(path)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Reads a PNG (8 or 16 bit, gray or colour: colour is converted to luma) as an AO image.
 pub fn read_ao_png(path: &Path) -> Result<AoImage> {
     let decoded = image::ImageReader::open(path)

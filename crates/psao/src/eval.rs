@@ -1,0 +1,354 @@
+//! `psao eval`: PSAO at several densities and server rates against SSAO and few-spp RTAO,
+//! all measured against a cached per-pixel reference (DESIGN §5).
+
+use crate::args::{FrameRange, Resolution};
+use crate::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
+use crate::png_io::{read_ao_png, write_ao_png};
+use crate::progress;
+use crate::reference::ReferenceRenderer;
+use crate::report::{self, Report, Row, Series};
+use crate::run::ServerTuning;
+use crate::scene_source::SceneInput;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use psao_eval::{compare, reference_ao, ssao, AoImage, Metrics, ReferenceSettings, SsaoSettings};
+use psao_raster::{rasterize, GBuffer, RasterOptions};
+use psao_scene::path::CameraPath;
+use psao_scene::Scene;
+use psao_trace::{GeometryMode, Tracer};
+use std::hash::{Hash, Hasher};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `psao eval`.
+#[derive(Args, Debug)]
+pub struct EvalArgs {
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = "default")]
+    pub scene: String,
+    /// Camera path file (default: the scene's first path).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Image size, `WxH`.
+    #[arg(long, default_value = "640x360")]
+    pub res: Resolution,
+    /// Half-open range of client frames `A..B` (default: the whole path).
+    #[arg(long)]
+    pub frames: Option<FrameRange>,
+    /// Measure image quality on every K-th frame.
+    #[arg(long, default_value_t = 30)]
+    pub every: u32,
+    /// PSAO densities (points per unit area) to evaluate.
+    #[arg(long, value_delimiter = ',', default_value = "512,1024,1536,2048")]
+    pub points: Vec<f32>,
+    /// Server rates to evaluate.
+    #[arg(long, value_delimiter = ',', default_value = "60")]
+    pub server_hz: Vec<u32>,
+    /// Rays per pixel of the reference.
+    #[arg(long, default_value_t = 512)]
+    pub spp: u32,
+    /// Rays per pixel of the few-spp per-pixel RTAO baseline.
+    #[arg(long, default_value_t = 4)]
+    pub rtao_spp: u32,
+    #[command(flatten)]
+    pub tuning: ServerTuning,
+    /// Folder of cached reference images.
+    #[arg(long, default_value = "out/cache")]
+    pub cache: PathBuf,
+    /// Output folder for `report.json`, `report.md`, plots and crops.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// One evaluated frame: its G-buffer, reference AO and composited reference.
+struct EvalFrame {
+    frame: u32,
+    gbuffer: GBuffer,
+    reference: AoImage,
+    reference_comp: AoImage,
+}
+
+/// Runs `psao eval`.
+pub fn run(args: &EvalArgs) -> Result<()> {
+    if args.every == 0 || args.points.is_empty() || args.server_hz.is_empty() {
+        bail!("--every must be ≥ 1 and --points / --server-hz must not be empty");
+    }
+    if args.spp == 0 || args.spp > crate::reference::MAX_SPP || args.rtao_spp == 0 {
+        bail!(
+            "--spp and --rtao-spp must be in 1..={}",
+            crate::reference::MAX_SPP
+        );
+    }
+    let input = SceneInput::load(&args.scene)?;
+    let path = input.camera_path(args.path.as_ref())?;
+    let count = path.frame_count() as u32;
+    let range = args.frames.unwrap_or(FrameRange {
+        start: 0,
+        end: count,
+    });
+    if range.end > count {
+        bail!(
+            "the camera path has {count} frames; asked for {}..{}",
+            range.start,
+            range.end
+        );
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let eval_frames: Vec<u32> = (range.start..range.end)
+        .step_by(args.every as usize)
+        .collect();
+    let frames = prepare_frames(&input, &path, &eval_frames, args)?;
+
+    let mut rows = Vec::new();
+    let mut bandwidth = Vec::new();
+    let mut crops: Vec<(String, AoImage)> = vec![(
+        "reference".into(),
+        frames[frames.len() / 2].reference.clone(),
+    )];
+    for &hz in &args.server_hz {
+        for &points in &args.points {
+            let (row, series, middle) =
+                eval_psao(&input.scene, &path, range, &frames, points, hz, args)?;
+            if hz == args.server_hz[0] && (crops.len() == 1) {
+                crops.push((format!("PSAO-{points}"), middle));
+            }
+            bandwidth.push(series);
+            rows.push(row);
+        }
+    }
+    let (ssao_row, ssao_middle) = eval_ssao(&input.scene, &path, &frames)?;
+    crops.push(("SSAO".into(), ssao_middle));
+    rows.push(ssao_row);
+    rows.push(eval_rtao(&input.scene, &frames, args)?);
+
+    let report = Report {
+        scene: input.name.clone(),
+        path: path.name.clone(),
+        res: args.res.to_string(),
+        frames: format!("{}..{}", range.start, range.end),
+        every: args.every,
+        spp: args.spp,
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        rows,
+    };
+    report::write(&args.out, &report, &bandwidth, &crops)?;
+    println!("{}", report::table(&report.rows));
+    println!("wrote {}", args.out.join("report.md").display());
+    Ok(())
+}
+
+/// G-buffers and (cached) references of the evaluated frames.
+fn prepare_frames(
+    input: &SceneInput,
+    path: &CameraPath,
+    eval_frames: &[u32],
+    args: &EvalArgs,
+) -> Result<Vec<EvalFrame>> {
+    let cache_dir = args.cache.join(reference_key(input, path, args));
+    std::fs::create_dir_all(&cache_dir)
+        .with_context(|| format!("cannot create {}", cache_dir.display()))?;
+    let renderer = ReferenceRenderer::new(
+        &input.scene,
+        args.tuning.backend.unwrap_or_default(),
+        args.spp,
+        1,
+    )?;
+    let pixels = args.res.width as u64 * args.res.height as u64;
+    let bar = progress::bar(pixels * eval_frames.len() as u64, "reference AO", "px");
+    let mut frames = Vec::new();
+    for &frame in eval_frames {
+        let file = crate::reference::frame_file(&cache_dir, frame);
+        let reference = match read_ao_png(&file) {
+            Ok(img) if (img.width, img.height) == (args.res.width, args.res.height) => {
+                bar.inc(pixels);
+                img
+            }
+            _ => {
+                let img = renderer.render(path, frame, args.res, &|n| bar.inc(n));
+                write_ao_png(&file, &img)?;
+                img
+            }
+        };
+        let camera = path.camera_at_frame(frame as usize);
+        let gbuffer = rasterize(
+            &input.scene,
+            &camera,
+            &RasterOptions::new(args.res.width, args.res.height),
+        );
+        let reference_comp = composite_luma(&input.scene, &gbuffer, &reference);
+        frames.push(EvalFrame {
+            frame,
+            gbuffer,
+            reference,
+            reference_comp,
+        });
+    }
+    bar.finish_and_clear();
+    Ok(frames)
+}
+
+/// The cache folder name of a reference configuration: readable parts plus a hash of everything
+/// that changes the images (scene geometry, camera keys, resolution, spp, radius).
+fn reference_key(input: &SceneInput, path: &CameraPath, args: &EvalArgs) -> String {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    args.scene.hash(&mut h);
+    input.scene.instanced_triangle_count().hash(&mut h);
+    format!("{:?}", path.keys).hash(&mut h);
+    input.scene.ao_radius.to_bits().hash(&mut h);
+    let (lo, hi) = input.scene.bounds();
+    format!("{lo:?}{hi:?}").hash(&mut h);
+    format!(
+        "{}_{}_{}_{}spp_{:016x}",
+        input.name,
+        path.name,
+        args.res,
+        args.spp,
+        h.finish()
+    )
+}
+
+fn composite_luma(scene: &Scene, gbuffer: &GBuffer, ao: &AoImage) -> AoImage {
+    luma(
+        gbuffer.width,
+        gbuffer.height,
+        &composite_rgb8(scene, gbuffer, ao),
+    )
+}
+
+/// Mean metrics over frames for AO-only and composited images.
+#[derive(Default)]
+struct MetricSums {
+    ao: Vec<Metrics>,
+    comp: Vec<Metrics>,
+}
+
+impl MetricSums {
+    fn add(&mut self, scene: &Scene, f: &EvalFrame, ao: &AoImage) -> Result<()> {
+        self.ao.push(compare(&f.reference, ao)?);
+        let comp = composite_luma(scene, &f.gbuffer, ao);
+        self.comp.push(compare(&f.reference_comp, &comp)?);
+        Ok(())
+    }
+
+    fn row(&self, method: &str) -> Row {
+        let mean = |v: &[Metrics], g: fn(&Metrics) -> f64| {
+            v.iter().map(g).sum::<f64>() / v.len().max(1) as f64
+        };
+        Row {
+            method: method.into(),
+            points: None,
+            server_hz: None,
+            psnr_ao: mean(&self.ao, |m| m.psnr),
+            ssim_ao: mean(&self.ao, |m| m.ssim),
+            flip_ao: mean(&self.ao, |m| m.flip),
+            psnr_comp: mean(&self.comp, |m| m.psnr),
+            ssim_comp: mean(&self.comp, |m| m.ssim),
+            flip_comp: mean(&self.comp, |m| m.flip),
+            mbit_s: 0.0,
+            server_ms: 0.0,
+            client_ms: 0.0,
+        }
+    }
+}
+
+/// Runs the split pipeline over the whole range and measures the evaluated frames.
+fn eval_psao(
+    scene: &Scene,
+    path: &CameraPath,
+    range: FrameRange,
+    frames: &[EvalFrame],
+    points: f32,
+    hz: u32,
+    args: &EvalArgs,
+) -> Result<(Row, Series, AoImage)> {
+    let config = args.tuning.config(points, hz, args.res)?;
+    let mut pipeline = Pipeline::new(scene, &config)?;
+    let bar = progress::bar(
+        (range.end - range.start) as u64,
+        &format!("PSAO-{points} @ {hz} Hz"),
+        "frames",
+    );
+    let mut sums = MetricSums::default();
+    let (mut server_ms, mut server_frames, mut client_ms) = (0.0, 0u32, 0.0);
+    let mut per_second =
+        vec![0u64; ((range.end - range.start) as usize).div_ceil(CLIENT_HZ as usize)];
+    let mut middle = None;
+    let mut next = frames.iter().peekable();
+    for frame in range.start..range.end {
+        let eval = next.next_if(|f| f.frame == frame);
+        let camera = path.camera_at_frame(frame as usize);
+        let (record, image) = pipeline.frame(frame, &camera, eval.is_some())?;
+        if record.server_frame {
+            server_ms += record.server_ms;
+            server_frames += 1;
+        }
+        per_second[((frame - range.start) / CLIENT_HZ) as usize] += record.bytes as u64;
+        if let (Some(f), Some(img)) = (eval, image) {
+            client_ms += record.client_ms;
+            sums.add(scene, f, &img.ao)?;
+            if std::ptr::eq(f, &frames[frames.len() / 2]) {
+                middle = Some(img.ao);
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let seconds = (range.end - range.start) as f64 / CLIENT_HZ as f64;
+    let mut row = sums.row("psao");
+    row.points = Some(points);
+    row.server_hz = Some(hz);
+    row.mbit_s = pipeline.total_bytes as f64 * 8.0 / seconds / 1e6;
+    row.server_ms = server_ms / server_frames.max(1) as f64;
+    row.client_ms = client_ms / frames.len().max(1) as f64;
+    let series = Series {
+        label: format!("PSAO-{points} @ {hz} Hz"),
+        mbit_per_second: per_second.iter().map(|&b| b as f64 * 8.0 / 1e6).collect(),
+    };
+    Ok((row, series, middle.context("no evaluated frame")?))
+}
+
+/// SSAO on the same G-buffers.
+fn eval_ssao(scene: &Scene, path: &CameraPath, frames: &[EvalFrame]) -> Result<(Row, AoImage)> {
+    let mut sums = MetricSums::default();
+    let mut ms = 0.0;
+    let mut middle = None;
+    for (i, f) in frames.iter().enumerate() {
+        let camera = path.camera_at_frame(f.frame as usize);
+        let t = Instant::now();
+        let ao = ssao(&f.gbuffer, &camera, &SsaoSettings::new(scene.ao_radius));
+        ms += t.elapsed().as_secs_f64() * 1e3;
+        sums.add(scene, f, &ao)?;
+        if i == frames.len() / 2 {
+            middle = Some(ao);
+        }
+    }
+    let mut row = sums.row("ssao");
+    row.client_ms = ms / frames.len().max(1) as f64;
+    Ok((row, middle.context("no evaluated frame")?))
+}
+
+/// Per-pixel RTAO with few rays per pixel.
+fn eval_rtao(scene: &Scene, frames: &[EvalFrame], args: &EvalArgs) -> Result<Row> {
+    let tracer = Tracer::new(
+        args.tuning.backend.unwrap_or_default(),
+        scene,
+        GeometryMode::Occlusion,
+    )?;
+    let mut sums = MetricSums::default();
+    let mut ms = 0.0;
+    for f in frames {
+        let settings = ReferenceSettings {
+            spp: args.rtao_spp,
+            radius: scene.ao_radius,
+            seed: 0x7274_616f ^ f.frame as u64,
+        };
+        let t = Instant::now();
+        let ao = reference_ao(&f.gbuffer, &tracer, &settings, &|_| {});
+        ms += t.elapsed().as_secs_f64() * 1e3;
+        sums.add(scene, f, &ao)?;
+    }
+    let mut row = sums.row("rtao");
+    row.client_ms = ms / frames.len().max(1) as f64;
+    Ok(row)
+}

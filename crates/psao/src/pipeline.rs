@@ -1,0 +1,197 @@
+//! The in-process split pipeline: a server and one client exchanging encoded bytes.
+//!
+//! Nothing goes around the codec: the client's state is built only from decoded updates.
+
+use crate::args::Resolution;
+use anyhow::{bail, Context, Result};
+use psao_client::{ClientState, ReconstructSettings, Shading};
+use psao_delta::Codec;
+use psao_eval::AoImage;
+use psao_raster::{GBuffer, RasterOptions, Rasterizer};
+use psao_scene::{Camera, Scene};
+use psao_server::{ClientId, Server, ServerConfig, View};
+use serde::Serialize;
+use std::time::Instant;
+
+/// Client frames per second of scene time (camera paths are sampled at this rate).
+pub const CLIENT_HZ: u32 = 60;
+
+/// Settings of one pipeline run.
+#[derive(Clone, Debug)]
+pub struct PipelineConfig {
+    /// Server settings (density, budget, thresholds, backend, seed).
+    pub server: ServerConfig,
+    /// Server frames per second of scene time (divides into the 60 Hz client clock).
+    pub server_hz: u32,
+    /// Codec name (`paper`).
+    pub codec: String,
+    /// Client image size.
+    pub res: Resolution,
+}
+
+/// What happened in one client frame.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct FrameRecord {
+    /// Client frame number on the camera path.
+    pub frame: u32,
+    /// Whether the server ran a frame (and sent an update) at this client frame.
+    pub server_frame: bool,
+    /// Bytes the client received in this frame.
+    pub bytes: usize,
+    /// Points whose published value changed on the server in this frame.
+    pub changed_points: usize,
+    /// Cells sent in this frame.
+    pub changed_cells: usize,
+    /// Rays the server traced in this frame.
+    pub rays: u64,
+    /// Server time (step + delta + encode) in ms.
+    pub server_ms: f64,
+    /// Client time (decode + apply + rasterize + reconstruct) in ms; 0 when nothing was rendered.
+    pub client_ms: f64,
+}
+
+/// One rendered client frame.
+pub struct ClientFrame {
+    /// The G-buffer it was reconstructed on.
+    pub gbuffer: GBuffer,
+    /// Reconstructed AO.
+    pub ao: AoImage,
+}
+
+/// A server and one client in one process.
+pub struct Pipeline<'a> {
+    scene: &'a Scene,
+    server: Server,
+    client_id: ClientId,
+    encoder: Box<dyn Codec>,
+    decoder: Box<dyn Codec>,
+    client: ClientState,
+    rasterizer: Rasterizer,
+    server_hz: u32,
+    last_tick: Option<u64>,
+    res: Resolution,
+    /// Bytes received so far.
+    pub total_bytes: u64,
+}
+
+impl<'a> Pipeline<'a> {
+    /// Generates the points, builds the server and connects the client.
+    pub fn new(scene: &'a Scene, config: &PipelineConfig) -> Result<Self> {
+        if config.server_hz == 0 || config.server_hz > CLIENT_HZ {
+            bail!(
+                "--server-hz must be in 1..={CLIENT_HZ}, got {}",
+                config.server_hz
+            );
+        }
+        let mut server = Server::new(scene, config.server.clone())
+            .context("cannot start the server (point generation or tracer)")?;
+        let client_id = server.add_client();
+        let client = ClientState::new(&server.instance_table());
+        Ok(Self {
+            scene,
+            server,
+            client_id,
+            encoder: psao_delta::codec_by_name(&config.codec)?,
+            decoder: psao_delta::codec_by_name(&config.codec)?,
+            client,
+            rasterizer: Rasterizer::new(),
+            server_hz: config.server_hz,
+            last_tick: None,
+            res: config.res,
+            total_bytes: 0,
+        })
+    }
+
+    /// The server (for point counts and overflow statistics).
+    pub fn server(&self) -> &Server {
+        &self.server
+    }
+
+    /// The client's state.
+    pub fn client(&self) -> &ClientState {
+        &self.client
+    }
+
+    /// Runs client frame `frame` with `camera`: a server frame first when the server clock ticks,
+    /// then (when `render`) the client's G-buffer and AO reconstruction.
+    pub fn frame(
+        &mut self,
+        frame: u32,
+        camera: &Camera,
+        render: bool,
+    ) -> Result<(FrameRecord, Option<ClientFrame>)> {
+        let mut record = FrameRecord {
+            frame,
+            ..Default::default()
+        };
+        let tick = frame as u64 * self.server_hz as u64 / CLIENT_HZ as u64;
+        let mut bytes = None;
+        if self.last_tick != Some(tick) {
+            self.last_tick = Some(tick);
+            let t = Instant::now();
+            let aspect = self.res.width as f32 / self.res.height as f32;
+            let stats = self.server.step(&[View {
+                camera: *camera,
+                aspect,
+            }]);
+            let update = self.server.update_for(self.client_id);
+            let encoded = self.encoder.encode(&update);
+            record.server_ms = t.elapsed().as_secs_f64() * 1e3;
+            record.server_frame = true;
+            record.rays = stats.rays;
+            record.changed_points = stats.published_points;
+            record.changed_cells = update.changed_cells();
+            record.bytes = encoded.len();
+            self.total_bytes += encoded.len() as u64;
+            bytes = Some(encoded);
+        }
+        let t = Instant::now();
+        if let Some(encoded) = bytes {
+            let update = self
+                .decoder
+                .decode(&encoded)
+                .context("the client could not decode the server's update")?;
+            self.client
+                .apply(&update)
+                .context("the client could not apply the server's update")?;
+        }
+        let mut out = None;
+        if render {
+            let mut gbuffer = GBuffer::empty(self.res.width, self.res.height);
+            let opts = RasterOptions::new(self.res.width, self.res.height);
+            self.rasterizer
+                .rasterize(self.scene, camera, &opts, &mut gbuffer);
+            let ao =
+                psao_client::reconstruct(&self.client, &gbuffer, &ReconstructSettings::default());
+            out = Some(ClientFrame {
+                ao: AoImage {
+                    width: gbuffer.width,
+                    height: gbuffer.height,
+                    data: ao,
+                },
+                gbuffer,
+            });
+        }
+        record.client_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok((record, out))
+    }
+}
+
+/// The composited client image (base shading × AO) as 8-bit sRGB RGB.
+pub fn composite_rgb8(scene: &Scene, gbuffer: &GBuffer, ao: &AoImage) -> Vec<u8> {
+    let linear = psao_client::composite(scene, gbuffer, &ao.data, &Shading::default());
+    psao_client::composite_srgb8(&linear)
+}
+
+/// Luma of an 8-bit sRGB RGB image as an [`AoImage`] (for metrics on composited frames).
+pub fn luma(width: u32, height: u32, rgb: &[u8]) -> AoImage {
+    let data = rgb
+        .chunks_exact(3)
+        .map(|p| (0.2126 * p[0] as f32 + 0.7152 * p[1] as f32 + 0.0722 * p[2] as f32) / 255.0)
+        .collect();
+    AoImage {
+        width,
+        height,
+        data,
+    }
+}

@@ -1,0 +1,343 @@
+//! The evaluation report: `report.json`, `report.md`, SVG plots and image crops.
+
+use anyhow::{Context, Result};
+use plotters::prelude::*;
+use psao_eval::AoImage;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One method's mean results (a row of the paper's Table 1).
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    /// `psao`, `ssao` or `rtao`.
+    pub method: String,
+    /// Points per unit area (PSAO only).
+    pub points: Option<f32>,
+    /// Server rate (PSAO only).
+    pub server_hz: Option<u32>,
+    /// PSNR of AO-only images (dB).
+    pub psnr_ao: f64,
+    /// SSIM of AO-only images.
+    pub ssim_ao: f64,
+    /// FLIP of AO-only images.
+    pub flip_ao: f64,
+    /// PSNR of composited images (luma, dB).
+    pub psnr_comp: f64,
+    /// SSIM of composited images (luma).
+    pub ssim_comp: f64,
+    /// FLIP of composited images (luma).
+    pub flip_comp: f64,
+    /// Received bandwidth, Mbit per second of scene time.
+    pub mbit_s: f64,
+    /// Mean server time per server frame (ms).
+    pub server_ms: f64,
+    /// Mean client (or per-pixel method) time per evaluated frame (ms).
+    pub client_ms: f64,
+}
+
+/// Bandwidth of one PSAO configuration over time.
+pub struct Series {
+    /// Legend label.
+    pub label: String,
+    /// Mbit received in each second of scene time.
+    pub mbit_per_second: Vec<f64>,
+}
+
+/// Everything the report says.
+pub struct Report {
+    /// Scene name.
+    pub scene: String,
+    /// Camera path name.
+    pub path: String,
+    /// Resolution.
+    pub res: String,
+    /// Frame range `A..B`.
+    pub frames: String,
+    /// Metric stride.
+    pub every: u32,
+    /// Reference spp.
+    pub spp: u32,
+    /// The command line that made it.
+    pub command: String,
+    /// Result rows.
+    pub rows: Vec<Row>,
+}
+
+/// The results as a Markdown table.
+pub fn table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| method | points | server Hz | PSNR AO | SSIM AO | FLIP AO | PSNR comp | SSIM comp | FLIP comp | Mbit/s | server ms | client ms |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in rows {
+        let opt = |v: Option<String>| v.unwrap_or_else(|| "–".into());
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.2} | {:.4} | {:.4} | {:.2} | {:.4} | {:.4} | {:.2} | {:.1} | {:.1} |",
+            r.method,
+            opt(r.points.map(|p| format!("{p}"))),
+            opt(r.server_hz.map(|h| h.to_string())),
+            r.psnr_ao,
+            r.ssim_ao,
+            r.flip_ao,
+            r.psnr_comp,
+            r.ssim_comp,
+            r.flip_comp,
+            r.mbit_s,
+            r.server_ms,
+            r.client_ms
+        );
+    }
+    s
+}
+
+/// Writes `report.json` (the list of rows), `report.md`, plots and crops into `dir`.
+pub fn write(
+    dir: &Path,
+    report: &Report,
+    bandwidth: &[Series],
+    crops: &[(String, AoImage)],
+) -> Result<()> {
+    crate::run::write_json(&dir.join("report.json"), &report.rows)?;
+    plot_quality_vs_points(&dir.join("quality_vs_points.svg"), &report.rows)?;
+    plot_bandwidth(&dir.join("bandwidth.svg"), bandwidth)?;
+    let multi_rate = report
+        .rows
+        .iter()
+        .filter_map(|r| r.server_hz)
+        .collect::<std::collections::BTreeSet<_>>()
+        .len()
+        > 1;
+    if multi_rate {
+        plot_quality_vs_rate(&dir.join("quality_vs_rate.svg"), &report.rows)?;
+    }
+    write_crops(&dir.join("crops.png"), crops)?;
+    let mut md = format!(
+        "# psao evaluation: {} / {}\n\n\
+         {} px, frames {} (metrics on every {}th frame), reference {} spp. \
+         AO-only and composited (base shading × AO, compared on luma) images against the reference.\n\n\
+         Command: `{}`\n\n{}\n",
+        report.scene,
+        report.path,
+        report.res,
+        report.frames,
+        report.every,
+        report.spp,
+        report.command,
+        table(&report.rows)
+    );
+    md.push_str("## Quality vs points\n\n![quality vs points](quality_vs_points.svg)\n\n");
+    if multi_rate {
+        md.push_str(
+            "## Quality vs server rate\n\n![quality vs server rate](quality_vs_rate.svg)\n\n",
+        );
+    }
+    md.push_str("## Bandwidth over time\n\n![bandwidth](bandwidth.svg)\n\n");
+    let labels: Vec<&str> = crops.iter().map(|(l, _)| l.as_str()).collect();
+    let _ = write!(
+        md,
+        "## Crops (middle evaluated frame, centre)\n\nLeft to right: {}.\n\n![crops](crops.png)\n",
+        labels.join(" / ")
+    );
+    let file = dir.join("report.md");
+    std::fs::write(&file, md).with_context(|| format!("cannot write {}", file.display()))
+}
+
+fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow::anyhow!("plotting failed: {e:?}")
+}
+
+/// PSNR (AO only) of PSAO against points per unit area, one line per server rate, baselines flat.
+fn plot_quality_vs_points(file: &Path, rows: &[Row]) -> Result<()> {
+    let psao: Vec<&Row> = rows.iter().filter(|r| r.method == "psao").collect();
+    let x_max = psao.iter().filter_map(|r| r.points).fold(0.0f32, f32::max) as f64 * 1.1 + 1.0;
+    let (y_lo, y_hi) = y_range(rows.iter().map(|r| r.psnr_ao));
+    let root = SVGBackend::new(file, (720, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("AO PSNR vs points per unit area", ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(48)
+        .build_cartesian_2d(0.0..x_max, y_lo..y_hi)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("points per unit area")
+        .y_desc("PSNR (dB)")
+        .draw()
+        .map_err(plot_err)?;
+    let rates: std::collections::BTreeSet<u32> = psao.iter().filter_map(|r| r.server_hz).collect();
+    for (i, hz) in rates.iter().enumerate() {
+        let pts: Vec<(f64, f64)> = psao
+            .iter()
+            .filter(|r| r.server_hz == Some(*hz))
+            .filter_map(|r| r.points.map(|p| (p as f64, r.psnr_ao)))
+            .collect();
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+            .map_err(plot_err)?
+            .label(format!("PSAO @ {hz} Hz"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
+            .map_err(plot_err)?;
+    }
+    for (i, r) in rows.iter().filter(|r| r.method != "psao").enumerate() {
+        let color = Palette99::pick(rates.len() + i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(
+                vec![(0.0, r.psnr_ao), (x_max, r.psnr_ao)],
+                color,
+            ))
+            .map_err(plot_err)?
+            .label(r.method.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(plot_err)?;
+    root.present().map_err(plot_err)
+}
+
+/// PSNR (AO only) against server rate, one line per density.
+fn plot_quality_vs_rate(file: &Path, rows: &[Row]) -> Result<()> {
+    let psao: Vec<&Row> = rows.iter().filter(|r| r.method == "psao").collect();
+    let x_max = psao.iter().filter_map(|r| r.server_hz).max().unwrap_or(60) as f64 * 1.1;
+    let (y_lo, y_hi) = y_range(rows.iter().map(|r| r.psnr_ao));
+    let root = SVGBackend::new(file, (720, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("AO PSNR vs server rate", ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(48)
+        .build_cartesian_2d(0.0..x_max, y_lo..y_hi)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("server Hz")
+        .y_desc("PSNR (dB)")
+        .draw()
+        .map_err(plot_err)?;
+    let mut densities: Vec<f32> = psao.iter().filter_map(|r| r.points).collect();
+    densities.sort_by(f32::total_cmp);
+    densities.dedup();
+    for (i, n) in densities.iter().enumerate() {
+        let mut pts: Vec<(f64, f64)> = psao
+            .iter()
+            .filter(|r| r.points == Some(*n))
+            .filter_map(|r| r.server_hz.map(|h| (h as f64, r.psnr_ao)))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+            .map_err(plot_err)?
+            .label(format!("PSAO-{n}"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(plot_err)?;
+    root.present().map_err(plot_err)
+}
+
+/// Received Mbit per second of scene time for each configuration.
+fn plot_bandwidth(file: &Path, series: &[Series]) -> Result<()> {
+    let x_max = series
+        .iter()
+        .map(|s| s.mbit_per_second.len())
+        .max()
+        .unwrap_or(1) as f64;
+    let y_max = series
+        .iter()
+        .flat_map(|s| s.mbit_per_second.iter().copied())
+        .fold(0.0, f64::max)
+        * 1.1
+        + 1e-3;
+    let root = SVGBackend::new(file, (720, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("Received bandwidth over time", ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0.0..x_max, 0.0..y_max)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("scene time (s)")
+        .y_desc("Mbit/s")
+        .draw()
+        .map_err(plot_err)?;
+    for (i, s) in series.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let pts: Vec<(f64, f64)> = s
+            .mbit_per_second
+            .iter()
+            .enumerate()
+            .map(|(t, &v)| (t as f64 + 0.5, v))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+            .map_err(plot_err)?
+            .label(s.label.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(plot_err)?;
+    root.present().map_err(plot_err)
+}
+
+/// A y range with margin around finite values.
+fn y_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(v), h.max(v))
+        });
+    if lo > hi {
+        return (0.0, 1.0);
+    }
+    (lo - 2.0, hi + 2.0)
+}
+
+/// The central half of each image, side by side with a 4-pixel gap, as 8-bit gray.
+fn write_crops(file: &Path, crops: &[(String, AoImage)]) -> Result<()> {
+    let Some((_, first)) = crops.first() else {
+        return Ok(());
+    };
+    let (cw, ch) = (first.width / 2, first.height / 2);
+    let (x0, y0) = (first.width / 4, first.height / 4);
+    let gap = 4;
+    let width = crops.len() as u32 * (cw + gap) - gap;
+    let mut out = image::GrayImage::from_pixel(width, ch, image::Luma([255]));
+    for (k, (_, img)) in crops.iter().enumerate() {
+        for y in 0..ch {
+            for x in 0..cw {
+                let v = img.data[((y + y0) * img.width + x + x0) as usize];
+                let px = k as u32 * (cw + gap) + x;
+                out.put_pixel(
+                    px,
+                    y,
+                    image::Luma([(v.clamp(0.0, 1.0) * 255.0).round() as u8]),
+                );
+            }
+        }
+    }
+    out.save(file)
+        .with_context(|| format!("cannot write {}", file.display()))
+}

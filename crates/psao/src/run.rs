@@ -1,0 +1,213 @@
+//! `psao run`: server and client in one process along a camera path.
+
+use crate::args::{FrameRange, Resolution};
+use crate::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
+use crate::png_io::{write_ao_png, write_rgb_png};
+use crate::progress;
+use crate::scene_source::SceneInput;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use psao_server::ServerConfig;
+use psao_trace::Backend;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Server tuning shared by `run`, `eval` and `demo`.
+#[derive(Args, Debug, Clone)]
+pub struct ServerTuning {
+    /// Rays the server traces per server frame at most.
+    #[arg(long, default_value_t = ServerConfig::default().ray_budget)]
+    pub ray_budget: u64,
+    /// Rays per point per server frame.
+    #[arg(long, default_value_t = ServerConfig::default().rays_per_point)]
+    pub rays_per_point: u32,
+    /// Samples after which a point counts as converged and is not traced again.
+    #[arg(long, default_value_t = ServerConfig::default().max_samples)]
+    pub max_samples: u32,
+    /// Update codec (`paper`).
+    #[arg(long, default_value = "paper")]
+    pub codec: String,
+    /// Ray-tracing backend, `obvhs` or `embree` (default: the fastest compiled in).
+    #[arg(long)]
+    pub backend: Option<Backend>,
+    /// Seed of point generation and AO sampling.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+impl ServerTuning {
+    /// The pipeline configuration for `points` per unit area at `server_hz` and resolution `res`.
+    pub fn config(&self, points: f32, server_hz: u32, res: Resolution) -> Result<PipelineConfig> {
+        if !(points.is_finite() && points > 0.0 && points <= 65_536.0) {
+            bail!("--points must be in (0, 65536], got {points}");
+        }
+        Ok(PipelineConfig {
+            server: ServerConfig {
+                density: points,
+                ray_budget: self.ray_budget,
+                rays_per_point: self.rays_per_point,
+                max_samples: self.max_samples,
+                seed: self.seed,
+                backend: self.backend.unwrap_or_default(),
+                ..ServerConfig::default()
+            },
+            server_hz,
+            codec: self.codec.clone(),
+            res,
+        })
+    }
+}
+
+/// Arguments of `psao run`.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = "default")]
+    pub scene: String,
+    /// Camera path file (default: the scene's first path).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Client image size, `WxH`.
+    #[arg(long, default_value = "640x360")]
+    pub res: Resolution,
+    /// Half-open range of client frames `A..B` (default: the whole path).
+    #[arg(long)]
+    pub frames: Option<FrameRange>,
+    /// Write images of every K-th frame only (statistics cover every frame).
+    #[arg(long, default_value_t = 1)]
+    pub every: u32,
+    /// Points per unit area (after sample elimination).
+    #[arg(long, default_value_t = 1024.0)]
+    pub points: f32,
+    /// Server frames per second of scene time.
+    #[arg(long, default_value_t = 60)]
+    pub server_hz: u32,
+    #[command(flatten)]
+    pub tuning: ServerTuning,
+    /// Output folder: `frame_NNNNN.png` (composited), `ao_NNNNN.png` (AO only), `stats.json`.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write the summary as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Summary and per-frame statistics of a run.
+#[derive(Serialize)]
+pub struct RunStats {
+    /// Scene name.
+    pub scene: String,
+    /// Camera path name.
+    pub path: String,
+    /// Codec name.
+    pub codec: String,
+    /// Points per unit area.
+    pub points_per_area: f32,
+    /// Points generated on the server.
+    pub points: usize,
+    /// Server rate.
+    pub server_hz: u32,
+    /// Client frames simulated.
+    pub frames: usize,
+    /// Bytes received over all frames.
+    pub total_bytes: u64,
+    /// Mean received bandwidth in Mbit per second of scene time.
+    pub mbit_s: f64,
+    /// Hash of the client's final buckets + cells.
+    pub state_hash: String,
+    /// Per-frame records.
+    pub per_frame: Vec<FrameRecord>,
+}
+
+/// Runs `psao run`.
+pub fn run(args: &RunArgs) -> Result<()> {
+    let input = SceneInput::load(&args.scene)?;
+    let path = input.camera_path(args.path.as_ref())?;
+    let count = path.frame_count() as u32;
+    let range = args.frames.unwrap_or(crate::args::FrameRange {
+        start: 0,
+        end: count,
+    });
+    if range.end > count {
+        bail!(
+            "the camera path has {count} frames; asked for {}..{}",
+            range.start,
+            range.end
+        );
+    }
+    if args.every == 0 {
+        bail!("--every must be at least 1");
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let config = args.tuning.config(args.points, args.server_hz, args.res)?;
+    let mut pipeline = Pipeline::new(&input.scene, &config)?;
+    tracing::info!(
+        "{} points on {} instances",
+        pipeline.server().point_count(),
+        input.scene.instances.len()
+    );
+    let bar = progress::bar((range.end - range.start) as u64, "psao run", "frames");
+    let mut records = Vec::new();
+    for frame in range.start..range.end {
+        let camera = path.camera_at_frame(frame as usize);
+        let render = (frame - range.start) % args.every == 0;
+        let (record, image) = pipeline.frame(frame, &camera, render)?;
+        if let Some(img) = image {
+            write_frame_images(&args.out, frame, &input.scene, &img)?;
+        }
+        records.push(record);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let seconds = records.len() as f64 / crate::pipeline::CLIENT_HZ as f64;
+    let stats = RunStats {
+        scene: input.name.clone(),
+        path: path.name.clone(),
+        codec: config.codec.clone(),
+        points_per_area: config.server.density,
+        points: pipeline.server().point_count(),
+        server_hz: config.server_hz,
+        frames: records.len(),
+        total_bytes: pipeline.total_bytes,
+        mbit_s: pipeline.total_bytes as f64 * 8.0 / seconds / 1e6,
+        state_hash: format!("{:016x}", pipeline.client().state_hash()),
+        per_frame: records,
+    };
+    let stats_file = args.out.join("stats.json");
+    write_json(&stats_file, &stats)?;
+    if let Some(json) = &args.json {
+        write_json(json, &stats)?;
+    }
+    println!(
+        "{} frames, {:.2} Mbit/s, state {} -> {}",
+        stats.frames,
+        stats.mbit_s,
+        stats.state_hash,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// Writes the composited and AO-only images of one frame.
+pub fn write_frame_images(
+    dir: &Path,
+    frame: u32,
+    scene: &psao_scene::Scene,
+    img: &crate::pipeline::ClientFrame,
+) -> Result<()> {
+    write_ao_png(&dir.join(format!("ao_{frame:05}.png")), &img.ao)?;
+    let rgb = composite_rgb8(scene, &img.gbuffer, &img.ao);
+    write_rgb_png(
+        &dir.join(format!("frame_{frame:05}.png")),
+        img.ao.width,
+        img.ao.height,
+        rgb,
+    )
+}
+
+/// Writes `value` as pretty JSON.
+pub fn write_json<T: Serialize>(file: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))
+}
