@@ -1,0 +1,123 @@
+//! [`psao_points::reconstruct_ao`] with the neighbourhood lookup shared between pixels.
+//!
+//! Neighbouring pixels of one surface usually fall into the same 2×2×2 block of cells (a cell
+//! spans several pixels at typical distances), so a [`Neighbourhood`] keeps the decoded points
+//! of the last block it gathered and only repeats the hash lookups and unpacking when the
+//! instance or the block changes. The weighting performs the same floating-point operations
+//! on the same points in the same order as `reconstruct_ao`, so results are bit-identical
+//! (tested).
+
+use glam::{IVec3, Vec3};
+use psao_points::pack::{is_valid, normal_code, normal_table, unpack_ao};
+use psao_points::{InstanceGrid, ReconstructParams, CELL_POINTS};
+
+/// Most points a 2×2×2 block can hold.
+const MAX_POINTS: usize = 8 * CELL_POINTS;
+
+/// The decoded points of one instance's 2×2×2 cell block, reused across pixels.
+pub(crate) struct Neighbourhood {
+    /// (instance, block base) the points belong to; `None` before the first gather.
+    key: Option<(u32, IVec3)>,
+    count: usize,
+    /// Positions and normals, one array per coordinate so the weighting loop vectorises.
+    position: [[f32; MAX_POINTS]; 3],
+    normal: [[f32; MAX_POINTS]; 3],
+    ao: [f32; MAX_POINTS],
+}
+
+impl Neighbourhood {
+    /// An empty cache.
+    pub(crate) fn new() -> Self {
+        Self {
+            key: None,
+            count: 0,
+            position: [[0.0; MAX_POINTS]; 3],
+            normal: [[0.0; MAX_POINTS]; 3],
+            ao: [0.0; MAX_POINTS],
+        }
+    }
+
+    /// AO at local position `p` with local unit normal `n` on instance `instance` (whose grid
+    /// is `grid`): the result of `reconstruct_ao(grid, p, n, params)`.
+    #[inline]
+    pub(crate) fn ao(
+        &mut self,
+        instance: u32,
+        grid: &InstanceGrid,
+        p: Vec3,
+        n: Vec3,
+        params: &ReconstructParams,
+    ) -> f32 {
+        let layout = grid.layout();
+        let r = layout.poisson_radius * params.interpolation_factor;
+        if !(r > 0.0 && r.is_finite() && p.is_finite()) {
+            return 1.0;
+        }
+        let base = layout.nearest_base(p);
+        if self.key != Some((instance, base)) {
+            self.gather(grid, base);
+            self.key = Some((instance, base));
+        }
+        let (r2, inv_r) = (r * r, 1.0 / r);
+        // Branch-free: a rejected point gets weight +0, which leaves both sums unchanged, so
+        // the result equals the early-continue formulation bit for bit.
+        let mut weight = [0.0f32; MAX_POINTS];
+        let [px, py, pz] = &self.position;
+        let [nx, ny, nz] = &self.normal;
+        for i in 0..self.count {
+            // Same operations as glam's `Vec3` arithmetic in `reconstruct_ao`.
+            let delta = Vec3::new(px[i], py[i], pz[i]) - p;
+            let ni = Vec3::new(nx[i], ny[i], nz[i]);
+            let d2 = delta.length_squared();
+            let d = d2.sqrt();
+            let c = ni.dot(delta) / d;
+            let keep = d2 < r2
+                && ni.dot(n) > params.normal_threshold
+                && (d2 == 0.0 || c * c < params.direction_threshold);
+            weight[i] = if keep { (r - d) * inv_r } else { 0.0 };
+        }
+        let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
+        for (w, ao) in weight.iter().zip(&self.ao).take(self.count) {
+            w_sum += w;
+            ao_sum += w * ao;
+        }
+        if w_sum > 0.0 {
+            ao_sum / w_sum
+        } else {
+            1.0
+        }
+    }
+
+    /// Decode the valid points of the allocated cells of the block at `base`, in the order
+    /// `reconstruct_ao` visits them.
+    fn gather(&mut self, grid: &InstanceGrid, base: IVec3) {
+        let layout = grid.layout();
+        let (buckets, cells) = (grid.buckets(), grid.cells());
+        let normals = normal_table();
+        self.count = 0;
+        for k in 0..8 {
+            let offset = IVec3::new(k & 1, (k >> 1) & 1, k >> 2);
+            let Some(coord) = layout.checked_coord(base.saturating_add(offset)) else {
+                continue;
+            };
+            let id = layout.cell_id(coord);
+            let Some(cell) = buckets[layout.bucket_of(id)]
+                .find(id)
+                .and_then(|slot| cells.get(slot as usize))
+            else {
+                continue;
+            };
+            for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+                let i = self.count;
+                let position = layout.unpack_position(coord, bits);
+                let normal = normals[normal_code(bits) as usize];
+                for axis in 0..3 {
+                    self.position[axis][i] = position[axis];
+                    self.normal[axis][i] = normal[axis];
+                }
+                self.ao[i] = unpack_ao(bits);
+                self.count += 1;
+            }
+        }
+    }
+}

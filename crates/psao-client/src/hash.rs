@@ -1,0 +1,76 @@
+//! A deterministic fingerprint of point-grid contents, so that a client's mirror can be
+//! compared with the server's grids without shipping them.
+//!
+//! Words are folded with `h = (rotl(h, 5) ^ w) · K` (K odd): for fixed other words every
+//! step is a bijection of both `h` and `w`, so two states that differ in exactly one word
+//! always hash differently; a 64-bit finaliser spreads the result. Buckets and cells are
+//! hashed in their compacted form (used entries first, in order; the form updates carry),
+//! so a server grid and a client mirror of it hash alike.
+
+use psao_delta::{compact_bucket, compact_cell};
+use psao_points::InstanceGrid;
+
+const MULTIPLIER: u64 = 0x517c_c1b7_2722_0a95;
+/// Word folded in for an instance without a grid.
+const NO_GRID: u64 = 0x6e6f_5f67_7269_6421;
+
+/// Incremental word hasher.
+struct Hasher(u64);
+
+impl Hasher {
+    #[inline]
+    fn word(&mut self, w: u64) {
+        self.0 = (self.0.rotate_left(5) ^ w).wrapping_mul(MULTIPLIER);
+    }
+
+    fn finish(&self) -> u64 {
+        // SplitMix64 finaliser.
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+}
+
+/// Hash of the buckets and cells of a sequence of grids (`None` = an instance without a grid),
+/// instance by instance, each bucket and cell compacted. Trailing cell slots without points are
+/// ignored, so a mirror that never received a freed trailing slot hashes like the server grid
+/// that still has it; so are counters, free lists and transforms. [`crate::ClientState::state_hash`]
+/// uses this; a server calls it on its own grids (`grids.iter().map(Some)`) to compare.
+pub fn state_hash_of<'a, I>(grids: I) -> u64
+where
+    I: IntoIterator<Item = Option<&'a InstanceGrid>>,
+{
+    let mut h = Hasher(0x243f_6a88_85a3_08d3);
+    let mut instances = 0u64;
+    for grid in grids {
+        instances += 1;
+        let Some(grid) = grid else {
+            h.word(NO_GRID);
+            continue;
+        };
+        let buckets = grid.buckets();
+        h.word(buckets.len() as u64);
+        for bucket in buckets {
+            for e in &compact_bucket(bucket).entries {
+                h.word(e.key);
+                h.word(u64::from(e.slot));
+            }
+        }
+        let cells = grid.cells();
+        let used = cells
+            .iter()
+            .rposition(|c| c.count() > 0)
+            .map_or(0, |last| last + 1);
+        h.word(used as u64);
+        for cell in &cells[..used] {
+            let words = compact_cell(cell).points;
+            for pair in words.chunks(2) {
+                let hi = pair.get(1).map_or(0, |&w| u64::from(w) << 32);
+                h.word(hi | u64::from(pair[0]));
+            }
+        }
+    }
+    h.word(instances);
+    h.finish()
+}

@@ -1,0 +1,23 @@
+//! The PSAO client's algorithms (DESIGN §1–§3, paper §3.5): mirror the server's point grids
+//! from applied updates ([`ClientState`]), reconstruct AO per pixel of a rasterized G-buffer
+//! ([`reconstruct`]) and composite it over a simple base shading ([`composite`],
+//! [`composite_srgb8`]). Pure computation: no file or network I/O.
+//!
+//! A frame: `state.apply(&update)?` for every update received since the last frame, rasterize
+//! the scene (`psao_raster`), then `reconstruct(&state, &gbuffer, &settings)` and
+//! `composite(&scene, &gbuffer, &ao, &shading)`.
+
+#![warn(missing_docs)]
+
+mod composite;
+mod error;
+mod gather;
+mod hash;
+mod reconstruct;
+mod state;
+
+pub use composite::{composite, composite_srgb8, encode_srgb, Shading, SKY_GREY};
+pub use error::ClientError;
+pub use hash::state_hash_of;
+pub use reconstruct::{reconstruct, reconstruct_into, ReconstructSettings};
+pub use state::{layout_is_usable, ClientState};

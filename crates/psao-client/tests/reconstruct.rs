@@ -1,0 +1,270 @@
+//! Per-pixel reconstruction through the client state: exact on constant AO, unoccluded where
+//! nothing is known, invariant under rigid motion, deterministic, and its speed.
+
+mod common;
+
+use std::time::Instant;
+
+use glam::{Affine3A, Quat, Vec3};
+use psao_client::{reconstruct, reconstruct_into, ClientState, ReconstructSettings};
+use psao_points::pack::{dequantize_ao, quantize_ao};
+use psao_points::{reconstruct_ao, ReconstructParams};
+use psao_raster::{rasterize, GBuffer, RasterOptions};
+use psao_scene::{Camera, Scene};
+
+/// AO varying over each instance's surface (local position), so misplaced lookups show.
+fn pattern(p: Vec3) -> f32 {
+    0.5 + 0.4 * (4.0 * p.x).sin() * (3.0 * p.z + p.y).cos()
+}
+
+/// Scene, client state after a snapshot with the scene's transforms, and the grids.
+fn setup(scene: &Scene, density: f32, ao: impl Fn(Vec3) -> f32) -> ClientState {
+    let points = common::points(scene, density, 11);
+    let grids: Vec<_> = common::grids(&points, ao)
+        .into_iter()
+        .map(|(g, _)| g)
+        .collect();
+    let mut state = ClientState::new(&common::table(&points, &grids));
+    state
+        .apply(&common::snapshot(1, &grids, common::transforms(scene)))
+        .unwrap();
+    state
+}
+
+fn render(scene: &Scene, camera: &Camera, w: u32, h: u32) -> GBuffer {
+    rasterize(scene, camera, &RasterOptions::new(w, h))
+}
+
+#[test]
+fn constant_ao_plane() {
+    let scene = common::scene(2.0, 0);
+    let state = setup(&scene, 512.0, |_| 0.5);
+    let g = render(&scene, &common::camera(), 160, 120);
+    let ao = reconstruct(&state, &g, &ReconstructSettings::default());
+    assert_eq!(ao.len(), 160 * 120);
+    let expected = dequantize_ao(quantize_ao(0.5));
+    let covered = g.covered_count();
+    assert!(covered > 4000 && covered < 160 * 120 - 1000, "{covered}");
+    for (i, &v) in ao.iter().enumerate() {
+        if g.covered(i) {
+            assert!((v - 0.5).abs() <= 0.5 / 255.0 + 1e-6, "pixel {i}: {v}");
+            assert!((v - expected).abs() < 1e-5, "pixel {i}: {v}");
+        } else {
+            assert_eq!(v, 1.0, "uncovered pixel {i}");
+        }
+    }
+}
+
+#[test]
+fn unknown_instances_are_unoccluded() {
+    let scene = common::scene(2.0, 2);
+    let points = common::points(&scene, 256.0, 3);
+    let grids: Vec<_> = common::grids(&points, |_| 0.2)
+        .into_iter()
+        .map(|(g, _)| g)
+        .collect();
+    let mut state = ClientState::new(&common::table(&points, &grids));
+    let g = render(&scene, &common::camera(), 96, 64);
+    let settings = ReconstructSettings::default();
+    // Nothing applied yet.
+    assert!(reconstruct(&state, &g, &settings).iter().all(|&v| v == 1.0));
+    // Grids but only instance 1 has a transform.
+    state
+        .apply(&common::snapshot(
+            1,
+            &grids,
+            vec![(1, scene.instances[1].transform)],
+        ))
+        .unwrap();
+    let ao = reconstruct(&state, &g, &settings);
+    let (mut seen_cube, mut holes) = (0, 0);
+    let expected = dequantize_ao(quantize_ao(0.2));
+    for (i, &v) in ao.iter().enumerate() {
+        if g.instance[i] == 1 {
+            seen_cube += 1;
+            // Near the cube's corners psao-points leaves a few holes (overflowing corner
+            // cells, no same-facing point within r): those read as unoccluded.
+            if v == 1.0 {
+                holes += 1;
+            } else {
+                assert!((v - expected).abs() < 1e-5, "pixel {i}: {v}");
+            }
+        } else {
+            assert_eq!(v, 1.0, "pixel {i} (instance {})", g.instance[i]);
+        }
+    }
+    assert!(seen_cube > 50, "{seen_cube}");
+    assert!(
+        holes * 20 < seen_cube,
+        "{holes} holes in {seen_cube} cube pixels"
+    );
+    // A degenerate transform (scaled to zero) counts as unknown, no NaN.
+    state
+        .apply(&common::delta(2, &grids, &grids, vec![(1, Affine3A::ZERO)]))
+        .unwrap();
+    assert!(reconstruct(&state, &g, &settings).iter().all(|&v| v == 1.0));
+    // Malformed G-buffer sizes do not panic: missing attributes read as uncovered.
+    let mut short = g.clone();
+    short.position.truncate(100);
+    short.normal.truncate(50);
+    assert_eq!(reconstruct(&state, &short, &settings).len(), g.len());
+    assert!(reconstruct(&state, &GBuffer::empty(0, 7), &settings).is_empty());
+}
+
+#[test]
+fn rigid_motion_keeps_the_reconstruction() {
+    let scene = common::scene(2.0, 2);
+    let mut state = setup(&scene, 512.0, pattern);
+    let camera = common::camera();
+    let (w, h) = (200, 150);
+    let settings = ReconstructSettings::default();
+    let before = reconstruct(&state, &render(&scene, &camera, w, h), &settings);
+
+    // Move the whole world and the camera rigidly: every pixel sees the same local point.
+    let motion = Affine3A::from_rotation_translation(
+        Quat::from_axis_angle(Vec3::new(0.3, 1.0, 0.2).normalize(), 0.8),
+        Vec3::new(3.0, -1.0, 2.0),
+    );
+    let mut moved = scene.clone();
+    for inst in &mut moved.instances {
+        inst.transform = motion * inst.transform;
+    }
+    let moved_camera = Camera {
+        position: motion.transform_point3(camera.position),
+        target: motion.transform_point3(camera.target),
+        up: motion.transform_vector3(camera.up),
+        ..camera
+    };
+    let g = render(&moved, &moved_camera, w, h);
+    let stale = reconstruct(&state, &g, &settings);
+    state
+        .apply(&common::delta(2, &[], &[], common::transforms(&moved)))
+        .unwrap();
+    let after = reconstruct(&state, &g, &settings);
+
+    let (mut same, mut both, mut diff_sum, mut stale_sum) = (0usize, 0usize, 0.0f64, 0.0f64);
+    for i in 0..g.len() {
+        if !g.covered(i) || before[i] == 1.0 && after[i] == 1.0 {
+            continue;
+        }
+        both += 1;
+        let d = (before[i] - after[i]).abs();
+        diff_sum += f64::from(d);
+        stale_sum += f64::from((before[i] - stale[i]).abs());
+        if d < 2.0 / 255.0 {
+            same += 1;
+        }
+    }
+    let (mean, stale_mean) = (diff_sum / both as f64, stale_sum / both as f64);
+    println!("rigid motion: {same}/{both} pixels within 2/255, mean |Δ| {mean:.5}, stale {stale_mean:.4}");
+    assert!(both > 5_000, "{both}");
+    assert!(same as f64 > 0.99 * both as f64, "{same}/{both}");
+    assert!(mean < 2e-3, "{mean}");
+    // The same G-buffer with the old transforms is clearly wrong: the test can fail.
+    assert!(stale_mean > 0.05, "{stale_mean}");
+}
+
+#[test]
+fn deterministic_and_thread_count_independent() {
+    let scene = common::scene(2.0, 2);
+    let state = setup(&scene, 512.0, pattern);
+    let g = render(&scene, &common::camera(), 240, 180);
+    let settings = ReconstructSettings::default();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| reconstruct(&state, &g, &settings))
+    };
+    let one = run(1);
+    assert!(one.iter().any(|&v| v < 0.9) && one.iter().any(|&v| v > 0.1 && v < 1.0));
+    for threads in [2, 3, 5] {
+        let other = run(threads);
+        assert!(
+            one.iter()
+                .zip(&other)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{threads} threads differ"
+        );
+    }
+    let mut reused = vec![0.25; 3];
+    reconstruct_into(&state, &g, &settings, &mut reused);
+    assert_eq!(reused, one);
+    // A different interpolation factor changes the result (the setting is used).
+    let wide = reconstruct(
+        &state,
+        &g,
+        &ReconstructSettings {
+            interpolation_factor: 1.0,
+        },
+    );
+    assert!(one.iter().zip(&wide).any(|(a, b)| a != b));
+}
+
+/// The cached, branch-free per-pixel evaluation equals psao-points's `reconstruct_ao` with
+/// the local position and normal computed from the G-buffer, bit for bit.
+#[test]
+fn matches_reconstruct_ao_bitwise() {
+    let scene = common::scene(3.0, 3);
+    let state = setup(&scene, 1024.0, pattern);
+    let camera = Camera::look_at(Vec3::new(1.0, 2.0, 4.0), Vec3::new(0.0, 0.2, -0.5), 55.0);
+    for factor in [psao_points::DEFAULT_INTERPOLATION_FACTOR, 1.3] {
+        let g = render(&scene, &camera, 320, 200);
+        let settings = ReconstructSettings {
+            interpolation_factor: factor,
+        };
+        let params = ReconstructParams {
+            interpolation_factor: factor,
+            ..ReconstructParams::default()
+        };
+        let ao = reconstruct(&state, &g, &settings);
+        let mut checked = 0;
+        for i in (0..g.len()).filter(|&i| g.covered(i)) {
+            let inst = g.instance[i] as usize;
+            let t = state.transform(inst).unwrap();
+            let p = t.inverse().transform_point3a(g.position[i].into());
+            let n = (t.matrix3.transpose() * glam::Vec3A::from(g.normal[i])).normalize_or_zero();
+            let direct = reconstruct_ao(state.grid(inst).unwrap(), p.into(), n.into(), &params);
+            assert_eq!(
+                ao[i].to_bits(),
+                direct.to_bits(),
+                "pixel {i}: {} vs {direct}",
+                ao[i]
+            );
+            checked += 1;
+        }
+        assert!(checked > 30_000, "{checked}");
+    }
+}
+
+/// Speed at 1280×720 on the default thread pool (print only; run with --nocapture).
+#[test]
+fn reconstruction_speed_720p() {
+    let scene = common::scene(6.0, 4);
+    let state = setup(&scene, 1024.0, pattern);
+    let camera = Camera::look_at(Vec3::new(0.0, 1.6, 4.0), Vec3::new(0.0, 0.3, -1.0), 60.0);
+    let g = render(&scene, &camera, 1280, 720);
+    let settings = ReconstructSettings::default();
+    let mut ao = Vec::new();
+    reconstruct_into(&state, &g, &settings, &mut ao);
+    let runs = 10;
+    let mut best = f64::INFINITY;
+    let start = Instant::now();
+    for _ in 0..runs {
+        let t = Instant::now();
+        reconstruct_into(&state, &g, &settings, &mut ao);
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    let mean = start.elapsed().as_secs_f64() / f64::from(runs);
+    let covered = g.covered_count();
+    println!(
+        "reconstruct 1280x720 ({covered} covered px, {} points, {} threads): mean {:.2} ms, best {:.2} ms",
+        state.point_count(),
+        rayon::current_num_threads(),
+        mean * 1e3,
+        best * 1e3
+    );
+    assert!(covered > 1280 * 720 / 2, "{covered}");
+    assert!(ao.iter().all(|v| (0.0..=1.0).contains(v)));
+}
