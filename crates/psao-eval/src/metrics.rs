@@ -110,7 +110,7 @@ mod tests {
 
     fn gradient(w: u32, h: u32) -> AoImage {
         let data = (0..w * h)
-            .map(|i| ((i % w) as f32 / w as f32 * 0.8 + (i / w) as f32 / h as f32 * 0.2))
+            .map(|i| (i % w) as f32 / w as f32 * 0.8 + (i / w) as f32 / h as f32 * 0.2)
             .collect();
         AoImage {
             width: w,

@@ -71,7 +71,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mut quality = String::new();
     for frame in 0..frames {
         let camera = path.camera_at_frame(frame as usize);
-        let (record, image) = pipeline.frame(frame, &camera, frame % args.every == 0)?;
+        let (record, image) = pipeline.frame(frame, &camera, frame.is_multiple_of(args.every))?;
         if let Some(img) = image {
             write_frame_images(&args.out, frame, &input.scene, &img)?;
             if compared.contains(&frame) {
@@ -105,7 +105,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mean = |v: &mut dyn Iterator<Item = f64>, n: usize| v.sum::<f64>() / n.max(1) as f64;
     let rendered: Vec<_> = records
         .iter()
-        .filter(|r| r.frame % args.every == 0)
+        .filter(|r| r.frame.is_multiple_of(args.every))
         .collect();
     let report = format!(
         "# psao demo\n\n\

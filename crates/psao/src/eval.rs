@@ -167,7 +167,8 @@ fn prepare_frames(
             _ => {
                 let img = renderer.render(path, frame, args.res, &|n| bar.inc(n));
                 write_ao_png(&file, &img)?;
-                img
+                // Use exactly what the cache holds, so cached and fresh runs agree.
+                AoImage::from_u16(img.width, img.height, &img.to_u16())
             }
         };
         let camera = path.camera_at_frame(frame as usize);

@@ -83,7 +83,7 @@ impl<'a> Pipeline<'a> {
                 config.server_hz
             );
         }
-        let mut server = Server::new(scene, config.server.clone())
+        let mut server = Server::new(scene, config.server)
             .context("cannot start the server (point generation or tracer)")?;
         let client_id = server.add_client();
         let client = ClientState::new(&server.instance_table());

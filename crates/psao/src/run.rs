@@ -151,7 +151,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let mut records = Vec::new();
     for frame in range.start..range.end {
         let camera = path.camera_at_frame(frame as usize);
-        let render = (frame - range.start) % args.every == 0;
+        let render = (frame - range.start).is_multiple_of(args.every);
         let (record, image) = pipeline.frame(frame, &camera, render)?;
         if let Some(img) = image {
             write_frame_images(&args.out, frame, &input.scene, &img)?;

@@ -1,0 +1,229 @@
+//! End-to-end tests of the `psao` binary: real processes, real files, small sizes.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn psao(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_psao"))
+        .args(["--log", "warn"])
+        .args(args)
+        .output()
+        .expect("the psao binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn help_lists_the_subcommands() {
+    let o = psao(&["--help"]);
+    assert!(o.status.success());
+    let text = String::from_utf8_lossy(&o.stdout);
+    for cmd in ["demo", "run", "eval", "reference", "compare", "bench"] {
+        assert!(text.contains(cmd), "--help does not mention {cmd}: {text}");
+    }
+}
+
+#[test]
+fn reference_writes_a_16_bit_image_and_compare_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let o = psao(&[
+        "reference",
+        "--frame",
+        "0",
+        "--spp",
+        "4",
+        "--res",
+        "64x36",
+        "--out",
+        out,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let file = dir.path().join("ao_00000.png");
+    let img = image::open(&file).unwrap();
+    assert_eq!((img.width(), img.height()), (64, 36));
+    assert!(matches!(img, image::DynamicImage::ImageLuma16(_)));
+    let f = file.to_str().unwrap();
+    let o = psao(&["compare", f, f, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(m["psnr"].as_f64(), Some(100.0));
+    assert!((m["ssim"].as_f64().unwrap() - 1.0).abs() < 1e-9);
+    assert!(m["flip"].as_f64().unwrap() < 1e-6);
+}
+
+#[test]
+fn bad_input_fails_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let broken = dir.path().join("broken.glb");
+    std::fs::write(&broken, b"glTF\x02\x00\x00\x00garbage").unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec![
+                "reference".into(),
+                "--res".into(),
+                "0x10".into(),
+                "--out".into(),
+                "x".into(),
+            ],
+            "out of range",
+        ),
+        (
+            vec![
+                "reference".into(),
+                "--scene".into(),
+                broken.to_str().unwrap().into(),
+                "--out".into(),
+                dir.path().join("o").to_str().unwrap().into(),
+            ],
+            "broken.glb",
+        ),
+        (
+            vec![
+                "compare".into(),
+                "missing-a.png".into(),
+                "missing-b.png".into(),
+            ],
+            "missing-a.png",
+        ),
+        (
+            vec![
+                "run".into(),
+                "--frames".into(),
+                "5..2".into(),
+                "--out".into(),
+                "x".into(),
+            ],
+            "empty",
+        ),
+        (
+            vec![
+                "reference".into(),
+                "--frames".into(),
+                "0..100000".into(),
+                "--out".into(),
+                dir.path().join("o").to_str().unwrap().into(),
+            ],
+            "frames",
+        ),
+    ];
+    for (args, needle) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = psao(&args);
+        assert!(!o.status.success(), "{args:?} should fail");
+        let err = stderr(&o);
+        assert!(err.contains(needle), "{args:?}: '{needle}' not in: {err}");
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    }
+}
+
+#[test]
+fn run_is_deterministic_and_counts_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut hashes = Vec::new();
+    for k in 0..2 {
+        let out = dir.path().join(format!("run{k}"));
+        let summary = dir.path().join(format!("run{k}.json"));
+        let o = psao(&[
+            "run",
+            "--frames",
+            "0..4",
+            "--points",
+            "64",
+            "--res",
+            "64x36",
+            "--server-hz",
+            "30",
+            "--ray-budget",
+            "50000",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+            summary.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let s = json(&summary);
+        let frames = s["per_frame"].as_array().unwrap();
+        assert_eq!(frames.len(), 4);
+        assert!(
+            frames[0]["bytes"].as_u64().unwrap() > 0,
+            "the snapshot has bytes"
+        );
+        // 30 Hz server under a 60 Hz client: every other frame receives nothing.
+        assert_eq!(frames[1]["bytes"].as_u64(), Some(0));
+        let total: u64 = frames.iter().map(|f| f["bytes"].as_u64().unwrap()).sum();
+        assert_eq!(s["total_bytes"].as_u64(), Some(total));
+        assert!(out.join("frame_00003.png").exists() && out.join("ao_00003.png").exists());
+        hashes.push(s["state_hash"].as_str().unwrap().to_string());
+    }
+    assert_eq!(hashes[0], hashes[1]);
+}
+
+#[test]
+fn eval_writes_the_report_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("eval");
+    let cache = dir.path().join("cache");
+    let args = [
+        "eval",
+        "--frames",
+        "0..2",
+        "--every",
+        "1",
+        "--points",
+        "32,64",
+        "--spp",
+        "4",
+        "--rtao-spp",
+        "1",
+        "--res",
+        "48x27",
+        "--ray-budget",
+        "50000",
+        "--out",
+        out.to_str().unwrap(),
+        "--cache",
+        cache.to_str().unwrap(),
+    ];
+    let o = psao(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = json(&out.join("report.json"));
+    let rows = rows.as_array().unwrap();
+    let methods: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
+    assert_eq!(methods, ["psao", "psao", "ssao", "rtao"]);
+    for key in [
+        "points",
+        "server_hz",
+        "psnr_ao",
+        "ssim_ao",
+        "flip_ao",
+        "psnr_comp",
+        "ssim_comp",
+        "flip_comp",
+        "mbit_s",
+        "server_ms",
+        "client_ms",
+    ] {
+        assert!(rows[0].get(key).is_some(), "row lacks {key}");
+    }
+    assert!(rows[0]["mbit_s"].as_f64().unwrap() > 0.0);
+    for f in [
+        "report.md",
+        "quality_vs_points.svg",
+        "bandwidth.svg",
+        "crops.png",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // The second run reads the cached references and gives the same table.
+    let o = psao(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let again = json(&out.join("report.json"));
+    assert_eq!(rows[0]["psnr_ao"], again[0]["psnr_ao"]);
+}
