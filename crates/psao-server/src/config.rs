@@ -1,0 +1,92 @@
+//! Server parameters and their defaults.
+
+use psao_trace::Backend;
+
+use crate::ServerError;
+
+/// When a point's published record is resent (DESIGN §3 "Server update").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Thresholds {
+    /// Resend when the AO estimate differs from the published AO by more than this.
+    pub ao: f32,
+    /// Resend when the cosine between current and published normal drops below this.
+    pub normal_cos: f32,
+    /// Resend when the position moved by more than this many quantisation steps (cell / 32)
+    /// along some axis.
+    pub position_steps: f32,
+}
+
+impl Default for Thresholds {
+    /// The paper's values: 8/255 AO, cosine 0.6, 3 position steps.
+    fn default() -> Self {
+        Self {
+            ao: 8.0 / 255.0,
+            normal_cos: 0.6,
+            position_steps: 3.0,
+        }
+    }
+}
+
+/// Everything that configures a [`crate::Server`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServerConfig {
+    /// Points per unit area after elimination (DESIGN §3: 1024).
+    pub density: f32,
+    /// AO ray length; `None` uses the scene's `ao_radius`.
+    pub ao_radius: Option<f32>,
+    /// Rays traced for a selected point in one frame.
+    pub rays_per_point: u32,
+    /// Most rays traced in one server frame.
+    pub ray_budget: u64,
+    /// Samples after which a point counts as converged and is no longer traced.
+    pub max_samples: u32,
+    /// Widening of the view frustum: the tangents of both half-angles are scaled by
+    /// `1 + frustum_margin` (0.2 = 20 % wider).
+    pub frustum_margin: f32,
+    /// Publishing thresholds.
+    pub thresholds: Thresholds,
+    /// Seed of point generation and AO sampling.
+    pub seed: u64,
+    /// Ray-tracing backend.
+    pub backend: Backend,
+}
+
+impl Default for ServerConfig {
+    /// Density 1024, the scene's AO radius, 16 rays per point and frame, 2 M rays per
+    /// frame, 256 samples to converge, 20 % frustum margin, paper thresholds, seed 0, the
+    /// default backend.
+    fn default() -> Self {
+        Self {
+            density: psao_points::DEFAULT_DENSITY,
+            ao_radius: None,
+            rays_per_point: 16,
+            ray_budget: 2_000_000,
+            max_samples: 256,
+            frustum_margin: 0.2,
+            thresholds: Thresholds::default(),
+            seed: 0,
+            backend: Backend::default(),
+        }
+    }
+}
+
+impl ServerConfig {
+    /// Check the values that point generation and tracing do not check themselves.
+    pub(crate) fn validate(&self) -> Result<(), ServerError> {
+        let bad = |what: &str| Err(ServerError::InvalidConfig(what.to_string()));
+        if self.rays_per_point == 0 {
+            return bad("rays_per_point must be at least 1");
+        }
+        if self.max_samples == 0 {
+            return bad("max_samples must be at least 1");
+        }
+        if !(self.frustum_margin.is_finite() && self.frustum_margin >= 0.0) {
+            return bad("frustum_margin must be finite and >= 0");
+        }
+        let t = &self.thresholds;
+        if !(t.ao.is_finite() && t.normal_cos.is_finite() && t.position_steps.is_finite()) {
+            return bad("thresholds must be finite");
+        }
+        Ok(())
+    }
+}

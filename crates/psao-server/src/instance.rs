@@ -1,0 +1,165 @@
+//! Per-instance server state: the points, their allocation in the hash grid, their AO
+//! accumulators, and the published (authoritative) grid that clients mirror.
+
+use glam::{Affine3A, Mat3A, UVec3, Vec3};
+use psao_points::{
+    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, CELL_POINTS,
+    DEFAULT_INTERPOLATION_FACTOR,
+};
+
+use crate::ServerError;
+
+/// Marks "no point" in a member list and "not stored" in a point's slot.
+pub(crate) const NONE: u32 = u32::MAX;
+
+/// Server state of one mesh instance.
+pub(crate) struct InstanceState {
+    /// Local-to-world transform.
+    pub transform: Affine3A,
+    /// Inverse transpose of the linear part, for normals.
+    pub normal_matrix: Mat3A,
+    /// World-space bounds of the instance's points.
+    pub world_bounds: (Vec3, Vec3),
+    /// World-space distance within which a point still affects reconstruction (Poisson
+    /// radius × interpolation factor): culling keeps points this close to the frustum.
+    pub slack: f32,
+    /// Poisson radius, local units.
+    pub poisson_radius: f32,
+    /// Where every stored point lives (all points, whether published or not).
+    pub alloc: InstanceGrid,
+    /// The published grid: what clients mirror.
+    pub grid: InstanceGrid,
+    /// Per allocation slot: the cell id and the points stored there ([`NONE`] = empty).
+    pub slot_ids: Vec<u64>,
+    pub members: Vec<[u32; CELL_POINTS]>,
+    /// Points (structure of arrays).
+    pub points: Points,
+    /// Server frame at which each published bucket / cell last changed (0 = never).
+    pub bucket_stamp: Vec<u64>,
+    pub cell_stamp: Vec<u64>,
+    /// Largest stamp of this instance.
+    pub max_stamp: u64,
+}
+
+/// Per-point state of one instance.
+#[derive(Default)]
+pub(crate) struct Points {
+    /// Local position and unit normal.
+    pub position: Vec<Vec3>,
+    pub normal: Vec<Vec3>,
+    /// Allocation slot, or [`NONE`] when the point overflowed and is not stored.
+    pub slot: Vec<u32>,
+    /// Sum of AO samples and their number.
+    pub sum: Vec<f32>,
+    pub count: Vec<u32>,
+    /// Last published record (0 = never published) and the slot it was published in.
+    pub published: Vec<u32>,
+    pub published_slot: Vec<u32>,
+}
+
+impl InstanceState {
+    /// Build the allocation grid from generated points (DESIGN §3 layout); nothing is
+    /// published yet.
+    pub fn new(points: &InstancePoints, transform: Affine3A) -> Result<Self, ServerError> {
+        let (alloc, locs) = InstanceGrid::from_points(points, 1.0)?;
+        let layout = *alloc.layout();
+        let n = points.points.len();
+        let mut p = Points {
+            position: points.points.iter().map(|s| s.position).collect(),
+            normal: points.points.iter().map(|s| s.normal).collect(),
+            slot: vec![NONE; n],
+            sum: vec![0.0; n],
+            count: vec![0; n],
+            published: vec![0; n],
+            published_slot: vec![NONE; n],
+        };
+        let mut members = vec![[NONE; CELL_POINTS]; alloc.cells().len()];
+        let mut slot_ids = vec![0; alloc.cells().len()];
+        for (i, loc) in locs.iter().enumerate() {
+            if let Some(loc) = loc {
+                p.slot[i] = loc.slot;
+                members[loc.slot as usize][usize::from(loc.index)] = i as u32;
+                if let Some(c) = layout.cell_coord(p.position[i]) {
+                    slot_ids[loc.slot as usize] = layout.cell_id(c);
+                }
+            }
+        }
+        let world_bounds = world_bounds(&p.position, &transform);
+        Ok(Self {
+            transform,
+            normal_matrix: transform.matrix3.inverse().transpose(),
+            world_bounds,
+            slack: points.poisson_radius * DEFAULT_INTERPOLATION_FACTOR,
+            poisson_radius: points.poisson_radius_local,
+            grid: InstanceGrid::new(layout),
+            bucket_stamp: vec![0; layout.bucket_count as usize],
+            cell_stamp: vec![0; alloc.cells().len()],
+            alloc,
+            slot_ids,
+            members,
+            points: p,
+            max_stamp: 0,
+        })
+    }
+
+    /// The grid layout.
+    pub fn layout(&self) -> &GridLayout {
+        self.alloc.layout()
+    }
+
+    /// Cell coordinate of allocation slot `slot`.
+    pub fn slot_coord(&self, slot: u32) -> Option<UVec3> {
+        let id = *self.slot_ids.get(slot as usize)?;
+        self.layout().coord_of_id(id)
+    }
+
+    /// World position and unit normal of point `i`.
+    #[inline]
+    pub fn world(&self, i: usize) -> (Vec3, Vec3) {
+        let p = self.transform.transform_point3(self.points.position[i]);
+        let n = self.normal_matrix.mul_vec3(self.points.normal[i]);
+        (p, n.normalize_or_zero())
+    }
+
+    /// The published content of slot `slot`: its members' published records, compacted.
+    pub fn published_cell(&self, slot: u32) -> Cell {
+        let mut cell = Cell::default();
+        let records = self.members[slot as usize]
+            .iter()
+            .filter(|&&m| m != NONE && self.points.published_slot[m as usize] == slot)
+            .map(|&m| self.points.published[m as usize]);
+        for (dst, bits) in cell.points.iter_mut().zip(records) {
+            *dst = bits;
+        }
+        cell
+    }
+
+    /// The published content of bucket `b`: the allocation bucket's entries whose cells hold
+    /// a published point, compacted.
+    pub fn published_bucket(&self, b: usize) -> Bucket {
+        let mut bucket = Bucket::default();
+        let entries = self.alloc.buckets()[b]
+            .entries
+            .iter()
+            .filter(|e| e.key != 0 && self.published_cell(e.slot).points[0] != 0);
+        for (dst, e) in bucket.entries.iter_mut().zip(entries) {
+            *dst = *e;
+        }
+        bucket
+    }
+}
+
+/// World-space bounds of local positions under `transform` (a point box if there are none).
+fn world_bounds(positions: &[Vec3], transform: &Affine3A) -> (Vec3, Vec3) {
+    let init = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let (lo, hi) = positions.iter().fold(init, |(lo, hi), p| {
+        let w = transform.transform_point3(*p);
+        (lo.min(w), hi.max(w))
+    });
+    if lo.cmple(hi).all() {
+        (lo, hi)
+    } else {
+        let t = transform.translation.into();
+        (t, t)
+    }
+}

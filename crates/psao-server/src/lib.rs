@@ -1,0 +1,22 @@
+//! The PSAO server (DESIGN §3 "Server update" and "CPU server"): the authoritative point
+//! state of a scene, AO accumulated over server frames within a ray budget, thresholded
+//! publishing into per-instance hash grids, and per-client deltas of what changed.
+//!
+//! Typical loop: [`Server::new`] → [`Server::instance_table`] (sent once per client) →
+//! each server frame [`Server::step`] with the clients' views → [`Server::update_for`] per
+//! client, encoded with a [`psao_delta::Codec`]. Pure computation: no file or network I/O.
+
+mod clients;
+mod config;
+mod error;
+mod frustum;
+mod instance;
+mod publish;
+mod server;
+mod trace;
+
+pub use clients::ClientId;
+pub use config::{ServerConfig, Thresholds};
+pub use error::ServerError;
+pub use frustum::{Frustum, View};
+pub use server::{PointInfo, Server, StepStats};

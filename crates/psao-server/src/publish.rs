@@ -1,0 +1,200 @@
+//! Thresholded publishing into the authoritative grids (DESIGN §3 "Server update").
+
+use psao_points::pack::{unpack_ao, unpack_normal, POSITION_STEPS};
+
+use crate::instance::{InstanceState, NONE};
+use crate::Thresholds;
+
+/// The record point `i` should be published with now, or `None` when what clients have is
+/// still good enough: never-traced and unstored points stay unpublished; a point is
+/// (re)published when it was never published, changed cell, or its AO, normal or position
+/// moved past the thresholds since it was last published.
+pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Option<u32> {
+    let p = &inst.points;
+    let (slot, count) = (p.slot[i], p.count[i]);
+    if slot == NONE || count == 0 {
+        return None;
+    }
+    let layout = inst.layout();
+    let ao = p.sum[i] / count as f32;
+    let bits = layout.pack(inst.slot_coord(slot)?, p.position[i], p.normal[i], ao);
+    let old = p.published[i];
+    if old == 0 || p.published_slot[i] != slot {
+        return Some(bits);
+    }
+    let step = layout.cell_size / POSITION_STEPS as f32;
+    let moved = inst
+        .slot_coord(slot)
+        .map(|c| layout.unpack_position(c, old))
+        .is_none_or(|q| (p.position[i] - q).abs().max_element() > t.position_steps * step);
+    let changed = (ao - unpack_ao(old)).abs() > t.ao
+        || p.normal[i].dot(unpack_normal(old)) < t.normal_cos
+        || moved;
+    changed.then_some(bits)
+}
+
+/// Record new published values and refresh the affected cells and buckets of the published
+/// grid, stamping what changed with `frame`. `updates` are (point, record) pairs. Returns the
+/// number of points published.
+pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64) -> usize {
+    let mut dirty_cells = Vec::with_capacity(updates.len());
+    for &(i, bits) in updates {
+        let i = i as usize;
+        let p = &mut inst.points;
+        let old_slot = std::mem::replace(&mut p.published_slot[i], p.slot[i]);
+        p.published[i] = bits;
+        dirty_cells.push(p.slot[i]);
+        if old_slot != NONE && old_slot != p.slot[i] {
+            dirty_cells.push(old_slot);
+        }
+    }
+    dirty_cells.sort_unstable();
+    dirty_cells.dedup();
+    let layout = *inst.layout();
+    let mut dirty_buckets = Vec::with_capacity(dirty_cells.len());
+    for &slot in &dirty_cells {
+        let cell = inst.published_cell(slot);
+        if inst
+            .grid
+            .cells()
+            .get(slot as usize)
+            .copied()
+            .unwrap_or_default()
+            != cell
+        {
+            let stored = inst.grid.set_cell(slot, cell);
+            debug_assert!(stored.is_ok(), "allocation slots are valid grid slots");
+            inst.cell_stamp[slot as usize] = frame;
+            inst.max_stamp = frame;
+        }
+        dirty_buckets.push(layout.bucket_of(inst.slot_ids[slot as usize]));
+    }
+    dirty_buckets.sort_unstable();
+    dirty_buckets.dedup();
+    for b in dirty_buckets {
+        let bucket = inst.published_bucket(b);
+        if inst.grid.buckets()[b] != bucket {
+            let stored = inst.grid.set_bucket(b, bucket);
+            debug_assert!(stored.is_ok(), "allocation buckets are valid grid buckets");
+            inst.bucket_stamp[b] = frame;
+            inst.max_stamp = frame;
+        }
+    }
+    updates.len()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Affine3A, Quat, Vec3};
+    use psao_points::{generate_instance_points, GenerateParams};
+    use psao_scene::{Material, Mesh};
+
+    fn state() -> InstanceState {
+        let mesh = Mesh {
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ],
+            indices: vec![[0, 2, 1], [0, 3, 2]],
+            ..Default::default()
+        };
+        let params = GenerateParams {
+            density: 256.0,
+            seed: 1,
+        };
+        let points = generate_instance_points(
+            &mesh,
+            &Material::default(),
+            &Affine3A::IDENTITY,
+            &params,
+            None,
+        )
+        .unwrap();
+        InstanceState::new(&points, Affine3A::IDENTITY).unwrap()
+    }
+
+    /// A stored point whose x lies in the middle of its cell (room to move 4 steps).
+    fn central_point(s: &InstanceState) -> usize {
+        let l = s.layout();
+        (0..s.points.position.len())
+            .find(|&i| {
+                let f = l.grid_coords(s.points.position[i]).x.fract();
+                s.points.slot[i] != NONE && (0.35..0.65).contains(&f)
+            })
+            .unwrap()
+    }
+
+    #[test]
+    fn thresholds_decide_republishing() {
+        let mut s = state();
+        let t = Thresholds::default();
+        let i = central_point(&s);
+        assert_eq!(republish(&s, i, &t), None, "never traced");
+        s.points.count[i] = 16;
+        s.points.sum[i] = 8.0;
+        let bits = republish(&s, i, &t).expect("first publish");
+        assert_eq!(apply(&mut s, &[(i as u32, bits)], 1), 1);
+        assert_eq!(republish(&s, i, &t), None, "unchanged");
+        s.points.sum[i] = 16.0 * (0.5 + 7.0 / 255.0);
+        assert_eq!(republish(&s, i, &t), None, "AO change below 8/255");
+        s.points.sum[i] = 16.0 * (0.5 + 9.0 / 255.0);
+        assert!(republish(&s, i, &t).is_some(), "AO change above 8/255");
+        s.points.sum[i] = 8.0;
+
+        let n = s.points.normal[i];
+        s.points.normal[i] = Quat::from_rotation_x(30f32.to_radians()) * n;
+        assert_eq!(republish(&s, i, &t), None, "normal turned 30°");
+        s.points.normal[i] = Quat::from_rotation_x(60f32.to_radians()) * n;
+        assert!(republish(&s, i, &t).is_some(), "normal turned 60°");
+        s.points.normal[i] = n;
+
+        let p = s.points.position[i];
+        let step = s.layout().cell_size / 32.0;
+        s.points.position[i] = p + Vec3::X * 2.0 * step;
+        assert_eq!(republish(&s, i, &t), None, "moved 2 steps");
+        s.points.position[i] = p + Vec3::X * 4.0 * step;
+        assert!(republish(&s, i, &t).is_some(), "moved 4 steps");
+        s.points.position[i] = p;
+
+        let slot = s.points.slot[i];
+        s.points.slot[i] = (slot + 1) % s.members.len() as u32;
+        assert!(republish(&s, i, &t).is_some(), "changed cell");
+        s.points.slot[i] = slot;
+        assert_eq!(republish(&s, i, &t), None);
+    }
+
+    #[test]
+    fn apply_keeps_cells_and_buckets_compact_and_stamps_changes() {
+        let mut s = state();
+        let t = Thresholds::default();
+        // Publish the second member of a cell with at least two, then the first.
+        let slot = (0..s.members.len())
+            .find(|&c| s.members[c][1] != NONE)
+            .unwrap();
+        let [a, b] = [s.members[slot][0], s.members[slot][1]].map(|m| m as usize);
+        for &m in &[a, b] {
+            s.points.count[m] = 4;
+            s.points.sum[m] = 2.0;
+        }
+        let bits_b = republish(&s, b, &t).unwrap();
+        apply(&mut s, &[(b as u32, bits_b)], 1);
+        let bucket = s.layout().bucket_of(s.slot_ids[slot]);
+        assert_eq!(s.grid.cells()[slot].points[..2], [bits_b, 0]);
+        assert_eq!(s.grid.buckets()[bucket].len(), 1);
+        assert_eq!((s.cell_stamp[slot], s.bucket_stamp[bucket]), (1, 1));
+
+        let bits_a = republish(&s, a, &t).unwrap();
+        apply(&mut s, &[(a as u32, bits_a)], 2);
+        // Members keep their allocation order once both are published.
+        assert_eq!(s.grid.cells()[slot].points[..3], [bits_a, bits_b, 0]);
+        assert_eq!(s.cell_stamp[slot], 2);
+        assert_eq!(s.bucket_stamp[bucket], 1, "bucket unchanged");
+        assert_eq!(s.max_stamp, 2);
+        // Unpublished cells stay out of the published grid.
+        let published_slots = s.grid.buckets().iter().map(|b| b.len()).sum::<usize>();
+        assert_eq!(published_slots, 1);
+    }
+}

@@ -1,0 +1,336 @@
+//! The [`Server`]: one authoritative point state, stepped once per server frame.
+
+use std::time::Instant;
+
+use glam::{Affine3A, Vec3};
+use psao_delta::{InstanceDelta, InstanceInfo, Update};
+use psao_points::pack::unpack_ao;
+use psao_points::{generate_scene_points, GenerateParams, InstanceGrid};
+use psao_scene::Scene;
+use psao_trace::{GeometryMode, Tracer};
+use rayon::prelude::*;
+
+use crate::clients::Clients;
+use crate::instance::{InstanceState, NONE};
+use crate::publish::{apply, republish};
+use crate::trace::{cull, select, trace};
+use crate::{ClientId, Frustum, ServerConfig, ServerError, View};
+
+/// What one [`Server::step`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepStats {
+    /// Stored points inside the extended frustum of some view (converged ones included).
+    pub visible_points: usize,
+    /// Points that received new samples.
+    pub traced_points: usize,
+    /// Rays traced.
+    pub rays: u64,
+    /// Points whose published record changed.
+    pub published_points: usize,
+    /// Wall time of the step in milliseconds.
+    pub ms: f64,
+}
+
+/// The server's view of one point (for inspection, tests and evaluation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointInfo {
+    /// Instance-local position.
+    pub position: Vec3,
+    /// Instance-local unit normal.
+    pub normal: Vec3,
+    /// Whether the point is stored in the grid (false: dropped by overflow).
+    pub stored: bool,
+    /// AO samples accumulated so far.
+    pub samples: u32,
+    /// Current AO estimate (mean of the samples), if any.
+    pub ao: Option<f32>,
+    /// The last published record, if the point was ever published.
+    pub published: Option<u32>,
+}
+
+impl PointInfo {
+    /// AO as last published (what clients see), if published.
+    pub fn published_ao(&self) -> Option<f32> {
+        self.published.map(unpack_ao)
+    }
+}
+
+/// The PSAO server for one (static) scene: generates the points, accumulates ray-traced AO
+/// for what the clients see within a per-frame ray budget, publishes changes past the
+/// thresholds into per-instance hash grids, and hands each client what it has not seen yet.
+pub struct Server {
+    config: ServerConfig,
+    radius: f32,
+    tracer: Tracer,
+    instances: Vec<InstanceState>,
+    clients: Clients,
+    frame: u64,
+}
+
+impl Server {
+    /// Generate the points of every instance (in parallel), lay out their grids and build
+    /// the tracer (AO rays skip alpha-masked geometry).
+    pub fn new(scene: &Scene, config: ServerConfig) -> Result<Server, ServerError> {
+        config.validate()?;
+        let radius = config.ao_radius.unwrap_or(scene.ao_radius);
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(ServerError::InvalidConfig(format!(
+                "AO radius {radius} must be finite and > 0"
+            )));
+        }
+        if u32::try_from(scene.instances.len()).is_err() {
+            return Err(ServerError::TooManyInstances(scene.instances.len()));
+        }
+        let params = GenerateParams {
+            density: config.density,
+            seed: config.seed,
+        };
+        let points = generate_scene_points(scene, &params, None)?;
+        let instances = points
+            .par_iter()
+            .zip(&scene.instances)
+            .map(|(p, inst)| InstanceState::new(p, inst.transform))
+            .collect::<Result<Vec<_>, _>>()?;
+        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
+        Ok(Server {
+            config,
+            radius,
+            tracer,
+            instances,
+            clients: Clients::default(),
+            frame: 0,
+        })
+    }
+
+    /// What a joining client needs: per instance its grid layout, Poisson radius and
+    /// number of stored points.
+    pub fn instance_table(&self) -> Vec<InstanceInfo> {
+        self.instances
+            .iter()
+            .map(|inst| InstanceInfo {
+                layout: *inst.layout(),
+                poisson_radius: inst.poisson_radius,
+                point_count: inst.alloc.point_count() as u32,
+            })
+            .collect()
+    }
+
+    /// Register a client; its first [`Server::update_for`] is a full snapshot.
+    pub fn add_client(&mut self) -> ClientId {
+        self.clients.add()
+    }
+
+    /// Forget a client (unknown ids are ignored).
+    pub fn remove_client(&mut self, id: ClientId) {
+        self.clients.remove(id);
+    }
+
+    /// Make the client's next update a full snapshot (e.g. after it reconnected or lost
+    /// an update).
+    pub fn resync(&mut self, id: ClientId) {
+        if let Some(c) = self.clients.get_mut(id) {
+            c.needs_snapshot = true;
+        }
+    }
+
+    /// Number of registered clients.
+    pub fn client_count(&self) -> usize {
+        self.clients.len()
+    }
+
+    /// One server frame for the union of `views`: cull points to the extended frusta, spend
+    /// the ray budget on the visible points with the fewest samples, accumulate, and publish
+    /// what moved past the thresholds.
+    pub fn step(&mut self, views: &[View]) -> StepStats {
+        let start = Instant::now();
+        self.frame += 1;
+        let c = &self.config;
+        let frusta: Vec<Frustum> = views
+            .iter()
+            .map(|v| Frustum::new(v, c.frustum_margin))
+            .collect();
+        let (visible, candidates) = cull(&self.instances, &frusta, c.max_samples, c.seed);
+        let max_points =
+            usize::try_from(c.ray_budget / u64::from(c.rays_per_point)).unwrap_or(usize::MAX);
+        let selected = select(candidates, max_points);
+        let traced = trace(
+            &self.tracer,
+            &self.instances,
+            &selected,
+            self.radius,
+            c.rays_per_point,
+            c.max_samples,
+            c.seed,
+        );
+        let mut rays = 0u64;
+        for t in &traced {
+            let p = &mut self.instances[t.instance as usize].points;
+            p.sum[t.index as usize] += t.sum;
+            p.count[t.index as usize] += t.rays;
+            rays += u64::from(t.rays);
+        }
+        let published = self.publish(&traced);
+        StepStats {
+            visible_points: visible,
+            traced_points: traced.len(),
+            rays,
+            published_points: published,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+        }
+    }
+
+    /// Publish the traced points that need it; returns how many were published.
+    fn publish(&mut self, traced: &[crate::trace::Traced]) -> usize {
+        let thresholds = self.config.thresholds;
+        let frame = self.frame;
+        // `traced` is sorted by (instance, index): split it per instance.
+        let mut published = 0;
+        for group in traced.chunk_by(|a, b| a.instance == b.instance) {
+            let inst = &mut self.instances[group[0].instance as usize];
+            let updates: Vec<(u32, u32)> = group
+                .par_iter()
+                .filter_map(|t| {
+                    republish(inst, t.index as usize, &thresholds).map(|b| (t.index, b))
+                })
+                .collect();
+            published += apply(inst, &updates, frame);
+        }
+        published
+    }
+
+    /// Everything the client has not received yet: the buckets and cells changed since its
+    /// last update (or, for its first update or after [`Server::resync`], a snapshot of every
+    /// non-empty bucket and cell), plus all instance transforms. An unknown id gets a
+    /// snapshot without being registered.
+    pub fn update_for(&mut self, id: ClientId) -> psao_delta::Update {
+        let frame = self.frame;
+        let (snapshot, since) = match self.clients.get_mut(id) {
+            Some(c) => {
+                let taken = (c.needs_snapshot, c.last_sent);
+                c.needs_snapshot = false;
+                c.last_sent = frame;
+                taken
+            }
+            None => (true, 0),
+        };
+        let instances = self
+            .instances
+            .par_iter()
+            .enumerate()
+            .filter(|(_, inst)| snapshot || inst.max_stamp > since)
+            .map(|(i, inst)| delta(i as u32, inst, snapshot, since))
+            .filter(|d| !d.buckets.is_empty() || !d.cells.is_empty())
+            .collect();
+        Update {
+            frame,
+            snapshot,
+            transforms: self.transforms(),
+            instances,
+        }
+    }
+
+    /// (instance, local-to-world transform) of every instance.
+    pub fn transforms(&self) -> Vec<(u32, Affine3A)> {
+        self.instances
+            .iter()
+            .enumerate()
+            .map(|(i, inst)| (i as u32, inst.transform))
+            .collect()
+    }
+
+    /// Points stored in the grids (overflowed points excluded).
+    pub fn point_count(&self) -> usize {
+        self.instances.iter().map(|i| i.alloc.point_count()).sum()
+    }
+
+    /// Overflow summed over the instances: (cell allocations refused because a bucket was
+    /// full, points dropped).
+    pub fn overflow(&self) -> (u64, u64) {
+        self.instances.iter().fold((0, 0), |(c, p), i| {
+            (c + i.alloc.overflow_cells(), p + i.alloc.overflow_points())
+        })
+    }
+
+    /// Server frames stepped so far (the frame number of the latest update).
+    pub fn frame(&self) -> u64 {
+        self.frame
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ServerConfig {
+        &self.config
+    }
+
+    /// The AO ray length in use.
+    pub fn ao_radius(&self) -> f32 {
+        self.radius
+    }
+
+    /// The tracer (AO geometry: alpha-masked meshes skipped).
+    pub fn tracer(&self) -> &Tracer {
+        &self.tracer
+    }
+
+    /// Number of instances.
+    pub fn instance_count(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// The published (authoritative) grid of an instance: what clients mirror.
+    pub fn grid(&self, instance: usize) -> Option<&InstanceGrid> {
+        self.instances.get(instance).map(|i| &i.grid)
+    }
+
+    /// Every generated point of an instance, in generation order (empty when out of range).
+    pub fn points(&self, instance: usize) -> impl Iterator<Item = PointInfo> + '_ {
+        let inst = self.instances.get(instance);
+        let n = inst.map_or(0, |i| i.points.position.len());
+        (0..n).filter_map(move |i| {
+            let p = &inst?.points;
+            Some(PointInfo {
+                position: p.position[i],
+                normal: p.normal[i],
+                stored: p.slot[i] != NONE,
+                samples: p.count[i],
+                ao: (p.count[i] > 0).then(|| p.sum[i] / p.count[i] as f32),
+                published: (p.published[i] != 0).then_some(p.published[i]),
+            })
+        })
+    }
+}
+
+/// The changed (or, for a snapshot, non-empty) buckets and cells of one instance.
+fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> InstanceDelta {
+    let grid = &inst.grid;
+    let buckets = grid
+        .buckets()
+        .iter()
+        .enumerate()
+        .filter(|&(b, bucket)| {
+            if snapshot {
+                !bucket.is_empty()
+            } else {
+                inst.bucket_stamp[b] > since
+            }
+        })
+        .map(|(b, bucket)| (b as u32, *bucket))
+        .collect();
+    let cells = grid
+        .cells()
+        .iter()
+        .enumerate()
+        .filter(|&(s, cell)| {
+            if snapshot {
+                cell.points[0] != 0
+            } else {
+                inst.cell_stamp.get(s).is_some_and(|&t| t > since)
+            }
+        })
+        .map(|(s, cell)| (s as u32, *cell))
+        .collect();
+    InstanceDelta {
+        instance: index,
+        buckets,
+        cells,
+    }
+}
