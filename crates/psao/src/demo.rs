@@ -25,7 +25,7 @@ pub struct DemoArgs {
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
     /// Seconds of the camera path to run.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 4.0)]
     pub seconds: f32,
     /// Client image size, `WxH`.
     #[arg(long, default_value = "640x360")]
@@ -34,13 +34,13 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 1024.0)]
     pub points: f32,
     /// Server frames per second.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 15)]
     pub server_hz: u32,
     /// Write every K-th client frame (the video runs at 60/K frames per second).
     #[arg(long, default_value_t = 2)]
     pub every: u32,
     /// Rays per pixel of the reference used for the quality table.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 128)]
     pub spp: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
