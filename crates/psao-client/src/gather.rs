@@ -92,21 +92,9 @@ impl Neighbourhood {
     /// `reconstruct_ao` visits them.
     fn gather(&mut self, grid: &InstanceGrid, base: IVec3) {
         let layout = grid.layout();
-        let (buckets, cells) = (grid.buckets(), grid.cells());
         let normals = normal_table();
         self.count = 0;
-        for k in 0..8 {
-            let offset = IVec3::new(k & 1, (k >> 1) & 1, k >> 2);
-            let Some(coord) = layout.checked_coord(base.saturating_add(offset)) else {
-                continue;
-            };
-            let id = layout.cell_id(coord);
-            let Some(cell) = buckets[layout.bucket_of(id)]
-                .find(id)
-                .and_then(|slot| cells.get(slot as usize))
-            else {
-                continue;
-            };
+        for (coord, cell) in grid.block_cells(base) {
             for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
                 let i = self.count;
                 let position = layout.unpack_position(coord, bits);

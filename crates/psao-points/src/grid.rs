@@ -227,6 +227,18 @@ impl InstanceGrid {
         })
     }
 
+    /// The allocated cells of the 2×2×2 block whose lowest cell is `base`, as
+    /// (cell coordinate, cell), x fastest, then y, then z; unallocated or out-of-grid cells are
+    /// skipped. This is the neighbourhood reconstruction visits.
+    pub fn block_cells(&self, base: glam::IVec3) -> impl Iterator<Item = (UVec3, &Cell)> + '_ {
+        (0..8).filter_map(move |k: i32| {
+            let offset = glam::IVec3::new(k & 1, (k >> 1) & 1, k >> 2);
+            let c = self.layout.checked_coord(base.saturating_add(offset))?;
+            let slot = self.find_cell(c)?;
+            self.cells.get(slot as usize).map(|cell| (c, cell))
+        })
+    }
+
     /// The decoded points of the cell at `coord` (nothing when it is not allocated).
     pub fn cell_points(&self, coord: UVec3) -> impl Iterator<Item = DecodedPoint> + '_ {
         let cell = self.find_cell(coord).map(|s| &self.cells[s as usize]);

@@ -1,6 +1,6 @@
 //! Client-side AO reconstruction at a shaded position (DESIGN §3, paper §3.5, Eqs. 2–4).
 
-use glam::{IVec3, Vec3};
+use glam::Vec3;
 
 use crate::grid::InstanceGrid;
 use crate::pack::{is_valid, normal_code, normal_table, unpack_ao};
@@ -56,21 +56,9 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
     }
     let (r2, inv_r) = (r * r, 1.0 / r);
     let base = layout.nearest_base(p);
-    let (buckets, cells) = (grid.buckets(), grid.cells());
     let normals = normal_table();
     let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
-    for k in 0..8 {
-        let offset = IVec3::new(k & 1, (k >> 1) & 1, k >> 2);
-        let Some(coord) = layout.checked_coord(base.saturating_add(offset)) else {
-            continue;
-        };
-        let id = layout.cell_id(coord);
-        let Some(cell) = buckets[layout.bucket_of(id)]
-            .find(id)
-            .and_then(|slot| cells.get(slot as usize))
-        else {
-            continue;
-        };
+    for (coord, cell) in grid.block_cells(base) {
         for &bits in &cell.points {
             if !is_valid(bits) {
                 continue;
