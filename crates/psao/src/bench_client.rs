@@ -3,13 +3,12 @@
 use crate::args::Resolution;
 use crate::pipeline::Pipeline;
 use crate::run::ServerTuning;
-use crate::scene_source::SceneInput;
+use crate::scene_source::SceneArgs;
 use anyhow::{bail, Result};
 use clap::Args;
 use psao_client::{reconstruct, ReconstructSettings};
 use psao_eval::{ssao, SsaoSettings};
 use serde::Serialize;
-use std::path::PathBuf;
 use std::time::Instant;
 
 /// Server frames run before timing, so that the visible points carry AO.
@@ -18,12 +17,8 @@ const WARMUP_SERVER_FRAMES: u32 = 30;
 /// Arguments of `psao bench client`.
 #[derive(Args, Debug)]
 pub struct BenchClientArgs {
-    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
-    #[arg(long, default_value = "default")]
-    pub scene: String,
-    /// Camera path (default: the scene's first path); its first frame is measured.
-    #[arg(long)]
-    pub path: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Image size.
     #[arg(long, default_value = "1280x720")]
     pub res: Resolution,
@@ -54,8 +49,7 @@ pub fn run(args: &BenchClientArgs) -> Result<()> {
     if args.repeat == 0 {
         bail!("--repeat must be at least 1");
     }
-    let input = SceneInput::load(&args.scene)?;
-    let path = input.camera_path(args.path.as_ref())?;
+    let (input, path) = args.input.load()?;
     let camera = path.camera_at_frame(0);
     let config = args.tuning.config(args.points, 60, args.res)?;
     let mut pipeline = Pipeline::new(&input.scene, &config)?;

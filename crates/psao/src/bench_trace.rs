@@ -1,14 +1,13 @@
 //! `psao bench trace`: ray-tracing throughput of every compiled backend on one AO ray set.
 
 use crate::args::Resolution;
-use crate::scene_source::SceneInput;
+use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_raster::{rasterize, RasterOptions};
 use psao_trace::{ao, sort_rays_spatially, Backend, GeometryMode, Ray, Tracer};
 use rayon::prelude::*;
 use serde::Serialize;
-use std::path::PathBuf;
 use std::time::Instant;
 
 /// Rays handed to one backend call; large enough to amortise the call, small enough to balance threads.
@@ -21,12 +20,8 @@ const MAX_RAYS: usize = 200_000_000;
 /// Arguments of `psao bench trace`.
 #[derive(Args, Debug)]
 pub struct BenchTraceArgs {
-    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
-    #[arg(long, default_value = "default")]
-    pub scene: String,
-    /// Camera path whose views pick the visible surfaces (default: the scene's first path).
-    #[arg(long)]
-    pub path: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Number of AO rays in the set.
     #[arg(long, default_value_t = 4_000_000)]
     pub rays: usize,
@@ -56,8 +51,7 @@ pub fn run(args: &BenchTraceArgs) -> Result<()> {
     if args.rays == 0 || args.rays > MAX_RAYS {
         bail!("--rays must be in 1..={MAX_RAYS}, got {}", args.rays);
     }
-    let input = SceneInput::load(&args.scene)?;
-    let path = input.camera_path(args.path.as_ref())?;
+    let (input, path) = args.input.load()?;
     let unsorted = ao_ray_set(&input, &path, args)?;
     let order = sort_rays_spatially(&unsorted);
     let sorted: Vec<Ray> = order.iter().map(|&i| unsorted[i as usize]).collect();

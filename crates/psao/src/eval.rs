@@ -8,7 +8,7 @@ use crate::progress;
 use crate::reference::ReferenceRenderer;
 use crate::report::{self, Report, Row, Series};
 use crate::run::ServerTuning;
-use crate::scene_source::SceneInput;
+use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{compare, reference_ao, ssao, AoImage, Metrics, ReferenceSettings, SsaoSettings};
@@ -23,12 +23,8 @@ use std::time::Instant;
 /// Arguments of `psao eval`.
 #[derive(Args, Debug)]
 pub struct EvalArgs {
-    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
-    #[arg(long, default_value = "default")]
-    pub scene: String,
-    /// Camera path file (default: the scene's first path).
-    #[arg(long)]
-    pub path: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Image size, `WxH`.
     #[arg(long, default_value = "640x360")]
     pub res: Resolution,
@@ -79,8 +75,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             crate::reference::MAX_SPP
         );
     }
-    let input = SceneInput::load(&args.scene)?;
-    let path = input.camera_path(args.path.as_ref())?;
+    let (input, path) = args.input.load()?;
     let count = path.frame_count() as u32;
     let range = args.frames.unwrap_or(FrameRange {
         start: 0,
@@ -193,7 +188,7 @@ fn prepare_frames(
 /// that changes the images (scene geometry, camera keys, resolution, spp, radius).
 fn reference_key(input: &SceneInput, path: &CameraPath, args: &EvalArgs) -> String {
     let mut h = std::collections::hash_map::DefaultHasher::new();
-    args.scene.hash(&mut h);
+    args.input.scene.hash(&mut h);
     input.scene.instanced_triangle_count().hash(&mut h);
     format!("{:?}", path.keys).hash(&mut h);
     input.scene.ao_radius.to_bits().hash(&mut h);

@@ -3,7 +3,7 @@
 use crate::args::{FrameRange, Resolution};
 use crate::png_io::write_ao_png;
 use crate::progress;
-use crate::scene_source::SceneInput;
+use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{reference_ao, AoImage, ReferenceSettings};
@@ -19,12 +19,8 @@ pub const MAX_SPP: u32 = 1 << 16;
 /// Arguments of `psao reference`.
 #[derive(Args, Debug)]
 pub struct ReferenceArgs {
-    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
-    #[arg(long, default_value = "default")]
-    pub scene: String,
-    /// Camera path file (default: the scene's first path).
-    #[arg(long)]
-    pub path: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// A single frame of the path (60 Hz).
     #[arg(long, conflicts_with = "frames")]
     pub frame: Option<u32>,
@@ -53,8 +49,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     if args.spp == 0 || args.spp > MAX_SPP {
         bail!("--spp must be in 1..={MAX_SPP}, got {}", args.spp);
     }
-    let input = SceneInput::load(&args.scene)?;
-    let path = input.camera_path(args.path.as_ref())?;
+    let (input, path) = args.input.load()?;
     let frames = select_frames(&path, args.frame, args.frames)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;

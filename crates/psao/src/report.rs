@@ -148,53 +148,55 @@ fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow::anyhow!("plotting failed: {e:?}")
 }
 
-/// PSNR (AO only) of PSAO against points per unit area, one line per server rate, baselines flat.
-fn plot_quality_vs_points(file: &Path, rows: &[Row]) -> Result<()> {
-    let psao: Vec<&Row> = rows.iter().filter(|r| r.method == "psao").collect();
-    let x_max = psao.iter().filter_map(|r| r.points).fold(0.0f32, f32::max) as f64 * 1.1 + 1.0;
-    let (y_lo, y_hi) = y_range(rows.iter().map(|r| r.psnr_ao));
+/// One line of a plot.
+struct Line {
+    label: String,
+    points: Vec<(f64, f64)>,
+    markers: bool,
+}
+
+/// Axis captions and ranges of a plot.
+struct Axes<'a> {
+    caption: &'a str,
+    x_desc: &'a str,
+    y_desc: &'a str,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+}
+
+/// Draws `lines` into an SVG file with a legend.
+fn line_plot(file: &Path, axes: &Axes, lines: &[Line]) -> Result<()> {
     let root = SVGBackend::new(file, (720, 420)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
     let mut chart = ChartBuilder::on(&root)
-        .caption("AO PSNR vs points per unit area", ("sans-serif", 18))
+        .caption(axes.caption, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(36)
-        .y_label_area_size(48)
-        .build_cartesian_2d(0.0..x_max, y_lo..y_hi)
+        .y_label_area_size(56)
+        .build_cartesian_2d(axes.x.clone(), axes.y.clone())
         .map_err(plot_err)?;
     chart
         .configure_mesh()
-        .x_desc("points per unit area")
-        .y_desc("PSNR (dB)")
+        .x_desc(axes.x_desc)
+        .y_desc(axes.y_desc)
         .draw()
         .map_err(plot_err)?;
-    let rates: std::collections::BTreeSet<u32> = psao.iter().filter_map(|r| r.server_hz).collect();
-    for (i, hz) in rates.iter().enumerate() {
-        let pts: Vec<(f64, f64)> = psao
-            .iter()
-            .filter(|r| r.server_hz == Some(*hz))
-            .filter_map(|r| r.points.map(|p| (p as f64, r.psnr_ao)))
-            .collect();
+    for (i, line) in lines.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
         chart
-            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+            .draw_series(LineSeries::new(line.points.clone(), color.stroke_width(2)))
             .map_err(plot_err)?
-            .label(format!("PSAO @ {hz} Hz"))
+            .label(line.label.clone())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-        chart
-            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
-            .map_err(plot_err)?;
-    }
-    for (i, r) in rows.iter().filter(|r| r.method != "psao").enumerate() {
-        let color = Palette99::pick(rates.len() + i).to_rgba();
-        chart
-            .draw_series(LineSeries::new(
-                vec![(0.0, r.psnr_ao), (x_max, r.psnr_ao)],
-                color,
-            ))
-            .map_err(plot_err)?
-            .label(r.method.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+        if line.markers {
+            chart
+                .draw_series(
+                    line.points
+                        .iter()
+                        .map(|&p| Circle::new(p, 3, color.filled())),
+                )
+                .map_err(plot_err)?;
+        }
     }
     chart
         .configure_series_labels()
@@ -205,50 +207,71 @@ fn plot_quality_vs_points(file: &Path, rows: &[Row]) -> Result<()> {
     root.present().map_err(plot_err)
 }
 
+/// PSNR (AO only) of PSAO against points per unit area, one line per server rate, baselines flat.
+fn plot_quality_vs_points(file: &Path, rows: &[Row]) -> Result<()> {
+    let psao: Vec<&Row> = rows.iter().filter(|r| r.method == "psao").collect();
+    let x_max = psao.iter().filter_map(|r| r.points).fold(0.0f32, f32::max) as f64 * 1.1 + 1.0;
+    let rates: std::collections::BTreeSet<u32> = psao.iter().filter_map(|r| r.server_hz).collect();
+    let mut lines: Vec<Line> = rates
+        .iter()
+        .map(|hz| Line {
+            label: format!("PSAO @ {hz} Hz"),
+            points: psao
+                .iter()
+                .filter(|r| r.server_hz == Some(*hz))
+                .filter_map(|r| r.points.map(|p| (p as f64, r.psnr_ao)))
+                .collect(),
+            markers: true,
+        })
+        .collect();
+    lines.extend(rows.iter().filter(|r| r.method != "psao").map(|r| Line {
+        label: r.method.clone(),
+        points: vec![(0.0, r.psnr_ao), (x_max, r.psnr_ao)],
+        markers: false,
+    }));
+    let (y_lo, y_hi) = y_range(rows.iter().map(|r| r.psnr_ao));
+    let axes = Axes {
+        caption: "AO PSNR vs points per unit area",
+        x_desc: "points per unit area",
+        y_desc: "PSNR (dB)",
+        x: 0.0..x_max,
+        y: y_lo..y_hi,
+    };
+    line_plot(file, &axes, &lines)
+}
+
 /// PSNR (AO only) against server rate, one line per density.
 fn plot_quality_vs_rate(file: &Path, rows: &[Row]) -> Result<()> {
     let psao: Vec<&Row> = rows.iter().filter(|r| r.method == "psao").collect();
     let x_max = psao.iter().filter_map(|r| r.server_hz).max().unwrap_or(60) as f64 * 1.1;
-    let (y_lo, y_hi) = y_range(rows.iter().map(|r| r.psnr_ao));
-    let root = SVGBackend::new(file, (720, 420)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption("AO PSNR vs server rate", ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(48)
-        .build_cartesian_2d(0.0..x_max, y_lo..y_hi)
-        .map_err(plot_err)?;
-    chart
-        .configure_mesh()
-        .x_desc("server Hz")
-        .y_desc("PSNR (dB)")
-        .draw()
-        .map_err(plot_err)?;
     let mut densities: Vec<f32> = psao.iter().filter_map(|r| r.points).collect();
     densities.sort_by(f32::total_cmp);
     densities.dedup();
-    for (i, n) in densities.iter().enumerate() {
-        let mut pts: Vec<(f64, f64)> = psao
-            .iter()
-            .filter(|r| r.points == Some(*n))
-            .filter_map(|r| r.server_hz.map(|h| (h as f64, r.psnr_ao)))
-            .collect();
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let color = Palette99::pick(i).to_rgba();
-        chart
-            .draw_series(LineSeries::new(pts, color.stroke_width(2)))
-            .map_err(plot_err)?
-            .label(format!("PSAO-{n}"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(plot_err)?;
-    root.present().map_err(plot_err)
+    let lines: Vec<Line> = densities
+        .iter()
+        .map(|n| {
+            let mut points: Vec<(f64, f64)> = psao
+                .iter()
+                .filter(|r| r.points == Some(*n))
+                .filter_map(|r| r.server_hz.map(|h| (h as f64, r.psnr_ao)))
+                .collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            Line {
+                label: format!("PSAO-{n}"),
+                points,
+                markers: true,
+            }
+        })
+        .collect();
+    let (y_lo, y_hi) = y_range(rows.iter().map(|r| r.psnr_ao));
+    let axes = Axes {
+        caption: "AO PSNR vs server rate",
+        x_desc: "server Hz",
+        y_desc: "PSNR (dB)",
+        x: 0.0..x_max,
+        y: y_lo..y_hi,
+    };
+    line_plot(file, &axes, &lines)
 }
 
 /// Received Mbit per second of scene time for each configuration.
@@ -264,42 +287,27 @@ fn plot_bandwidth(file: &Path, series: &[Series]) -> Result<()> {
         .fold(0.0, f64::max)
         * 1.1
         + 1e-3;
-    let root = SVGBackend::new(file, (720, 420)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_err)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption("Received bandwidth over time", ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(36)
-        .y_label_area_size(56)
-        .build_cartesian_2d(0.0..x_max, 0.0..y_max)
-        .map_err(plot_err)?;
-    chart
-        .configure_mesh()
-        .x_desc("scene time (s)")
-        .y_desc("Mbit/s")
-        .draw()
-        .map_err(plot_err)?;
-    for (i, s) in series.iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
-        let pts: Vec<(f64, f64)> = s
-            .mbit_per_second
-            .iter()
-            .enumerate()
-            .map(|(t, &v)| (t as f64 + 0.5, v))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(pts, color.stroke_width(2)))
-            .map_err(plot_err)?
-            .label(s.label.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(plot_err)?;
-    root.present().map_err(plot_err)
+    let lines: Vec<Line> = series
+        .iter()
+        .map(|s| Line {
+            label: s.label.clone(),
+            points: s
+                .mbit_per_second
+                .iter()
+                .enumerate()
+                .map(|(t, &v)| (t as f64 + 0.5, v))
+                .collect(),
+            markers: false,
+        })
+        .collect();
+    let axes = Axes {
+        caption: "Received bandwidth over time",
+        x_desc: "scene time (s)",
+        y_desc: "Mbit/s",
+        x: 0.0..x_max,
+        y: 0.0..y_max,
+    };
+    line_plot(file, &axes, &lines)
 }
 
 /// A y range with margin around finite values.

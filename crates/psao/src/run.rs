@@ -4,7 +4,7 @@ use crate::args::{FrameRange, Resolution};
 use crate::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
 use crate::png_io::{write_ao_png, write_rgb_png};
 use crate::progress;
-use crate::scene_source::SceneInput;
+use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_server::ServerConfig;
@@ -61,12 +61,8 @@ impl ServerTuning {
 /// Arguments of `psao run`.
 #[derive(Args, Debug)]
 pub struct RunArgs {
-    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
-    #[arg(long, default_value = "default")]
-    pub scene: String,
-    /// Camera path file (default: the scene's first path).
-    #[arg(long)]
-    pub path: Option<PathBuf>,
+    #[command(flatten)]
+    pub input: SceneArgs,
     /// Client image size, `WxH`.
     #[arg(long, default_value = "640x360")]
     pub res: Resolution,
@@ -121,8 +117,7 @@ pub struct RunStats {
 
 /// Runs `psao run`.
 pub fn run(args: &RunArgs) -> Result<()> {
-    let input = SceneInput::load(&args.scene)?;
-    let path = input.camera_path(args.path.as_ref())?;
+    let (input, path) = args.input.load()?;
     let count = path.frame_count() as u32;
     let range = args.frames.unwrap_or(crate::args::FrameRange {
         start: 0,

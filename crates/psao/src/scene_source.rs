@@ -1,6 +1,7 @@
 //! Resolving `--scene` and `--path` arguments into a loaded scene and a camera path.
 
 use anyhow::{bail, Context, Result};
+use clap::Args;
 use psao_scene::path::CameraPath;
 use psao_scene::Scene;
 use std::path::{Path, PathBuf};
@@ -13,6 +14,26 @@ const BUILTIN_PATHS: [(&str, &str); 2] = [
     ("default_a", include_str!("../../../paths/default_a.toml")),
     ("default_b", include_str!("../../../paths/default_b.toml")),
 ];
+
+/// The `--scene` and `--path` arguments.
+#[derive(Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = BUILTIN_SCENE)]
+    pub scene: String,
+    /// Camera path file (default: the scene's first path).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+}
+
+impl SceneArgs {
+    /// Loads the scene and picks the camera path.
+    pub fn load(&self) -> Result<(SceneInput, CameraPath)> {
+        let input = SceneInput::load(&self.scene)?;
+        let path = input.camera_path(self.path.as_ref())?;
+        Ok((input, path))
+    }
+}
 
 /// A scene with the camera paths it names.
 pub struct SceneInput {
