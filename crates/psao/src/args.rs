@@ -72,6 +72,24 @@ impl FromStr for FrameRange {
     }
 }
 
+impl FrameRange {
+    /// `requested`, or else all `count` frames of a camera path, checked to lie within the path.
+    pub fn within_path(requested: Option<FrameRange>, count: u32) -> Result<FrameRange> {
+        let range = requested.unwrap_or(FrameRange {
+            start: 0,
+            end: count,
+        });
+        if range.end > count {
+            bail!(
+                "the camera path has {count} frames (0..{count}); asked for {}..{}",
+                range.start,
+                range.end
+            );
+        }
+        Ok(range)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,5 +111,14 @@ mod tests {
         assert!("5..5".parse::<FrameRange>().is_err());
         assert!("5".parse::<FrameRange>().is_err());
         assert!("-1..3".parse::<FrameRange>().is_err());
+    }
+
+    #[test]
+    fn frame_ranges_are_checked_against_the_path() {
+        let all = FrameRange::within_path(None, 901).unwrap();
+        assert_eq!((all.start, all.end), (0, 901));
+        let r = FrameRange { start: 10, end: 20 };
+        assert_eq!(FrameRange::within_path(Some(r), 20).unwrap(), r);
+        assert!(FrameRange::within_path(Some(r), 19).is_err());
     }
 }

@@ -77,17 +77,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     }
     let (input, path) = args.input.load()?;
     let count = path.frame_count() as u32;
-    let range = args.frames.unwrap_or(FrameRange {
-        start: 0,
-        end: count,
-    });
-    if range.end > count {
-        bail!(
-            "the camera path has {count} frames; asked for {}..{}",
-            range.start,
-            range.end
-        );
-    }
+    let range = FrameRange::within_path(args.frames, count)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let eval_frames: Vec<u32> = (range.start..range.end)

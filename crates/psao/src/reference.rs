@@ -87,16 +87,16 @@ fn select_frames(
     frame: Option<u32>,
     frames: Option<FrameRange>,
 ) -> Result<Vec<u32>> {
-    let count = path.frame_count() as u32;
-    let (start, end) = match (frame, frames) {
-        (Some(f), _) => (f, f + 1),
-        (None, Some(r)) => (r.start, r.end),
-        (None, None) => (0, 1),
+    let range = match (frame, frames) {
+        (Some(f), _) => FrameRange {
+            start: f,
+            end: f.saturating_add(1),
+        },
+        (None, Some(r)) => r,
+        (None, None) => FrameRange { start: 0, end: 1 },
     };
-    if end > count {
-        bail!("the camera path has {count} frames (0..{count}); asked for {start}..{end}");
-    }
-    Ok((start..end).collect())
+    let range = FrameRange::within_path(Some(range), path.frame_count() as u32)?;
+    Ok((range.start..range.end).collect())
 }
 
 /// Renders reference AO frames of one static scene.

@@ -119,17 +119,7 @@ pub struct RunStats {
 pub fn run(args: &RunArgs) -> Result<()> {
     let (input, path) = args.input.load()?;
     let count = path.frame_count() as u32;
-    let range = args.frames.unwrap_or(crate::args::FrameRange {
-        start: 0,
-        end: count,
-    });
-    if range.end > count {
-        bail!(
-            "the camera path has {count} frames; asked for {}..{}",
-            range.start,
-            range.end
-        );
-    }
+    let range = FrameRange::within_path(args.frames, count)?;
     if args.every == 0 {
         bail!("--every must be at least 1");
     }
