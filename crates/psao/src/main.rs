@@ -2,6 +2,7 @@
 
 mod args;
 mod bench_client;
+mod bench_serve;
 mod bench_trace;
 mod compare;
 mod demo;
@@ -13,6 +14,9 @@ mod reference;
 mod report;
 mod run;
 mod scene_source;
+mod serve;
+mod view;
+mod volume_cmd;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -41,6 +45,13 @@ enum Command {
     Reference(reference::ReferenceArgs),
     /// Compare two AO images: PSNR, SSIM and FLIP.
     Compare(compare::CompareArgs),
+    /// Serve AO updates to `psao view` clients over TCP and WebSocket.
+    Serve(serve::ServeArgs),
+    /// Connect to a `psao serve`, follow a camera path and write frames (headless client).
+    View(view::ViewArgs),
+    /// Sparse volumes: inspect, convert and render OpenVDB and `.psv` files.
+    #[command(subcommand)]
+    Volume(volume_cmd::VolumeCommand),
     /// Benchmarks.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -52,6 +63,8 @@ enum BenchCommand {
     Trace(bench_trace::BenchTraceArgs),
     /// Time the client's AO reconstruction against SSAO on the same G-buffer.
     Client(bench_client::BenchClientArgs),
+    /// One server and N headless clients on loopback: per-client Mbit/s, server ms, coalescing.
+    Serve(bench_serve::BenchServeArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -81,5 +94,9 @@ fn run(command: Command) -> Result<()> {
         Command::Compare(a) => compare::run(&a),
         Command::Bench(BenchCommand::Trace(a)) => bench_trace::run(&a),
         Command::Bench(BenchCommand::Client(a)) => bench_client::run(&a),
+        Command::Bench(BenchCommand::Serve(a)) => bench_serve::run(&a),
+        Command::Serve(a) => serve::run(&a),
+        Command::View(a) => view::run(&a),
+        Command::Volume(c) => volume_cmd::run(&c),
     }
 }
