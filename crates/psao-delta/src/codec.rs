@@ -1,9 +1,9 @@
 //! The codec interface and lookup by name.
 
-use crate::{DeltaError, PaperCodec, Update};
+use crate::{CompactCodec, DeltaError, PaperCodec, Update};
 
 /// Names accepted by [`codec_by_name`].
-pub const CODEC_NAMES: &[&str] = &["paper"];
+pub const CODEC_NAMES: &[&str] = &["compact", "paper"];
 
 /// Turns updates into bytes and back. Codecs may keep state between calls (e.g. the last
 /// sent state for XOR deltas), so a sender and its receiver each hold one instance and see
@@ -16,12 +16,17 @@ pub trait Codec: Send {
     /// Decode one update; malformed input gives an error, never a panic or an unbounded
     /// allocation.
     fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError>;
+    /// Lower the most bytes one update may decompress to (e.g. to what the instance table
+    /// allows); never above [`crate::MAX_DECODED_BYTES`]. Codecs without a configurable
+    /// limit keep [`crate::MAX_DECODED_BYTES`].
+    fn set_decode_limit(&mut self, _bytes: u64) {}
 }
 
-/// A fresh codec by name (`"paper"`).
+/// A fresh codec by name (`"compact"` or `"paper"`).
 pub fn codec_by_name(name: &str) -> Result<Box<dyn Codec>, DeltaError> {
     match name {
         "paper" => Ok(Box::new(PaperCodec)),
+        "compact" => Ok(Box::new(CompactCodec::new())),
         _ => Err(DeltaError::UnknownCodec(name.to_string())),
     }
 }

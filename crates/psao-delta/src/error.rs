@@ -47,4 +47,15 @@ pub enum DeltaError {
     /// Words left over after the last record.
     #[error("{0} trailing words after the update")]
     Trailing(usize),
+    /// A varint that is too long or a delta that leaves the 32-bit range.
+    #[error("bad varint in {0}")]
+    BadVarint(&'static str),
+    /// The byte planes do not have the size the index stream implies.
+    #[error("byte planes hold {found} bytes, the index stream implies {expected}")]
+    PlaneSize {
+        /// Bytes implied by the counts.
+        expected: u64,
+        /// Bytes present.
+        found: u64,
+    },
 }

@@ -8,12 +8,15 @@
 //! Pure computation: no file or network I/O.
 
 mod codec;
+mod compact;
 mod error;
 mod model;
 mod paper;
 mod words;
+mod zstd_io;
 
 pub use codec::{codec_by_name, Codec, CODEC_NAMES};
+pub use compact::{CompactCodec, COMPACT_LEVEL};
 pub use error::DeltaError;
 pub use model::{compact_bucket, compact_cell, InstanceDelta, InstanceInfo, Update};
 pub use paper::{PaperCodec, MAX_DECODED_BYTES, PAPER_LEVEL};

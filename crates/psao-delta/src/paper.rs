@@ -196,38 +196,14 @@ fn read_cell(r: &mut WordReader<'_>) -> Result<(u32, Cell), DeltaError> {
 
 /// zstd level 15, strategy lazy, with content size and checksum recorded.
 fn compress(payload: &[u8]) -> Vec<u8> {
-    let params = [
-        CParameter::CompressionLevel(PAPER_LEVEL),
-        CParameter::Strategy(Strategy::ZSTD_lazy),
-        CParameter::ContentSizeFlag(true),
-        CParameter::ChecksumFlag(true),
-    ];
-    let result = zstd::bulk::Compressor::new(PAPER_LEVEL).and_then(|mut c| {
-        params.into_iter().try_for_each(|p| c.set_parameter(p))?;
-        c.compress(payload)
-    });
-    // Constant, valid parameters into a buffer of `compress_bound` bytes: zstd cannot fail
-    // here short of running out of memory, which aborts anyway.
-    result.expect("zstd compression with fixed valid parameters")
+    crate::zstd_io::compress_with(
+        payload,
+        PAPER_LEVEL,
+        &[CParameter::Strategy(Strategy::ZSTD_lazy)],
+    )
 }
 
-/// Decompress at most [`MAX_DECODED_BYTES`], allocating exactly the recorded size.
+/// Decompress at most [`MAX_DECODED_BYTES`].
 fn decompress(bytes: &[u8]) -> Result<Vec<u8>, DeltaError> {
-    let size = zstd::bulk::Decompressor::upper_bound(bytes).ok_or(DeltaError::UnknownSize)?;
-    if size as u64 > MAX_DECODED_BYTES {
-        return Err(DeltaError::TooLarge {
-            size: size as u64,
-            limit: MAX_DECODED_BYTES,
-        });
-    }
-    let out = zstd::bulk::Decompressor::new()
-        .and_then(|mut d| d.decompress(bytes, size))
-        .map_err(|e| DeltaError::Decompress(e.to_string()))?;
-    if out.len() != size {
-        return Err(DeltaError::Decompress(format!(
-            "expanded to {} bytes, {size} recorded",
-            out.len()
-        )));
-    }
-    Ok(out)
+    crate::zstd_io::decompress(bytes, MAX_DECODED_BYTES)
 }
