@@ -5,6 +5,8 @@
 //! default scene, else every root), with the node's world transform at rest. Each
 //! primitive becomes one shared [`Mesh`]. Images and textures are never read.
 //!
+//! Clips that drive disjoint nodes all play; of clips sharing nodes only the first plays.
+//!
 //! For a skinned instance, `transform` is still its node's world transform; skinning in
 //! mesh-local space uses `transform⁻¹ · world(joint) · inverse_bind(joint)` per joint.
 
@@ -16,6 +18,7 @@ mod precheck;
 mod primitive;
 
 use std::collections::hash_map::{Entry, HashMap};
+use std::collections::HashSet;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
@@ -25,7 +28,7 @@ use glam::Vec4;
 
 use self::accessor::BufferData;
 use crate::error::{read_file, SceneError};
-use crate::model::{AlphaMode, Instance, Material, Scene, DEFAULT_AO_RADIUS};
+use crate::model::{AlphaMode, Animation, Instance, Material, Scene, DEFAULT_AO_RADIUS};
 
 /// Loads a `.gltf` or `.glb` file (the format is detected from the content).
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
@@ -77,7 +80,7 @@ fn build(doc: &Document, data: &BufferData) -> Result<Scene, SceneError> {
         ao_radius: DEFAULT_AO_RADIUS,
         ..Default::default()
     };
-    scene.playing = (0..scene.animations.len()).collect();
+    scene.playing = default_clips(&scene.animations);
 
     let nodes: Vec<_> = doc.nodes().collect();
     let mut mesh_map: HashMap<usize, Vec<usize>> = HashMap::new();
@@ -119,6 +122,22 @@ fn build(doc: &Document, data: &BufferData) -> Result<Scene, SceneError> {
     }
     scene.nodes = tree.nodes;
     Ok(scene)
+}
+
+/// The clips that play by default: every clip, except one that drives a node an earlier
+/// chosen clip already drives (alternative clips of one character, e.g. Survey/Walk/Run:
+/// the first one plays).
+fn default_clips(animations: &[Animation]) -> Vec<usize> {
+    let mut driven = HashSet::new();
+    let mut playing = Vec::new();
+    for (i, a) in animations.iter().enumerate() {
+        let nodes: HashSet<usize> = a.channels.iter().map(|c| c.node).collect();
+        if nodes.is_disjoint(&driven) {
+            driven.extend(nodes);
+            playing.push(i);
+        }
+    }
+    playing
 }
 
 /// Converts the triangle primitives of a glTF mesh, appending them to `scene.meshes`;

@@ -1,5 +1,6 @@
 //! Scene data model and import: glTF 2.0, OBJ, scene files, the built-in default scene and camera paths.
 
+pub mod anim;
 pub mod builtin;
 pub mod camera;
 mod error;
@@ -11,6 +12,7 @@ pub mod obj;
 pub mod path;
 pub mod scene_file;
 
+pub use anim::{AnimationError, Animator, Motion, PosedInstance, ScenePose, SkinnedGeometry};
 pub use camera::Camera;
 pub use error::{SceneError, MAX_ELEMENTS};
 pub use load::{load, load_scene, LoadedScene};

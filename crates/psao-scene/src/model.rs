@@ -181,6 +181,34 @@ impl Animation {
     }
 }
 
+/// A root node carried along a path at constant speed, turned to face its direction of travel
+/// (and optionally rolling like a ball), while the node's own clips keep playing.
+///
+/// At path arc length `s` with heading yaw `θ` (the angle turning +Z into the direction of
+/// travel) the node's local transform becomes `T · R · S` with the node's rest scale `S`,
+/// `R = yaw(θ) · roll · rotation` and `T` chosen so that `centre` (a point in the node's
+/// child space, e.g. the asset's bounds centre) lands `lift` metres above the path point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Walker {
+    /// The moved node; must be a root.
+    pub node: usize,
+    /// Path corners in world space (at least one).
+    pub points: Vec<Vec3>,
+    /// Speed along the path in metres per second.
+    pub speed: f32,
+    /// `true`: the path is closed (last point back to the first) and is walked round and
+    /// round; `false`: it is walked to its end and back again.
+    pub closed: bool,
+    /// Orientation applied before the heading (the asset's `rotation_deg`).
+    pub rotation: Quat,
+    /// The point of the node's child space that follows the path.
+    pub centre: Vec3,
+    /// Height of `centre` above the path point (e.g. half the asset's height).
+    pub lift: f32,
+    /// When set, the node also rolls without slipping as a ball of this radius.
+    pub roll_radius: Option<f32>,
+}
+
 /// A whole scene ready for tracing and rasterizing.
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
@@ -198,6 +226,8 @@ pub struct Scene {
     pub animations: Vec<Animation>,
     /// Indices into [`Scene::animations`] that play.
     pub playing: Vec<usize>,
+    /// Root nodes moved along paths (scene-file `walk` entries).
+    pub walkers: Vec<Walker>,
     /// AO ray length in scene units (DESIGN §2 default 0.6).
     pub ao_radius: f32,
 }

@@ -262,6 +262,7 @@ mod tests {
                 }],
             }],
             playing: vec![0],
+            walkers: Vec::new(),
             ao_radius: DEFAULT_AO_RADIUS,
         }
     }
