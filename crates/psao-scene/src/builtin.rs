@@ -29,6 +29,26 @@ pub fn default_scene() -> Scene {
     scene
 }
 
+/// A one-object asset for scene files: `"sphere"` (radius 0.5, centred on the origin),
+/// `"box"` (a 1 m cube centred on the origin) or `"cylinder"` (radius 0.5, standing on y = 0,
+/// 1 m high); its single instance hangs on a root node. `None` for other names.
+pub fn shape_asset(name: &str) -> Option<Scene> {
+    let (mesh, rgb) = match name {
+        "sphere" => (shapes::sphere(0.5, 48), [0.60, 0.12, 0.10]),
+        "box" => (shapes::cuboid(Vec3::splat(0.5)), [0.48, 0.32, 0.19]),
+        "cylinder" => (shapes::cylinder(0.5, 1.0, 48), [0.36, 0.35, 0.34]),
+        _ => return None,
+    };
+    let mut b = SceneBuilder::default();
+    let material = b.material(name, rgb, 0.0, 0.8);
+    let mesh = b.mesh(mesh, name, material);
+    let node = b.node(name, None, Vec3::ZERO, Quat::IDENTITY);
+    b.place_on_node(mesh, node);
+    let mut scene = b.scene;
+    scene.ao_radius = DEFAULT_AO_RADIUS;
+    Some(scene)
+}
+
 /// Material indices of the default scene.
 struct Palette {
     stone: usize,

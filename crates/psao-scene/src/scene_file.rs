@@ -9,10 +9,26 @@
 //! rotation_deg = [0.0, 0.0, 0.0]        # optional: about X, then Y, then Z (fixed axes)
 //! scale = 1.0                           # optional, number or [x, y, z]
 //! animations = ["Walk"]                 # optional: clip names or "all"; default: the asset's playing clips
+//! # optional, at most one of:
+//! walk = { points = [[0, 0, 0], [4, 0, 0]], speed = 1.2, loop = true, roll = false }
+//! keys = { times = [0, 1], translation = [[0, 2, 0], [0, 0, 0]], rotation_deg = [[0, 0, 0], [90, 0, 0]], interpolation = "linear" }
 //! ```
 //!
-//! Each asset that has a node hierarchy gets a new root node carrying the asset transform,
-//! parent of all its former roots; node-less instances get the transform baked in.
+//! `file` may also be `builtin:sphere` (radius 0.5), `builtin:box` (1 m cube) or
+//! `builtin:cylinder` (radius 0.5, 1 m high, standing on y = 0), each centred on the origin
+//! in x and z.
+//!
+//! Each asset that has a node hierarchy gets a new root node (the *wrapper*) carrying the
+//! asset transform, parent of all its former roots; node-less instances get the transform
+//! baked in, unless the asset moves (then each gets a node under the wrapper).
+//!
+//! `walk` carries the wrapper along the path (world points; `loop = true`: closed, round and
+//! round; `false`: there and back) at `speed` m/s, keeping the asset's bounds centre above
+//! the path at its rest height and turning its +Z axis (after `rotation_deg`) to the
+//! direction of travel; `roll = true` also rolls it as a ball of half its height. `walk`
+//! replaces `translation`. `keys` animates the wrapper's translation and/or rotation
+//! (absolute, replacing `translation` / `rotation_deg` where given), looping over the last
+//! key time. The asset's own clips keep playing in both cases.
 
 use std::path::Path;
 
@@ -22,6 +38,10 @@ use serde::Deserialize;
 use crate::error::{read_file, toml_message, SceneError};
 use crate::load::{load_asset, LoadedScene};
 use crate::model::{Node, Scene, DEFAULT_AO_RADIUS};
+
+mod motion;
+
+use motion::{KeysEntry, WalkEntry};
 
 /// The `file` value naming the built-in default scene.
 pub const BUILTIN_DEFAULT: &str = "builtin:default";
@@ -40,12 +60,13 @@ struct SceneFile {
 #[serde(deny_unknown_fields)]
 struct AssetEntry {
     file: String,
-    #[serde(default)]
-    translation: [f32; 3],
+    translation: Option<[f32; 3]>,
     #[serde(default)]
     rotation_deg: [f32; 3],
     scale: Option<Scale>,
     animations: Option<Vec<String>>,
+    walk: Option<WalkEntry>,
+    keys: Option<KeysEntry>,
 }
 
 #[derive(Deserialize)]
@@ -80,8 +101,13 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
     for (i, entry) in file.asset.iter().enumerate() {
         let (translation, rotation, scale) =
             entry_trs(entry).map_err(|m| bad(format!("asset {i} ({}): {m}", entry.file)))?;
-        let asset = if entry.file == BUILTIN_DEFAULT {
+        let what = |m: String| bad(format!("asset {i} ({}): {m}", entry.file));
+        let mut asset = if entry.file == BUILTIN_DEFAULT {
             crate::builtin::default_scene()
+        } else if let Some(shape) = entry.file.strip_prefix("builtin:") {
+            crate::builtin::shape_asset(shape).ok_or_else(|| {
+                what("unknown built-in asset (builtin:default, builtin:sphere, builtin:box, builtin:cylinder)".into())
+            })?
         } else {
             let asset_path = dir.join(&entry.file);
             let is_scene_file = asset_path
@@ -101,16 +127,44 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
                 source: Box::new(e),
             })?
         };
-        let playing = select_clips(&asset, entry.animations.as_deref())
-            .map_err(|m| bad(format!("asset {i} ({}): {m}", entry.file)))?;
-        let wrapper = Node {
+        let playing = select_clips(&asset, entry.animations.as_deref()).map_err(what)?;
+        let mut wrapper = Node {
             name: format!("asset:{}", entry.file),
             parent: None,
             translation,
             rotation,
             scale,
         };
-        append(&mut scene, asset, wrapper, playing);
+        if entry.walk.is_some() && (entry.keys.is_some() || entry.translation.is_some()) {
+            return Err(what("walk excludes keys and translation".into()));
+        }
+        let mut walker = None;
+        let mut keys = None;
+        if entry.walk.is_some() || entry.keys.is_some() {
+            motion::attach_loose_instances(&mut asset);
+            asset.playing = playing.clone();
+        }
+        if let Some(w) = &entry.walk {
+            let (w, t, r) = motion::walker(w, &asset, rotation, scale).map_err(what)?;
+            (wrapper.translation, wrapper.rotation) = (t, r);
+            walker = Some(w);
+        }
+        if let Some(k) = &entry.keys {
+            let (clip, t, r) =
+                motion::keys_clip(k, &entry.file, 0, (translation, rotation)).map_err(what)?;
+            (wrapper.translation, wrapper.rotation) = (t, r);
+            keys = Some(clip);
+        }
+        let root = append(&mut scene, asset, wrapper, playing);
+        if let (Some(mut w), Some(root)) = (walker, root) {
+            w.node = root;
+            scene.walkers.push(w);
+        }
+        if let (Some(mut clip), Some(root)) = (keys, root) {
+            clip.channels.iter_mut().for_each(|c| c.node = root);
+            scene.animations.push(clip);
+            scene.playing.push(scene.animations.len() - 1);
+        }
     }
 
     let mut camera_paths = Vec::with_capacity(file.camera_paths.len());
@@ -132,9 +186,8 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
 
 /// Validated asset transform as (translation, rotation, scale).
 fn entry_trs(e: &AssetEntry) -> Result<(Vec3, Quat, Vec3), String> {
-    let t = Vec3::from_array(e.translation);
-    let [rx, ry, rz] = e.rotation_deg.map(f32::to_radians);
-    let r = Quat::from_rotation_z(rz) * Quat::from_rotation_y(ry) * Quat::from_rotation_x(rx);
+    let t = Vec3::from_array(e.translation.unwrap_or_default());
+    let r = motion::euler_deg(e.rotation_deg);
     let s = match e.scale {
         None => Vec3::ONE,
         Some(Scale::Uniform(s)) => Vec3::splat(s),
@@ -174,8 +227,9 @@ fn select_clips(asset: &Scene, names: Option<&[String]>) -> Result<Vec<usize>, S
 }
 
 /// Appends `src` to `dst` under the asset transform `wrapper`, offsetting every index;
-/// `playing` indexes `src.animations`.
-fn append(dst: &mut Scene, src: Scene, wrapper: Node, playing: Vec<usize>) {
+/// `playing` indexes `src.animations`. Returns the wrapper's node index (`None` when `src`
+/// has no nodes and so gets no wrapper).
+fn append(dst: &mut Scene, src: Scene, wrapper: Node, playing: Vec<usize>) -> Option<usize> {
     let asset = wrapper.local_transform();
     let mesh_base = dst.meshes.len();
     let material_base = dst.materials.len();
@@ -214,6 +268,11 @@ fn append(dst: &mut Scene, src: Scene, wrapper: Node, playing: Vec<usize>) {
         }));
     dst.playing
         .extend(playing.into_iter().map(|p| p + anim_base));
+    dst.walkers.extend(src.walkers.into_iter().map(|mut w| {
+        w.node += node_base;
+        w
+    }));
+    root
 }
 
 #[cfg(test)]
@@ -309,10 +368,12 @@ mod tests {
     fn rotation_is_x_then_y_then_z() {
         let e = AssetEntry {
             file: String::new(),
-            translation: [0.0; 3],
+            translation: None,
             rotation_deg: [90.0, 90.0, 0.0],
             scale: Some(Scale::Uniform(2.0)),
             animations: None,
+            walk: None,
+            keys: None,
         };
         let (_, r, s) = entry_trs(&e).unwrap();
         // X first maps +Y to +Z, then Y maps +Z to +X.

@@ -9,7 +9,7 @@ mod sample;
 mod skin;
 #[cfg(test)]
 mod tests;
-mod walk;
+pub(crate) mod walk;
 
 use std::collections::HashMap;
 use std::sync::Arc;
