@@ -1,0 +1,367 @@
+//! Brick codecs: every brick of the shared pool is stored in one format.
+//!
+//! * `F32`, `F16`: raw values (4 / 2 bytes per voxel).
+//! * `Unorm8`: values mapped to 0..=255 between the volume's min and max (1 byte).
+//! * `Bc4`: the brick as eight 8×8 z-slices, each four BC4 blocks (4 bits per voxel).
+//! * `Bc7`: four consecutive z voxels packed into the RGBA channels of one texel, so a brick is
+//!   two 8×8 texel slices of four BC7 blocks each (128 bytes, 2 bits per voxel).
+//!
+//! Normalised formats store `(v - lo) / (hi - lo)`; decoding maps back to values.
+
+use crate::grid::{voxel_index, BRICK_VOXELS};
+use rayon::prelude::*;
+
+/// A brick storage format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BrickFormat {
+    /// 32-bit float.
+    F32,
+    /// 16-bit float.
+    F16,
+    /// 8-bit unsigned normalised (per-volume min-max).
+    Unorm8,
+    /// BC4 blocks (per-volume min-max).
+    Bc4,
+    /// BC7 blocks with four z voxels per RGBA texel (per-volume min-max).
+    Bc7,
+}
+
+impl BrickFormat {
+    /// All formats, best quality first.
+    pub const ALL: [BrickFormat; 5] = [
+        BrickFormat::F32,
+        BrickFormat::F16,
+        BrickFormat::Unorm8,
+        BrickFormat::Bc4,
+        BrickFormat::Bc7,
+    ];
+
+    /// Bytes of one 8³ brick.
+    pub fn brick_bytes(self) -> usize {
+        match self {
+            BrickFormat::F32 => 2048,
+            BrickFormat::F16 => 1024,
+            BrickFormat::Unorm8 => 512,
+            BrickFormat::Bc4 => 256,
+            BrickFormat::Bc7 => 128,
+        }
+    }
+
+    /// Lower-case name (as on the command line).
+    pub fn name(self) -> &'static str {
+        match self {
+            BrickFormat::F32 => "f32",
+            BrickFormat::F16 => "f16",
+            BrickFormat::Unorm8 => "unorm8",
+            BrickFormat::Bc4 => "bc4",
+            BrickFormat::Bc7 => "bc7",
+        }
+    }
+
+    /// Parses a name from [`BrickFormat::name`].
+    pub fn parse(s: &str) -> Option<BrickFormat> {
+        BrickFormat::ALL.into_iter().find(|f| f.name() == s)
+    }
+
+    /// Stable numeric code used in `.psv` files.
+    pub fn code(self) -> u8 {
+        match self {
+            BrickFormat::F32 => 0,
+            BrickFormat::F16 => 1,
+            BrickFormat::Unorm8 => 2,
+            BrickFormat::Bc4 => 3,
+            BrickFormat::Bc7 => 4,
+        }
+    }
+
+    /// Inverse of [`BrickFormat::code`].
+    pub fn from_code(c: u8) -> Option<BrickFormat> {
+        BrickFormat::ALL.into_iter().find(|f| f.code() == c)
+    }
+}
+
+/// The shared brick pool of all frames.
+#[derive(Clone, Debug)]
+pub struct BrickPool {
+    /// Storage format.
+    pub format: BrickFormat,
+    /// Minimum of the value range used by normalised formats.
+    pub lo: f32,
+    /// Maximum of the value range used by normalised formats.
+    pub hi: f32,
+    /// Encoded bricks, `format.brick_bytes()` each.
+    pub data: Vec<u8>,
+}
+
+/// Bricks per encoder call (one BC surface).
+const CHUNK: usize = 64;
+
+fn to_unorm(v: f32, lo: f32, scale: f32) -> u8 {
+    ((v - lo) * scale * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+impl BrickPool {
+    /// Encodes `bricks` (values in [`voxel_index`] layout) in `format` over the range
+    /// `lo..=hi` (used by the normalised formats).
+    pub fn encode(format: BrickFormat, bricks: &[[f32; BRICK_VOXELS]], lo: f32, hi: f32) -> Self {
+        let scale = if hi > lo { 1.0 / (hi - lo) } else { 0.0 };
+        let bb = format.brick_bytes();
+        let mut data = vec![0u8; bricks.len() * bb];
+        data.par_chunks_mut(bb * CHUNK)
+            .zip(bricks.par_chunks(CHUNK))
+            .for_each(|(out, src)| encode_chunk(format, src, lo, scale, out));
+        BrickPool {
+            format,
+            lo,
+            hi,
+            data,
+        }
+    }
+
+    /// Number of bricks.
+    pub fn len(&self) -> usize {
+        self.data.len() / self.format.brick_bytes()
+    }
+
+    /// Whether the pool holds no brick.
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// The encoded bytes of brick `i`.
+    #[inline]
+    pub fn brick(&self, i: u32) -> &[u8] {
+        let bb = self.format.brick_bytes();
+        &self.data[i as usize * bb..(i as usize + 1) * bb]
+    }
+
+    /// Decodes brick `i` into `out` ([`voxel_index`] layout).
+    pub fn decode(&self, i: u32, out: &mut [f32; BRICK_VOXELS]) {
+        let b = self.brick(i);
+        let (lo, span) = (self.lo, (self.hi - self.lo) / 255.0);
+        match self.format {
+            BrickFormat::F32 => {
+                for (o, c) in out.iter_mut().zip(b.chunks_exact(4)) {
+                    *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+                }
+            }
+            BrickFormat::F16 => {
+                for (o, c) in out.iter_mut().zip(b.chunks_exact(2)) {
+                    *o = half::f16::from_le_bytes([c[0], c[1]]).to_f32();
+                }
+            }
+            BrickFormat::Unorm8 => {
+                for (o, &c) in out.iter_mut().zip(b) {
+                    *o = lo + c as f32 * span;
+                }
+            }
+            BrickFormat::Bc4 => {
+                let mut px = [0u8; 16];
+                for (k, block) in b.chunks_exact(8).enumerate() {
+                    bcdec_rs::bc4(block, &mut px, 4, false);
+                    // Block k: row-of-blocks k / 2 covers slice z = k / 4, rows y0..y0 + 4.
+                    let (row, x0) = (k / 2, (k % 2) * 4);
+                    let (z, y0) = (row / 2, (row % 2) * 4);
+                    for dy in 0..4 {
+                        for dx in 0..4 {
+                            out[voxel_index(x0 + dx, y0 + dy, z)] =
+                                lo + px[dy * 4 + dx] as f32 * span;
+                        }
+                    }
+                }
+            }
+            BrickFormat::Bc7 => {
+                let mut px = [0u8; 64];
+                for (k, block) in b.chunks_exact(16).enumerate() {
+                    bcdec_rs::bc7(block, &mut px, 16);
+                    let (row, x0) = (k / 2, (k % 2) * 4);
+                    let (zq, y0) = (row / 2, (row % 2) * 4);
+                    for dy in 0..4 {
+                        for dx in 0..4 {
+                            for c in 0..4 {
+                                out[voxel_index(x0 + dx, y0 + dy, zq * 4 + c)] =
+                                    lo + px[(dy * 4 + dx) * 4 + c] as f32 * span;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Reads one voxel of brick `i` directly (the uncompressed formats only).
+    #[inline]
+    pub fn raw_value(&self, i: u32, voxel: usize) -> Option<f32> {
+        let bb = self.format.brick_bytes();
+        let at = i as usize * bb;
+        match self.format {
+            BrickFormat::F32 => {
+                let c = &self.data[at + voxel * 4..at + voxel * 4 + 4];
+                Some(f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            }
+            BrickFormat::F16 => {
+                let c = &self.data[at + voxel * 2..at + voxel * 2 + 2];
+                Some(half::f16::from_le_bytes([c[0], c[1]]).to_f32())
+            }
+            BrickFormat::Unorm8 => {
+                Some(self.lo + self.data[at + voxel] as f32 * (self.hi - self.lo) / 255.0)
+            }
+            BrickFormat::Bc4 | BrickFormat::Bc7 => None,
+        }
+    }
+
+    /// Keeps only the bricks listed in `keep` (in that order).
+    pub fn select(&self, keep: &[u32]) -> BrickPool {
+        let mut data = Vec::with_capacity(keep.len() * self.format.brick_bytes());
+        for &i in keep {
+            data.extend_from_slice(self.brick(i));
+        }
+        BrickPool {
+            data,
+            ..self.clone()
+        }
+    }
+}
+
+fn encode_chunk(
+    format: BrickFormat,
+    src: &[[f32; BRICK_VOXELS]],
+    lo: f32,
+    scale: f32,
+    out: &mut [u8],
+) {
+    match format {
+        BrickFormat::F32 => {
+            for (o, v) in out.chunks_exact_mut(4).zip(src.iter().flatten()) {
+                o.copy_from_slice(&v.to_le_bytes());
+            }
+        }
+        BrickFormat::F16 => {
+            for (o, v) in out.chunks_exact_mut(2).zip(src.iter().flatten()) {
+                o.copy_from_slice(&half::f16::from_f32(*v).to_le_bytes());
+            }
+        }
+        BrickFormat::Unorm8 => {
+            for (o, v) in out.iter_mut().zip(src.iter().flatten()) {
+                *o = to_unorm(*v, lo, scale);
+            }
+        }
+        BrickFormat::Bc4 => {
+            // Surface: 8 texels wide, 64 rows per brick (row = 8 z + y).
+            let mut px = vec![0u8; src.len() * BRICK_VOXELS];
+            for (b, brick) in src.iter().enumerate() {
+                for z in 0..8 {
+                    for y in 0..8 {
+                        for x in 0..8 {
+                            px[b * 512 + (z * 8 + y) * 8 + x] =
+                                to_unorm(brick[voxel_index(x, y, z)], lo, scale);
+                        }
+                    }
+                }
+            }
+            let surface = intel_tex_2::RSurface {
+                data: &px,
+                width: 8,
+                height: (src.len() * 64) as u32,
+                stride: 8,
+            };
+            intel_tex_2::bc4::compress_blocks_into(&surface, out);
+        }
+        BrickFormat::Bc7 => {
+            // Surface: 8 texels wide, 16 rows per brick (row = 8 zq + y), RGBA = z 4 zq + c.
+            let mut px = vec![0u8; src.len() * BRICK_VOXELS];
+            for (b, brick) in src.iter().enumerate() {
+                for zq in 0..2 {
+                    for y in 0..8 {
+                        for x in 0..8 {
+                            for c in 0..4 {
+                                px[b * 512 + ((zq * 8 + y) * 8 + x) * 4 + c] =
+                                    to_unorm(brick[voxel_index(x, y, zq * 4 + c)], lo, scale);
+                            }
+                        }
+                    }
+                }
+            }
+            let surface = intel_tex_2::RgbaSurface {
+                data: &px,
+                width: 8,
+                height: (src.len() * 16) as u32,
+                stride: 32,
+            };
+            intel_tex_2::bc7::compress_blocks_into(
+                &intel_tex_2::bc7::alpha_basic_settings(),
+                &surface,
+                out,
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn smooth_bricks(n: usize) -> Vec<[f32; BRICK_VOXELS]> {
+        (0..n)
+            .map(|b| {
+                let mut a = [0.0; BRICK_VOXELS];
+                for z in 0..8 {
+                    for y in 0..8 {
+                        for x in 0..8 {
+                            a[voxel_index(x, y, z)] =
+                                ((x + 2 * y + 3 * z + b) as f32 * 0.02).sin() * 0.5 + 0.5;
+                        }
+                    }
+                }
+                a
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_format_round_trips_within_its_precision() {
+        let bricks = smooth_bricks(70);
+        for (format, tol) in [
+            (BrickFormat::F32, 0.0),
+            (BrickFormat::F16, 1e-3),
+            (BrickFormat::Unorm8, 0.5 / 255.0 + 1e-6),
+            (BrickFormat::Bc4, 0.02),
+            (BrickFormat::Bc7, 0.03),
+        ] {
+            let pool = BrickPool::encode(format, &bricks, 0.0, 1.0);
+            assert_eq!(pool.len(), bricks.len());
+            assert_eq!(pool.data.len(), bricks.len() * format.brick_bytes());
+            let mut out = [0.0; BRICK_VOXELS];
+            for (i, b) in bricks.iter().enumerate() {
+                pool.decode(i as u32, &mut out);
+                let err = b
+                    .iter()
+                    .zip(&out)
+                    .map(|(a, c)| (a - c).abs())
+                    .fold(0.0, f32::max);
+                assert!(err <= tol, "{format:?} brick {i}: error {err}");
+                if let Some(v) = pool.raw_value(i as u32, 77) {
+                    assert_eq!(v, out[77]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bc7_keeps_the_z_channels_apart() {
+        let mut brick = [0.0f32; BRICK_VOXELS];
+        for z in 0..8 {
+            for y in 0..8 {
+                for x in 0..8 {
+                    brick[voxel_index(x, y, z)] = z as f32 / 7.0;
+                }
+            }
+        }
+        let pool = BrickPool::encode(BrickFormat::Bc7, &[brick], 0.0, 1.0);
+        let mut out = [0.0; BRICK_VOXELS];
+        pool.decode(0, &mut out);
+        for z in 0..8 {
+            assert!((out[voxel_index(3, 5, z)] - z as f32 / 7.0).abs() < 0.02);
+        }
+    }
+}

@@ -1,0 +1,120 @@
+//! The in-memory sparse grid that ingest produces and the flat tree consumes: 8³ leaves in
+//! index space plus the index-to-world transform.
+
+use glam::{DVec3, IVec3, Vec3};
+
+/// Voxels per brick edge.
+pub const BRICK: usize = 8;
+/// Voxels per brick.
+pub const BRICK_VOXELS: usize = BRICK * BRICK * BRICK;
+
+/// Linear index of voxel (x, y, z) inside a brick: x fastest, z slowest.
+#[inline]
+pub fn voxel_index(x: usize, y: usize, z: usize) -> usize {
+    x + BRICK * (y + BRICK * z)
+}
+
+/// What the values of a grid mean.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridClass {
+    /// Fog volume: non-negative density, 0 outside.
+    Fog,
+    /// Narrow-band signed distance field: negative inside, zero on the surface.
+    LevelSet,
+}
+
+impl GridClass {
+    /// Lower-case name used in reports and files.
+    pub fn name(self) -> &'static str {
+        match self {
+            GridClass::Fog => "fog",
+            GridClass::LevelSet => "levelset",
+        }
+    }
+}
+
+/// Index-to-world map: `world = index * scale + translation` (voxel centres at integer indices).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transform {
+    /// Voxel size per axis (world units).
+    pub scale: DVec3,
+    /// World position of index (0, 0, 0).
+    pub translation: DVec3,
+}
+
+impl Transform {
+    /// World position of an index-space point.
+    pub fn index_to_world(&self, p: Vec3) -> Vec3 {
+        (p.as_dvec3() * self.scale + self.translation).as_vec3()
+    }
+
+    /// Index-space position of a world point.
+    pub fn world_to_index(&self, p: Vec3) -> Vec3 {
+        ((p.as_dvec3() - self.translation) / self.scale).as_vec3()
+    }
+
+    /// Index-space direction of a world direction, so that a ray parameter `t` means the same
+    /// point in both spaces.
+    pub fn world_dir_to_index(&self, d: Vec3) -> Vec3 {
+        (d.as_dvec3() / self.scale).as_vec3()
+    }
+}
+
+/// One 8³ leaf: values (layout of [`voxel_index`]) and the active-voxel mask (bit = index).
+#[derive(Clone, Debug)]
+pub struct Leaf {
+    /// Index-space origin (multiple of 8).
+    pub origin: IVec3,
+    /// Voxel values.
+    pub values: Box<[f32; BRICK_VOXELS]>,
+    /// Active voxels, bit `voxel_index` of word `index / 64`.
+    pub mask: [u64; 8],
+}
+
+impl Leaf {
+    /// Whether voxel `i` is active.
+    #[inline]
+    pub fn is_active(&self, i: usize) -> bool {
+        self.mask[i / 64] >> (i % 64) & 1 == 1
+    }
+
+    /// Number of active voxels.
+    pub fn active_count(&self) -> u32 {
+        self.mask.iter().map(|w| w.count_ones()).sum()
+    }
+}
+
+/// A sparse grid of one frame, as read from a file.
+#[derive(Clone, Debug)]
+pub struct SparseGrid {
+    /// Grid name in the file.
+    pub name: String,
+    /// Fog or level set.
+    pub class: GridClass,
+    /// Index-to-world map.
+    pub transform: Transform,
+    /// Background value (outside the leaves).
+    pub background: f32,
+    /// Leaves sorted by origin (z, y, x).
+    pub leaves: Vec<Leaf>,
+}
+
+impl SparseGrid {
+    /// Number of active voxels.
+    pub fn active_voxels(&self) -> u64 {
+        self.leaves.iter().map(|l| l.active_count() as u64).sum()
+    }
+
+    /// Index-space bounds of the leaves: (min corner, max corner exclusive), or `None` if empty.
+    pub fn leaf_bounds(&self) -> Option<(IVec3, IVec3)> {
+        let mut it = self.leaves.iter();
+        let first = it.next()?;
+        let init = (first.origin, first.origin + IVec3::splat(BRICK as i32));
+        Some(it.fold(init, |(lo, hi), l| {
+            (
+                lo.min(l.origin),
+                hi.max(l.origin + IVec3::splat(BRICK as i32)),
+            )
+        }))
+    }
+}

@@ -1,0 +1,298 @@
+//! A volume: the flat tree of all frames over one encoded brick pool, plus per-L3 majorants
+//! derived from the decoded bricks.
+
+use crate::cluster::{cluster, ClusterParams};
+use crate::codec::{BrickFormat, BrickPool};
+use crate::error::{Result, VolumeError};
+use crate::grid::{GridClass, SparseGrid, Transform, BRICK, BRICK_VOXELS};
+use crate::tree::{FlatTree, Locate, TreeStats};
+use glam::{IVec3, Vec3};
+use rayon::prelude::*;
+
+/// A multi-frame sparse volume.
+#[derive(Clone, Debug)]
+pub struct Volume {
+    /// Fog or level set.
+    pub class: GridClass,
+    /// Index-to-world map (shared by all frames).
+    pub transform: Transform,
+    /// Value outside the leaves.
+    pub background: f32,
+    /// The flat tree.
+    pub tree: FlatTree,
+    /// The shared brick pool.
+    pub pool: BrickPool,
+    /// Per L3 node: maximum decoded value over its brick and its +x/+y/+z neighbours (what
+    /// trilinear samples inside the node can reach).
+    pub(crate) l3_max: Vec<f32>,
+    /// Per L3 node: minimum over the same voxels (level sets skip nodes with a positive minimum).
+    pub(crate) l3_min: Vec<f32>,
+    /// Per frame: index-space bounds of the leaves (min, max exclusive).
+    pub(crate) bounds: Vec<(IVec3, IVec3)>,
+}
+
+/// How a volume was built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BuildStats {
+    /// Bricks before clustering (= leaves of all frames).
+    pub bricks_before: usize,
+    /// Bricks in the pool.
+    pub bricks_after: usize,
+    /// Bricks that took part in k-means.
+    pub cluster_candidates: usize,
+}
+
+/// Errors against a reference over active voxels, with values normalised by the value range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ErrorStats {
+    /// Root mean square error.
+    pub rmse: f64,
+    /// Maximum absolute error.
+    pub max_error: f64,
+    /// Active voxels compared.
+    pub active_voxels: u64,
+}
+
+/// Memory of a volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SizeStats {
+    /// The tree.
+    pub tree: TreeStats,
+    /// Brick pool bytes.
+    pub brick_bytes: usize,
+    /// Voxels stored in the pool (bricks × 512).
+    pub brick_voxels: usize,
+    /// Active voxels of all frames.
+    pub active_voxels: u64,
+}
+
+impl SizeStats {
+    /// Brick bytes × 8 / stored voxels.
+    pub fn bits_per_voxel_bricks(&self) -> f64 {
+        self.brick_bytes as f64 * 8.0 / self.brick_voxels as f64
+    }
+
+    /// (Brick + tree bytes) × 8 / stored voxels.
+    pub fn bits_per_voxel_total(&self) -> f64 {
+        (self.brick_bytes + self.tree.total_bytes()) as f64 * 8.0 / self.brick_voxels as f64
+    }
+
+    /// (Brick + tree bytes) × 8 / active voxels.
+    pub fn bits_per_active_voxel(&self) -> f64 {
+        (self.brick_bytes + self.tree.total_bytes()) as f64 * 8.0 / self.active_voxels as f64
+    }
+}
+
+impl Volume {
+    /// Builds a volume from frames (one grid each) in `format`, optionally clustering bricks.
+    pub fn build(
+        frames: &[SparseGrid],
+        format: BrickFormat,
+        clustering: Option<&ClusterParams>,
+    ) -> Result<(Volume, BuildStats)> {
+        let first = frames.first().ok_or(VolumeError::Empty)?;
+        for (i, g) in frames.iter().enumerate() {
+            if g.class != first.class {
+                return Err(VolumeError::FrameMismatch(format!(
+                    "frame {i} is a {} grid, frame 0 a {} grid",
+                    g.class.name(),
+                    first.class.name()
+                )));
+            }
+            if g.transform != first.transform {
+                return Err(VolumeError::FrameMismatch(format!(
+                    "frame {i} has another transform than frame 0"
+                )));
+            }
+        }
+        let mut tree = FlatTree::default();
+        let mut bricks: Vec<[f32; BRICK_VOXELS]> = Vec::new();
+        for g in frames {
+            tree.push_frame(&g.leaves, bricks.len() as u32)?;
+            bricks.extend(g.leaves.iter().map(|l| *l.values));
+        }
+        let (lo, hi) = bricks
+            .par_iter()
+            .map(|b| {
+                b.iter()
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, c), &v| {
+                        (a.min(v), c.max(v))
+                    })
+            })
+            .reduce(
+                || (f32::INFINITY, f32::NEG_INFINITY),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(VolumeError::InvalidParameter(
+                "voxel values are not finite".into(),
+            ));
+        }
+        let bricks_before = bricks.len();
+        let mut candidates = 0;
+        if let Some(p) = clustering {
+            let c = cluster(&bricks, lo, hi, p)?;
+            for n in &mut tree.l3 {
+                n.brick = c.remap[n.brick as usize];
+            }
+            bricks = c.bricks;
+            candidates = c.candidates;
+        }
+        let pool = BrickPool::encode(format, &bricks, lo, hi);
+        let volume = Volume::assemble(first.class, first.transform, first.background, tree, pool)?;
+        Ok((
+            volume,
+            BuildStats {
+                bricks_before,
+                bricks_after: bricks.len(),
+                cluster_candidates: candidates,
+            },
+        ))
+    }
+
+    /// Puts a volume together from its parts, checking consistency and deriving majorants.
+    pub fn assemble(
+        class: GridClass,
+        transform: Transform,
+        background: f32,
+        tree: FlatTree,
+        pool: BrickPool,
+    ) -> Result<Volume> {
+        let bricks = pool.len();
+        if tree.l3.iter().any(|n| n.brick as usize >= bricks) {
+            return Err(VolumeError::InvalidParameter(
+                "an L3 node points past the brick pool".into(),
+            ));
+        }
+        let brick_range: Vec<(f32, f32)> = (0..bricks as u32)
+            .into_par_iter()
+            .map(|i| {
+                let mut b = [0.0; BRICK_VOXELS];
+                pool.decode(i, &mut b);
+                b.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |a, &v| {
+                    (a.0.min(v), a.1.max(v))
+                })
+            })
+            .collect();
+        let mut bounds = Vec::new();
+        let mut l3_max = vec![0.0f32; tree.l3.len()];
+        let mut l3_min = vec![0.0f32; tree.l3.len()];
+        for frame in 0..tree.frames() {
+            let mut lo = IVec3::MAX;
+            let mut hi = IVec3::MIN;
+            for (_, i, o) in tree.leaves().filter(|(f, _, _)| *f == frame) {
+                lo = lo.min(o);
+                hi = hi.max(o + IVec3::splat(BRICK as i32));
+                let (mut mn, mut mx) = brick_range[tree.l3[i as usize].brick as usize];
+                for d in 1..8 {
+                    let n = o + IVec3::new(d & 1, (d >> 1) & 1, d >> 2) * BRICK as i32;
+                    let (a, b) = match tree.locate(frame, n) {
+                        Locate::Leaf(j, _) => brick_range[tree.l3[j as usize].brick as usize],
+                        _ => (background, background),
+                    };
+                    mn = mn.min(a);
+                    mx = mx.max(b);
+                }
+                l3_max[i as usize] = mx;
+                l3_min[i as usize] = mn;
+            }
+            if lo.x > hi.x {
+                return Err(VolumeError::Empty);
+            }
+            bounds.push((lo, hi));
+        }
+        Ok(Volume {
+            class,
+            transform,
+            background,
+            tree,
+            pool,
+            l3_max,
+            l3_min,
+            bounds,
+        })
+    }
+
+    /// Number of frames.
+    pub fn frames(&self) -> usize {
+        self.tree.frames()
+    }
+
+    /// Index-space bounds of `frame` (min, max exclusive).
+    pub fn index_bounds(&self, frame: usize) -> (IVec3, IVec3) {
+        self.bounds[frame]
+    }
+
+    /// World-space axis-aligned bounds of `frame` (min, max).
+    pub fn world_bounds(&self, frame: usize) -> (Vec3, Vec3) {
+        let (lo, hi) = self.bounds[frame];
+        let a = self.transform.index_to_world(lo.as_vec3());
+        let b = self.transform.index_to_world(hi.as_vec3() - Vec3::ONE);
+        (a.min(b), a.max(b))
+    }
+
+    /// Sizes of the tree and the pool.
+    pub fn sizes(&self, active_voxels: u64) -> SizeStats {
+        SizeStats {
+            tree: self.tree.stats(),
+            brick_bytes: self.pool.data.len(),
+            brick_voxels: self.pool.len() * BRICK_VOXELS,
+            active_voxels,
+        }
+    }
+
+    /// Majorant of L3 node `i` (maximum reachable value).
+    pub fn majorant(&self, i: u32) -> f32 {
+        self.l3_max[i as usize]
+    }
+
+    /// Minimum reachable value inside L3 node `i`.
+    pub fn minorant(&self, i: u32) -> f32 {
+        self.l3_min[i as usize]
+    }
+
+    /// RMSE and maximum error of the decoded volume against the source frames over their
+    /// active voxels, values normalised by the pool's value range.
+    pub fn compare(&self, frames: &[SparseGrid]) -> Result<ErrorStats> {
+        if frames.len() != self.frames() {
+            return Err(VolumeError::FrameMismatch(format!(
+                "{} reference frames for a {}-frame volume",
+                frames.len(),
+                self.frames()
+            )));
+        }
+        let range = (self.pool.hi - self.pool.lo).max(f32::MIN_POSITIVE) as f64;
+        let per_leaf: Vec<(f64, f64, u64)> = frames
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(f, g)| g.leaves.iter().map(move |l| (f, l)))
+            .map(|(f, leaf)| {
+                let mut out = [0.0; BRICK_VOXELS];
+                match self.tree.locate(f, leaf.origin) {
+                    Locate::Leaf(i, _) => {
+                        self.pool.decode(self.tree.l3[i as usize].brick, &mut out)
+                    }
+                    _ => out = [self.background; BRICK_VOXELS],
+                }
+                let (mut se, mut mx, mut n) = (0.0f64, 0.0f64, 0u64);
+                for (k, (&a, &b)) in leaf.values.iter().zip(&out).enumerate() {
+                    if leaf.is_active(k) {
+                        let e = (a - b).abs() as f64 / range;
+                        se += e * e;
+                        mx = mx.max(e);
+                        n += 1;
+                    }
+                }
+                (se, mx, n)
+            })
+            .collect();
+        let (se, mx, n) = per_leaf.iter().fold((0.0, 0.0f64, 0), |a, b| {
+            (a.0 + b.0, a.1.max(b.1), a.2 + b.2)
+        });
+        Ok(ErrorStats {
+            rmse: if n > 0 { (se / n as f64).sqrt() } else { 0.0 },
+            max_error: mx,
+            active_voxels: n,
+        })
+    }
+}
