@@ -5,23 +5,26 @@
 //!
 //! Payload before compression (integers little-endian):
 //! ```text
-//! tag "PSC1" · flags u32 (bit 0 snapshot) · frame u64 · index stream length u32
+//! tag "PSC1" · flags u32 (bit 0 snapshot) · frame u64 · index stream length u32 ·
+//! cell word count u32
 //! index stream (LEB128 varints, zigzag for deltas):
 //!     transform count · per transform: instance − previous instance (previous starts at −1)
 //!     instance count · per instance: instance − previous, bucket count, cell count,
 //!         bucket index − previous (from −1) per bucket, cell slot − previous (from −1) per cell
+//! cell lengths: one byte per cell (in index order), its number of points (0..=7)
 //! planes, four groups in this order, each stored as its 4 byte planes (byte 0 of every
 //! word, then byte 1, …):
 //!     transforms: 12 words each (Affine3A columns, f32 bits)
 //!     bucket keys: 16 words each (8 keys, low word then high word)
 //!     bucket slots: 8 words each
-//!     cells: 7 words each
+//!     cells: per cell the first max(new length, reference length) words
 //! ```
 //! Every word is XORed with the word at the same position of the same slot (instance +
 //! bucket index, instance + cell slot, or instance for transforms) as last sent in this
 //! session, or with 0 if never sent; a snapshot starts from an empty state. Buckets and cells
 //! are compacted (empty entries last) first, so they decode exactly as the `paper` codec
-//! does. Both ends must see the same sequence of updates; after a decoding error the
+//! does. Cell words past both the new and the reference length are zero after XOR and are
+//! not stored. Both ends must see the same sequence of updates; after a decoding error the
 //! decoder's state is undefined and the session must start again (with a snapshot).
 
 use std::collections::HashMap;
@@ -38,7 +41,7 @@ pub const COMPACT_LEVEL: i32 = 3;
 
 const TAG: u32 = u32::from_le_bytes(*b"PSC1");
 const FLAG_SNAPSHOT: u32 = 1;
-const HEADER_BYTES: usize = 20;
+const HEADER_BYTES: usize = 24;
 const TRANSFORM_WORDS: usize = 12;
 const KEY_WORDS: usize = 2 * BUCKET_ENTRIES;
 const SLOT_WORDS: usize = BUCKET_ENTRIES;
@@ -157,6 +160,12 @@ struct Groups {
     keys: Vec<u32>,
     slots: Vec<u32>,
     cells: Vec<u32>,
+    cell_lengths: Vec<u8>,
+}
+
+/// Words of a cell up to its last non-zero one.
+fn cell_len(words: &[u32; CELL_POINTS]) -> usize {
+    words.iter().rposition(|&w| w != 0).map_or(0, |i| i + 1)
 }
 
 impl Codec for CompactCodec {
@@ -200,17 +209,28 @@ impl Codec for CompactCodec {
             for (s, cell) in &d.cells {
                 put_delta(&mut index, &mut prev, *s);
                 let words = compact_cell(cell).points;
-                xor_encode(&mut r.cells, key(d.instance, *s), words, &mut g.cells);
+                let prev = r
+                    .cells
+                    .insert(key(d.instance, *s), words)
+                    .unwrap_or_default();
+                let n = cell_len(&words);
+                g.cell_lengths.push(n as u8);
+                let m = n.max(cell_len(&prev));
+                g.cells
+                    .extend(words[..m].iter().zip(&prev[..m]).map(|(w, p)| w ^ p));
             }
         }
         let words = g.transforms.len() + g.keys.len() + g.slots.len() + g.cells.len();
-        let mut payload = Vec::with_capacity(HEADER_BYTES + index.len() + 4 * words);
+        let mut payload =
+            Vec::with_capacity(HEADER_BYTES + index.len() + g.cell_lengths.len() + 4 * words);
         payload.extend_from_slice(&TAG.to_le_bytes());
         let flags = if update.snapshot { FLAG_SNAPSHOT } else { 0 };
         payload.extend_from_slice(&flags.to_le_bytes());
         payload.extend_from_slice(&update.frame.to_le_bytes());
         payload.extend_from_slice(&(index.len() as u32).to_le_bytes());
+        payload.extend_from_slice(&(g.cells.len() as u32).to_le_bytes());
         payload.extend_from_slice(&index);
+        payload.extend_from_slice(&g.cell_lengths);
         for group in [&g.transforms, &g.keys, &g.slots, &g.cells] {
             shuffle_into(group, &mut payload);
         }
@@ -238,6 +258,7 @@ impl Codec for CompactCodec {
         }
         let frame = u64::from(word(8)) | (u64::from(word(12)) << 32);
         let index_len = word(16) as usize;
+        let cell_words = u64::from(word(20));
         let rest = &payload[HEADER_BYTES..];
         if index_len > rest.len() {
             return Err(DeltaError::Truncated {
@@ -246,9 +267,18 @@ impl Codec for CompactCodec {
                 available: rest.len(),
             });
         }
-        let (index, planes) = rest.split_at(index_len);
+        let (index, rest) = rest.split_at(index_len);
         let layout = parse_index(index)?;
-        let words = layout.words();
+        let cells = layout.cells() as usize;
+        if cells > rest.len() {
+            return Err(DeltaError::Truncated {
+                what: "cell lengths",
+                needed: cells as u64,
+                available: rest.len(),
+            });
+        }
+        let (lengths, planes) = rest.split_at(cells);
+        let words = layout.fixed_words() + cell_words;
         if planes.len() as u64 != words * 4 {
             return Err(DeltaError::PlaneSize {
                 expected: words * 4,
@@ -258,13 +288,15 @@ impl Codec for CompactCodec {
         if flags & FLAG_SNAPSHOT != 0 {
             self.reference.clear();
         }
-        Ok(assemble(
+        let snapshot = flags & FLAG_SNAPSHOT != 0;
+        assemble(
             &layout,
+            lengths,
             planes,
             frame,
-            flags & FLAG_SNAPSHOT != 0,
+            snapshot,
             &mut self.reference,
-        ))
+        )
     }
 
     fn set_decode_limit(&mut self, bytes: u64) {
@@ -285,10 +317,10 @@ impl IndexLayout {
     fn cells(&self) -> u64 {
         self.instances.iter().map(|i| i.2.len() as u64).sum()
     }
-    fn words(&self) -> u64 {
+    /// Plane words of the transforms and buckets (cells vary in length).
+    fn fixed_words(&self) -> u64 {
         self.transforms.len() as u64 * TRANSFORM_WORDS as u64
             + self.buckets() * (KEY_WORDS + SLOT_WORDS) as u64
-            + self.cells() * CELL_POINTS as u64
     }
 }
 
@@ -330,11 +362,12 @@ fn parse_index(bytes: &[u8]) -> Result<IndexLayout, DeltaError> {
 /// Rebuild the update from the checked layout and planes, updating the reference state.
 fn assemble(
     layout: &IndexLayout,
+    lengths: &[u8],
     planes: &[u8],
     frame: u64,
     snapshot: bool,
     r: &mut Reference,
-) -> Update {
+) -> Result<Update, DeltaError> {
     let nt = layout.transforms.len() * TRANSFORM_WORDS;
     let nb = layout.buckets() as usize;
     let (t_planes, rest) = planes.split_at(nt * 4);
@@ -360,7 +393,8 @@ fn assemble(
         .collect();
     let mut keys = k_words.chunks_exact(KEY_WORDS);
     let mut slots = s_words.chunks_exact(SLOT_WORDS);
-    let mut cells = c_words.chunks_exact(CELL_POINTS);
+    let mut cell_words = &c_words[..];
+    let mut lengths = lengths.iter();
     let instances = layout
         .instances
         .iter()
@@ -383,26 +417,45 @@ fn assemble(
                 .collect();
             let cells = slot_ids
                 .iter()
-                .zip(cells.by_ref())
-                .map(|(&s, cc)| {
-                    let points: [u32; CELL_POINTS] =
-                        xor_decode(&mut r.cells, key(*instance, s), cc);
-                    (s, Cell { points })
+                .zip(lengths.by_ref())
+                .map(|(&s, &n)| {
+                    let k = key(*instance, s);
+                    let prev = r.cells.get(&k).copied().unwrap_or_default();
+                    let n = usize::from(n);
+                    if n > CELL_POINTS {
+                        return Err(DeltaError::CellLength(n));
+                    }
+                    let m = n.max(cell_len(&prev));
+                    let (coded, rest) =
+                        cell_words
+                            .split_at_checked(m)
+                            .ok_or(DeltaError::PlaneSize {
+                                expected: c_words.len() as u64 + m as u64,
+                                found: c_words.len() as u64,
+                            })?;
+                    cell_words = rest;
+                    let mut points = prev;
+                    points.iter_mut().zip(coded).for_each(|(p, c)| *p ^= c);
+                    r.cells.insert(k, points);
+                    Ok((s, Cell { points }))
                 })
-                .collect();
-            InstanceDelta {
+                .collect::<Result<_, _>>()?;
+            Ok(InstanceDelta {
                 instance: *instance,
                 buckets,
                 cells,
-            }
+            })
         })
-        .collect();
-    Update {
+        .collect::<Result<_, _>>()?;
+    if !cell_words.is_empty() {
+        return Err(DeltaError::Trailing(cell_words.len()));
+    }
+    Ok(Update {
         frame,
         snapshot,
         transforms,
         instances,
-    }
+    })
 }
 
 /// Append the byte planes of `words`: byte 0 of every word, then byte 1, …
@@ -503,7 +556,8 @@ mod tests {
     fn cell(ao: u32, n: usize) -> Cell {
         let mut c = Cell::default();
         for (i, p) in c.points.iter_mut().take(n).enumerate() {
-            *p = VALID_BIT | ((i as u32) << 16) | ao;
+            let noise = (ao ^ (i as u32 + 1)).wrapping_mul(0x9e37_79b9) & 0x7fff_ff00;
+            *p = VALID_BIT | noise | (ao & 0xff);
         }
         c
     }
@@ -528,7 +582,7 @@ mod tests {
                     buckets: vec![(7, bucket), (3, Bucket::default())],
                     cells: slots
                         .clone()
-                        .map(|s| (s, cell(ao + s, 1 + s as usize % 7)))
+                        .map(|s| (s, cell(ao + s, (s + ao) as usize % 8)))
                         .collect(),
                 },
                 InstanceDelta {
@@ -602,12 +656,13 @@ mod tests {
         p.extend_from_slice(&0u32.to_le_bytes());
         p.extend_from_slice(&7u64.to_le_bytes());
         p.extend_from_slice(&3u32.to_le_bytes());
+        p.extend_from_slice(&0u32.to_le_bytes());
         p.extend_from_slice(&[1, 2, 0]); // one transform, no instances, but no planes
         assert!(matches!(
             dec.decode(&z(&p)),
             Err(DeltaError::PlaneSize { .. })
         ));
-        let mut huge = p[..20].to_vec();
+        let mut huge = p[..24].to_vec();
         huge[16] = 11;
         huge.extend_from_slice(&[0xff; 10]); // a varint longer than 64 bits
         huge.push(0);
@@ -615,7 +670,7 @@ mod tests {
             dec.decode(&z(&huge)),
             Err(DeltaError::BadVarint(_))
         ));
-        let mut count = p[..20].to_vec();
+        let mut count = p[..24].to_vec();
         count[16] = 5;
         count.extend_from_slice(&[0xff, 0xff, 0xff, 0xff, 0x0f]); // 4 G transforms
         assert!(matches!(

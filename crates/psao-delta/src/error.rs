@@ -58,4 +58,7 @@ pub enum DeltaError {
         /// Bytes present.
         found: u64,
     },
+    /// A cell length above the 7 points a cell holds.
+    #[error("cell length {0} exceeds 7 points")]
+    CellLength(usize),
 }

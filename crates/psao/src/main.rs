@@ -7,6 +7,7 @@ mod bench_trace;
 mod compare;
 mod demo;
 mod eval;
+mod net;
 mod pipeline;
 mod png_io;
 mod progress;

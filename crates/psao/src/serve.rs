@@ -1,12 +1,664 @@
-//! `psao serve` (issue 4, in progress).
+//! `psao serve`: one shared point set streamed to many clients over TCP and WebSocket.
+//!
+//! A simulation thread owns the [`Server`]: each server frame it steps once for the union of
+//! the clients' latest views, then hands every client whose queue has room the update since
+//! what *it* last received (a client that falls behind gets one coalesced update later).
+//! Connection tasks (tokio) do the handshake, read cameras and acks, and write the queued
+//! frames. With `--lockstep` the server steps once per round of camera messages instead of
+//! on a clock, which makes a session reproduce `psao run` exactly.
 
-use anyhow::Result;
+use std::collections::{BTreeMap, VecDeque};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use psao_delta::Codec;
+use psao_server::{ClientId, Server, View};
+use psao_wire::{
+    capabilities, encode_frame, Bye, Delta, ErrorCode, ErrorMsg, Message, SceneTime, Welcome,
+    MAX_CLIENT_FRAME, PROTOCOL_VERSION,
+};
+use serde::Serialize;
+use tokio::net::TcpListener;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::args::Resolution;
+use crate::net::convert::{entry_of, view_of};
+use crate::net::transport::{accept, FrameReader, FrameWriter, ReadError};
+use crate::pipeline::CLIENT_HZ;
+use crate::run::{write_json, ServerTuning};
+use crate::scene_source::SceneInput;
+
+/// Frames queued per client before its updates are coalesced.
+const QUEUE_FRAMES: usize = 4;
+/// Updates sent but not yet acknowledged before a client's updates are coalesced.
+const ACK_WINDOW: usize = 3;
+/// Time a new connection has to send its hello.
+const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// Arguments of `psao serve`.
-#[derive(clap::Args, Debug)]
-pub struct ServeArgs {}
+#[derive(clap::Args, Debug, Clone)]
+pub struct ServeArgs {
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = crate::scene_source::BUILTIN_SCENE)]
+    pub scene: String,
+    /// Address to listen on (TCP and WebSocket on the same port); port 0 picks a free one.
+    #[arg(long, default_value = "127.0.0.1:7878")]
+    pub listen: SocketAddr,
+    /// Access token clients must present.
+    #[arg(long)]
+    pub token: Option<String>,
+    /// Points per unit area (after sample elimination).
+    #[arg(long, default_value_t = 1024.0)]
+    pub points: f32,
+    /// Server frames per second of scene time.
+    #[arg(long, default_value_t = 30)]
+    pub hz: u32,
+    #[command(flatten)]
+    pub tuning: ServerTuning,
+    /// Step once per round of client camera messages (deterministic; see docs/STREAMING.md).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Wait for this many clients before the first server frame.
+    #[arg(long, default_value_t = 1)]
+    pub wait_clients: usize,
+    /// Exit once every client has left (after at least one joined).
+    #[arg(long)]
+    pub once: bool,
+    /// Write server statistics as JSON to this file on exit.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Per-client statistics.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ClientStats {
+    /// Session id.
+    pub id: u32,
+    /// Bytes of frames queued for the client (headers included).
+    pub bytes: u64,
+    /// Deltas and snapshots sent.
+    pub updates: u64,
+    /// Snapshots among them.
+    pub snapshots: u64,
+    /// Server frames at which the client had no room, so its changes were coalesced into a
+    /// later update.
+    pub coalesced: u64,
+    /// Server frames stepped while the client was connected.
+    pub frames: u64,
+}
+
+/// What `psao serve --json` writes.
+#[derive(Debug, Default, Serialize)]
+pub struct ServeStats {
+    /// Server frames stepped.
+    pub frames: u64,
+    /// Mean step + encode time per server frame, ms.
+    pub mean_ms: f64,
+    /// 95th percentile of it, ms.
+    pub p95_ms: f64,
+    /// Mean of the step alone, ms.
+    pub mean_step_ms: f64,
+    /// Server frames that started late because the previous one overran the period.
+    pub late_frames: u64,
+    /// Hash of the server's final buckets + cells.
+    pub state_hash: String,
+    /// Every client session, in order of joining.
+    pub clients: Vec<ClientStats>,
+}
+
+/// A connection's request to join, answered with its session.
+struct Join {
+    capabilities: u32,
+    out: mpsc::Sender<Vec<u8>>,
+    reply: oneshot::Sender<Result<Welcome, ErrorMsg>>,
+}
+
+/// What connections tell the simulation.
+enum Event {
+    Join(Join),
+    Camera(u32, psao_wire::CameraMsg),
+    Ack(u32, u64),
+    Leave(u32),
+}
+
+/// The simulation's record of one client.
+struct Session {
+    id: ClientId,
+    codec: Box<dyn Codec>,
+    out: mpsc::Sender<Vec<u8>>,
+    want_hash: bool,
+    view: Option<View>,
+    /// Lockstep: the camera frame awaiting an answer.
+    pending: Option<u32>,
+    unacked: VecDeque<u64>,
+    stats: ClientStats,
+}
 
 /// Runs `psao serve`.
-pub fn run(_args: &ServeArgs) -> Result<()> {
-    anyhow::bail!("`psao serve` is not available yet")
+pub fn run(args: &ServeArgs) -> Result<()> {
+    if args.hz == 0 || args.hz > CLIENT_HZ {
+        bail!("--hz must be in 1..={CLIENT_HZ}, got {}", args.hz);
+    }
+    psao_delta::codec_by_name(&args.tuning.codec)?;
+    let input = SceneInput::load(&args.scene)?;
+    let config = args.tuning.config(
+        args.points,
+        args.hz,
+        Resolution {
+            width: 1,
+            height: 1,
+        },
+    )?;
+    let server = Server::new(&input.scene, config.server)
+        .context("cannot start the server (point generation or tracer)")?;
+    tracing::info!(
+        "{} points on {} instances; codec {}",
+        server.point_count(),
+        input.scene.instances.len(),
+        args.tuning.codec
+    );
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let listener = rt
+        .block_on(TcpListener::bind(args.listen))
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let local = listener.local_addr()?;
+    println!("listening on {local}");
+    tracing::info!("listening on {local} (TCP and WebSocket)");
+    let (events_tx, events_rx) = mpsc::channel::<Event>(1024);
+    let stop = Arc::new(AtomicBool::new(false));
+    let token = args.token.clone();
+    rt.spawn(accept_loop(listener, events_tx, token));
+    let stop_signal = stop.clone();
+    rt.spawn(async move {
+        if tokio::signal::ctrl_c().await.is_ok() {
+            tracing::info!("Ctrl-C: shutting down");
+            stop_signal.store(true, Ordering::SeqCst);
+        }
+    });
+    let sim = Simulation {
+        server,
+        codec: args.tuning.codec.clone(),
+        scene: input.name.clone(),
+        hz: args.hz,
+        lockstep: args.lockstep,
+        sessions: BTreeMap::new(),
+        stats: ServeStats::default(),
+        events: events_rx,
+        rt: rt.handle().clone(),
+        stop,
+        ever_joined: false,
+        once: args.once,
+        wait_clients: args.wait_clients,
+        step_ms: Vec::new(),
+        frame_ms: Vec::new(),
+    };
+    let stats = sim.run();
+    rt.shutdown_timeout(Duration::from_millis(500));
+    if let Some(json) = &args.json {
+        write_json(json, &stats)?;
+    }
+    Ok(())
+}
+
+async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, token: Option<String>) {
+    loop {
+        match listener.accept().await {
+            Ok((stream, peer)) => {
+                let events = events.clone();
+                let token = token.clone();
+                tokio::spawn(async move {
+                    if let Err(e) = connection(stream, events, token).await {
+                        tracing::info!("session with {peer} ended: {e:#}");
+                    }
+                });
+            }
+            Err(e) => {
+                tracing::warn!("accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+    }
+}
+
+/// Sends `error` and closes.
+async fn refuse(writer: &mut FrameWriter, code: ErrorCode, message: String) -> anyhow::Error {
+    let text = message.clone();
+    if let Ok(frame) = encode_frame(&Message::Error(ErrorMsg { code, message })) {
+        let _ = writer.send(frame).await;
+    }
+    writer.close().await;
+    anyhow::anyhow!("{code:?}: {text}")
+}
+
+/// One client connection: handshake, then cameras/acks in, queued frames out.
+async fn connection(
+    stream: tokio::net::TcpStream,
+    events: mpsc::Sender<Event>,
+    token: Option<String>,
+) -> Result<()> {
+    let (mut reader, mut writer, kind) = accept(stream, MAX_CLIENT_FRAME, HELLO_TIMEOUT).await?;
+    let first = tokio::time::timeout(HELLO_TIMEOUT, reader.next(MAX_CLIENT_FRAME)).await;
+    let hello = match first {
+        Err(_) => {
+            return Err(refuse(&mut writer, ErrorCode::Protocol, "no hello in time".into()).await)
+        }
+        Ok(Ok(Some((Message::Hello(h), _)))) => h,
+        Ok(Ok(Some((m, _)))) => {
+            let text = format!("expected hello, got {}", m.kind());
+            return Err(refuse(&mut writer, ErrorCode::Protocol, text).await);
+        }
+        Ok(Ok(None)) => bail!("closed before hello"),
+        Ok(Err(e)) => return Err(read_failure(&mut writer, e).await),
+    };
+    if hello.version != PROTOCOL_VERSION {
+        let text = format!(
+            "protocol version {} not supported (server speaks {PROTOCOL_VERSION})",
+            hello.version
+        );
+        return Err(refuse(&mut writer, ErrorCode::Version, text).await);
+    }
+    if let Some(expected) = &token {
+        let given = hello.token.as_deref().unwrap_or("");
+        if !constant_time_eq(given.as_bytes(), expected.as_bytes()) {
+            return Err(refuse(
+                &mut writer,
+                ErrorCode::Token,
+                "missing or wrong token".into(),
+            )
+            .await);
+        }
+    }
+    let (out_tx, mut out_rx) = mpsc::channel::<Vec<u8>>(QUEUE_FRAMES);
+    let (reply_tx, reply_rx) = oneshot::channel();
+    events
+        .send(Event::Join(Join {
+            capabilities: hello.capabilities,
+            out: out_tx.clone(),
+            reply: reply_tx,
+        }))
+        .await
+        .context("server is shutting down")?;
+    let welcome = match reply_rx.await.context("server is shutting down")? {
+        Ok(w) => w,
+        Err(e) => return Err(refuse(&mut writer, e.code, e.message).await),
+    };
+    let id = welcome.client_id;
+    tracing::info!("client {id} ({}, {kind}) joined", hello.name);
+    writer
+        .send(encode_frame(&Message::Welcome(welcome))?)
+        .await?;
+    let writer_task = tokio::spawn(async move {
+        while let Some(frame) = out_rx.recv().await {
+            if writer.send(frame).await.is_err() {
+                break;
+            }
+        }
+        writer.close().await;
+    });
+    let result = read_loop(&mut reader, id, &events).await;
+    if let Err(e) = &result {
+        let (code, message) = match e {
+            ReadError::Wire(w) => (ErrorCode::Frame, w.to_string()),
+            ReadError::Io(_) => (ErrorCode::Protocol, e.to_string()),
+        };
+        if let Ok(frame) = encode_frame(&Message::Error(ErrorMsg { code, message })) {
+            let _ = out_tx.send(frame).await;
+        }
+    }
+    drop(out_tx);
+    let _ = events.send(Event::Leave(id)).await;
+    let _ = tokio::time::timeout(Duration::from_secs(2), writer_task).await;
+    result.map_err(anyhow::Error::from)
+}
+
+async fn read_failure(writer: &mut FrameWriter, e: ReadError) -> anyhow::Error {
+    let code = match e {
+        ReadError::Wire(_) => ErrorCode::Frame,
+        ReadError::Io(_) => ErrorCode::Protocol,
+    };
+    refuse(writer, code, e.to_string()).await
+}
+
+/// Messages after the welcome until the client leaves.
+async fn read_loop(
+    reader: &mut FrameReader,
+    id: u32,
+    events: &mpsc::Sender<Event>,
+) -> Result<(), ReadError> {
+    loop {
+        let Some((message, _)) = reader.next(MAX_CLIENT_FRAME).await? else {
+            return Ok(());
+        };
+        let event = match message {
+            Message::Camera(c) => Event::Camera(id, c),
+            Message::Ack(a) => Event::Ack(id, a.frame),
+            Message::Bye(_) => return Ok(()),
+            other => {
+                return Err(ReadError::Io(format!(
+                    "unexpected {} from a client",
+                    other.kind()
+                )))
+            }
+        };
+        if events.send(event).await.is_err() {
+            return Ok(());
+        }
+    }
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// The simulation thread's state.
+struct Simulation {
+    server: Server,
+    codec: String,
+    scene: String,
+    hz: u32,
+    lockstep: bool,
+    sessions: BTreeMap<u32, Session>,
+    stats: ServeStats,
+    events: mpsc::Receiver<Event>,
+    rt: tokio::runtime::Handle,
+    stop: Arc<AtomicBool>,
+    ever_joined: bool,
+    once: bool,
+    wait_clients: usize,
+    step_ms: Vec<f64>,
+    frame_ms: Vec<f64>,
+}
+
+impl Simulation {
+    /// The main loop until Ctrl-C (or, with `--once`, until the last client left).
+    fn run(mut self) -> ServeStats {
+        let period = Duration::from_secs_f64(1.0 / f64::from(self.hz));
+        let mut next = Instant::now();
+        let mut started = false;
+        let mut round = 0u64;
+        let mut last_tick = None;
+        loop {
+            if self.stop.load(Ordering::SeqCst)
+                || (self.once && self.ever_joined && self.sessions.is_empty())
+            {
+                break;
+            }
+            if !started {
+                started = self.sessions.len() >= self.wait_clients.max(1);
+                if !started {
+                    self.wait_event(Duration::from_millis(50));
+                    continue;
+                }
+                next = Instant::now();
+            }
+            if self.lockstep {
+                // Every client must have sent the camera of its next frame.
+                let ready = !self.sessions.is_empty()
+                    && self.sessions.values().all(|s| s.pending.is_some());
+                if !ready {
+                    self.wait_event(Duration::from_millis(50));
+                    continue;
+                }
+                let tick = round * u64::from(self.hz) / u64::from(CLIENT_HZ);
+                let seconds = round as f64 / f64::from(CLIENT_HZ);
+                round += 1;
+                if last_tick != Some(tick) {
+                    last_tick = Some(tick);
+                    self.frame(seconds, true);
+                } else {
+                    self.answer_without_update(seconds);
+                }
+            } else {
+                let now = Instant::now();
+                if now < next {
+                    self.wait_event(next - now);
+                    continue;
+                }
+                if now > next + period {
+                    self.stats.late_frames += 1;
+                    next = now;
+                }
+                next += period;
+                self.drain_events();
+                let seconds = (self.server.frame() + 1) as f64 / f64::from(self.hz);
+                self.frame(seconds, false);
+            }
+        }
+        self.shutdown()
+    }
+
+    /// Wait up to `timeout` for one event, then handle everything pending.
+    fn wait_event(&mut self, timeout: Duration) {
+        let got = self
+            .rt
+            .block_on(async { tokio::time::timeout(timeout, self.events.recv()).await });
+        if let Ok(Some(e)) = got {
+            self.handle(e);
+        }
+        self.drain_events();
+    }
+
+    fn drain_events(&mut self) {
+        while let Ok(e) = self.events.try_recv() {
+            self.handle(e);
+        }
+    }
+
+    fn handle(&mut self, event: Event) {
+        match event {
+            Event::Join(join) => self.join(join),
+            Event::Camera(id, cam) => {
+                if let Some(s) = self.sessions.get_mut(&id) {
+                    s.view = Some(view_of(&cam));
+                    s.pending = Some(cam.frame);
+                }
+            }
+            Event::Ack(id, frame) => {
+                if let Some(s) = self.sessions.get_mut(&id) {
+                    while s.unacked.front().is_some_and(|&f| f <= frame) {
+                        s.unacked.pop_front();
+                    }
+                }
+            }
+            Event::Leave(id) => {
+                if let Some(s) = self.sessions.remove(&id) {
+                    self.server.remove_client(s.id);
+                    tracing::info!("client {id} left");
+                    self.stats.clients.push(s.stats);
+                }
+            }
+        }
+    }
+
+    fn join(&mut self, join: Join) {
+        let wanted = match self.codec.as_str() {
+            "paper" => capabilities::CODEC_PAPER,
+            _ => capabilities::CODEC_COMPACT,
+        };
+        if join.capabilities & wanted == 0 {
+            let _ = join.reply.send(Err(ErrorMsg {
+                code: ErrorCode::Protocol,
+                message: format!(
+                    "the client cannot decode the server's codec `{}`",
+                    self.codec
+                ),
+            }));
+            return;
+        }
+        let id = self.server.add_client();
+        let Ok(codec) = psao_delta::codec_by_name(&self.codec) else {
+            return;
+        };
+        let welcome = Welcome {
+            version: PROTOCOL_VERSION,
+            client_id: id.0,
+            codec: self.codec.clone(),
+            server_hz: self.hz,
+            client_hz: CLIENT_HZ,
+            lockstep: self.lockstep,
+            scene: self.scene.clone(),
+            frame: self.server.frame(),
+            scene_time: self.server.frame() as f64 / f64::from(self.hz),
+            instances: self.server.instance_table().iter().map(entry_of).collect(),
+        };
+        if join.reply.send(Ok(welcome)).is_err() {
+            self.server.remove_client(id);
+            return;
+        }
+        self.ever_joined = true;
+        self.sessions.insert(
+            id.0,
+            Session {
+                id,
+                codec,
+                out: join.out,
+                want_hash: join.capabilities & capabilities::STATE_HASH != 0,
+                view: None,
+                pending: None,
+                unacked: VecDeque::new(),
+                stats: ClientStats {
+                    id: id.0,
+                    ..Default::default()
+                },
+            },
+        );
+    }
+
+    /// Step once for the union of the clients' views and send each client with room its
+    /// update (lockstep: every client, waiting for room).
+    fn frame(&mut self, seconds: f64, lockstep: bool) {
+        let t = Instant::now();
+        let mut views: Vec<View> = Vec::new();
+        for v in self.sessions.values().filter_map(|s| s.view) {
+            if !views.contains(&v) {
+                views.push(v);
+            }
+        }
+        let step = self.server.step(&views);
+        self.step_ms.push(step.ms);
+        let hash = self
+            .sessions
+            .values()
+            .any(|s| s.want_hash)
+            .then(|| self.state_hash());
+        let frame = self.server.frame();
+        let mut gone = Vec::new();
+        for (&id, s) in &mut self.sessions {
+            s.stats.frames += 1;
+            let room = s.out.capacity() > 0 && s.unacked.len() < ACK_WINDOW;
+            if !lockstep && !room {
+                s.stats.coalesced += 1;
+                continue;
+            }
+            let update = self.server.update_for(s.id);
+            let delta = Delta {
+                frame,
+                scene_time: seconds,
+                client_frame: if lockstep { s.pending.take() } else { None },
+                state_hash: if s.want_hash { hash } else { None },
+                payload: s.codec.encode(&update),
+            };
+            let message = if update.snapshot {
+                s.stats.snapshots += 1;
+                Message::Snapshot(delta)
+            } else {
+                Message::Delta(delta)
+            };
+            let Ok(bytes) = encode_frame(&message) else {
+                gone.push(id);
+                continue;
+            };
+            s.stats.bytes += bytes.len() as u64;
+            s.stats.updates += 1;
+            s.unacked.push_back(frame);
+            let sent = if lockstep {
+                self.rt.block_on(s.out.send(bytes)).is_ok()
+            } else {
+                s.out.try_send(bytes).is_ok()
+            };
+            if !sent {
+                gone.push(id);
+            }
+        }
+        for id in gone {
+            self.handle(Event::Leave(id));
+        }
+        self.frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+
+    /// Lockstep round without a server frame: tell each client its frame is done.
+    fn answer_without_update(&mut self, seconds: f64) {
+        let frame = self.server.frame();
+        for s in self.sessions.values_mut() {
+            let msg = Message::SceneTime(SceneTime {
+                frame,
+                seconds,
+                client_frame: s.pending.take(),
+            });
+            if let Ok(bytes) = encode_frame(&msg) {
+                s.stats.bytes += bytes.len() as u64;
+                let _ = self.rt.block_on(s.out.send(bytes));
+            }
+        }
+    }
+
+    fn state_hash(&self) -> u64 {
+        psao_client::state_hash_of((0..self.server.instance_count()).map(|i| self.server.grid(i)))
+    }
+
+    /// Say bye to everyone and collect the statistics.
+    fn shutdown(mut self) -> ServeStats {
+        let bye = encode_frame(&Message::Bye(Bye {
+            reason: "server shutting down".into(),
+        }));
+        for s in self.sessions.values() {
+            if let Ok(b) = &bye {
+                let _ = s.out.try_send(b.clone());
+            }
+        }
+        let ids: Vec<u32> = self.sessions.keys().copied().collect();
+        for id in ids {
+            self.handle(Event::Leave(id));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        let mut stats = std::mem::take(&mut self.stats);
+        stats.frames = self.server.frame();
+        stats.mean_ms = mean(&self.frame_ms);
+        stats.p95_ms = percentile(&self.frame_ms, 0.95);
+        stats.mean_step_ms = mean(&self.step_ms);
+        stats.state_hash = format!("{:016x}", self.state_hash());
+        stats.clients.sort_by_key(|c| c.id);
+        tracing::info!(
+            "{} server frames, {:.2} ms mean ({:.2} ms step), {} late",
+            stats.frames,
+            stats.mean_ms,
+            stats.mean_step_ms,
+            stats.late_frames
+        );
+        stats
+    }
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn percentile(v: &[f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * q).round() as usize]
 }

@@ -1,0 +1,91 @@
+//! Conversions between wire messages and the algorithm types.
+
+use anyhow::{bail, Result};
+use glam::{UVec3, Vec3};
+use psao_delta::{GridLayout, InstanceInfo};
+use psao_scene::Camera;
+use psao_server::View;
+use psao_wire::{CameraMsg, InstanceEntry};
+
+/// Most hash buckets over all instances a client accepts from a welcome (128 bytes each:
+/// 1 GiB of grid tables).
+pub const MAX_TOTAL_BUCKETS: u64 = 1 << 23;
+
+/// The wire form of an instance-table entry.
+pub fn entry_of(info: &InstanceInfo) -> InstanceEntry {
+    let l = &info.layout;
+    InstanceEntry {
+        origin: l.origin.to_array(),
+        cell_size: l.cell_size,
+        dims: l.dims.to_array(),
+        layout_poisson_radius: l.poisson_radius,
+        bucket_count: l.bucket_count,
+        poisson_radius: info.poisson_radius,
+        point_count: info.point_count,
+    }
+}
+
+/// The instance table of a welcome, refused when its grids would take more than
+/// [`MAX_TOTAL_BUCKETS`] buckets.
+pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>> {
+    let buckets: u64 = entries.iter().map(|e| u64::from(e.bucket_count)).sum();
+    if buckets > MAX_TOTAL_BUCKETS {
+        bail!("the instance table asks for {buckets} hash buckets (limit {MAX_TOTAL_BUCKETS})");
+    }
+    Ok(entries
+        .iter()
+        .map(|e| InstanceInfo {
+            layout: GridLayout {
+                origin: Vec3::from_array(e.origin),
+                cell_size: e.cell_size,
+                dims: UVec3::from_array(e.dims),
+                poisson_radius: e.layout_poisson_radius,
+                bucket_count: e.bucket_count,
+            },
+            poisson_radius: e.poisson_radius,
+            point_count: e.point_count,
+        })
+        .collect())
+}
+
+/// Most bytes one decoded update can legitimately take for this table (a snapshot of every
+/// bucket and every addressable cell, with generous per-record overhead).
+pub fn decode_limit(table: &[InstanceInfo]) -> u64 {
+    let per_instance: u64 = table
+        .iter()
+        .map(|i| {
+            let cells = i.layout.max_cells() as u64;
+            64 + u64::from(i.layout.bucket_count) * 110 + cells * 40
+        })
+        .sum();
+    4096 + per_instance
+}
+
+/// The camera message of client frame `frame`.
+pub fn camera_msg(frame: u32, camera: &Camera, aspect: f32) -> CameraMsg {
+    CameraMsg {
+        frame,
+        position: camera.position.to_array(),
+        target: camera.target.to_array(),
+        up: camera.up.to_array(),
+        fov_y: camera.fov_y,
+        near: camera.near,
+        far: camera.far,
+        aspect,
+    }
+}
+
+/// The server's view from a (validated) camera message.
+pub fn view_of(msg: &CameraMsg) -> View {
+    View {
+        camera: Camera {
+            position: Vec3::from_array(msg.position),
+            target: Vec3::from_array(msg.target),
+            up: Vec3::from_array(msg.up),
+            fov_y: msg.fov_y,
+            near: msg.near,
+            far: msg.far,
+        },
+        aspect: msg.aspect,
+    }
+}
