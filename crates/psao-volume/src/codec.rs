@@ -204,7 +204,7 @@ impl BrickPool {
                 Some(half::f16::from_le_bytes([c[0], c[1]]).to_f32())
             }
             BrickFormat::Unorm8 => {
-                Some(self.lo + self.data[at + voxel] as f32 * (self.hi - self.lo) / 255.0)
+                Some(self.lo + self.data[at + voxel] as f32 * ((self.hi - self.lo) / 255.0))
             }
             BrickFormat::Bc4 | BrickFormat::Bc7 => None,
         }

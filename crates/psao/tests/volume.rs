@@ -1,0 +1,194 @@
+//! End-to-end tests of `psao volume …` on the shared OpenVDB files (skipped when missing).
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn data(name: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/volumes"
+    ))
+    .join(name);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("note: {} missing, test skipped", p.display());
+        None
+    }
+}
+
+fn psao(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_psao"))
+        .args(args)
+        .output()
+        .expect("run psao")
+}
+
+#[test]
+fn info_convert_and_render_a_psv() {
+    let Some(dragon) = data("dragon_sergeneren.vdb") else {
+        return;
+    };
+    let dragon = dragon.to_str().unwrap();
+    let out = psao(&["volume", "info", dragon]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("19660 active voxels"), "{text}");
+    assert!(text.contains("UniformScaleMap"), "{text}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let psv = dir.path().join("d.psv");
+    let json = dir.path().join("d.json");
+    let out = psao(&[
+        "volume",
+        "convert",
+        dragon,
+        "--format",
+        "bc7",
+        "--cluster",
+        "8,5,0.05",
+        "--out",
+        psv.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for key in [
+        "bits_per_voxel_bricks",
+        "bits_per_voxel_total",
+        "bits_per_active_voxel",
+        "rmse",
+        "max_error",
+    ] {
+        assert!(j[key].as_f64().is_some(), "{key} missing in {j}");
+    }
+    assert_eq!(j["bits_per_voxel_bricks"].as_f64().unwrap(), 2.0);
+    assert!(j["bits_per_voxel_total"].as_f64().unwrap() > 2.0);
+    assert!(j["rmse"].as_f64().unwrap() < 0.05);
+    assert!(j["bricks_after"].as_u64().unwrap() <= j["bricks_before"].as_u64().unwrap());
+
+    let out = psao(&["volume", "info", psv.to_str().unwrap()]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("format bc7"));
+
+    for mode in ["fog", "deltatrack"] {
+        let png = dir.path().join(format!("{mode}.png"));
+        let out = psao(&[
+            "volume",
+            "render",
+            psv.to_str().unwrap(),
+            "--mode",
+            mode,
+            "--res",
+            "40x30",
+            "--spp",
+            "2",
+            "--out",
+            png.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let img = image::open(&png).unwrap();
+        assert_eq!((img.width(), img.height()), (40, 30));
+        assert!(
+            img.to_luma8().pixels().any(|p| p.0[0] > 0),
+            "{mode} image is black"
+        );
+    }
+    // A fog volume cannot be rendered as a level set.
+    let out = psao(&[
+        "volume",
+        "render",
+        psv.to_str().unwrap(),
+        "--mode",
+        "levelset",
+        "--res",
+        "8x8",
+        "--out",
+        dir.path().join("x.png").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("level-set"));
+}
+
+#[test]
+fn level_set_render_from_vdb() {
+    let Some(sphere) = data("sphere.vdb") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("s.png");
+    let out = psao(&[
+        "volume",
+        "render",
+        sphere.to_str().unwrap(),
+        "--res",
+        "32x32",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&png).unwrap().to_luma8();
+    // The sphere covers the centre, not the corners.
+    assert!(img.get_pixel(16, 16).0[0] > 0);
+    assert_eq!(img.get_pixel(0, 0).0[0], 0);
+}
+
+#[test]
+fn broken_files_fail_with_a_clear_message() {
+    let Some(sphere) = data("sphere.vdb") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(&sphere).unwrap();
+    let truncated = dir.path().join("truncated.vdb");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 3]).unwrap();
+    let garbage = dir.path().join("garbage.vdb");
+    std::fs::write(&garbage, b"this is not a volume at all, just some text").unwrap();
+    let bad_psv = dir.path().join("bad.psv");
+    std::fs::write(&bad_psv, b"PSVOLUME\x01\x00\x00\x00garbage").unwrap();
+    for (file, expect) in [
+        (&truncated, "truncated.vdb"),
+        (&garbage, "magic"),
+        (&bad_psv, ".psv"),
+    ] {
+        for cmd in ["info", "render"] {
+            let out = psao(
+                &["volume", cmd, file.to_str().unwrap(), "--out", "/dev/null"]
+                    [..if cmd == "info" { 3 } else { 5 }],
+            );
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success(), "{cmd} {file:?} succeeded");
+            assert!(err.contains(expect), "{cmd} {file:?}: {err}");
+            assert!(!err.contains("panicked"), "{err}");
+        }
+    }
+    let out = psao(&[
+        "volume",
+        "convert",
+        sphere.to_str().unwrap(),
+        "--format",
+        "bc9",
+        "--out",
+        "x.psv",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown brick format"));
+}
