@@ -233,6 +233,29 @@ impl EmbreeTracer {
         Ok(())
     }
 
+    /// Writes new vertex positions and rebuilds the mesh's BVH from scratch (medium quality),
+    /// leaving it in refit mode for later updates.
+    pub(crate) fn rebuild_mesh_positions(
+        &mut self,
+        mesh: usize,
+        positions: &[Vec3],
+    ) -> Result<(), TraceError> {
+        let Some(Some(ms)) = self.meshes.get_mut(mesh) else {
+            return Ok(());
+        };
+        // SAFETY: as in `update_mesh_positions`: the handle is alive and `&mut self` excludes
+        // concurrent traversal or commits.
+        unsafe { rtcSetGeometryBuildQuality(ms.triangles.handle(), BuildQuality::MEDIUM) };
+        ms.deforming = true;
+        set_mesh_scene_mode(&mut ms.scene, true);
+        self.update_mesh_positions(mesh, positions)?;
+        if let Some(Some(ms)) = self.meshes.get_mut(mesh) {
+            // SAFETY: as above.
+            unsafe { rtcSetGeometryBuildQuality(ms.triangles.handle(), BuildQuality::REFIT) };
+        }
+        Ok(())
+    }
+
     pub(crate) fn commit(&mut self) {
         self.top.commit();
     }

@@ -13,5 +13,5 @@ mod tracer;
 mod types;
 
 pub use sort::sort_rays_spatially;
-pub use tracer::Tracer;
+pub use tracer::{MeshUpdate, Tracer, DEFAULT_MAX_COST_RATIO};
 pub use types::{Backend, GeometryMode, Hit, Ray, TraceError};

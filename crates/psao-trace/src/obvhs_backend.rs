@@ -95,6 +95,33 @@ fn build_bvh2(aabbs: &[Aabb], traced_long: bool) -> Bvh2 {
     bvh2
 }
 
+/// Surface-area-heuristic cost of a binary BVH relative to its root's surface area: the
+/// expected number of node visits plus triangle tests for a random ray through the root
+/// (traversal and intersection weighted 1 each). Refitting keeps the topology while the
+/// boxes grow, so the cost rises as the deformation moves away from the built pose.
+fn sah_cost(bvh2: &Bvh2) -> f32 {
+    let Some(root) = bvh2.nodes.first() else {
+        return 0.0;
+    };
+    let root_area = root.aabb().half_area();
+    if root_area.is_nan() || root_area <= 0.0 {
+        return 0.0;
+    }
+    let sum: f32 = bvh2
+        .nodes
+        .iter()
+        .map(|n| {
+            let weight = if n.is_leaf() {
+                n.prim_count as f32
+            } else {
+                1.0
+            };
+            n.aabb().half_area() * weight
+        })
+        .sum();
+    sum / root_area
+}
+
 /// One mesh's bottom-level structure.
 struct Blas {
     /// The wide BVH that is traversed.
@@ -108,6 +135,10 @@ struct Blas {
     indices: Vec<[u32; 3]>,
     /// The binary BVH kept for deforming meshes; refitting it keeps the topology.
     refit: Option<Bvh2>,
+    /// Normalised SAH cost ([`sah_cost`]) right after the last full build.
+    built_cost: f32,
+    /// Normalised SAH cost now (after any refits).
+    cost: f32,
 }
 
 impl Blas {
@@ -124,12 +155,38 @@ impl Blas {
             hi: Vec3::ZERO,
             indices: indices.to_vec(),
             refit: None,
+            built_cost: 0.0,
+            cost: 0.0,
         };
-        blas.compress(&bvh2, positions);
-        if deforming {
-            blas.refit = Some(bvh2);
-        }
+        blas.set_built(bvh2, positions, deforming);
         blas
+    }
+
+    /// Installs a freshly built `bvh2` (kept for refits when `keep`) as the new reference.
+    fn set_built(&mut self, bvh2: Bvh2, positions: &[Vec3], keep: bool) {
+        self.compress(&bvh2, positions);
+        self.built_cost = sah_cost(&bvh2);
+        self.cost = self.built_cost;
+        self.refit = keep.then_some(bvh2);
+    }
+
+    /// Rebuilds the structure from scratch for new vertex positions (kept for refits).
+    fn rebuild(&mut self, positions: &[Vec3]) {
+        let aabbs: Vec<Aabb> = self
+            .indices
+            .iter()
+            .map(|&t| Triangle::aabb(positions, t))
+            .collect();
+        self.set_built(build_bvh2(&aabbs, false), positions, true);
+    }
+
+    /// SAH cost now relative to right after the last full build (1 = as good as built).
+    fn cost_ratio(&self) -> f32 {
+        if self.built_cost > 0.0 {
+            self.cost / self.built_cost
+        } else {
+            1.0
+        }
     }
 
     /// Converts `bvh2` to the traversed wide BVH and lays the triangles out in its order.
@@ -153,7 +210,7 @@ impl Blas {
             .iter()
             .map(|&t| Triangle::aabb(positions, t))
             .collect();
-        let bvh2 = match self.refit.take() {
+        match self.refit.take() {
             Some(mut bvh2) => {
                 for node in bvh2.nodes.iter_mut().filter(|n| n.is_leaf()) {
                     let first = node.first_index as usize;
@@ -164,12 +221,12 @@ impl Blas {
                     node.set_aabb(aabb);
                 }
                 bvh2.refit_all();
-                bvh2
+                self.compress(&bvh2, positions);
+                self.cost = sah_cost(&bvh2);
+                self.refit = Some(bvh2);
             }
-            None => build_bvh2(&aabbs, false),
-        };
-        self.compress(&bvh2, positions);
-        self.refit = Some(bvh2);
+            None => self.set_built(build_bvh2(&aabbs, false), positions, true),
+        }
     }
 
     /// Closest hit `(slot, u, v)`; shortens `ray.tmax` to its distance.
@@ -306,6 +363,19 @@ impl ObvhsTracer {
             blas.update_positions(positions);
             self.dirty = true;
         }
+    }
+
+    pub(crate) fn rebuild_mesh_positions(&mut self, mesh: usize, positions: &[Vec3]) {
+        if let Some(Some(blas)) = self.blas.get_mut(mesh) {
+            blas.rebuild(positions);
+            self.dirty = true;
+        }
+    }
+
+    /// The mesh's SAH cost relative to its last full build (`None` unless it deforms).
+    pub(crate) fn mesh_cost_ratio(&self, mesh: usize) -> Option<f32> {
+        let blas = self.blas.get(mesh)?.as_ref()?;
+        blas.refit.as_ref().map(|_| blas.cost_ratio())
     }
 
     /// Rebuilds the top level when a transform or a mesh changed.

@@ -9,6 +9,19 @@ use crate::geometry::{check_positions, included_meshes};
 use crate::obvhs_backend::ObvhsTracer;
 use crate::{Backend, GeometryMode, Hit, Ray, TraceError};
 
+/// Default [`Tracer::update_deforming_mesh`] threshold: rebuild once refits made the BVH's
+/// expected cost per ray 30 % higher than a fresh build.
+pub const DEFAULT_MAX_COST_RATIO: f32 = 1.3;
+
+/// What [`Tracer::update_deforming_mesh`] did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeshUpdate {
+    /// Whether the mesh's BVH was rebuilt (otherwise refitted).
+    pub rebuilt: bool,
+    /// The cost ratio after the update (`None` where the backend has no metric).
+    pub cost_ratio: Option<f32>,
+}
+
 /// The backend-specific structure.
 enum Inner {
     Obvhs(ObvhsTracer),
@@ -81,6 +94,81 @@ impl Tracer {
         mesh: usize,
         positions: &[Vec3],
     ) -> Result<(), TraceError> {
+        self.check_update(mesh, positions)?;
+        match &mut self.inner {
+            Inner::Obvhs(t) => {
+                t.update_mesh_positions(mesh, positions);
+                Ok(())
+            }
+            #[cfg(feature = "embree")]
+            Inner::Embree(t) => t.update_mesh_positions(mesh, positions),
+        }
+    }
+
+    /// Replaces the vertex positions of a deforming mesh like
+    /// [`Tracer::update_mesh_positions`], but builds its BVH from scratch instead of refitting
+    /// (slower, restores full quality); later updates refit the new structure.
+    pub fn rebuild_mesh_positions(
+        &mut self,
+        mesh: usize,
+        positions: &[Vec3],
+    ) -> Result<(), TraceError> {
+        self.check_update(mesh, positions)?;
+        match &mut self.inner {
+            Inner::Obvhs(t) => {
+                t.rebuild_mesh_positions(mesh, positions);
+                Ok(())
+            }
+            #[cfg(feature = "embree")]
+            Inner::Embree(t) => t.rebuild_mesh_positions(mesh, positions),
+        }
+    }
+
+    /// How much a deforming mesh's BVH has degraded through refits: its surface-area-heuristic
+    /// cost relative to right after its last full build (1 = as built, 1.5 = 50 % more
+    /// expected work per ray). `None` for meshes that were never updated, meshes left out
+    /// of the structure, and the Embree backend (which exposes no such metric).
+    pub fn mesh_cost_ratio(&self, mesh: usize) -> Option<f32> {
+        match &self.inner {
+            Inner::Obvhs(t) => t.mesh_cost_ratio(mesh),
+            #[cfg(feature = "embree")]
+            Inner::Embree(_) => None,
+        }
+    }
+
+    /// The per-frame update of a skinned mesh: refits, unless the last refit left the BVH's
+    /// cost ratio ([`Tracer::mesh_cost_ratio`]) above `max_cost_ratio`, then rebuilds.
+    pub fn update_deforming_mesh(
+        &mut self,
+        mesh: usize,
+        positions: &[Vec3],
+        max_cost_ratio: f32,
+    ) -> Result<MeshUpdate, TraceError> {
+        let rebuild = self
+            .mesh_cost_ratio(mesh)
+            .is_some_and(|r| r > max_cost_ratio);
+        if rebuild {
+            self.rebuild_mesh_positions(mesh, positions)?;
+        } else {
+            self.update_mesh_positions(mesh, positions)?;
+        }
+        Ok(MeshUpdate {
+            rebuilt: rebuild,
+            cost_ratio: self.mesh_cost_ratio(mesh),
+        })
+    }
+
+    /// Rebuilds the top level after transform or mesh updates; call before querying again.
+    pub fn commit(&mut self) {
+        match &mut self.inner {
+            Inner::Obvhs(t) => t.commit(),
+            #[cfg(feature = "embree")]
+            Inner::Embree(t) => t.commit(),
+        }
+    }
+
+    /// Checks a vertex update: the mesh exists and the positions fit it and are finite.
+    fn check_update(&self, mesh: usize, positions: &[Vec3]) -> Result<(), TraceError> {
         let expected = *self.vertex_counts.get(mesh).ok_or(TraceError::NoSuchMesh {
             mesh,
             meshes: self.vertex_counts.len(),
@@ -92,24 +180,7 @@ impl Tracer {
                 got: positions.len(),
             });
         }
-        check_positions(mesh, positions)?;
-        match &mut self.inner {
-            Inner::Obvhs(t) => {
-                t.update_mesh_positions(mesh, positions);
-                Ok(())
-            }
-            #[cfg(feature = "embree")]
-            Inner::Embree(t) => t.update_mesh_positions(mesh, positions),
-        }
-    }
-
-    /// Rebuilds the top level after transform or mesh updates; call before querying again.
-    pub fn commit(&mut self) {
-        match &mut self.inner {
-            Inner::Obvhs(t) => t.commit(),
-            #[cfg(feature = "embree")]
-            Inner::Embree(t) => t.commit(),
-        }
+        check_positions(mesh, positions)
     }
 
     /// For each ray: is anything hit with `0 < t < tmax`? Traces on the calling thread;
