@@ -73,7 +73,11 @@ pub fn cluster(
     hi: f32,
     params: &ClusterParams,
 ) -> Result<Clustering> {
-    if params.k == 0 || params.iterations == 0 || !(params.threshold >= 0.0) {
+    if params.k == 0
+        || params.iterations == 0
+        || params.threshold.is_nan()
+        || params.threshold < 0.0
+    {
         return Err(VolumeError::InvalidParameter(format!(
             "clustering needs k >= 1, iterations >= 1 and threshold >= 0 (got {params:?})"
         )));
@@ -188,9 +192,9 @@ mod tests {
         assert_eq!(c.candidates, 40);
         assert!(c.bricks.len() <= 3);
         assert_eq!(c.bricks[c.remap[40] as usize], noisy);
-        for i in 0..40 {
+        for (i, orig) in bricks.iter().enumerate().take(40) {
             let b = &c.bricks[c.remap[i] as usize];
-            assert!((b[0] - bricks[i][0]).abs() < 3e-3);
+            assert!((b[0] - orig[0]).abs() < 3e-3);
         }
         let again = cluster(&bricks, 0.0, 1.0, &p).unwrap();
         assert_eq!(again.remap, c.remap);

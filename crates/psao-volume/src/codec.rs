@@ -6,7 +6,9 @@
 //! * `Bc7`: four consecutive z voxels packed into the RGBA channels of one texel, so a brick is
 //!   two 8×8 texel slices of four BC7 blocks each (128 bytes, 2 bits per voxel).
 //!
-//! Normalised formats store `(v - lo) / (hi - lo)`; decoding maps back to values.
+//! Normalised formats store `(v - lo) / (hi - lo)`; decoding maps back to values. The BC
+//! formats also lead each brick with two bytes: its own min and max on that 0..=255 scale,
+//! and the blocks use the full 0..=255 code range between them (0.03 bit per voxel).
 
 use crate::grid::{voxel_index, BRICK_VOXELS};
 use rayon::prelude::*;
@@ -42,8 +44,8 @@ impl BrickFormat {
             BrickFormat::F32 => 2048,
             BrickFormat::F16 => 1024,
             BrickFormat::Unorm8 => 512,
-            BrickFormat::Bc4 => 256,
-            BrickFormat::Bc7 => 128,
+            BrickFormat::Bc4 => 2 + 256,
+            BrickFormat::Bc7 => 2 + 128,
         }
     }
 
@@ -95,6 +97,32 @@ pub struct BrickPool {
 
 /// Bricks per encoder call (one BC surface).
 const CHUNK: usize = 64;
+
+/// Offset and step of a BC brick's codes from its two leading range bytes.
+#[inline]
+fn sub_range(b: &[u8], lo: f32, span: f32) -> (f32, f32) {
+    let (q0, q1) = (b[0] as f32, b[1] as f32);
+    (lo + q0 * span, (q1 - q0) * span / 255.0)
+}
+
+/// The two range bytes of a brick for BC coding, and the matching (offset, scale) that maps
+/// its values onto 0..=1.
+fn brick_range(brick: &[f32; BRICK_VOXELS], lo: f32, scale: f32) -> ([u8; 2], f32, f32) {
+    let (mn, mx) = brick
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |a, &v| {
+            (a.0.min(v), a.1.max(v))
+        });
+    let q0 = ((mn - lo) * scale * 255.0).floor().clamp(0.0, 254.0);
+    let q1 = ((mx - lo) * scale * 255.0).ceil().clamp(q0 + 1.0, 255.0);
+    let off = lo + q0 / (255.0 * scale.max(f32::MIN_POSITIVE));
+    let sub = if scale > 0.0 {
+        scale * 255.0 / (q1 - q0)
+    } else {
+        0.0
+    };
+    ([q0 as u8, q1 as u8], off, sub)
+}
 
 fn to_unorm(v: f32, lo: f32, scale: f32) -> u8 {
     ((v - lo) * scale * 255.0).round().clamp(0.0, 255.0) as u8
@@ -156,8 +184,9 @@ impl BrickPool {
                 }
             }
             BrickFormat::Bc4 => {
+                let (lo, span) = sub_range(b, lo, span);
                 let mut px = [0u8; 16];
-                for (k, block) in b.chunks_exact(8).enumerate() {
+                for (k, block) in b[2..].chunks_exact(8).enumerate() {
                     bcdec_rs::bc4(block, &mut px, 4, false);
                     // Block k: row-of-blocks k / 2 covers slice z = k / 4, rows y0..y0 + 4.
                     let (row, x0) = (k / 2, (k % 2) * 4);
@@ -171,8 +200,9 @@ impl BrickPool {
                 }
             }
             BrickFormat::Bc7 => {
+                let (lo, span) = sub_range(b, lo, span);
                 let mut px = [0u8; 64];
-                for (k, block) in b.chunks_exact(16).enumerate() {
+                for (k, block) in b[2..].chunks_exact(16).enumerate() {
                     bcdec_rs::bc7(block, &mut px, 16);
                     let (row, x0) = (k / 2, (k % 2) * 4);
                     let (zq, y0) = (row / 2, (row % 2) * 4);
@@ -249,7 +279,10 @@ fn encode_chunk(
         BrickFormat::Bc4 => {
             // Surface: 8 texels wide, 64 rows per brick (row = 8 z + y).
             let mut px = vec![0u8; src.len() * BRICK_VOXELS];
+            let mut ranges = Vec::with_capacity(src.len());
             for (b, brick) in src.iter().enumerate() {
+                let (r, lo, scale) = brick_range(brick, lo, scale);
+                ranges.push(r);
                 for z in 0..8 {
                     for y in 0..8 {
                         for x in 0..8 {
@@ -265,12 +298,15 @@ fn encode_chunk(
                 height: (src.len() * 64) as u32,
                 stride: 8,
             };
-            intel_tex_2::bc4::compress_blocks_into(&surface, out);
+            interleave(&ranges, &intel_tex_2::bc4::compress_blocks(&surface), out);
         }
         BrickFormat::Bc7 => {
             // Surface: 8 texels wide, 16 rows per brick (row = 8 zq + y), RGBA = z 4 zq + c.
             let mut px = vec![0u8; src.len() * BRICK_VOXELS];
+            let mut ranges = Vec::with_capacity(src.len());
             for (b, brick) in src.iter().enumerate() {
+                let (r, lo, scale) = brick_range(brick, lo, scale);
+                ranges.push(r);
                 for zq in 0..2 {
                     for y in 0..8 {
                         for x in 0..8 {
@@ -288,12 +324,25 @@ fn encode_chunk(
                 height: (src.len() * 16) as u32,
                 stride: 32,
             };
-            intel_tex_2::bc7::compress_blocks_into(
+            let blocks = intel_tex_2::bc7::compress_blocks(
                 &intel_tex_2::bc7::alpha_basic_settings(),
                 &surface,
-                out,
             );
+            interleave(&ranges, &blocks, out);
         }
+    }
+}
+
+/// Writes each brick as its two range bytes followed by its blocks.
+fn interleave(ranges: &[[u8; 2]], blocks: &[u8], out: &mut [u8]) {
+    let per = blocks.len() / ranges.len();
+    for ((o, r), b) in out
+        .chunks_exact_mut(per + 2)
+        .zip(ranges)
+        .zip(blocks.chunks_exact(per))
+    {
+        o[..2].copy_from_slice(r);
+        o[2..].copy_from_slice(b);
     }
 }
 

@@ -3,18 +3,9 @@
 //! A mask is coded as a two-level octree: 2 bytes give, for each 4³ octant, whether it is
 //! mixed (first byte) and whether it is full (second byte); each mixed octant follows with
 //! 2 bytes in the same form for its eight 2³ sub-octants, and each mixed sub-octant with
-//! 1 byte of voxel bits. Full and empty masks never reach the table (see [`MaskRef`]).
+//! 1 byte of voxel bits. Full masks never reach the table.
 
 use crate::grid::voxel_index;
-
-/// How an L3 node refers to its activity mask.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MaskRef {
-    /// Every voxel active (needs no table entry).
-    Full,
-    /// Byte offset of the coded mask in the mask table.
-    Table(u32),
-}
 
 /// Octant `o` (0..8) of a cube of edge `2 * half` at `base`: its origin.
 #[inline]

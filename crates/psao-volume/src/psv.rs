@@ -4,13 +4,13 @@
 //! Layout (little-endian): magic `PSVOLUME`, version `u32`, payload length `u64`, FNV-1a 64
 //! checksum of the payload `u64`, payload. The payload holds class, format, transform,
 //! background and value range, then the L1 nodes (origin, mask, first child), the L2 nodes
-//! (mask, first child), the L3 nodes (brick, mask offset or `u32::MAX` for full), the coded
+//! (mask, first child, first mask), the L3 nodes (brick | has-mask bit), the coded
 //! mask table and the brick pool. Rank prefixes and majorants are rebuilt on load.
 
 use crate::codec::{BrickFormat, BrickPool};
 use crate::error::{Result, VolumeError};
 use crate::grid::{GridClass, Transform};
-use crate::mask::{self, MaskRef};
+use crate::mask;
 use crate::tree::{FlatTree, L1Node, L2Node, L3Node};
 use crate::volume::Volume;
 use glam::{DVec3, IVec3};
@@ -65,15 +65,11 @@ pub fn to_bytes(vol: &Volume) -> Vec<u8> {
             .iter()
             .for_each(|w| p.extend_from_slice(&w.to_le_bytes()));
         p.extend_from_slice(&n.first.to_le_bytes());
+        p.extend_from_slice(&n.mask_first.to_le_bytes());
     }
     p.extend_from_slice(&(t.l3.len() as u32).to_le_bytes());
     for n in &t.l3 {
-        p.extend_from_slice(&n.brick.to_le_bytes());
-        let m = match n.mask {
-            MaskRef::Full => u32::MAX,
-            MaskRef::Table(at) => at,
-        };
-        p.extend_from_slice(&m.to_le_bytes());
+        p.extend_from_slice(&n.0.to_le_bytes());
     }
     p.extend_from_slice(&(t.masks.len() as u64).to_le_bytes());
     p.extend_from_slice(&t.masks);
@@ -210,12 +206,13 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Volume> {
             first,
         });
     }
-    for _ in 0..r.count(512 + 4)? {
+    for _ in 0..r.count(512 + 8)? {
         let mut mask = [0u64; 64];
         for w in &mut mask {
             *w = r.u64()?;
         }
         let first = r.u32()?;
+        let mask_first = r.u32()?;
         let mut prefix = [0u16; 64];
         let mut acc = 0u32;
         for (p, w) in prefix.iter_mut().zip(&mask) {
@@ -226,21 +223,11 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Volume> {
             mask,
             prefix,
             first,
+            mask_first,
         });
     }
-    let mut mask_refs = Vec::new();
-    for _ in 0..r.count(8)? {
-        let brick = r.u32()?;
-        let m = r.u32()?;
-        mask_refs.push(m);
-        tree.l3.push(L3Node {
-            brick,
-            mask: if m == u32::MAX {
-                MaskRef::Full
-            } else {
-                MaskRef::Table(m)
-            },
-        });
+    for _ in 0..r.count(4)? {
+        tree.l3.push(L3Node(r.u32()?));
     }
     let mask_len = r.u64()? as usize;
     tree.masks = r.take(mask_len)?.to_vec();
@@ -262,15 +249,25 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Volume> {
             return Err(bad("L2 children out of range"));
         }
     }
-    for &m in mask_refs.iter().filter(|&&m| m != u32::MAX) {
-        if tree
-            .masks
-            .get(m as usize..)
-            .and_then(mask::coded_len)
-            .is_none()
-        {
-            return Err(bad("mask reference out of range"));
+    // Every coded mask must be complete and the table used exactly, in child order.
+    let mut at = 0usize;
+    for n in &tree.l2 {
+        if n.mask_first as usize != at {
+            return Err(bad("mask table out of order"));
         }
+        let kids: u32 = n.mask.iter().map(|w| w.count_ones()).sum();
+        for l3 in &tree.l3[n.first as usize..(n.first + kids) as usize] {
+            if l3.has_mask() {
+                at += tree
+                    .masks
+                    .get(at..)
+                    .and_then(mask::coded_len)
+                    .ok_or_else(|| bad("coded mask out of range"))?;
+            }
+        }
+    }
+    if at != tree.masks.len() {
+        return Err(bad("mask table size mismatch"));
     }
     if data.len() % format.brick_bytes() != 0 || !(lo.is_finite() && hi.is_finite()) {
         return Err(bad("brick pool of partial bricks"));

@@ -256,7 +256,7 @@ impl DenseGrid {
             if f != frame {
                 continue;
             }
-            vol.pool.decode(vol.tree.l3[i as usize].brick, &mut b);
+            vol.pool.decode(vol.tree.l3[i as usize].brick(), &mut b);
             for z in 0..8 {
                 for y in 0..8 {
                     for x in 0..8 {

@@ -69,7 +69,7 @@ impl<'a> Sampler<'a> {
     /// Value of voxel `v` (0..512) of L3 node `leaf`.
     #[inline]
     pub fn leaf_value(&mut self, leaf: u32, v: usize) -> f32 {
-        let brick = self.vol.tree.l3[leaf as usize].brick;
+        let brick = self.vol.tree.l3[leaf as usize].brick();
         if self.slots.is_empty() {
             let at = brick as usize * 2048 + v * 4;
             let d = &self.vol.pool.data[at..at + 4];
@@ -118,7 +118,7 @@ impl<'a> Sampler<'a> {
                     let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
                     const OFF: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
                     if self.slots.is_empty() {
-                        let brick = self.vol.tree.l3[leaf as usize].brick as usize;
+                        let brick = self.vol.tree.l3[leaf as usize].brick() as usize;
                         let data = &self.vol.pool.data[brick * 2048..brick * 2048 + 2048];
                         for (k, o) in OFF.iter().enumerate() {
                             let at = (i0 + o) * 4;
@@ -130,7 +130,7 @@ impl<'a> Sampler<'a> {
                             ]);
                         }
                     } else {
-                        let brick = self.vol.tree.l3[leaf as usize].brick;
+                        let brick = self.vol.tree.l3[leaf as usize].brick();
                         let d = self.decoded(brick);
                         for (k, o) in OFF.iter().enumerate() {
                             c[k] = d[i0 + o];

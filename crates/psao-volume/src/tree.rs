@@ -7,7 +7,7 @@
 
 use crate::error::{Result, VolumeError};
 use crate::grid::{Leaf, BRICK};
-use crate::mask::{self, MaskRef};
+use crate::mask;
 use glam::IVec3;
 
 /// Voxels spanned by one L1 child (an L2 node).
@@ -37,15 +37,41 @@ pub struct L2Node {
     pub prefix: [u16; 64],
     /// Index of the first child in [`FlatTree::l3`].
     pub first: u32,
+    /// Byte offset in [`FlatTree::masks`] of the first coded mask of its children (the masks
+    /// of the children follow in child order).
+    pub mask_first: u32,
 }
 
-/// Leaf node: its brick and its activity mask.
+/// Leaf node, 4 bytes: its brick index, with the top bit set when its activity mask is not
+/// full (the coded mask then sits in the mask table, found from the parent's `mask_first`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct L3Node {
+pub struct L3Node(pub u32);
+
+/// Top bit of an L3 node: the node has a coded (not full) mask.
+const HAS_MASK: u32 = 1 << 31;
+
+impl L3Node {
+    /// A node for `brick` (below 2³¹) with or without a coded mask.
+    pub fn new(brick: u32, coded_mask: bool) -> Self {
+        L3Node(brick | if coded_mask { HAS_MASK } else { 0 })
+    }
+
     /// Brick index in the shared pool.
-    pub brick: u32,
-    /// Activity mask.
-    pub mask: MaskRef,
+    #[inline]
+    pub fn brick(self) -> u32 {
+        self.0 & !HAS_MASK
+    }
+
+    /// Points the node at another brick.
+    pub fn set_brick(&mut self, brick: u32) {
+        self.0 = (self.0 & HAS_MASK) | brick;
+    }
+
+    /// Whether the mask is coded in the table (else all voxels are active).
+    #[inline]
+    pub fn has_mask(self) -> bool {
+        self.0 & HAS_MASK != 0
+    }
 }
 
 /// Where an index-space voxel falls in the tree.
@@ -176,29 +202,31 @@ impl FlatTree {
         for &(b1, b2, i) in &order {
             if current_l2 != Some(b1) {
                 l1_mask[b1 / 64] |= 1 << (b1 % 64);
+                let mask_first = u32::try_from(self.masks.len()).map_err(|_| {
+                    VolumeError::InvalidParameter("mask table exceeds 4 GiB".into())
+                })?;
                 self.l2.push(L2Node {
                     mask: [0; 64],
                     prefix: [0; 64],
                     first: self.l3.len() as u32,
+                    mask_first,
                 });
                 current_l2 = Some(b1);
             }
             let node = self.l2.last_mut().expect("pushed above");
             node.mask[b2 / 64] |= 1 << (b2 % 64);
             let leaf = &leaves[i];
-            let mask = if mask::is_full(&leaf.mask) {
-                MaskRef::Full
-            } else {
-                let at = u32::try_from(self.masks.len()).map_err(|_| {
-                    VolumeError::InvalidParameter("mask table exceeds 4 GiB".into())
-                })?;
+            let coded = !mask::is_full(&leaf.mask);
+            if coded {
                 mask::encode(&leaf.mask, &mut self.masks);
-                MaskRef::Table(at)
-            };
-            self.l3.push(L3Node {
-                brick: first_brick + i as u32,
-                mask,
-            });
+            }
+            let brick = first_brick + i as u32;
+            if brick >= HAS_MASK {
+                return Err(VolumeError::InvalidParameter(
+                    "more than 2^31 bricks".into(),
+                ));
+            }
+            self.l3.push(L3Node::new(brick, coded));
         }
         for node in &mut self.l2[l1_first as usize..] {
             let p = prefixes(&node.mask);
@@ -260,12 +288,30 @@ impl FlatTree {
             .then(|| (top.first + rank(&top.mask, top.prefix[b1 / 64] as u32, b1)) as usize)
     }
 
-    /// Whether voxel (x, y, z) (0..8) of L3 node `index` is active.
-    pub fn is_active(&self, index: u32, x: usize, y: usize, z: usize) -> bool {
-        match self.l3[index as usize].mask {
-            MaskRef::Full => true,
-            MaskRef::Table(at) => mask::is_active(&self.masks[at as usize..], x, y, z),
+    /// Whether index-space voxel `p` of `frame` is active. Walks the coded masks of the
+    /// preceding siblings (rendering never needs this, so the tree stays small).
+    pub fn is_active(&self, frame: usize, p: IVec3) -> bool {
+        let Some(n2) = self.l2_index(frame, p) else {
+            return false;
+        };
+        let Locate::Leaf(index, origin) = self.locate(frame, p) else {
+            return false;
+        };
+        let node = &self.l2[n2];
+        if !self.l3[index as usize].has_mask() {
+            return true;
         }
+        let mut at = node.mask_first as usize;
+        for sibling in &self.l3[node.first as usize..index as usize] {
+            if sibling.has_mask() {
+                match self.masks.get(at..).and_then(mask::coded_len) {
+                    Some(n) => at += n,
+                    None => return false,
+                }
+            }
+        }
+        let l = p - origin;
+        mask::is_active(&self.masks[at..], l.x as usize, l.y as usize, l.z as usize)
     }
 
     /// Iterates over (frame, L3 index, origin) of all leaves.
@@ -304,16 +350,17 @@ impl FlatTree {
     }
 
     /// Node counts and bytes per level. An L1 node costs its 4 KiB mask, 1 KiB of word
-    /// prefixes and a 4-byte index; an L2 node 512 + 128 + 4 bytes; an L3 node 8 bytes.
+    /// prefixes and a 4-byte index; an L2 node 512 + 128 + 8 bytes
+    /// (mask, prefixes, child index, mask-table index); an L3 node 4 bytes.
     pub fn stats(&self) -> TreeStats {
         TreeStats {
             l1_nodes: self.l1.len(),
             l1_bytes: self.l1.len() * (4096 + 1024 + 4),
             l2_nodes: self.l2.len(),
-            l2_bytes: self.l2.len() * (512 + 128 + 4),
+            l2_bytes: self.l2.len() * (512 + 128 + 8),
             l3_nodes: self.l3.len(),
-            l3_bytes: self.l3.len() * 8,
-            full_masks: self.l3.iter().filter(|n| n.mask == MaskRef::Full).count(),
+            l3_bytes: self.l3.len() * 4,
+            full_masks: self.l3.iter().filter(|n| !n.has_mask()).count(),
             mask_bytes: self.masks.len(),
         }
     }

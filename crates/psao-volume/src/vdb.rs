@@ -287,9 +287,9 @@ fn fill_inactive_signs(leaf: &mut Leaf, bg: f32) {
             break;
         }
     }
-    for i in 0..BRICK_VOXELS {
+    for (i, s) in sign.iter().enumerate() {
         if !leaf.is_active(i) {
-            leaf.values[i] = bg * if sign[i] < 0 { -1.0 } else { 1.0 };
+            leaf.values[i] = bg * if *s < 0 { -1.0 } else { 1.0 };
         }
     }
 }

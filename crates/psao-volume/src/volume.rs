@@ -133,7 +133,7 @@ impl Volume {
         if let Some(p) = clustering {
             let c = cluster(&bricks, lo, hi, p)?;
             for n in &mut tree.l3 {
-                n.brick = c.remap[n.brick as usize];
+                n.set_brick(c.remap[n.brick() as usize]);
             }
             bricks = c.bricks;
             candidates = c.candidates;
@@ -159,7 +159,7 @@ impl Volume {
         pool: BrickPool,
     ) -> Result<Volume> {
         let bricks = pool.len();
-        if tree.l3.iter().any(|n| n.brick as usize >= bricks) {
+        if tree.l3.iter().any(|n| n.brick() as usize >= bricks) {
             return Err(VolumeError::InvalidParameter(
                 "an L3 node points past the brick pool".into(),
             ));
@@ -183,11 +183,11 @@ impl Volume {
             for (_, i, o) in tree.leaves().filter(|(f, _, _)| *f == frame) {
                 lo = lo.min(o);
                 hi = hi.max(o + IVec3::splat(BRICK as i32));
-                let (mut mn, mut mx) = brick_range[tree.l3[i as usize].brick as usize];
+                let (mut mn, mut mx) = brick_range[tree.l3[i as usize].brick() as usize];
                 for d in 1..8 {
                     let n = o + IVec3::new(d & 1, (d >> 1) & 1, d >> 2) * BRICK as i32;
                     let (a, b) = match tree.locate(frame, n) {
-                        Locate::Leaf(j, _) => brick_range[tree.l3[j as usize].brick as usize],
+                        Locate::Leaf(j, _) => brick_range[tree.l3[j as usize].brick() as usize],
                         _ => (background, background),
                     };
                     mn = mn.min(a);
@@ -270,7 +270,7 @@ impl Volume {
                 let mut out = [0.0; BRICK_VOXELS];
                 match self.tree.locate(f, leaf.origin) {
                     Locate::Leaf(i, _) => {
-                        self.pool.decode(self.tree.l3[i as usize].brick, &mut out)
+                        self.pool.decode(self.tree.l3[i as usize].brick(), &mut out)
                     }
                     _ => out = [self.background; BRICK_VOXELS],
                 }
