@@ -41,6 +41,7 @@ impl ServerTuning {
         if !(points.is_finite() && points > 0.0 && points <= 65_536.0) {
             bail!("--points must be in (0, 65536], got {points}");
         }
+        psao_delta::codec_by_name(&self.codec)?;
         Ok(PipelineConfig {
             server: ServerConfig {
                 density: points,

@@ -227,13 +227,19 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, token: 
     }
 }
 
-/// Sends `error` and closes.
-async fn refuse(writer: &mut FrameWriter, code: ErrorCode, message: String) -> anyhow::Error {
+/// Sends `error`, lets the peer read it, and closes.
+async fn refuse(
+    reader: &mut FrameReader,
+    writer: &mut FrameWriter,
+    code: ErrorCode,
+    message: String,
+) -> anyhow::Error {
     let text = message.clone();
     if let Ok(frame) = encode_frame(&Message::Error(ErrorMsg { code, message })) {
         let _ = writer.send(frame).await;
     }
     writer.close().await;
+    reader.drain(Duration::from_millis(500)).await;
     anyhow::anyhow!("{code:?}: {text}")
 }
 
@@ -247,27 +253,34 @@ async fn connection(
     let first = tokio::time::timeout(HELLO_TIMEOUT, reader.next(MAX_CLIENT_FRAME)).await;
     let hello = match first {
         Err(_) => {
-            return Err(refuse(&mut writer, ErrorCode::Protocol, "no hello in time".into()).await)
+            return Err(refuse(
+                &mut reader,
+                &mut writer,
+                ErrorCode::Protocol,
+                "no hello in time".into(),
+            )
+            .await)
         }
         Ok(Ok(Some((Message::Hello(h), _)))) => h,
         Ok(Ok(Some((m, _)))) => {
             let text = format!("expected hello, got {}", m.kind());
-            return Err(refuse(&mut writer, ErrorCode::Protocol, text).await);
+            return Err(refuse(&mut reader, &mut writer, ErrorCode::Protocol, text).await);
         }
         Ok(Ok(None)) => bail!("closed before hello"),
-        Ok(Err(e)) => return Err(read_failure(&mut writer, e).await),
+        Ok(Err(e)) => return Err(read_failure(&mut reader, &mut writer, e).await),
     };
     if hello.version != PROTOCOL_VERSION {
         let text = format!(
             "protocol version {} not supported (server speaks {PROTOCOL_VERSION})",
             hello.version
         );
-        return Err(refuse(&mut writer, ErrorCode::Version, text).await);
+        return Err(refuse(&mut reader, &mut writer, ErrorCode::Version, text).await);
     }
     if let Some(expected) = &token {
         let given = hello.token.as_deref().unwrap_or("");
         if !constant_time_eq(given.as_bytes(), expected.as_bytes()) {
             return Err(refuse(
+                &mut reader,
                 &mut writer,
                 ErrorCode::Token,
                 "missing or wrong token".into(),
@@ -287,7 +300,7 @@ async fn connection(
         .context("server is shutting down")?;
     let welcome = match reply_rx.await.context("server is shutting down")? {
         Ok(w) => w,
-        Err(e) => return Err(refuse(&mut writer, e.code, e.message).await),
+        Err(e) => return Err(refuse(&mut reader, &mut writer, e.code, e.message).await),
     };
     let id = welcome.client_id;
     tracing::info!("client {id} ({}, {kind}) joined", hello.name);
@@ -315,15 +328,20 @@ async fn connection(
     drop(out_tx);
     let _ = events.send(Event::Leave(id)).await;
     let _ = tokio::time::timeout(Duration::from_secs(2), writer_task).await;
+    reader.drain(Duration::from_millis(500)).await;
     result.map_err(anyhow::Error::from)
 }
 
-async fn read_failure(writer: &mut FrameWriter, e: ReadError) -> anyhow::Error {
+async fn read_failure(
+    reader: &mut FrameReader,
+    writer: &mut FrameWriter,
+    e: ReadError,
+) -> anyhow::Error {
     let code = match e {
         ReadError::Wire(_) => ErrorCode::Frame,
         ReadError::Io(_) => ErrorCode::Protocol,
     };
-    refuse(writer, code, e.to_string()).await
+    refuse(reader, writer, code, e.to_string()).await
 }
 
 /// Messages after the welcome until the client leaves.

@@ -15,15 +15,15 @@ use psao_delta::Codec;
 use psao_eval::AoImage;
 use psao_raster::{GBuffer, RasterOptions, Rasterizer};
 use psao_wire::{
-    capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, Welcome, MAX_SERVER_FRAME,
-    PROTOCOL_VERSION,
+    capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, Welcome, WireError,
+    MAX_SERVER_FRAME, PROTOCOL_VERSION,
 };
 use serde::Serialize;
 use tokio::sync::mpsc;
 
 use crate::args::Resolution;
 use crate::net::convert::{camera_msg, decode_limit, table_of};
-use crate::net::transport::connect;
+use crate::net::transport::{connect, ReadError};
 use crate::pipeline::{ClientFrame, CLIENT_HZ};
 use crate::run::{write_frame_images, write_json};
 use crate::scene_source::SceneArgs;
@@ -64,7 +64,14 @@ pub struct ViewArgs {
     /// Fault injection: drop the connection once, at this client frame.
     #[arg(long, hide = true)]
     pub drop_at: Option<u32>,
+    /// Write the first received frames (≤ 64 KiB each) and their update payloads to this
+    /// folder (seed corpus for the fuzz targets).
+    #[arg(long, hide = true)]
+    pub record: Option<PathBuf>,
 }
+
+/// Frames (and update payloads) `--record` writes at most.
+const RECORD_MAX: u32 = 8;
 
 /// What `psao view --json` writes.
 #[derive(Debug, Default, Serialize)]
@@ -134,7 +141,13 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let (out_tx, out_rx) = mpsc::unbounded_channel::<Outgoing>();
     rt.spawn(network(args.clone(), event_tx, out_rx));
 
-    let mut client = Client::default();
+    let mut client = Client {
+        record: args.record.clone(),
+        ..Client::default()
+    };
+    if let Some(dir) = &args.record {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
     let aspect = args.res.width as f32 / args.res.height as f32;
     let mut rasterizer = Rasterizer::new();
     let start = Instant::now();
@@ -260,6 +273,8 @@ struct Client {
     server_hash: Option<u64>,
     /// Lockstep: the latest client frame the server answered.
     answered: Option<u32>,
+    record: Option<PathBuf>,
+    recorded: u32,
 }
 
 impl Default for Client {
@@ -275,6 +290,8 @@ impl Default for Client {
             last_frame: 0,
             server_hash: None,
             answered: None,
+            record: None,
+            recorded: 0,
         }
     }
 }
@@ -307,6 +324,7 @@ impl Client {
             }
             NetEvent::Message(m, size) => {
                 self.bytes += size as u64;
+                self.record(&m)?;
                 match m {
                     Message::Delta(d) => self.apply(d, false, out)?,
                     Message::Snapshot(d) => self.apply(d, true, out)?,
@@ -324,6 +342,24 @@ impl Client {
             NetEvent::Fatal(why) => bail!("{why}"),
         }
         Ok(None)
+    }
+
+    /// `--record`: keep small frames and update payloads as fuzzing seeds.
+    fn record(&mut self, m: &Message) -> Result<()> {
+        let Some(dir) = &self.record else {
+            return Ok(());
+        };
+        let frame = encode_frame(m)?;
+        if self.recorded >= RECORD_MAX || frame.len() > 64 << 10 {
+            return Ok(());
+        }
+        let n = self.recorded;
+        self.recorded += 1;
+        std::fs::write(dir.join(format!("frame_{n:03}.bin")), &frame)?;
+        if let Message::Delta(d) | Message::Snapshot(d) = m {
+            std::fs::write(dir.join(format!("delta_{n:03}.bin")), &d.payload)?;
+        }
+        Ok(())
     }
 
     fn apply(
@@ -479,7 +515,12 @@ async fn session(
                     }
                 }
                 Ok(None) => return Ok(()),
-                Err(e) => return Err(e.to_string()),
+                // A frame cut short is what a crashing server leaves: reconnect. Any other
+                // malformed frame ends the client.
+                Err(ReadError::Wire(w)) if !matches!(w, WireError::Truncated { .. }) => {
+                    return Err((true, w.to_string()))
+                }
+                Err(e) => return Err((false, e.to_string())),
             }
         }
     });
@@ -489,7 +530,10 @@ async fn session(
             item = delay_rx.recv() => {
                 let Some((due, m, size)) = item else {
                     let why = match (&mut reader_task).await {
-                        Ok(Err(e)) => e,
+                        Ok(Err((true, e))) => {
+                            return Err(SessionError::Fatal(format!("bad frame from the server: {e}")))
+                        }
+                        Ok(Err((false, e))) => e,
                         _ => "the server closed the connection".into(),
                     };
                     return Ok(SessionEnd::Reconnect(why));

@@ -178,6 +178,28 @@ impl FrameReader {
     }
 }
 
+impl FrameReader {
+    /// Read and discard what the peer still sends (at most 1 MiB, for at most `timeout`), so
+    /// that closing afterwards does not reset the connection before the peer has read our
+    /// last frame.
+    pub async fn drain(&mut self, timeout: Duration) {
+        let FrameReader::Tcp(r) = self else {
+            return;
+        };
+        let mut buf = [0u8; 4096];
+        let mut left = 1usize << 20;
+        let _ = tokio::time::timeout(timeout, async {
+            while left > 0 {
+                match r.read(&mut buf).await {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => left = left.saturating_sub(n),
+                }
+            }
+        })
+        .await;
+    }
+}
+
 fn truncated(e: std::io::Error, needed: usize) -> ReadError {
     if e.kind() == std::io::ErrorKind::UnexpectedEof {
         ReadError::Wire(WireError::Truncated {
