@@ -1,4 +1,7 @@
-//! `psao bench trace`: ray-tracing throughput of every compiled backend on one AO ray set.
+//! `psao bench trace`: ray-tracing throughput of every compiled backend on one AO ray set;
+//! with `--dynamic`, the cost of animating the scene's structure ([`dynamic`]).
+
+mod dynamic;
 
 use crate::args::Resolution;
 use crate::scene_source::{SceneArgs, SceneInput};
@@ -31,9 +34,20 @@ pub struct BenchTraceArgs {
     /// Timed repetitions per case (the best is reported).
     #[arg(long, default_value_t = 3)]
     pub repeat: u32,
-    /// Print JSON (a list of `{backend, sorted, threads, query, mrays_per_s}`).
+    /// Print JSON (a list of `{backend, sorted, threads, query, mrays_per_s}`, or with
+    /// `--dynamic` one record per backend).
     #[arg(long)]
     pub json: bool,
+    /// Measure dynamic updates instead: per-frame top-level updates of the moving instances,
+    /// refit and rebuild times of skinned meshes, AO throughput after refits vs rebuilds.
+    #[arg(long)]
+    pub dynamic: bool,
+    /// Server frames (1/15 s apart) animated by `--dynamic`.
+    #[arg(long, default_value_t = 30)]
+    pub frames: usize,
+    /// `--dynamic`: rebuild a skinned mesh once refits raised its SAH cost by this factor.
+    #[arg(long, default_value_t = psao_trace::DEFAULT_MAX_COST_RATIO)]
+    pub max_cost_ratio: f32,
 }
 
 /// One measured case.
@@ -52,6 +66,9 @@ pub fn run(args: &BenchTraceArgs) -> Result<()> {
         bail!("--rays must be in 1..={MAX_RAYS}, got {}", args.rays);
     }
     let (input, path) = args.input.load()?;
+    if args.dynamic {
+        return dynamic::run(args, &input, &path);
+    }
     let unsorted = ao_ray_set(&input, &path, args)?;
     let order = sort_rays_spatially(&unsorted);
     let sorted: Vec<Ray> = order.iter().map(|&i| unsorted[i as usize]).collect();
