@@ -1,12 +1,249 @@
-//! `psao bench serve` (issue 4, in progress).
+//! `psao bench serve`: one `psao serve` and N headless `psao view` processes on loopback for
+//! a fixed number of client frames; reports per-client Mbit/s, server ms per frame and the
+//! updates coalesced because a client had no room.
 
-use anyhow::Result;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use crate::run::write_json;
 
 /// Arguments of `psao bench serve`.
 #[derive(clap::Args, Debug)]
-pub struct BenchServeArgs {}
+pub struct BenchServeArgs {
+    /// Number of clients.
+    #[arg(long, default_value_t = 8)]
+    pub clients: u32,
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = crate::scene_source::BUILTIN_SCENE)]
+    pub scene: String,
+    /// Camera path file (default: the scene's first path); client k starts k/N of the way
+    /// along it.
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Client frames per client (60 per second of scene time).
+    #[arg(long, default_value_t = 300)]
+    pub frames: u32,
+    /// Server frames per second.
+    #[arg(long, default_value_t = 30)]
+    pub hz: u32,
+    /// Points per unit area.
+    #[arg(long, default_value_t = 1024.0)]
+    pub points: f32,
+    /// Update codec.
+    #[arg(long, default_value = "compact")]
+    pub codec: String,
+    /// Rays per server frame at most.
+    #[arg(long)]
+    pub ray_budget: Option<u64>,
+    /// Clients' image size (their aspect shapes the culling frusta).
+    #[arg(long, default_value = "640x360")]
+    pub res: String,
+    /// Write the report as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// One client's numbers.
+#[derive(Debug, Serialize)]
+pub struct BenchClient {
+    /// Received Mbit per second of scene time.
+    pub mbit_s: f64,
+    /// Updates applied.
+    pub updates: u64,
+    /// Server frames coalesced into a later update for this client.
+    pub coalesced: u64,
+    /// Final state equal to the server's at the client's last update.
+    pub exact: bool,
+}
+
+/// What `psao bench serve` reports.
+#[derive(Debug, Serialize)]
+pub struct BenchServeReport {
+    /// Scene.
+    pub scene: String,
+    /// Clients.
+    pub clients: u32,
+    /// Server rate.
+    pub hz: u32,
+    /// Client frames each.
+    pub frames: u32,
+    /// Server frames stepped.
+    pub server_frames: u64,
+    /// Mean server ms per frame (step + per-client deltas + encode).
+    pub server_mean_ms: f64,
+    /// 95th percentile of it.
+    pub server_p95_ms: f64,
+    /// Mean of the step alone.
+    pub server_step_ms: f64,
+    /// Server frames started late (the previous one overran the period).
+    pub late_frames: u64,
+    /// Per client.
+    pub per_client: Vec<BenchClient>,
+}
+
+struct Guard(Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn read_json(path: &Path) -> Result<serde_json::Value> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(serde_json::from_str(&text)?)
+}
 
 /// Runs `psao bench serve`.
-pub fn run(_args: &BenchServeArgs) -> Result<()> {
-    anyhow::bail!("`psao bench serve` is not available yet")
+pub fn run(args: &BenchServeArgs) -> Result<()> {
+    if args.clients == 0 || args.frames == 0 {
+        bail!("--clients and --frames must be at least 1");
+    }
+    let exe = std::env::current_exe().context("cannot find the psao executable")?;
+    let dir = tempfile_dir()?;
+    let serve_json = dir.join("serve.json");
+    let mut serve = Command::new(&exe);
+    serve
+        .args([
+            "--log",
+            "warn",
+            "serve",
+            "--scene",
+            &args.scene,
+            "--listen",
+            "127.0.0.1:0",
+        ])
+        .args([
+            "--hz",
+            &args.hz.to_string(),
+            "--points",
+            &args.points.to_string(),
+        ])
+        .args(["--codec", &args.codec, "--once"])
+        .args(["--wait-clients", &args.clients.to_string()])
+        .arg("--json")
+        .arg(&serve_json)
+        .stdout(Stdio::piped());
+    if let Some(b) = args.ray_budget {
+        serve.args(["--ray-budget", &b.to_string()]);
+    }
+    let mut server = Guard(serve.spawn().context("cannot start psao serve")?);
+    let mut line = String::new();
+    let stdout = server.0.stdout.take().context("no server stdout")?;
+    BufReader::new(stdout).read_line(&mut line)?;
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .with_context(|| format!("psao serve did not start: {line:?}"))?
+        .to_string();
+    tracing::info!("server at {addr}; starting {} clients", args.clients);
+    let (input, path) = crate::scene_source::SceneArgs {
+        scene: args.scene.clone(),
+        path: args.path.clone(),
+    }
+    .load()?;
+    drop(input);
+    let total = path.frame_count() as u32;
+    let mut views = Vec::new();
+    for k in 0..args.clients {
+        let mut c = Command::new(&exe);
+        c.args([
+            "--log",
+            "warn",
+            "view",
+            "--connect",
+            &addr,
+            "--scene",
+            &args.scene,
+        ])
+        .args(["--frames", &args.frames.to_string(), "--res", &args.res])
+        .args(["--path-offset", &(k * total / args.clients).to_string()])
+        .arg("--json")
+        .arg(dir.join(format!("view_{k}.json")))
+        .stdout(Stdio::null());
+        if let Some(p) = &args.path {
+            c.arg("--path").arg(p);
+        }
+        views.push(Guard(c.spawn().context("cannot start psao view")?));
+    }
+    for (k, v) in views.iter_mut().enumerate() {
+        let status = v.0.wait()?;
+        if !status.success() {
+            bail!("client {k} failed ({status})");
+        }
+    }
+    let status = server.0.wait()?;
+    if !status.success() {
+        bail!("the server failed ({status})");
+    }
+    let s = read_json(&serve_json)?;
+    let server_clients = s["clients"].as_array().cloned().unwrap_or_default();
+    let coalesced_of = |id: &serde_json::Value| {
+        server_clients
+            .iter()
+            .filter(|c| c["id"] == *id)
+            .filter_map(|c| c["coalesced"].as_u64())
+            .sum::<u64>()
+    };
+    let mut per_client = Vec::new();
+    for k in 0..args.clients as usize {
+        let v = read_json(&dir.join(format!("view_{k}.json")))?;
+        per_client.push(BenchClient {
+            mbit_s: v["mbit_s"].as_f64().unwrap_or(0.0),
+            updates: v["updates"].as_u64().unwrap_or(0),
+            coalesced: v["client_ids"]
+                .as_array()
+                .map_or(0, |ids| ids.iter().map(coalesced_of).sum()),
+            exact: v["state_hash"] == v["server_state_hash"],
+        });
+    }
+    let report = BenchServeReport {
+        scene: args.scene.clone(),
+        clients: args.clients,
+        hz: args.hz,
+        frames: args.frames,
+        server_frames: s["frames"].as_u64().unwrap_or(0),
+        server_mean_ms: s["mean_ms"].as_f64().unwrap_or(0.0),
+        server_p95_ms: s["p95_ms"].as_f64().unwrap_or(0.0),
+        server_step_ms: s["mean_step_ms"].as_f64().unwrap_or(0.0),
+        late_frames: s["late_frames"].as_u64().unwrap_or(0),
+        per_client,
+    };
+    println!(
+        "{} clients at {} Hz on {}: {} server frames, {:.1} ms mean / {:.1} ms p95 per frame \
+         ({:.1} ms step), {} late",
+        report.clients,
+        report.hz,
+        report.scene,
+        report.server_frames,
+        report.server_mean_ms,
+        report.server_p95_ms,
+        report.server_step_ms,
+        report.late_frames
+    );
+    println!("client  Mbit/s  updates  coalesced  exact");
+    for (k, c) in report.per_client.iter().enumerate() {
+        println!(
+            "{k:>6}  {:>6.2}  {:>7}  {:>9}  {}",
+            c.mbit_s, c.updates, c.coalesced, c.exact
+        );
+    }
+    if let Some(json) = &args.json {
+        write_json(json, &report)?;
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
+/// A fresh scratch folder for the children's JSON files.
+fn tempfile_dir() -> Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("psao-bench-serve-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    Ok(dir)
 }

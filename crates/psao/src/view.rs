@@ -61,6 +61,9 @@ pub struct ViewArgs {
     /// Give up after this many seconds without a connection.
     #[arg(long, default_value_t = 30.0)]
     pub retry_secs: f64,
+    /// Start this many frames into the camera path (wrapping around at its end).
+    #[arg(long, default_value_t = 0)]
+    pub path_offset: u32,
     /// Fault injection: drop the connection once, at this client frame.
     #[arg(long, hide = true)]
     pub drop_at: Option<u32>,
@@ -98,6 +101,8 @@ pub struct ViewStats {
     pub last_server_frame: u64,
     /// Wall-clock seconds.
     pub seconds: f64,
+    /// The server's id of every session, in order.
+    pub client_ids: Vec<u32>,
 }
 
 /// From the network task to the frame loop.
@@ -153,7 +158,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let start = Instant::now();
     let mut lockstep = None;
     for frame in 0..frames {
-        let camera = path.camera_at_frame(frame as usize);
+        let camera = path.camera_at_frame(((frame + args.path_offset) % total) as usize);
         if args.drop_at == Some(frame) {
             let _ = out_tx.send(Outgoing::Drop);
         }
@@ -221,6 +226,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         snapshots: client.snapshots,
         last_server_frame: client.last_frame,
         seconds: start.elapsed().as_secs_f64(),
+        client_ids: client.ids.clone(),
     };
     println!(
         "{} frames, {:.2} Mbit/s, {} reconnects, state {}",
@@ -275,6 +281,7 @@ struct Client {
     answered: Option<u32>,
     record: Option<PathBuf>,
     recorded: u32,
+    ids: Vec<u32>,
 }
 
 impl Default for Client {
@@ -292,6 +299,7 @@ impl Default for Client {
             answered: None,
             record: None,
             recorded: 0,
+            ids: Vec::new(),
         }
     }
 }
@@ -311,6 +319,7 @@ impl Client {
                 self.state = ClientState::new(&table);
                 self.codec = Some(codec);
                 self.sessions += 1;
+                self.ids.push(w.client_id);
                 self.answered = None;
                 tracing::info!(
                     "session {} with the server: client {}, codec {}, {} Hz, lockstep {}",
