@@ -153,6 +153,8 @@ pub struct Animator {
     instance_nodes: Vec<Option<usize>>,
     /// Per instance: its stored transform (used while it does not move).
     rest_transforms: Vec<Affine3A>,
+    /// Per instance: its mesh's local bounds (min, max); empty meshes have min > max.
+    local_bounds: Vec<(Vec3, Vec3)>,
     motion: Vec<Motion>,
     rigs: Vec<SkinRig>,
 }
@@ -277,6 +279,11 @@ impl Animator {
             walkers,
             instance_nodes: scene.instances.iter().map(|i| i.node).collect(),
             rest_transforms: scene.instances.iter().map(|i| i.transform).collect(),
+            local_bounds: scene
+                .instances
+                .iter()
+                .map(|i| bounds(&scene.meshes[i.mesh].positions))
+                .collect(),
             motion,
             rigs,
         })
@@ -290,6 +297,32 @@ impl Animator {
     /// Whether anything moves at all.
     pub fn is_dynamic(&self) -> bool {
         self.motion.iter().any(|&m| m != Motion::Static)
+    }
+
+    /// World-space bounds (min, max) of instance `i` in `pose` (skinned vertices where the
+    /// pose has them, else the mesh's box under the instance transform); `None` when `i` is
+    /// out of range or the mesh has no vertices.
+    pub fn world_bounds(&self, pose: &ScenePose, i: usize) -> Option<(Vec3, Vec3)> {
+        let transform = *pose.transforms.get(i)?;
+        let (lo, hi) = match pose.skinned.get(i).and_then(Option::as_ref) {
+            Some(g) => bounds(&g.positions),
+            None => *self.local_bounds.get(i)?,
+        };
+        if lo.cmpgt(hi).any() {
+            return None;
+        }
+        let corners = (0..8).map(|c| {
+            Vec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            )
+        });
+        Some(bounds(
+            &corners
+                .map(|p| transform.transform_point3(p))
+                .collect::<Vec<_>>(),
+        ))
     }
 
     /// The pose at scene time `time` (seconds).
@@ -517,6 +550,14 @@ fn skin_rig(
             .collect(),
         mesh: bind,
     })
+}
+
+/// Axis-aligned bounds (min, max) of `points`; min > max when empty.
+fn bounds(points: &[Vec3]) -> (Vec3, Vec3) {
+    points.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    )
 }
 
 /// `transform⁻¹`, or the identity when it is singular or non-finite.

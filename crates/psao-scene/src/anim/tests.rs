@@ -322,6 +322,23 @@ fn two_joint_skin_blends_hand_computed_matrices() {
 }
 
 #[test]
+fn world_bounds_follow_rigid_and_skinned_poses() {
+    let scene = two_joint_scene([0.5, 0.5, 0.0, 0.0]);
+    let a = Animator::new(&scene).unwrap();
+    // Bent: the vertices span x in [-0.5, 0] and y in [0.5, 1.1] around the skeleton.
+    let (lo, hi) = a.world_bounds(&a.pose_at(1.5), 0).unwrap();
+    assert!(
+        close(lo, Vec3::new(-0.5, 0.5, 0.0)) && close(hi, Vec3::new(0.0, 1.1, 0.0)),
+        "{lo} {hi}"
+    );
+    let slider = sliding_scene();
+    let a = Animator::new(&slider).unwrap();
+    let (lo, hi) = a.world_bounds(&a.pose_at(1.0), 0).unwrap();
+    assert!(close(lo, Vec3::X) && close(hi, Vec3::X));
+    assert!(a.world_bounds(&a.pose_at(1.0), 1).is_none());
+}
+
+#[test]
 fn skin_weights_are_renormalised() {
     let normalised = Animator::new(&two_joint_scene([0.5, 0.5, 0.0, 0.0])).unwrap();
     let raw = Animator::new(&two_joint_scene([2.0, 2.0, 0.0, 0.0])).unwrap();
