@@ -14,6 +14,16 @@ pub fn voxel_index(x: usize, y: usize, z: usize) -> usize {
     x + BRICK * (y + BRICK * z)
 }
 
+/// Component-wise floor to integers without a libm call (inputs well inside the i32 range).
+#[inline]
+pub fn floor_ivec(p: glam::Vec3) -> IVec3 {
+    let f = |x: f32| {
+        let i = x as i32;
+        i - ((i as f32) > x) as i32
+    };
+    IVec3::new(f(p.x), f(p.y), f(p.z))
+}
+
 /// What the values of a grid mean.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GridClass {

@@ -126,7 +126,7 @@ impl Image {
 }
 
 /// Edge of the pixel tiles rendered by one sampler (so decoded bricks are reused).
-const TILE: u32 = 8;
+const TILE: u32 = 16;
 
 fn check(vol: &Volume, cam: &Camera, st: &RenderSettings) -> Result<()> {
     if st.width == 0 || st.height == 0 || st.frame >= vol.frames() {
@@ -284,9 +284,8 @@ impl DenseGrid {
     }
 
     fn trilinear(&self, p: Vec3, background: f32) -> f32 {
-        let base = p.floor();
-        let f = p - base;
-        let b = base.as_ivec3();
+        let b = crate::grid::floor_ivec(p);
+        let f = p - b.as_vec3();
         let c = |dx, dy, dz| self.at(b + IVec3::new(dx, dy, dz), background);
         let x0 = c(0, 0, 0) + (c(1, 0, 0) - c(0, 0, 0)) * f.x;
         let x1 = c(0, 1, 0) + (c(1, 1, 0) - c(0, 1, 0)) * f.x;

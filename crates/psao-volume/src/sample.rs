@@ -3,13 +3,15 @@
 //! (and usually once per tile of neighbouring rays). `f32` bricks are read in place.
 
 use crate::codec::BrickFormat;
-use crate::grid::{voxel_index, BRICK_VOXELS};
+use crate::grid::{floor_ivec, voxel_index, BRICK_VOXELS};
 use crate::tree::Locate;
 use crate::volume::Volume;
 use glam::{IVec3, Vec3};
 
 /// Decoded bricks kept per sampler (direct-mapped by brick index).
-const SLOTS: usize = 128;
+const SLOTS: usize = 256;
+/// Located cells remembered per sampler.
+const CELLS: usize = 4;
 
 /// A per-thread sampler of one frame of a volume.
 pub struct Sampler<'a> {
@@ -17,8 +19,9 @@ pub struct Sampler<'a> {
     frame: usize,
     keys: [u32; SLOTS],
     slots: Vec<[f32; BRICK_VOXELS]>,
-    last_cell: IVec3,
-    last_leaf: Option<u32>,
+    /// Recently located 8³ cells and their L3 nodes (round robin).
+    cells: [(IVec3, Option<u32>); CELLS],
+    next_cell: usize,
     /// Bricks decoded so far (for statistics).
     pub decodes: u64,
 }
@@ -36,8 +39,8 @@ impl<'a> Sampler<'a> {
             } else {
                 Vec::new()
             },
-            last_cell: IVec3::MAX,
-            last_leaf: None,
+            cells: [(IVec3::MAX, None); CELLS],
+            next_cell: 0,
             decodes: 0,
         }
     }
@@ -52,18 +55,21 @@ impl<'a> Sampler<'a> {
         self.frame
     }
 
-    /// L3 node containing voxel `p`, if any (the last answer is remembered).
+    /// L3 node containing voxel `p`, if any (the last few answers are remembered, so
+    /// trilinear samples across a brick border do not search the tree each time).
     #[inline]
     pub fn leaf_at(&mut self, p: IVec3) -> Option<u32> {
         let cell: IVec3 = p >> 3i32;
-        if cell != self.last_cell {
-            self.last_cell = cell;
-            self.last_leaf = match self.vol.tree.locate(self.frame, p) {
-                Locate::Leaf(i, _) => Some(i),
-                _ => None,
-            };
+        if let Some(&(_, leaf)) = self.cells.iter().find(|(c, _)| *c == cell) {
+            return leaf;
         }
-        self.last_leaf
+        let leaf = match self.vol.tree.locate(self.frame, p) {
+            Locate::Leaf(i, _) => Some(i),
+            _ => None,
+        };
+        self.cells[self.next_cell] = (cell, leaf);
+        self.next_cell = (self.next_cell + 1) % CELLS;
+        leaf
     }
 
     /// Value of voxel `v` (0..512) of L3 node `leaf`.
@@ -105,9 +111,8 @@ impl<'a> Sampler<'a> {
     /// Trilinear value at index-space point `p` (voxel centres at integer coordinates).
     #[inline]
     pub fn trilinear(&mut self, p: Vec3) -> f32 {
-        let base = p.floor();
-        let f = p - base;
-        let b = base.as_ivec3();
+        let b = floor_ivec(p);
+        let f = p - b.as_vec3();
         let l: IVec3 = b & 7i32;
         let mut c = [0.0f32; 8];
         if l.x < 7 && l.y < 7 && l.z < 7 {
@@ -139,9 +144,24 @@ impl<'a> Sampler<'a> {
                 }
             }
         } else {
+            // Corners in up to eight bricks: locate each distinct brick once.
+            let cross =
+                (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
+            let mut leaves = [None; 8];
             for (k, v) in c.iter_mut().enumerate() {
-                *v = self
-                    .voxel(b + IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32));
+                let d = IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
+                let p = b + d;
+                let key = k & cross;
+                if key == k {
+                    leaves[k] = self.leaf_at(p);
+                }
+                *v = match leaves[key] {
+                    Some(leaf) => {
+                        let q: IVec3 = p & 7i32;
+                        self.leaf_value(leaf, voxel_index(q.x as usize, q.y as usize, q.z as usize))
+                    }
+                    None => self.vol.background,
+                };
             }
         }
         let x0 = c[0] + (c[1] - c[0]) * f.x;

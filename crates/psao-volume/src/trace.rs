@@ -5,7 +5,7 @@
 //! Rays are given in world space with a unit direction; they are mapped to index space with
 //! the same parameter `t`, so all distances are world distances.
 
-use crate::grid::{GridClass, BRICK};
+use crate::grid::{floor_ivec, GridClass, BRICK};
 use crate::rng::Rng;
 use crate::sample::Sampler;
 use crate::tree::{Locate, L2_SPAN};
@@ -86,9 +86,20 @@ pub fn march(
     };
     let (mut t, end) = (a.max(t_min), b.min(t_max));
     let eps = 1e-4 * (1.0 + end.abs());
+    // The L2 node the previous point was in (origin, index), to skip the L1 level.
+    let mut current: Option<(IVec3, usize)> = None;
+    let top = vol.tree.l1[frame].origin;
     while t < end {
-        let p = ray.at(t + eps).floor().as_ivec3();
-        let (cell, size, leaf) = match vol.tree.locate(frame, p) {
+        let p = floor_ivec(ray.at(t + eps));
+        let l2_origin = top + (((p - top) >> 7i32) << 7i32);
+        let located = match current {
+            Some((o, n2)) if o == l2_origin => vol.tree.locate_in_l2(n2, o, p),
+            _ => {
+                current = vol.tree.l2_index(frame, p).map(|n2| (l2_origin, n2));
+                vol.tree.locate(frame, p)
+            }
+        };
+        let (cell, size, leaf) = match located {
             Locate::Outside => return,
             Locate::EmptyL2(c) => (c, L2_SPAN, None),
             Locate::EmptyL3(c) => (c, BRICK as i32, None),

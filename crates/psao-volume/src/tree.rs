@@ -275,6 +275,23 @@ impl FlatTree {
         )
     }
 
+    /// Like [`FlatTree::locate`] for a point known to lie in L2 node `n2` whose origin is
+    /// `origin` (skips the L1 level).
+    #[inline]
+    pub fn locate_in_l2(&self, n2: usize, origin: IVec3, p: IVec3) -> Locate {
+        let node = &self.l2[n2];
+        let c2: IVec3 = (p - origin) >> 3i32;
+        let b2 = (c2.x + 16 * (c2.y + 16 * c2.z)) as usize;
+        let cell = origin + c2 * BRICK as i32;
+        if !test(&node.mask, b2) {
+            return Locate::EmptyL3(cell);
+        }
+        Locate::Leaf(
+            node.first + rank(&node.mask, node.prefix[b2 / 64] as u32, b2),
+            cell,
+        )
+    }
+
     /// Index of the L2 node containing `p` in `frame`, if any.
     pub fn l2_index(&self, frame: usize, p: IVec3) -> Option<usize> {
         let top = &self.l1[frame];

@@ -22,8 +22,8 @@ pub struct Volume {
     pub tree: FlatTree,
     /// The shared brick pool.
     pub pool: BrickPool,
-    /// Per L3 node: maximum decoded value over its brick and its +x/+y/+z neighbours (what
-    /// trilinear samples inside the node can reach).
+    /// Per L3 node: maximum decoded value over the 9³ voxels that trilinear samples inside
+    /// the node can reach (its brick and the touching layers of its +x/+y/+z neighbours).
     pub(crate) l3_max: Vec<f32>,
     /// Per L3 node: minimum over the same voxels (level sets skip nodes with a positive minimum).
     pub(crate) l3_min: Vec<f32>,
@@ -164,14 +164,31 @@ impl Volume {
                 "an L3 node points past the brick pool".into(),
             ));
         }
-        let brick_range: Vec<(f32, f32)> = (0..bricks as u32)
+        // Per brick and per corner offset d (bit 0: x, 1: y, 2: z): value range over the
+        // voxels whose local coordinate is 0 along the axes set in d (d = 0: whole brick).
+        // A trilinear sample in a node reads its brick and these parts of its +neighbours.
+        let brick_range: Vec<[(f32, f32); 8]> = (0..bricks as u32)
             .into_par_iter()
             .map(|i| {
                 let mut b = [0.0; BRICK_VOXELS];
                 pool.decode(i, &mut b);
-                b.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |a, &v| {
-                    (a.0.min(v), a.1.max(v))
-                })
+                let mut r = [(f32::INFINITY, f32::NEG_INFINITY); 8];
+                for z in 0..BRICK {
+                    for y in 0..BRICK {
+                        for x in 0..BRICK {
+                            let v = b[crate::grid::voxel_index(x, y, z)];
+                            let on = (x == 0) as usize
+                                | ((y == 0) as usize) << 1
+                                | ((z == 0) as usize) << 2;
+                            for (d, e) in r.iter_mut().enumerate() {
+                                if d & on == d {
+                                    *e = (e.0.min(v), e.1.max(v));
+                                }
+                            }
+                        }
+                    }
+                }
+                r
             })
             .collect();
         let mut bounds = Vec::new();
@@ -183,11 +200,13 @@ impl Volume {
             for (_, i, o) in tree.leaves().filter(|(f, _, _)| *f == frame) {
                 lo = lo.min(o);
                 hi = hi.max(o + IVec3::splat(BRICK as i32));
-                let (mut mn, mut mx) = brick_range[tree.l3[i as usize].brick() as usize];
-                for d in 1..8 {
-                    let n = o + IVec3::new(d & 1, (d >> 1) & 1, d >> 2) * BRICK as i32;
-                    let (a, b) = match tree.locate(frame, n) {
-                        Locate::Leaf(j, _) => brick_range[tree.l3[j as usize].brick() as usize],
+                let (mut mn, mut mx) = brick_range[tree.l3[i as usize].brick() as usize][0];
+                // `d` is both the neighbour offset and the part of its brick that is read.
+                #[allow(clippy::needless_range_loop)]
+                for d in 1..8usize {
+                    let off = IVec3::new((d & 1) as i32, ((d >> 1) & 1) as i32, (d >> 2) as i32);
+                    let (a, b) = match tree.locate(frame, o + off * BRICK as i32) {
+                        Locate::Leaf(j, _) => brick_range[tree.l3[j as usize].brick() as usize][d],
                         _ => (background, background),
                     };
                     mn = mn.min(a);

@@ -476,19 +476,45 @@ fn table(files: &[PathBuf], cluster: &[String], seed: u64) -> Result<()> {
     Ok(())
 }
 
-fn best_time(
-    reps: u32,
-    mut f: impl FnMut() -> Result<psao_volume::Image>,
-) -> Result<(f64, psao_volume::Image)> {
-    let mut best = f64::INFINITY;
-    let mut img = None;
+/// CPU seconds used by this process so far (all threads), from `/proc/self/stat` (Linux).
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // Fields 14 and 15 of the full line (utime, stime) are 11 and 12 after the name.
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+/// Best wall and CPU time of two renderers, run alternately `reps` times each.
+struct Pair {
+    wall: [f64; 2],
+    cpu: [f64; 2],
+    images: Vec<psao_volume::Image>,
+}
+
+type Job<'a> = Box<dyn Fn() -> Result<psao_volume::Image> + 'a>;
+
+fn race(reps: u32, jobs: [Job; 2]) -> Result<Pair> {
+    let mut p = Pair {
+        wall: [f64::INFINITY; 2],
+        cpu: [f64::INFINITY; 2],
+        images: Vec::new(),
+    };
     for _ in 0..reps {
-        let t = Instant::now();
-        let i = f()?;
-        best = best.min(t.elapsed().as_secs_f64());
-        img = Some(i);
+        for (k, job) in jobs.iter().enumerate() {
+            let (t, c) = (Instant::now(), cpu_seconds());
+            let img = job()?;
+            p.wall[k] = p.wall[k].min(t.elapsed().as_secs_f64());
+            if let (Some(a), Some(b)) = (c, cpu_seconds()) {
+                p.cpu[k] = p.cpu[k].min(b - a);
+            }
+            if p.images.len() < 2 {
+                p.images.push(img);
+            }
+        }
     }
-    Ok((best, img.context("no repetitions")?))
+    Ok(p)
 }
 
 fn bench(file: &Path, w: u32, h: u32, reps: u32) -> Result<()> {
@@ -497,30 +523,44 @@ fn bench(file: &Path, w: u32, h: u32, reps: u32) -> Result<()> {
     let (bc7v, _) = Volume::build(&frames, BrickFormat::Bc7, None)?;
     let cam = Camera::framing(f32v.world_bounds(0), 40.0);
     let fog = RenderSettings::new(&f32v, w, h, RenderMode::Fog);
-    let (t32, i32_) = best_time(reps, || Ok(render::render(&f32v, &cam, &fog)?))?;
-    let (t7, i7) = best_time(reps, || Ok(render::render(&bc7v, &cam, &fog)?))?;
+    let p = race(
+        reps,
+        [
+            Box::new(|| Ok(render::render(&f32v, &cam, &fog)?)),
+            Box::new(|| Ok(render::render(&bc7v, &cam, &fog)?)),
+        ],
+    )?;
     println!(
-        "{}: fog {w}x{h}: f32 pool {:.1} ms, bc7 pool {:.1} ms, speed bc7/f32 = {:.2}x (image mean abs diff {:.4})",
+        "{}: fog {w}x{h}: f32 pool {:.1} ms ({:.2} CPU s), bc7 pool {:.1} ms ({:.2} CPU s): speed bc7/f32 = {:.2}x wall, {:.2}x CPU (image mean abs diff {:.4})",
         file.display(),
-        t32 * 1e3,
-        t7 * 1e3,
-        t32 / t7,
-        i32_.mean_abs_diff(&i7)
+        p.wall[0] * 1e3,
+        p.cpu[0],
+        p.wall[1] * 1e3,
+        p.cpu[1],
+        p.wall[0] / p.wall[1],
+        p.cpu[0] / p.cpu[1],
+        p.images[0].mean_abs_diff(&p.images[1])
     );
     if f32v.class == GridClass::LevelSet {
         let ls = RenderSettings::new(&f32v, w, h, RenderMode::LevelSet);
         let dense = DenseGrid::from_volume(&f32v, 0);
-        let (th, ih) = best_time(reps, || Ok(render::render(&f32v, &cam, &ls)?))?;
-        let (td, id) = best_time(reps, || {
-            Ok(render::render_dense_level_set(&f32v, &dense, &cam, &ls)?)
-        })?;
+        let p = race(
+            reps,
+            [
+                Box::new(|| Ok(render::render(&f32v, &cam, &ls)?)),
+                Box::new(|| Ok(render::render_dense_level_set(&f32v, &dense, &cam, &ls)?)),
+            ],
+        )?;
         println!(
-            "{}: level set {w}x{h}: HDDA {:.1} ms, dense fixed-step march {:.1} ms, speed-up {:.2}x (image mean abs diff {:.4})",
+            "{}: level set {w}x{h}: HDDA {:.1} ms ({:.2} CPU s), dense fixed-step march {:.1} ms ({:.2} CPU s): speed-up {:.2}x wall, {:.2}x CPU (image mean abs diff {:.4})",
             file.display(),
-            th * 1e3,
-            td * 1e3,
-            td / th,
-            ih.mean_abs_diff(&id)
+            p.wall[0] * 1e3,
+            p.cpu[0],
+            p.wall[1] * 1e3,
+            p.cpu[1],
+            p.wall[1] / p.wall[0],
+            p.cpu[1] / p.cpu[0],
+            p.images[0].mean_abs_diff(&p.images[1])
         );
     }
     Ok(())
