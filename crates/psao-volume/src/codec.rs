@@ -6,9 +6,11 @@
 //! * `Bc7`: four consecutive z voxels packed into the RGBA channels of one texel, so a brick is
 //!   two 8×8 texel slices of four BC7 blocks each (128 bytes, 2 bits per voxel).
 //!
-//! Normalised formats store `(v - lo) / (hi - lo)`; decoding maps back to values. The BC
-//! formats also lead each brick with two bytes: its own min and max on that 0..=255 scale,
-//! and the blocks use the full 0..=255 code range between them (0.03 bit per voxel).
+//! Normalised formats store `(v - lo) / (hi - lo)`; decoding maps back to values. BC4 bricks
+//! lead with two bytes, their own min and max on that 0..=255 scale, and the blocks use the
+//! full code range between them. BC7 pools carry a sparse refinement layer: the 1/64 of the
+//! bricks with the largest BC7 error also store their residual as one more BC7 brick over
+//! its own range (two `f32`), found by binary search of the sorted refined brick list.
 
 use crate::grid::{voxel_index, BRICK_VOXELS};
 use rayon::prelude::*;
@@ -45,7 +47,7 @@ impl BrickFormat {
             BrickFormat::F16 => 1024,
             BrickFormat::Unorm8 => 512,
             BrickFormat::Bc4 => 2 + 256,
-            BrickFormat::Bc7 => 2 + 128,
+            BrickFormat::Bc7 => 128,
         }
     }
 
@@ -93,7 +95,16 @@ pub struct BrickPool {
     pub hi: f32,
     /// Encoded bricks, `format.brick_bytes()` each.
     pub data: Vec<u8>,
+    /// BC7 only: sorted indices of the refined bricks.
+    pub refined: Vec<u32>,
+    /// BC7 only: per refined brick, residual min and max (`f32`) and 128 bytes of BC7 blocks.
+    pub refinement: Vec<u8>,
 }
+
+/// Bytes of one refinement record.
+pub const REFINEMENT_BYTES: usize = 8 + 128;
+/// One brick in this many gets a BC7 refinement.
+const REFINE_EVERY: usize = 64;
 
 /// Bricks per encoder call (one BC surface).
 const CHUNK: usize = 64;
@@ -138,12 +149,80 @@ impl BrickPool {
         data.par_chunks_mut(bb * CHUNK)
             .zip(bricks.par_chunks(CHUNK))
             .for_each(|(out, src)| encode_chunk(format, src, lo, scale, out));
-        BrickPool {
+        let mut pool = BrickPool {
             format,
             lo,
             hi,
             data,
+            refined: Vec::new(),
+            refinement: Vec::new(),
+        };
+        if format == BrickFormat::Bc7 {
+            pool.refine(bricks);
         }
+        pool
+    }
+
+    /// Adds BC7 residual bricks for the bricks with the largest squared error.
+    fn refine(&mut self, bricks: &[[f32; BRICK_VOXELS]]) {
+        let count = bricks.len() / REFINE_EVERY;
+        if count == 0 {
+            return;
+        }
+        let residuals: Vec<[f32; BRICK_VOXELS]> = bricks
+            .par_iter()
+            .enumerate()
+            .map(|(i, b)| {
+                let mut out = [0.0; BRICK_VOXELS];
+                self.decode(i as u32, &mut out);
+                for (o, v) in out.iter_mut().zip(b) {
+                    *o = v - *o;
+                }
+                out
+            })
+            .collect();
+        let se = |r: &[f32; BRICK_VOXELS]| r.iter().map(|e| (e * e) as f64).sum::<f64>();
+        let mut order: Vec<u32> = (0..bricks.len() as u32).collect();
+        order.sort_by(|&a, &b| se(&residuals[b as usize]).total_cmp(&se(&residuals[a as usize])));
+        let mut chosen: Vec<u32> = order[..count]
+            .iter()
+            .copied()
+            .filter(|&i| se(&residuals[i as usize]) > 0.0)
+            .collect();
+        chosen.sort_unstable();
+        let picked: Vec<[f32; BRICK_VOXELS]> =
+            chosen.iter().map(|&i| residuals[i as usize]).collect();
+        let ranges: Vec<(f32, f32)> = picked
+            .iter()
+            .map(|r| {
+                r.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |a, &v| {
+                    (a.0.min(v), a.1.max(v))
+                })
+            })
+            .collect();
+        let blocks: Vec<Vec<u8>> = picked
+            .par_chunks(CHUNK)
+            .zip(ranges.par_chunks(CHUNK))
+            .map(|(src, rg)| {
+                let per: Vec<(f32, f32)> = rg
+                    .iter()
+                    .map(|&(a, b)| (a, if b > a { 1.0 / (b - a) } else { 0.0 }))
+                    .collect();
+                encode_bc7(src, &per)
+            })
+            .collect();
+        let blocks: Vec<u8> = blocks.concat();
+        for ((r, b), _) in ranges.iter().zip(blocks.chunks_exact(128)).zip(&chosen) {
+            self.refinement.extend_from_slice(&r.0.to_le_bytes());
+            self.refinement.extend_from_slice(&r.1.to_le_bytes());
+            self.refinement.extend_from_slice(b);
+        }
+        self.refined = chosen;
+    }
+
+    /// All bytes of the pool (bricks, refined list and refinement records).
+    pub fn byte_size(&self) -> usize {
+        self.data.len() + 4 * self.refined.len() + self.refinement.len()
     }
 
     /// Number of bricks.
@@ -200,20 +279,12 @@ impl BrickPool {
                 }
             }
             BrickFormat::Bc7 => {
-                let (lo, span) = sub_range(b, lo, span);
-                let mut px = [0u8; 64];
-                for (k, block) in b[2..].chunks_exact(16).enumerate() {
-                    bcdec_rs::bc7(block, &mut px, 16);
-                    let (row, x0) = (k / 2, (k % 2) * 4);
-                    let (zq, y0) = (row / 2, (row % 2) * 4);
-                    for dy in 0..4 {
-                        for dx in 0..4 {
-                            for c in 0..4 {
-                                out[voxel_index(x0 + dx, y0 + dy, zq * 4 + c)] =
-                                    lo + px[(dy * 4 + dx) * 4 + c] as f32 * span;
-                            }
-                        }
-                    }
+                decode_bc7(b, lo, span, out, false);
+                if let Ok(k) = self.refined.binary_search(&i) {
+                    let r = &self.refinement[k * REFINEMENT_BYTES..(k + 1) * REFINEMENT_BYTES];
+                    let r0 = f32::from_le_bytes([r[0], r[1], r[2], r[3]]);
+                    let r1 = f32::from_le_bytes([r[4], r[5], r[6], r[7]]);
+                    decode_bc7(&r[8..], r0, (r1 - r0) / 255.0, out, true);
                 }
             }
         }
@@ -237,18 +308,6 @@ impl BrickPool {
                 Some(self.lo + self.data[at + voxel] as f32 * ((self.hi - self.lo) / 255.0))
             }
             BrickFormat::Bc4 | BrickFormat::Bc7 => None,
-        }
-    }
-
-    /// Keeps only the bricks listed in `keep` (in that order).
-    pub fn select(&self, keep: &[u32]) -> BrickPool {
-        let mut data = Vec::with_capacity(keep.len() * self.format.brick_bytes());
-        for &i in keep {
-            data.extend_from_slice(self.brick(i));
-        }
-        BrickPool {
-            data,
-            ..self.clone()
         }
     }
 }
@@ -301,34 +360,53 @@ fn encode_chunk(
             interleave(&ranges, &intel_tex_2::bc4::compress_blocks(&surface), out);
         }
         BrickFormat::Bc7 => {
-            // Surface: 8 texels wide, 16 rows per brick (row = 8 zq + y), RGBA = z 4 zq + c.
-            let mut px = vec![0u8; src.len() * BRICK_VOXELS];
-            let mut ranges = Vec::with_capacity(src.len());
-            for (b, brick) in src.iter().enumerate() {
-                let (r, lo, scale) = brick_range(brick, lo, scale);
-                ranges.push(r);
-                for zq in 0..2 {
-                    for y in 0..8 {
-                        for x in 0..8 {
-                            for c in 0..4 {
-                                px[b * 512 + ((zq * 8 + y) * 8 + x) * 4 + c] =
-                                    to_unorm(brick[voxel_index(x, y, zq * 4 + c)], lo, scale);
-                            }
-                        }
+            let per = vec![(lo, scale); src.len()];
+            out.copy_from_slice(&encode_bc7(src, &per));
+        }
+    }
+}
+
+/// BC7-encodes bricks, four z voxels per RGBA texel: the surface is 8 texels wide with 16
+/// rows per brick (row = 8 zq + y, channel c = z - 4 zq). Brick `b` maps `v` to
+/// `(v - per[b].0) * per[b].1` on 0..=1.
+fn encode_bc7(src: &[[f32; BRICK_VOXELS]], per: &[(f32, f32)]) -> Vec<u8> {
+    let mut px = vec![0u8; src.len() * BRICK_VOXELS];
+    for (b, (brick, &(lo, scale))) in src.iter().zip(per).enumerate() {
+        for zq in 0..2 {
+            for y in 0..8 {
+                for x in 0..8 {
+                    for c in 0..4 {
+                        px[b * 512 + ((zq * 8 + y) * 8 + x) * 4 + c] =
+                            to_unorm(brick[voxel_index(x, y, zq * 4 + c)], lo, scale);
                     }
                 }
             }
-            let surface = intel_tex_2::RgbaSurface {
-                data: &px,
-                width: 8,
-                height: (src.len() * 16) as u32,
-                stride: 32,
-            };
-            let blocks = intel_tex_2::bc7::compress_blocks(
-                &intel_tex_2::bc7::alpha_basic_settings(),
-                &surface,
-            );
-            interleave(&ranges, &blocks, out);
+        }
+    }
+    let surface = intel_tex_2::RgbaSurface {
+        data: &px,
+        width: 8,
+        height: (src.len() * 16) as u32,
+        stride: 32,
+    };
+    intel_tex_2::bc7::compress_blocks(&intel_tex_2::bc7::alpha_basic_settings(), &surface)
+}
+
+/// Decodes one BC7 brick (128 bytes) as `lo + code · span`, added to `out` if `add`.
+fn decode_bc7(b: &[u8], lo: f32, span: f32, out: &mut [f32; BRICK_VOXELS], add: bool) {
+    let mut px = [0u8; 64];
+    for (k, block) in b.chunks_exact(16).enumerate() {
+        bcdec_rs::bc7(block, &mut px, 16);
+        let (row, x0) = (k / 2, (k % 2) * 4);
+        let (zq, y0) = (row / 2, (row % 2) * 4);
+        for dy in 0..4 {
+            for dx in 0..4 {
+                for c in 0..4 {
+                    let v = lo + px[(dy * 4 + dx) * 4 + c] as f32 * span;
+                    let o = &mut out[voxel_index(x0 + dx, y0 + dy, zq * 4 + c)];
+                    *o = if add { *o + v } else { v };
+                }
+            }
         }
     }
 }

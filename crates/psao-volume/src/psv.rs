@@ -5,9 +5,10 @@
 //! checksum of the payload `u64`, payload. The payload holds class, format, transform,
 //! background and value range, then the L1 nodes (origin, mask, first child), the L2 nodes
 //! (mask, first child, first mask), the L3 nodes (brick | has-mask bit), the coded
-//! mask table and the brick pool. Rank prefixes and majorants are rebuilt on load.
+//! mask table, the brick pool and the BC7 refinement layer (count, brick indices, records).
+//! Rank prefixes and majorants are rebuilt on load.
 
-use crate::codec::{BrickFormat, BrickPool};
+use crate::codec::{BrickFormat, BrickPool, REFINEMENT_BYTES};
 use crate::error::{Result, VolumeError};
 use crate::grid::{GridClass, Transform};
 use crate::mask;
@@ -75,6 +76,11 @@ pub fn to_bytes(vol: &Volume) -> Vec<u8> {
     p.extend_from_slice(&t.masks);
     p.extend_from_slice(&(vol.pool.data.len() as u64).to_le_bytes());
     p.extend_from_slice(&vol.pool.data);
+    p.extend_from_slice(&(vol.pool.refined.len() as u32).to_le_bytes());
+    for i in &vol.pool.refined {
+        p.extend_from_slice(&i.to_le_bytes());
+    }
+    p.extend_from_slice(&vol.pool.refinement);
     let mut out = Vec::with_capacity(HEADER + p.len());
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
@@ -233,6 +239,10 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Volume> {
     tree.masks = r.take(mask_len)?.to_vec();
     let pool_len = r.u64()? as usize;
     let data = r.take(pool_len)?.to_vec();
+    let refined: Vec<u32> = (0..r.count(4 + REFINEMENT_BYTES)?)
+        .map(|_| r.u32())
+        .collect::<Result<_>>()?;
+    let refinement = r.take(refined.len() * REFINEMENT_BYTES)?.to_vec();
     if r.at != payload.len() {
         return Err(bad("trailing bytes after the brick pool"));
     }
@@ -275,11 +285,21 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Volume> {
     if !(scale.is_finite() && translation.is_finite() && scale.min_element() > 0.0) {
         return Err(bad("degenerate transform"));
     }
+    let bricks = data.len() / format.brick_bytes();
+    if !refined.is_empty()
+        && (format != BrickFormat::Bc7
+            || refined.windows(2).any(|w| w[0] >= w[1])
+            || refined.iter().any(|&i| i as usize >= bricks))
+    {
+        return Err(bad("invalid refinement list"));
+    }
     let pool = BrickPool {
         format,
         lo,
         hi,
         data,
+        refined,
+        refinement,
     };
     Volume::assemble(
         class,

@@ -58,7 +58,7 @@ pub struct ErrorStats {
 pub struct SizeStats {
     /// The tree.
     pub tree: TreeStats,
-    /// Brick pool bytes.
+    /// Brick pool bytes (with the BC7 refinement layer).
     pub brick_bytes: usize,
     /// Voxels stored in the pool (bricks × 512).
     pub brick_voxels: usize,
@@ -254,7 +254,7 @@ impl Volume {
     pub fn sizes(&self, active_voxels: u64) -> SizeStats {
         SizeStats {
             tree: self.tree.stats(),
-            brick_bytes: self.pool.data.len(),
+            brick_bytes: self.pool.byte_size(),
             brick_voxels: self.pool.len() * BRICK_VOXELS,
             active_voxels,
         }

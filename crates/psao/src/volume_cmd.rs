@@ -304,7 +304,7 @@ fn info(file: &Path) -> Result<()> {
         println!(
             "  bricks {}, brick bytes {}, tree bytes {}",
             vol.pool.len(),
-            vol.pool.data.len(),
+            vol.pool.byte_size(),
             s.total_bytes()
         );
         print_tree(&s);

@@ -72,10 +72,8 @@ fn info_convert_and_render_a_psv() {
     ] {
         assert!(j[key].as_f64().is_some(), "{key} missing in {j}");
     }
-    assert_eq!(
-        j["bits_per_voxel_bricks"].as_f64().unwrap(),
-        130.0 * 8.0 / 512.0
-    );
+    let bricks_bpv = j["bits_per_voxel_bricks"].as_f64().unwrap();
+    assert!((2.0..2.1).contains(&bricks_bpv), "{bricks_bpv}");
     assert!(j["bits_per_voxel_total"].as_f64().unwrap() > 2.0);
     assert!(j["rmse"].as_f64().unwrap() < 0.05);
     assert!(j["bricks_after"].as_u64().unwrap() <= j["bricks_before"].as_u64().unwrap());
