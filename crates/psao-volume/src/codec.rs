@@ -290,6 +290,53 @@ impl BrickPool {
         }
     }
 
+    /// Decodes the 4³ block `g` (`x/4 + 2 (y/4) + 4 (z/4)`) of brick `i` into `out`, indexed
+    /// `x%4 + 4 (y%4 + 4 (z%4))`: a BC7 block, four BC4 blocks or 64 plain values.
+    pub fn decode_block(&self, i: u32, g: usize, out: &mut [f32; 64]) {
+        let b = self.brick(i);
+        let (lo, span) = (self.lo, (self.hi - self.lo) / 255.0);
+        let (x0, y0, z0) = ((g & 1) * 4, ((g >> 1) & 1) * 4, (g >> 2) * 4);
+        match self.format {
+            BrickFormat::Bc7 => {
+                // BC7 block k = (zq * 2 + y / 4) * 2 + x / 4 is exactly group g.
+                decode_bc7_block(&b[g * 16..g * 16 + 16], lo, span, out, false);
+                if let Ok(k) = self.refined.binary_search(&i) {
+                    let r = &self.refinement[k * REFINEMENT_BYTES..(k + 1) * REFINEMENT_BYTES];
+                    let r0 = f32::from_le_bytes([r[0], r[1], r[2], r[3]]);
+                    let r1 = f32::from_le_bytes([r[4], r[5], r[6], r[7]]);
+                    decode_bc7_block(
+                        &r[8 + g * 16..8 + g * 16 + 16],
+                        r0,
+                        (r1 - r0) / 255.0,
+                        out,
+                        true,
+                    );
+                }
+            }
+            BrickFormat::Bc4 => {
+                let (lo, span) = sub_range(b, lo, span);
+                let mut px = [0u8; 16];
+                for dz in 0..4 {
+                    let k = ((z0 + dz) * 2 + y0 / 4) * 2 + x0 / 4;
+                    bcdec_rs::bc4(&b[2 + k * 8..2 + k * 8 + 8], &mut px, 4, false);
+                    for (j, &p) in px.iter().enumerate() {
+                        out[j + 16 * dz] = lo + p as f32 * span;
+                    }
+                }
+            }
+            _ => {
+                for dz in 0..4 {
+                    for dy in 0..4 {
+                        for dx in 0..4 {
+                            let v = voxel_index(x0 + dx, y0 + dy, z0 + dz);
+                            out[dx + 4 * (dy + 4 * dz)] = self.raw_value(i, v).unwrap_or(0.0);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
     /// Reads one voxel of brick `i` directly (the uncompressed formats only).
     #[inline]
     pub fn raw_value(&self, i: u32, voxel: usize) -> Option<f32> {
@@ -392,6 +439,22 @@ fn encode_bc7(src: &[[f32; BRICK_VOXELS]], per: &[(f32, f32)]) -> Vec<u8> {
     intel_tex_2::bc7::compress_blocks(&intel_tex_2::bc7::alpha_basic_settings(), &surface)
 }
 
+/// Decodes one BC7 block (a 4³ group, indexed `x + 4 (y + 4 z)`) as `lo + code · span`,
+/// added to `out` if `add`.
+fn decode_bc7_block(b: &[u8], lo: f32, span: f32, out: &mut [f32; 64], add: bool) {
+    let mut px = [0u8; 64];
+    bcdec_rs::bc7(b, &mut px, 16);
+    for dy in 0..4 {
+        for dx in 0..4 {
+            for c in 0..4 {
+                let v = lo + px[(dy * 4 + dx) * 4 + c] as f32 * span;
+                let o = &mut out[dx + 4 * (dy + 4 * c)];
+                *o = if add { *o + v } else { v };
+            }
+        }
+    }
+}
+
 /// Decodes one BC7 brick (128 bytes) as `lo + code · span`, added to `out` if `add`.
 fn decode_bc7(b: &[u8], lo: f32, span: f32, out: &mut [f32; BRICK_VOXELS], add: bool) {
     let mut px = [0u8; 64];
@@ -469,6 +532,15 @@ mod tests {
                 assert!(err <= tol, "{format:?} brick {i}: error {err}");
                 if let Some(v) = pool.raw_value(i as u32, 77) {
                     assert_eq!(v, out[77]);
+                }
+                let mut block = [0.0; 64];
+                for g in 0..8 {
+                    pool.decode_block(i as u32, g, &mut block);
+                    let (x0, y0, z0) = ((g & 1) * 4, ((g >> 1) & 1) * 4, (g >> 2) * 4);
+                    for (j, v) in block.iter().enumerate() {
+                        let (x, y, z) = (x0 + j % 4, y0 + (j / 4) % 4, z0 + j / 16);
+                        assert_eq!(*v, out[voxel_index(x, y, z)], "{format:?} block {g}");
+                    }
                 }
             }
         }

@@ -1,6 +1,7 @@
-//! Voxel sampling that decodes bricks on the fly: a sampler keeps a small direct-mapped cache
-//! of decoded bricks (keyed by L3 node), so a compressed brick is decoded once per ray segment
-//! (and usually once per tile of neighbouring rays). `f32` bricks are read in place.
+//! Voxel sampling that decodes compressed bricks on the fly, one 4³ block (one BC7 block) at
+//! a time: a sampler keeps a direct-mapped cache of decoded blocks, so a block is decoded once
+//! per ray segment, and usually once per tile of neighbouring rays. `f32` bricks are read in
+//! place.
 
 use crate::codec::BrickFormat;
 use crate::grid::{floor_ivec, voxel_index, BRICK_VOXELS};
@@ -8,21 +9,37 @@ use crate::tree::Locate;
 use crate::volume::Volume;
 use glam::{IVec3, Vec3};
 
-/// Decoded bricks kept per sampler (direct-mapped by brick index).
+/// Bricks kept per sampler (direct-mapped by hashed brick index); their 4³ blocks are decoded
+/// when first needed.
 const SLOTS: usize = 256;
 /// Located cells remembered per sampler.
 const CELLS: usize = 4;
+
+/// The 4³ block (0..8) of voxel (x, y, z) of a brick.
+#[inline]
+fn block_of(x: usize, y: usize, z: usize) -> usize {
+    (x >> 2) | ((y >> 2) << 1) | ((z >> 2) << 2)
+}
+
+/// Block-major index of voxel (x, y, z) of a brick.
+#[inline]
+fn block_major(x: usize, y: usize, z: usize) -> usize {
+    block_of(x, y, z) * 64 + (x & 3) + 4 * ((y & 3) + 4 * (z & 3))
+}
 
 /// A per-thread sampler of one frame of a volume.
 pub struct Sampler<'a> {
     vol: &'a Volume,
     frame: usize,
-    keys: [u32; SLOTS],
+    keys: Vec<u32>,
+    /// Per slot: which of the eight 4³ blocks are decoded.
+    valid: Vec<u8>,
+    /// Per slot: the brick's values block-major (`64 g + x%4 + 4 (y%4 + 4 z%4)`).
     slots: Vec<[f32; BRICK_VOXELS]>,
     /// Recently located 8³ cells and their L3 nodes (round robin).
     cells: [(IVec3, Option<u32>); CELLS],
     next_cell: usize,
-    /// Bricks decoded so far (for statistics).
+    /// Blocks decoded so far (for statistics).
     pub decodes: u64,
 }
 
@@ -33,7 +50,12 @@ impl<'a> Sampler<'a> {
         Sampler {
             vol,
             frame,
-            keys: [u32::MAX; SLOTS],
+            keys: if decoded {
+                vec![u32::MAX; SLOTS]
+            } else {
+                Vec::new()
+            },
+            valid: if decoded { vec![0; SLOTS] } else { Vec::new() },
             slots: if decoded {
                 vec![[0.0; BRICK_VOXELS]; SLOTS]
             } else {
@@ -72,28 +94,40 @@ impl<'a> Sampler<'a> {
         leaf
     }
 
-    /// Value of voxel `v` (0..512) of L3 node `leaf`.
+    /// Value of voxel (x, y, z) (each 0..8) of L3 node `leaf`.
     #[inline]
-    pub fn leaf_value(&mut self, leaf: u32, v: usize) -> f32 {
+    pub fn leaf_value(&mut self, leaf: u32, x: usize, y: usize, z: usize) -> f32 {
         let brick = self.vol.tree.l3[leaf as usize].brick();
         if self.slots.is_empty() {
-            let at = brick as usize * 2048 + v * 4;
+            let at = brick as usize * 2048 + voxel_index(x, y, z) * 4;
             let d = &self.vol.pool.data[at..at + 4];
             return f32::from_le_bytes([d[0], d[1], d[2], d[3]]);
         }
-        self.decoded(brick)[v]
+        let s = self.slot(brick, 1 << block_of(x, y, z));
+        self.slots[s][block_major(x, y, z)]
     }
 
-    /// The decoded values of `brick` (compressed formats only).
+    /// The cache slot of `brick` with at least the blocks in bit set `need` decoded
+    /// (compressed formats only).
     #[inline]
-    fn decoded(&mut self, brick: u32) -> &[f32; BRICK_VOXELS] {
-        let s = brick as usize % SLOTS;
+    fn slot(&mut self, brick: u32, need: u8) -> usize {
+        let s = (brick.wrapping_mul(0x9E37_79B9) >> 24) as usize % SLOTS;
         if self.keys[s] != brick {
-            self.vol.pool.decode(brick, &mut self.slots[s]);
             self.keys[s] = brick;
-            self.decodes += 1;
+            self.valid[s] = 0;
         }
-        &self.slots[s]
+        let mut missing = need & !self.valid[s];
+        while missing != 0 {
+            let g = missing.trailing_zeros() as usize;
+            let block: &mut [f32; 64] = (&mut self.slots[s][g * 64..g * 64 + 64])
+                .try_into()
+                .expect("64 values");
+            self.vol.pool.decode_block(brick, g, block);
+            self.decodes += 1;
+            missing &= missing - 1;
+        }
+        self.valid[s] |= need;
+        s
     }
 
     /// Value of index-space voxel `p` (the background outside the leaves).
@@ -102,7 +136,7 @@ impl<'a> Sampler<'a> {
         match self.leaf_at(p) {
             Some(leaf) => {
                 let l: IVec3 = p & 7i32;
-                self.leaf_value(leaf, voxel_index(l.x as usize, l.y as usize, l.z as usize))
+                self.leaf_value(leaf, l.x as usize, l.y as usize, l.z as usize)
             }
             None => self.vol.background,
         }
@@ -136,9 +170,15 @@ impl<'a> Sampler<'a> {
                         }
                     } else {
                         let brick = self.vol.tree.l3[leaf as usize].brick();
-                        let d = self.decoded(brick);
-                        for (k, o) in OFF.iter().enumerate() {
-                            c[k] = d[i0 + o];
+                        let (x, y, z) = (l.x as usize, l.y as usize, l.z as usize);
+                        let mut need = 0u8;
+                        for k in 0..8 {
+                            need |= 1 << block_of(x + (k & 1), y + ((k >> 1) & 1), z + (k >> 2));
+                        }
+                        let s = self.slot(brick, need);
+                        let d = &self.slots[s];
+                        for (k, v) in c.iter_mut().enumerate() {
+                            *v = d[block_major(x + (k & 1), y + ((k >> 1) & 1), z + (k >> 2))];
                         }
                     }
                 }
@@ -158,7 +198,7 @@ impl<'a> Sampler<'a> {
                 *v = match leaves[key] {
                     Some(leaf) => {
                         let q: IVec3 = p & 7i32;
-                        self.leaf_value(leaf, voxel_index(q.x as usize, q.y as usize, q.z as usize))
+                        self.leaf_value(leaf, q.x as usize, q.y as usize, q.z as usize)
                     }
                     None => self.vol.background,
                 };
