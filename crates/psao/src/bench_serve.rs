@@ -42,6 +42,10 @@ pub struct BenchServeArgs {
     /// Clients' image size (their aspect shapes the culling frusta).
     #[arg(long, default_value = "640x360")]
     pub res: String,
+    /// Clients check their state against the server's hash after every update (costs a hash
+    /// of the whole state per update on both ends).
+    #[arg(long)]
+    pub verify: bool,
     /// Write the report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -56,8 +60,8 @@ pub struct BenchClient {
     pub updates: u64,
     /// Server frames coalesced into a later update for this client.
     pub coalesced: u64,
-    /// Final state equal to the server's at the client's last update.
-    pub exact: bool,
+    /// Final state equal to the server's at the client's last update (only with `--verify`).
+    pub exact: Option<bool>,
 }
 
 /// What `psao bench serve` reports.
@@ -79,6 +83,10 @@ pub struct BenchServeReport {
     pub server_p95_ms: f64,
     /// Mean of the step alone.
     pub server_step_ms: f64,
+    /// Mean of collecting the clients' updates per frame (all clients).
+    pub server_update_ms: f64,
+    /// Mean of encoding them per frame (all clients).
+    pub server_encode_ms: f64,
     /// Server frames started late (the previous one overran the period).
     pub late_frames: u64,
     /// Per client.
@@ -167,6 +175,9 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         .arg("--json")
         .arg(dir.join(format!("view_{k}.json")))
         .stdout(Stdio::null());
+        if !args.verify {
+            c.arg("--no-verify");
+        }
         if let Some(p) = &args.path {
             c.arg("--path").arg(p);
         }
@@ -200,7 +211,9 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
             coalesced: v["client_ids"]
                 .as_array()
                 .map_or(0, |ids| ids.iter().map(coalesced_of).sum()),
-            exact: v["state_hash"] == v["server_state_hash"],
+            exact: args
+                .verify
+                .then(|| v["state_hash"] == v["server_state_hash"]),
         });
     }
     let report = BenchServeReport {
@@ -212,12 +225,14 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         server_mean_ms: s["mean_ms"].as_f64().unwrap_or(0.0),
         server_p95_ms: s["p95_ms"].as_f64().unwrap_or(0.0),
         server_step_ms: s["mean_step_ms"].as_f64().unwrap_or(0.0),
+        server_update_ms: s["mean_update_ms"].as_f64().unwrap_or(0.0),
+        server_encode_ms: s["mean_encode_ms"].as_f64().unwrap_or(0.0),
         late_frames: s["late_frames"].as_u64().unwrap_or(0),
         per_client,
     };
     println!(
         "{} clients at {} Hz on {}: {} server frames, {:.1} ms mean / {:.1} ms p95 per frame \
-         ({:.1} ms step), {} late",
+         ({:.1} ms step, {:.1} ms updates, {:.1} ms encoding), {} late",
         report.clients,
         report.hz,
         report.scene,
@@ -225,13 +240,18 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         report.server_mean_ms,
         report.server_p95_ms,
         report.server_step_ms,
+        report.server_update_ms,
+        report.server_encode_ms,
         report.late_frames
     );
     println!("client  Mbit/s  updates  coalesced  exact");
     for (k, c) in report.per_client.iter().enumerate() {
         println!(
             "{k:>6}  {:>6.2}  {:>7}  {:>9}  {}",
-            c.mbit_s, c.updates, c.coalesced, c.exact
+            c.mbit_s,
+            c.updates,
+            c.coalesced,
+            c.exact.map_or("-".to_string(), |e| e.to_string())
         );
     }
     if let Some(json) = &args.json {

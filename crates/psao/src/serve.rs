@@ -102,6 +102,12 @@ pub struct ServeStats {
     pub p95_ms: f64,
     /// Mean of the step alone, ms.
     pub mean_step_ms: f64,
+    /// Mean per server frame of collecting the clients' updates (`update_for`), ms.
+    pub mean_update_ms: f64,
+    /// Mean per server frame of encoding them (codec + framing), ms.
+    pub mean_encode_ms: f64,
+    /// Mean per server frame of hashing the server state for verifying clients, ms.
+    pub mean_hash_ms: f64,
     /// Server frames that started late because the previous one overran the period.
     pub late_frames: u64,
     /// Hash of the server's final buckets + cells.
@@ -198,6 +204,9 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         wait_clients: args.wait_clients,
         step_ms: Vec::new(),
         frame_ms: Vec::new(),
+        update_ms: 0.0,
+        encode_ms: 0.0,
+        hash_ms: 0.0,
     };
     let stats = sim.run();
     rt.shutdown_timeout(Duration::from_millis(500));
@@ -392,6 +401,10 @@ struct Simulation {
     wait_clients: usize,
     step_ms: Vec<f64>,
     frame_ms: Vec<f64>,
+    /// Summed over frames: update collection, encoding, hashing (ms).
+    update_ms: f64,
+    encode_ms: f64,
+    hash_ms: f64,
 }
 
 impl Simulation {
@@ -561,11 +574,13 @@ impl Simulation {
         }
         let step = self.server.step(&views);
         self.step_ms.push(step.ms);
+        let th = Instant::now();
         let hash = self
             .sessions
             .values()
             .any(|s| s.want_hash)
             .then(|| self.state_hash());
+        self.hash_ms += th.elapsed().as_secs_f64() * 1e3;
         let frame = self.server.frame();
         let mut gone = Vec::new();
         for (&id, s) in &mut self.sessions {
@@ -575,13 +590,17 @@ impl Simulation {
                 s.stats.coalesced += 1;
                 continue;
             }
+            let tu = Instant::now();
             let update = self.server.update_for(s.id);
+            let te = Instant::now();
+            self.update_ms += (te - tu).as_secs_f64() * 1e3;
+            let payload = s.codec.encode(&update);
             let delta = Delta {
                 frame,
                 scene_time: seconds,
                 client_frame: if lockstep { s.pending.take() } else { None },
                 state_hash: if s.want_hash { hash } else { None },
-                payload: s.codec.encode(&update),
+                payload,
             };
             let message = if update.snapshot {
                 s.stats.snapshots += 1;
@@ -593,6 +612,7 @@ impl Simulation {
                 gone.push(id);
                 continue;
             };
+            self.encode_ms += te.elapsed().as_secs_f64() * 1e3;
             s.stats.bytes += bytes.len() as u64;
             s.stats.updates += 1;
             s.unacked.push_back(frame);
@@ -651,6 +671,10 @@ impl Simulation {
         stats.mean_ms = mean(&self.frame_ms);
         stats.p95_ms = percentile(&self.frame_ms, 0.95);
         stats.mean_step_ms = mean(&self.step_ms);
+        let frames = self.frame_ms.len().max(1) as f64;
+        stats.mean_update_ms = self.update_ms / frames;
+        stats.mean_encode_ms = self.encode_ms / frames;
+        stats.mean_hash_ms = self.hash_ms / frames;
         stats.state_hash = format!("{:016x}", self.state_hash());
         stats.clients.sort_by_key(|c| c.id);
         tracing::info!(
