@@ -184,33 +184,36 @@ pub fn render(vol: &Volume, cam: &Camera, st: &RenderSettings) -> Result<Image> 
     let tiles = tiles_x * h.div_ceil(TILE);
     let tile_pixels: Vec<Vec<(u32, f32)>> = (0..tiles)
         .into_par_iter()
-        .map(|tile| {
-            let mut s = Sampler::new(vol, st.frame);
-            let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-            let mut out = Vec::with_capacity((TILE * TILE) as usize);
-            for y in y0..(y0 + TILE).min(h) {
-                for x in x0..(x0 + TILE).min(w) {
-                    let dir = cam.ray_dir(x, y, w, h);
-                    let ray = IndexRay::from_world(vol, cam.eye, dir);
-                    let v = match st.mode {
-                        RenderMode::LevelSet => {
-                            shade_depth(level_set_hit(&mut s, &ray, f32::INFINITY), range)
-                        }
-                        RenderMode::Fog => {
-                            1.0 - (-st.density_scale * optical_depth(&mut s, &ray, f32::INFINITY))
-                                .exp()
-                        }
-                        RenderMode::DeltaTrack => {
-                            let pixel = (y as u64) * w as u64 + x as u64;
-                            let mut rng = Rng::new(st.seed, pixel);
-                            single_scatter(&mut s, &ray, st, &mut rng)
-                        }
-                    };
-                    out.push((y * w + x, v));
+        // One sampler (and its decoded-brick cache) per worker, reused across tiles.
+        .map_init(
+            || Sampler::new(vol, st.frame),
+            |s, tile| {
+                let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
+                let mut out = Vec::with_capacity((TILE * TILE) as usize);
+                for y in y0..(y0 + TILE).min(h) {
+                    for x in x0..(x0 + TILE).min(w) {
+                        let dir = cam.ray_dir(x, y, w, h);
+                        let ray = IndexRay::from_world(vol, cam.eye, dir);
+                        let v = match st.mode {
+                            RenderMode::LevelSet => {
+                                shade_depth(level_set_hit(s, &ray, f32::INFINITY), range)
+                            }
+                            RenderMode::Fog => {
+                                1.0 - (-st.density_scale * optical_depth(s, &ray, f32::INFINITY))
+                                    .exp()
+                            }
+                            RenderMode::DeltaTrack => {
+                                let pixel = (y as u64) * w as u64 + x as u64;
+                                let mut rng = Rng::new(st.seed, pixel);
+                                single_scatter(s, &ray, st, &mut rng)
+                            }
+                        };
+                        out.push((y * w + x, v));
+                    }
                 }
-            }
-            out
-        })
+                out
+            },
+        )
         .collect();
     let mut pixels = vec![0.0f32; (w * h) as usize];
     for (i, v) in tile_pixels.into_iter().flatten() {

@@ -21,10 +21,12 @@ fn block_of(x: usize, y: usize, z: usize) -> usize {
     (x >> 2) | ((y >> 2) << 1) | ((z >> 2) << 2)
 }
 
-/// Block-major index of voxel (x, y, z) of a brick.
+/// The set of blocks `x + 2 y + 4 z` for x, y, z in the given 2-bit sets of halves.
 #[inline]
-fn block_major(x: usize, y: usize, z: usize) -> usize {
-    block_of(x, y, z) * 64 + (x & 3) + 4 * ((y & 3) + 4 * (z & 3))
+fn spread(xs: u8, ys: u8, zs: u8) -> u8 {
+    let row = xs | xs << 2; // x halves for y = 0 and y = 1
+    let plane = row & (if ys & 1 != 0 { 0b0011 } else { 0 } | if ys & 2 != 0 { 0b1100 } else { 0 });
+    (if zs & 1 != 0 { plane } else { 0 }) | (if zs & 2 != 0 { plane << 4 } else { 0 })
 }
 
 /// A per-thread sampler of one frame of a volume.
@@ -34,7 +36,7 @@ pub struct Sampler<'a> {
     keys: Vec<u32>,
     /// Per slot: which of the eight 4³ blocks are decoded.
     valid: Vec<u8>,
-    /// Per slot: the brick's values block-major (`64 g + x%4 + 4 (y%4 + 4 z%4)`).
+    /// Per slot: the brick's values ([`voxel_index`] layout; only decoded blocks are valid).
     slots: Vec<[f32; BRICK_VOXELS]>,
     /// Recently located 8³ cells and their L3 nodes (round robin).
     cells: [(IVec3, Option<u32>); CELLS],
@@ -104,7 +106,7 @@ impl<'a> Sampler<'a> {
             return f32::from_le_bytes([d[0], d[1], d[2], d[3]]);
         }
         let s = self.slot(brick, 1 << block_of(x, y, z));
-        self.slots[s][block_major(x, y, z)]
+        self.slots[s][voxel_index(x, y, z)]
     }
 
     /// The cache slot of `brick` with at least the blocks in bit set `need` decoded
@@ -117,12 +119,19 @@ impl<'a> Sampler<'a> {
             self.valid[s] = 0;
         }
         let mut missing = need & !self.valid[s];
+        let mut block = [0.0f32; 64];
         while missing != 0 {
             let g = missing.trailing_zeros() as usize;
-            let block: &mut [f32; 64] = (&mut self.slots[s][g * 64..g * 64 + 64])
-                .try_into()
-                .expect("64 values");
-            self.vol.pool.decode_block(brick, g, block);
+            self.vol.pool.decode_block(brick, g, &mut block);
+            let (x0, y0, z0) = ((g & 1) * 4, ((g >> 1) & 1) * 4, (g >> 2) * 4);
+            let slot = &mut self.slots[s];
+            for dz in 0..4 {
+                for dy in 0..4 {
+                    let row = voxel_index(x0, y0 + dy, z0 + dz);
+                    slot[row..row + 4]
+                        .copy_from_slice(&block[16 * dz + 4 * dy..16 * dz + 4 * dy + 4]);
+                }
+            }
             self.decodes += 1;
             missing &= missing - 1;
         }
@@ -170,15 +179,13 @@ impl<'a> Sampler<'a> {
                         }
                     } else {
                         let brick = self.vol.tree.l3[leaf as usize].brick();
-                        let (x, y, z) = (l.x as usize, l.y as usize, l.z as usize);
-                        let mut need = 0u8;
-                        for k in 0..8 {
-                            need |= 1 << block_of(x + (k & 1), y + ((k >> 1) & 1), z + (k >> 2));
-                        }
+                        // Halves (4-voxel blocks) touched along each axis, as 2-bit sets.
+                        let half = |v: i32| (1u8 << (v >> 2)) | (1u8 << ((v + 1) >> 2));
+                        let need = spread(half(l.x), half(l.y), half(l.z));
                         let s = self.slot(brick, need);
                         let d = &self.slots[s];
-                        for (k, v) in c.iter_mut().enumerate() {
-                            *v = d[block_major(x + (k & 1), y + ((k >> 1) & 1), z + (k >> 2))];
+                        for (k, o) in OFF.iter().enumerate() {
+                            c[k] = d[i0 + o];
                         }
                     }
                 }
