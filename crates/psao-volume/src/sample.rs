@@ -111,9 +111,18 @@ impl<'a> Sampler<'a> {
 
     /// The cache slot of `brick` with at least the blocks in bit set `need` decoded
     /// (compressed formats only).
-    #[inline]
+    #[inline(always)]
     fn slot(&mut self, brick: u32, need: u8) -> usize {
         let s = (brick.wrapping_mul(0x9E37_79B9) >> 24) as usize % SLOTS;
+        if self.keys[s] == brick && need & !self.valid[s] == 0 {
+            return s;
+        }
+        self.fill(s, brick, need)
+    }
+
+    /// Makes slot `s` hold `brick` with the blocks in `need` decoded.
+    #[inline(never)]
+    fn fill(&mut self, s: usize, brick: u32, need: u8) -> usize {
         if self.keys[s] != brick {
             self.keys[s] = brick;
             self.valid[s] = 0;
@@ -195,18 +204,24 @@ impl<'a> Sampler<'a> {
             let cross =
                 (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
             let mut leaves = [None; 8];
+            // Compressed: the cache slot of each distinct brick, with all its blocks decoded.
+            let mut slots = [0usize; 8];
+            let compressed = !self.slots.is_empty();
             for (k, v) in c.iter_mut().enumerate() {
                 let d = IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
                 let p = b + d;
                 let key = k & cross;
                 if key == k {
                     leaves[k] = self.leaf_at(p);
-                }
-                *v = match leaves[key] {
-                    Some(leaf) => {
-                        let q: IVec3 = p & 7i32;
-                        self.leaf_value(leaf, q.x as usize, q.y as usize, q.z as usize)
+                    if let (true, Some(leaf)) = (compressed, leaves[k]) {
+                        slots[k] = self.slot(self.vol.tree.l3[leaf as usize].brick(), 0xff);
                     }
+                }
+                let q: IVec3 = p & 7i32;
+                let (x, y, z) = (q.x as usize, q.y as usize, q.z as usize);
+                *v = match leaves[key] {
+                    Some(_) if compressed => self.slots[slots[key]][voxel_index(x, y, z)],
+                    Some(leaf) => self.leaf_value(leaf, x, y, z),
                     None => self.vol.background,
                 };
             }
