@@ -65,6 +65,9 @@ pub struct ServeArgs {
     /// Wait for this many clients before the first server frame.
     #[arg(long, default_value_t = 1)]
     pub wait_clients: usize,
+    /// Most clients at once; later ones are refused with a `Server` error.
+    #[arg(long, default_value_t = 64)]
+    pub max_clients: usize,
     /// Exit once every client has left (after at least one joined).
     #[arg(long)]
     pub once: bool,
@@ -202,6 +205,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         ever_joined: false,
         once: args.once,
         wait_clients: args.wait_clients,
+        max_clients: args.max_clients,
         step_ms: Vec::new(),
         frame_ms: Vec::new(),
         update_ms: 0.0,
@@ -399,6 +403,7 @@ struct Simulation {
     ever_joined: bool,
     once: bool,
     wait_clients: usize,
+    max_clients: usize,
     step_ms: Vec<f64>,
     frame_ms: Vec<f64>,
     /// Summed over frames: update collection, encoding, hashing (ms).
@@ -520,6 +525,13 @@ impl Simulation {
                     "the client cannot decode the server's codec `{}`",
                     self.codec
                 ),
+            }));
+            return;
+        }
+        if self.sessions.len() >= self.max_clients {
+            let _ = join.reply.send(Err(ErrorMsg {
+                code: ErrorCode::Server,
+                message: format!("server full ({} clients)", self.max_clients),
             }));
             return;
         }

@@ -394,7 +394,11 @@ fn error_code(messages: &[Message]) -> Option<ErrorCode> {
 #[test]
 fn hostile_clients_get_a_clear_error_and_the_server_keeps_serving() {
     let fx = Fixture::new();
-    let server = Serve::start(&fx, "127.0.0.1:0", &["--hz", "30", "--token", "sesame"]);
+    let server = Serve::start(
+        &fx,
+        "127.0.0.1:0",
+        &["--hz", "30", "--token", "sesame", "--max-clients", "1"],
+    );
     let addr = server.addr.as_str();
     let good = hello(PROTOCOL_VERSION, Some("sesame"));
 
@@ -404,6 +408,21 @@ fn hostile_clients_get_a_clear_error_and_the_server_keeps_serving() {
     assert_eq!(error_code(&m), Some(ErrorCode::Token), "{m:?}");
     let m = exchange(addr, &hello(PROTOCOL_VERSION + 1, Some("sesame")));
     assert_eq!(error_code(&m), Some(ErrorCode::Version), "{m:?}");
+    // A client that cannot decode the server's codec.
+    let mut no_codec = Hello {
+        version: PROTOCOL_VERSION,
+        capabilities: capabilities::STATE_HASH,
+        token: Some("sesame".into()),
+        name: "test".into(),
+    };
+    let m = exchange(
+        addr,
+        &encode_frame(&Message::Hello(no_codec.clone())).unwrap(),
+    );
+    assert_eq!(error_code(&m), Some(ErrorCode::Protocol), "{m:?}");
+    no_codec.capabilities = capabilities::ALL;
+    let m = exchange(addr, &encode_frame(&Message::Hello(no_codec)).unwrap());
+    assert!(matches!(m.first(), Some(Message::Welcome(_))), "{m:?}");
 
     // Truncated: half a hello, then the client stops sending.
     let m = exchange(addr, &good[..good.len() / 2]);
@@ -463,6 +482,17 @@ fn hostile_clients_get_a_clear_error_and_the_server_keeps_serving() {
         .unwrap();
     assert!(!o.status.success());
     assert!(stderr(&o).contains("token"), "{}", stderr(&o));
+    // --max-clients 1: a second client at the same time is refused.
+    let mut first = view_cmd(&fx, addr, 90, &["--token", "sesame"])
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    let o = view_cmd(&fx, addr, 5, &["--token", "sesame"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("server full"), "{}", stderr(&o));
+    assert!(first.wait().unwrap().success());
 }
 
 /// A fake server: accepts one client, answers its hello with a welcome for a one-instance
