@@ -21,6 +21,7 @@ use psao_wire::{
     capabilities, encode_frame, Bye, Delta, ErrorCode, ErrorMsg, Message, SceneTime, Welcome,
     MAX_CLIENT_FRAME, PROTOCOL_VERSION,
 };
+use rayon::prelude::*;
 use serde::Serialize;
 use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot};
@@ -594,7 +595,9 @@ impl Simulation {
             .then(|| self.state_hash());
         self.hash_ms += th.elapsed().as_secs_f64() * 1e3;
         let frame = self.server.frame();
-        let mut gone = Vec::new();
+        // Collect the updates (the server is shared), then encode them in parallel.
+        let tu = Instant::now();
+        let mut due = Vec::new();
         for (&id, s) in &mut self.sessions {
             s.stats.frames += 1;
             let room = s.out.capacity() > 0 && s.unacked.len() < ACK_WINDOW;
@@ -602,29 +605,37 @@ impl Simulation {
                 s.stats.coalesced += 1;
                 continue;
             }
-            let tu = Instant::now();
             let update = self.server.update_for(s.id);
-            let te = Instant::now();
-            self.update_ms += (te - tu).as_secs_f64() * 1e3;
-            let payload = s.codec.encode(&update);
-            let delta = Delta {
-                frame,
-                scene_time: seconds,
-                client_frame: if lockstep { s.pending.take() } else { None },
-                state_hash: if s.want_hash { hash } else { None },
-                payload,
-            };
-            let message = if update.snapshot {
-                s.stats.snapshots += 1;
-                Message::Snapshot(delta)
-            } else {
-                Message::Delta(delta)
-            };
-            let Ok(bytes) = encode_frame(&message) else {
+            due.push((id, s, update));
+        }
+        let te = Instant::now();
+        self.update_ms += (te - tu).as_secs_f64() * 1e3;
+        let encoded: Vec<(u32, Option<Vec<u8>>)> = due
+            .into_par_iter()
+            .map(|(id, s, update)| {
+                let delta = Delta {
+                    frame,
+                    scene_time: seconds,
+                    client_frame: if lockstep { s.pending.take() } else { None },
+                    state_hash: if s.want_hash { hash } else { None },
+                    payload: s.codec.encode(&update),
+                };
+                let message = if update.snapshot {
+                    s.stats.snapshots += 1;
+                    Message::Snapshot(delta)
+                } else {
+                    Message::Delta(delta)
+                };
+                (id, encode_frame(&message).ok())
+            })
+            .collect();
+        self.encode_ms += te.elapsed().as_secs_f64() * 1e3;
+        let mut gone = Vec::new();
+        for (id, bytes) in encoded {
+            let (Some(s), Some(bytes)) = (self.sessions.get_mut(&id), bytes) else {
                 gone.push(id);
                 continue;
             };
-            self.encode_ms += te.elapsed().as_secs_f64() * 1e3;
             s.stats.bytes += bytes.len() as u64;
             s.stats.updates += 1;
             s.unacked.push_back(frame);
