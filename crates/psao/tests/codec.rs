@@ -7,7 +7,9 @@ fn run(codec: &str, dir: &std::path::Path) -> serde_json::Value {
     let json = dir.join(format!("{codec}.json"));
     let o = Command::new(env!("CARGO_BIN_EXE_psao"))
         .args(["--log", "warn", "run", "--scene", "default"])
-        .args(["--points", "256", "--frames", "0..12", "--res", "32x18", "--every", "1000"])
+        .args([
+            "--points", "256", "--frames", "0..12", "--res", "32x18", "--every", "1000",
+        ])
         .args(["--codec", codec, "--out"])
         .arg(dir.join(codec))
         .arg("--json")
@@ -39,7 +41,9 @@ fn compact_needs_at_most_six_tenths_of_the_paper_bytes_for_the_same_state() {
 #[test]
 fn unknown_codecs_are_refused_with_the_known_names() {
     let o = Command::new(env!("CARGO_BIN_EXE_psao"))
-        .args(["--log", "warn", "run", "--frames", "0..1", "--res", "8x8", "--codec", "nope"])
+        .args([
+            "--log", "warn", "run", "--frames", "0..1", "--res", "8x8", "--codec", "nope",
+        ])
         .arg("--out")
         .arg(tempfile::tempdir().unwrap().path())
         .output()
