@@ -44,18 +44,33 @@ impl FrameHeader {
 /// rule of [`Message::validate`] or does not fit in a `u32` length.
 pub fn encode_frame(message: &Message) -> Result<Vec<u8>, WireError> {
     message.validate()?;
-    let mut out = vec![0u8; HEADER_LEN];
-    let mut out = postcard::to_extend(message, std::mem::take(&mut out))
-        .map_err(|e| WireError::Malformed(e.to_string()))?;
-    let len = u32::try_from(out.len() - HEADER_LEN).map_err(|_| WireError::TooLarge {
-        len: (out.len() - HEADER_LEN) as u64,
+    let out = vec![0u8; HEADER_LEN];
+    let mut out =
+        postcard::to_extend(message, out).map_err(|e| WireError::Malformed(e.to_string()))?;
+    let header = header_for(&out[HEADER_LEN..])?;
+    out[..HEADER_LEN].copy_from_slice(&header);
+    Ok(out)
+}
+
+/// Frame an already-encoded payload as is (header + `payload`), without checking that it
+/// holds a valid message: for relaying, and for tests that send malformed payloads.
+pub fn frame_payload(payload: &[u8]) -> Result<Vec<u8>, WireError> {
+    let mut out = header_for(payload)?.to_vec();
+    out.extend_from_slice(payload);
+    Ok(out)
+}
+
+/// The header of a frame carrying `payload`: magic, length, CRC-32.
+fn header_for(payload: &[u8]) -> Result<[u8; HEADER_LEN], WireError> {
+    let len = u32::try_from(payload.len()).map_err(|_| WireError::TooLarge {
+        len: payload.len() as u64,
         limit: u64::from(u32::MAX),
     })?;
-    let crc = crc32fast::hash(&out[HEADER_LEN..]);
-    out[..4].copy_from_slice(&MAGIC);
-    out[4..8].copy_from_slice(&len.to_le_bytes());
-    out[8..12].copy_from_slice(&crc.to_le_bytes());
-    Ok(out)
+    let mut header = [0u8; HEADER_LEN];
+    header[..4].copy_from_slice(&MAGIC);
+    header[4..8].copy_from_slice(&len.to_le_bytes());
+    header[8..12].copy_from_slice(&crc32fast::hash(payload).to_le_bytes());
+    Ok(header)
 }
 
 /// Check the payload of a frame against its header and decode + validate the message.
@@ -173,11 +188,7 @@ mod tests {
             Err(WireError::TooLarge { len: _, limit: 4 })
         ));
         // A correct checksum over garbage.
-        let garbage = [0xffu8; 9];
-        let mut frame = MAGIC.to_vec();
-        frame.extend_from_slice(&(garbage.len() as u32).to_le_bytes());
-        frame.extend_from_slice(&crc32fast::hash(&garbage).to_le_bytes());
-        frame.extend_from_slice(&garbage);
+        let frame = frame_payload(&[0xffu8; 9]).unwrap();
         assert!(matches!(
             decode_frame(&frame, 1 << 16),
             Err(WireError::Malformed(_))

@@ -14,8 +14,8 @@ mod message;
 
 pub use error::WireError;
 pub use frame::{
-    decode_frame, decode_payload, encode_frame, FrameHeader, HEADER_LEN, MAGIC, MAX_CLIENT_FRAME,
-    MAX_SERVER_FRAME,
+    decode_frame, decode_payload, encode_frame, frame_payload, FrameHeader, HEADER_LEN, MAGIC,
+    MAX_CLIENT_FRAME, MAX_SERVER_FRAME,
 };
 pub use message::{
     capabilities, Ack, Bye, CameraMsg, Delta, ErrorCode, ErrorMsg, Hello, InstanceEntry, Message,

@@ -1,23 +1,8 @@
 //! End-to-end tests of the `psao` binary: real processes, real files, small sizes.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
 
-fn psao(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_psao"))
-        .args(["--log", "warn"])
-        .args(args)
-        .output()
-        .expect("the psao binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
+use common::{json, psao, stderr};
 
 #[test]
 fn help_lists_the_subcommands() {

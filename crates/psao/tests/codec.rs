@@ -1,23 +1,34 @@
 //! The compact codec against the paper codec end to end (`psao run`): same decoded client
 //! state, at most 0.6× the bytes, on the first frames of a committed camera path.
 
-use std::process::Command;
+mod common;
+
+use common::{json, psao, stderr};
 
 fn run(codec: &str, dir: &std::path::Path) -> serde_json::Value {
-    let json = dir.join(format!("{codec}.json"));
-    let o = Command::new(env!("CARGO_BIN_EXE_psao"))
-        .args(["--log", "warn", "run", "--scene", "default"])
-        .args([
-            "--points", "256", "--frames", "0..12", "--res", "32x18", "--every", "1000",
-        ])
-        .args(["--codec", codec, "--out"])
-        .arg(dir.join(codec))
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap()
+    let json_file = dir.join(format!("{codec}.json"));
+    let out = dir.join(codec);
+    let o = psao(&[
+        "run",
+        "--scene",
+        "default",
+        "--points",
+        "256",
+        "--frames",
+        "0..12",
+        "--res",
+        "32x18",
+        "--every",
+        "1000",
+        "--codec",
+        codec,
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+        json_file.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    json(&json_file)
 }
 
 #[test]
@@ -40,15 +51,19 @@ fn compact_needs_at_most_six_tenths_of_the_paper_bytes_for_the_same_state() {
 
 #[test]
 fn unknown_codecs_are_refused_with_the_known_names() {
-    let o = Command::new(env!("CARGO_BIN_EXE_psao"))
-        .args([
-            "--log", "warn", "run", "--frames", "0..1", "--res", "8x8", "--codec", "nope",
-        ])
-        .arg("--out")
-        .arg(tempfile::tempdir().unwrap().path())
-        .output()
-        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let o = psao(&[
+        "run",
+        "--frames",
+        "0..1",
+        "--res",
+        "8x8",
+        "--codec",
+        "nope",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
     assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = stderr(&o);
     assert!(err.contains("compact") && err.contains("paper"), "{err}");
 }

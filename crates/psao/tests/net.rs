@@ -3,16 +3,18 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+
+use common::{json, stderr, BIN};
 use psao_wire::{
-    capabilities, decode_frame, encode_frame, CameraMsg, Delta, ErrorCode, Hello, InstanceEntry,
-    Message, Welcome, HEADER_LEN, MAGIC, PROTOCOL_VERSION,
+    capabilities, decode_frame, encode_frame, frame_payload, CameraMsg, Delta, ErrorCode, Hello,
+    InstanceEntry, Message, Welcome, HEADER_LEN, MAGIC, PROTOCOL_VERSION,
 };
 
-const BIN: &str = env!("CARGO_BIN_EXE_psao");
 /// Server settings of every test: few points, small budget.
 const SERVER: &[&str] = &["--points", "96", "--ray-budget", "40000"];
 
@@ -147,14 +149,6 @@ fn view_cmd(fx: &Fixture, addr: &str, frames: u32, extra: &[&str]) -> Command {
     ])
     .args(extra);
     c
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 fn free_port() -> u16 {
@@ -331,27 +325,7 @@ fn ctrl_c_shuts_the_server_down_cleanly() {
 
 /// Raw frame with a correct header for `payload`.
 fn raw_frame(payload: &[u8]) -> Vec<u8> {
-    let mut f = MAGIC.to_vec();
-    f.extend_from_slice(&(payload.len() as u32).to_le_bytes());
-    f.extend_from_slice(&crc32(payload).to_le_bytes());
-    f.extend_from_slice(payload);
-    f
-}
-
-/// CRC-32 (IEEE), bitwise: the checksum of the frame header.
-fn crc32(data: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in data {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ 0xedb8_8320
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
+    frame_payload(payload).unwrap()
 }
 
 fn hello(version: u16, token: Option<&str>) -> Vec<u8> {

@@ -1,7 +1,9 @@
 //! End-to-end tests of `psao volume …` on the shared OpenVDB files (skipped when missing).
 
+mod common;
+
+use common::{psao, stderr};
 use std::path::PathBuf;
-use std::process::Command;
 
 fn data(name: &str) -> Option<PathBuf> {
     let p = PathBuf::from(concat!(
@@ -17,13 +19,6 @@ fn data(name: &str) -> Option<PathBuf> {
     }
 }
 
-fn psao(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_psao"))
-        .args(args)
-        .output()
-        .expect("run psao")
-}
-
 #[test]
 fn info_convert_and_render_a_psv() {
     let Some(dragon) = data("dragon_sergeneren.vdb") else {
@@ -31,11 +26,7 @@ fn info_convert_and_render_a_psv() {
     };
     let dragon = dragon.to_str().unwrap();
     let out = psao(&["volume", "info", dragon]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("19660 active voxels"), "{text}");
     assert!(text.contains("UniformScaleMap"), "{text}");
@@ -56,11 +47,7 @@ fn info_convert_and_render_a_psv() {
         "--json",
         json.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{}", stderr(&out));
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     for key in [
@@ -97,11 +84,7 @@ fn info_convert_and_render_a_psv() {
             "--out",
             png.to_str().unwrap(),
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        assert!(out.status.success(), "{}", stderr(&out));
         let img = image::open(&png).unwrap();
         assert_eq!((img.width(), img.height()), (40, 30));
         assert!(
@@ -122,7 +105,7 @@ fn info_convert_and_render_a_psv() {
         dir.path().join("x.png").to_str().unwrap(),
     ]);
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("level-set"));
+    assert!(stderr(&out).contains("level-set"));
 }
 
 #[test]
@@ -141,11 +124,7 @@ fn level_set_render_from_vdb() {
         "--out",
         png.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{}", stderr(&out));
     let img = image::open(&png).unwrap().to_luma8();
     // The sphere covers the centre, not the corners.
     assert!(img.get_pixel(16, 16).0[0] > 0);
@@ -175,7 +154,7 @@ fn broken_files_fail_with_a_clear_message() {
                 &["volume", cmd, file.to_str().unwrap(), "--out", "/dev/null"]
                     [..if cmd == "info" { 3 } else { 5 }],
             );
-            let err = String::from_utf8_lossy(&out.stderr);
+            let err = stderr(&out);
             assert!(!out.status.success(), "{cmd} {file:?} succeeded");
             assert!(err.contains(expect), "{cmd} {file:?}: {err}");
             assert!(!err.contains("panicked"), "{err}");
@@ -191,5 +170,5 @@ fn broken_files_fail_with_a_clear_message() {
         "x.psv",
     ]);
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown brick format"));
+    assert!(stderr(&out).contains("unknown brick format"));
 }
