@@ -27,11 +27,8 @@
 //! not stored. Both ends must see the same sequence of updates; after a decoding error the
 //! decoder's state is undefined and the session must start again (with a snapshot).
 
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
-
 use glam::Affine3A;
-use psao_points::{Bucket, BucketEntry, Cell, BUCKET_ENTRIES, CELL_POINTS};
+use psao_points::{Bucket, BucketEntry, Cell, KeyMap, BUCKET_ENTRIES, CELL_POINTS};
 
 use crate::model::{compact_bucket, compact_cell, InstanceDelta, Update};
 use crate::{Codec, DeltaError, MAX_DECODED_BYTES};
@@ -46,23 +43,6 @@ const TRANSFORM_WORDS: usize = 12;
 const KEY_WORDS: usize = 2 * BUCKET_ENTRIES;
 const SLOT_WORDS: usize = BUCKET_ENTRIES;
 
-/// A fast multiplicative hasher for the (instance, index) keys of the reference state.
-#[derive(Default)]
-struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        bytes.iter().for_each(|&b| self.write_u64(u64::from(b)));
-    }
-    fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-    }
-}
-
-type Map<V> = HashMap<u64, V, BuildHasherDefault<KeyHasher>>;
 
 fn key(instance: u32, index: u32) -> u64 {
     (u64::from(instance) << 32) | u64::from(index)
@@ -71,10 +51,10 @@ fn key(instance: u32, index: u32) -> u64 {
 /// What was last sent, per slot: the XOR reference of both ends.
 #[derive(Default, Clone)]
 struct Reference {
-    transforms: Map<[u32; TRANSFORM_WORDS]>,
-    keys: Map<[u32; KEY_WORDS]>,
-    slots: Map<[u32; SLOT_WORDS]>,
-    cells: Map<[u32; CELL_POINTS]>,
+    transforms: KeyMap<[u32; TRANSFORM_WORDS]>,
+    keys: KeyMap<[u32; KEY_WORDS]>,
+    slots: KeyMap<[u32; SLOT_WORDS]>,
+    cells: KeyMap<[u32; CELL_POINTS]>,
 }
 
 impl Reference {
@@ -85,7 +65,7 @@ impl Reference {
 
 /// XOR `words` with the reference stored under `k` and store `words` as the new reference.
 fn xor_encode<const N: usize>(
-    map: &mut Map<[u32; N]>,
+    map: &mut KeyMap<[u32; N]>,
     k: u64,
     words: [u32; N],
     out: &mut Vec<u32>,
@@ -95,7 +75,7 @@ fn xor_encode<const N: usize>(
 }
 
 /// Undo [`xor_encode`]: the words after XOR with the reference, stored as the new reference.
-fn xor_decode<const N: usize>(map: &mut Map<[u32; N]>, k: u64, coded: &[u32]) -> [u32; N] {
+fn xor_decode<const N: usize>(map: &mut KeyMap<[u32; N]>, k: u64, coded: &[u32]) -> [u32; N] {
     let prev = map.get(&k).copied().unwrap_or([0; N]);
     let mut words = [0u32; N];
     for ((w, c), p) in words.iter_mut().zip(coded).zip(prev) {

@@ -27,13 +27,10 @@
 //! decrease. Each point counts its remaining neighbours that outrank it; it is ready at zero.
 //! A unit test checks the result against a textbook max-heap-style implementation.
 
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
-
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::rng::mix64;
+use crate::KeyMap;
 
 /// Exponent of the weight function (Yuksel's α = 8).
 const ALPHA: i32 = 8;
@@ -172,24 +169,6 @@ fn remove_all_by_local_maxima(nbrs: &Neighbours, w: &mut [u64]) {
     );
 }
 
-/// A hasher for integer keys: one SplitMix64 round.
-#[derive(Default)]
-struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = mix64(self.0 ^ u64::from(b));
-        }
-    }
-    fn write_u64(&mut self, x: u64) {
-        self.0 = mix64(x);
-    }
-}
-
 /// Block coordinates packed into one key (17 bits per axis).
 #[inline]
 fn block_key(b: [i64; 3]) -> u64 {
@@ -221,7 +200,7 @@ struct BlockGrid {
     /// Key of each occupied block.
     block_key: Vec<u64>,
     /// Block key → block index.
-    lookup: HashMap<u64, u32, BuildHasherDefault<KeyHasher>>,
+    lookup: KeyMap<u32>,
 }
 
 impl BlockGrid {
@@ -275,7 +254,7 @@ impl BlockGrid {
         }
         cell_start.push(keyed.len() as u32);
         block_cells.push(cell_local.len() as u32);
-        let mut lookup = HashMap::with_capacity_and_hasher(block_keys.len(), Default::default());
+        let mut lookup = KeyMap::with_capacity_and_hasher(block_keys.len(), Default::default());
         for (b, &key) in block_keys.iter().enumerate() {
             lookup.insert(key, b as u32);
         }

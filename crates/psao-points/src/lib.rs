@@ -13,6 +13,7 @@ mod elimination;
 mod error;
 mod generate;
 mod grid;
+mod key_map;
 mod layout;
 pub mod pack;
 mod reconstruct;
@@ -25,6 +26,7 @@ pub use generate::{
     InstancePoints, SceneAlphaTest, SurfacePoint, DEFAULT_DENSITY, MAX_SPAWNED,
 };
 pub use grid::{Bucket, BucketEntry, Cell, InstanceGrid, PointLoc};
+pub use key_map::{KeyHasher, KeyMap};
 pub use layout::{
     DecodedPoint, GridLayout, BUCKET_ENTRIES, CELLS_PER_AREA, CELL_POINTS, CELL_RADIUS_FACTOR,
     MAX_DIM, TABLE_OVERSIZE,

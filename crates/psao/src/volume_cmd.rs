@@ -493,6 +493,27 @@ struct Pair {
     images: Vec<psao_volume::Image>,
 }
 
+impl Pair {
+    /// "A t ms (c CPU s), B t ms (c CPU s): SPEED r× wall, r× CPU (image mean abs diff d)",
+    /// with the speed of the first renderer over the second when `first_faster`, else of
+    /// the second over the first.
+    fn summary(&self, names: [&str; 2], speed: &str, first_faster: bool) -> String {
+        let (fast, slow) = if first_faster { (0, 1) } else { (1, 0) };
+        format!(
+            "{} {:.1} ms ({:.2} CPU s), {} {:.1} ms ({:.2} CPU s): {speed} = {:.2}x wall, {:.2}x CPU (image mean abs diff {:.4})",
+            names[0],
+            self.wall[0] * 1e3,
+            self.cpu[0],
+            names[1],
+            self.wall[1] * 1e3,
+            self.cpu[1],
+            self.wall[slow] / self.wall[fast],
+            self.cpu[slow] / self.cpu[fast],
+            self.images[0].mean_abs_diff(&self.images[1])
+        )
+    }
+}
+
 type Job<'a> = Box<dyn Fn() -> Result<psao_volume::Image> + 'a>;
 
 fn race(reps: u32, jobs: [Job; 2]) -> Result<Pair> {
@@ -531,15 +552,9 @@ fn bench(file: &Path, w: u32, h: u32, reps: u32) -> Result<()> {
         ],
     )?;
     println!(
-        "{}: fog {w}x{h}: f32 pool {:.1} ms ({:.2} CPU s), bc7 pool {:.1} ms ({:.2} CPU s): speed bc7/f32 = {:.2}x wall, {:.2}x CPU (image mean abs diff {:.4})",
+        "{}: fog {w}x{h}: {}",
         file.display(),
-        p.wall[0] * 1e3,
-        p.cpu[0],
-        p.wall[1] * 1e3,
-        p.cpu[1],
-        p.wall[0] / p.wall[1],
-        p.cpu[0] / p.cpu[1],
-        p.images[0].mean_abs_diff(&p.images[1])
+        p.summary(["f32 pool", "bc7 pool"], "speed bc7/f32", false)
     );
     if f32v.class == GridClass::LevelSet {
         let ls = RenderSettings::new(&f32v, w, h, RenderMode::LevelSet);
@@ -552,15 +567,9 @@ fn bench(file: &Path, w: u32, h: u32, reps: u32) -> Result<()> {
             ],
         )?;
         println!(
-            "{}: level set {w}x{h}: HDDA {:.1} ms ({:.2} CPU s), dense fixed-step march {:.1} ms ({:.2} CPU s): speed-up {:.2}x wall, {:.2}x CPU (image mean abs diff {:.4})",
+            "{}: level set {w}x{h}: {}",
             file.display(),
-            p.wall[0] * 1e3,
-            p.cpu[0],
-            p.wall[1] * 1e3,
-            p.cpu[1],
-            p.wall[1] / p.wall[0],
-            p.cpu[1] / p.cpu[0],
-            p.images[0].mean_abs_diff(&p.images[1])
+            p.summary(["HDDA", "dense fixed-step march"], "speed-up", true)
         );
     }
     Ok(())
