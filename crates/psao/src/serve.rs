@@ -106,6 +106,8 @@ pub struct ServeStats {
     pub p95_ms: f64,
     /// Mean of the step alone, ms.
     pub mean_step_ms: f64,
+    /// Mean rays traced per server frame.
+    pub mean_rays: f64,
     /// Mean per server frame of collecting the clients' updates (`update_for`), ms.
     pub mean_update_ms: f64,
     /// Mean per server frame of encoding them (codec + framing), ms.
@@ -209,6 +211,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         max_clients: args.max_clients,
         step_ms: Vec::new(),
         frame_ms: Vec::new(),
+        rays: 0,
         update_ms: 0.0,
         encode_ms: 0.0,
         hash_ms: 0.0,
@@ -407,6 +410,8 @@ struct Simulation {
     max_clients: usize,
     step_ms: Vec<f64>,
     frame_ms: Vec<f64>,
+    /// Rays traced, summed over frames.
+    rays: u64,
     /// Summed over frames: update collection, encoding, hashing (ms).
     update_ms: f64,
     encode_ms: f64,
@@ -587,6 +592,7 @@ impl Simulation {
         }
         let step = self.server.step(&views);
         self.step_ms.push(step.ms);
+        self.rays += step.rays;
         let th = Instant::now();
         let hash = self
             .sessions
@@ -698,6 +704,7 @@ impl Simulation {
         stats.mean_update_ms = self.update_ms / frames;
         stats.mean_encode_ms = self.encode_ms / frames;
         stats.mean_hash_ms = self.hash_ms / frames;
+        stats.mean_rays = self.rays as f64 / frames;
         stats.state_hash = format!("{:016x}", self.state_hash());
         stats.clients.sort_by_key(|c| c.id);
         tracing::info!(
