@@ -175,13 +175,15 @@ impl InstanceState {
     }
 
     /// The published content of bucket `b`: the allocation bucket's entries whose cells hold
-    /// a published point, compacted.
+    /// a published point, compacted. Reads the published grid's cells, so refresh those
+    /// (with [`InstanceState::published_cell`]) first.
     pub fn published_bucket(&self, b: usize) -> Bucket {
         let mut bucket = Bucket::default();
+        let cells = self.grid.cells();
         let entries = self.alloc.buckets()[b]
             .entries
             .iter()
-            .filter(|e| e.key != 0 && self.published_cell(e.slot).points[0] != 0);
+            .filter(|e| e.key != 0 && cells.get(e.slot as usize).is_some_and(|c| c.points[0] != 0));
         for (dst, e) in bucket.entries.iter_mut().zip(entries) {
             *dst = *e;
         }

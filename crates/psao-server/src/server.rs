@@ -67,7 +67,13 @@ pub struct Server {
     frame: u64,
     /// Frames of change lists kept: a client further behind gets its delta by a scan.
     history_frames: u64,
+    /// Where culling expects this frame's selection cut (see [`cull`]).
+    cut_guess: usize,
 }
+
+/// Selection histogram bins added to the previous frame's cut to guess the next one (the
+/// cut moves by about one bin per frame while the visible points take their first samples).
+const CUT_GUESS_MARGIN: usize = 4;
 
 /// Server frames whose changed buckets and cells are listed (2 s at 30 Hz): a client that
 /// last received an update longer ago gets its delta by scanning every stamp instead.
@@ -107,6 +113,7 @@ impl Server {
             clients: Clients::default(),
             frame: 0,
             history_frames: CHANGE_HISTORY_FRAMES,
+            cut_guess: 0,
         })
     }
 
@@ -159,9 +166,17 @@ impl Server {
             .iter()
             .map(|v| Frustum::new(v, c.frustum_margin))
             .collect();
-        let (visible, candidates) = cull(&self.instances, &frusta, c.max_samples, max_points);
+        let culled = cull(
+            &self.instances,
+            &frusta,
+            c.max_samples,
+            max_points,
+            self.cut_guess,
+        );
+        self.cut_guess = culled.cut.saturating_add(CUT_GUESS_MARGIN);
+        let visible = culled.visible;
         let t_cull = Instant::now();
-        let selected = select(candidates, max_points);
+        let selected = select(culled.candidates, max_points);
         let traced = trace(
             &self.tracer,
             &self.instances,
@@ -240,7 +255,7 @@ impl Server {
             .instances
             .par_iter()
             .enumerate()
-            .filter(|(_, inst)| snapshot || inst.max_stamp > since)
+            .filter(|(_, inst)| inst.max_stamp > if snapshot { 0 } else { since })
             .map(|(i, inst)| delta(i as u32, inst, snapshot, since))
             .filter(|d| !d.buckets.is_empty() || !d.cells.is_empty())
             .collect();
@@ -516,5 +531,44 @@ mod tests {
             from_log > 20 && scanned > 2,
             "{from_log} from the log, {scanned} scanned"
         );
+    }
+
+    #[test]
+    fn culling_selects_the_same_points_whatever_the_guessed_cut() {
+        let config = ServerConfig {
+            density: 256.0,
+            ray_budget: 4000,
+            rays_per_point: 4,
+            max_samples: 12,
+            ..ServerConfig::default()
+        };
+        let mut server = Server::new(&scene(), config).unwrap();
+        let max_points = 1000;
+        for frame in 0..12 {
+            let views = [view(frame), view(frame + 5)];
+            let frusta: Vec<Frustum> = views
+                .iter()
+                .map(|v| Frustum::new(v, config.frustum_margin))
+                .collect();
+            let run = |guess| {
+                let c = cull(
+                    &server.instances,
+                    &frusta,
+                    config.max_samples,
+                    max_points,
+                    guess,
+                );
+                let ids = |s: Vec<crate::trace::Candidate>| -> Vec<(u32, u32)> {
+                    s.iter().map(|c| (c.instance, c.index)).collect()
+                };
+                (c.visible, c.cut, ids(select(c.candidates, max_points)))
+            };
+            let all = run(usize::MAX);
+            assert!(all.0 > max_points && all.2.len() == max_points);
+            for guess in [0, 1, all.1.saturating_sub(1), all.1, all.1 + 3] {
+                assert_eq!(run(guess), all, "frame {frame}, guess {guess}");
+            }
+            server.step(&views);
+        }
     }
 }

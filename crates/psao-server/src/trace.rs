@@ -77,16 +77,28 @@ struct Visible {
     /// (instance, position in the instance's block order) of visible points of the other
     /// blocks.
     points: Vec<(u32, u32)>,
+    /// The candidates in bins up to the guessed cut.
+    guessed: Vec<Candidate>,
 }
 
 impl Visible {
-    fn note(&mut self, count: u32, tie: u32, max_samples: u32) {
+    /// Count visible point `index` of `instance` and, when it needs samples, its bin; keep
+    /// it as a candidate when its bin is at most `guess`.
+    fn note(&mut self, instance: u32, index: u32, count: u32, tie: u32, limits: &Limits) {
         self.count += 1;
-        if count < max_samples {
+        if count < limits.max_samples {
             if self.hist.is_empty() {
                 self.hist = vec![0; COUNT_LEVELS * TIE_LEVELS];
             }
-            self.hist[bin(count, tie)] += 1;
+            let b = bin(count, tie);
+            self.hist[b] += 1;
+            if b <= limits.guess {
+                self.guessed.push(Candidate {
+                    key: (u64::from(count) << 32) | u64::from(tie),
+                    instance,
+                    index,
+                });
+            }
         }
     }
 
@@ -101,20 +113,44 @@ impl Visible {
         }
         self.blocks.append(&mut other.blocks);
         self.points.append(&mut other.points);
+        self.guessed.append(&mut other.guessed);
         self
     }
+}
+
+/// What culling keeps: points with fewer samples than `max_samples`, kept in pass 1 when
+/// their bin is at most `guess`.
+struct Limits {
+    max_samples: u32,
+    guess: usize,
+}
+
+/// What [`cull`] found.
+pub(crate) struct Culled {
+    /// Stored points inside some frustum.
+    pub visible: usize,
+    /// Every candidate [`select`] may keep (and possibly more).
+    pub candidates: Vec<Candidate>,
+    /// The histogram bin up to which candidates were needed (`usize::MAX`: all): a good
+    /// `guess` for the next frame.
+    pub cut: usize,
 }
 
 /// Count the stored points inside any frustum (grown by each instance's reconstruction
 /// reach) and list those with fewer than `max_samples` samples that may be among the
 /// `max_points` that [`select`] keeps (a superset of them; `select` decides). Blocks are
 /// tested against the frusta first; only blocks straddling a frustum test their points.
+/// One pass counts the candidates per key bin (finding the cut) and keeps those up to
+/// `guess` (the previous frame's cut plus a margin); a second pass over the visible points
+/// runs only when the cut lies beyond the guess. The result does not depend on `guess`.
 pub(crate) fn cull(
     instances: &[InstanceState],
     frusta: &[Frustum],
     max_samples: u32,
     max_points: usize,
-) -> (usize, Vec<Candidate>) {
+    guess: usize,
+) -> Culled {
+    let limits = Limits { max_samples, guess };
     let near: Vec<Vec<&Frustum>> = instances
         .iter()
         .map(|inst| {
@@ -155,7 +191,7 @@ pub(crate) fn cull(
                 for k in range {
                     let i = blocks.order[k] as usize;
                     if p.slot[i] != NONE {
-                        acc.note(p.count[i], blocks.tie[k], max_samples);
+                        acc.note(ii, i as u32, p.count[i], blocks.tie[k], &limits);
                     }
                 }
             } else if !straddling.is_empty() {
@@ -166,7 +202,7 @@ pub(crate) fn cull(
                     }
                     let w = inst.transform.transform_point3(p.position[i]);
                     if straddling.iter().any(|f| f.contains(w, inst.slack)) {
-                        acc.note(p.count[i], blocks.tie[k], max_samples);
+                        acc.note(ii, i as u32, p.count[i], blocks.tie[k], &limits);
                         acc.points.push((ii, k as u32));
                     }
                 }
@@ -186,7 +222,20 @@ pub(crate) fn cull(
         }
     }
     if max_points == 0 {
-        return (visible.count, Vec::new());
+        return Culled {
+            visible: visible.count,
+            candidates: Vec::new(),
+            cut: 0,
+        };
+    }
+    if cut <= guess {
+        let mut candidates = visible.guessed;
+        candidates.retain(|c| bin((c.key >> 32) as u32, c.key as u32) <= cut);
+        return Culled {
+            visible: visible.count,
+            candidates,
+            cut,
+        };
     }
     let candidate = |ii: u32, k: usize| {
         let inst = &instances[ii as usize];
@@ -213,7 +262,11 @@ pub(crate) fn cull(
             .par_iter()
             .filter_map(|&(ii, k)| candidate(ii, k as usize)),
     );
-    (visible.count, out)
+    Culled {
+        visible: visible.count,
+        candidates: out,
+        cut,
+    }
 }
 
 /// Keep the `max_points` candidates that need samples most (fewest samples first), in

@@ -93,6 +93,11 @@ pub struct BenchServeReport {
     pub server_p95_ms: f64,
     /// Mean server ms per frame over the frame period (1000 / hz): below 1 keeps up.
     pub server_load: f64,
+    /// Server process CPU ms (all threads) per frame.
+    pub server_cpu_ms: f64,
+    /// That over the CPU time of 2 cores in one frame period: the server's share of a
+    /// 2-core machine, independent of other load.
+    pub server_cpu_share_2_cores: f64,
     /// Mean of the step alone.
     pub server_step_ms: f64,
     /// Mean of collecting the clients' updates per frame (all clients).
@@ -237,6 +242,8 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         server_mean_ms: s["mean_ms"].as_f64().unwrap_or(0.0),
         server_p95_ms: s["p95_ms"].as_f64().unwrap_or(0.0),
         server_load: s["mean_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 1000.0,
+        server_cpu_ms: s["cpu_ms"].as_f64().unwrap_or(0.0),
+        server_cpu_share_2_cores: s["cpu_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 2000.0,
         server_step_ms: s["mean_step_ms"].as_f64().unwrap_or(0.0),
         server_update_ms: s["mean_update_ms"].as_f64().unwrap_or(0.0),
         server_encode_ms: s["mean_encode_ms"].as_f64().unwrap_or(0.0),
@@ -246,7 +253,8 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     println!(
         "{} clients at {} Hz on {}: {} server frames, {:.0} rays per frame (budget {}), \
          {:.1} ms mean ({:.2} of the {:.1} ms period) / {:.1} ms p95 per frame \
-         ({:.1} ms step, {:.1} ms updates, {:.1} ms encoding), {} late",
+         ({:.1} ms step, {:.1} ms updates, {:.1} ms encoding), {} late; \
+         server CPU {:.1} ms per frame = {:.2} of 2 cores",
         report.clients,
         report.hz,
         report.scene,
@@ -260,7 +268,9 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         report.server_step_ms,
         report.server_update_ms,
         report.server_encode_ms,
-        report.late_frames
+        report.late_frames,
+        report.server_cpu_ms,
+        report.server_cpu_share_2_cores
     );
     println!("client  Mbit/s  updates  coalesced  exact");
     for (k, c) in report.per_client.iter().enumerate() {
