@@ -96,11 +96,11 @@ impl Block {
         let half = (self.hi - self.lo) * 0.5;
         let m = transform.matrix3;
         let extent = m.x_axis.abs() * half.x + m.y_axis.abs() * half.y + m.z_axis.abs() * half.z;
-        let size = Vec3::from(extent).max_element() + Vec3::from(centre).abs().max_element();
+        let size = Vec3::from(extent).max_element() + centre.abs().max_element();
         let mut inside = true;
         for plane in frustum.planes() {
             let n = plane.truncate();
-            let d = n.dot(centre.into()) + plane.w;
+            let d = n.dot(centre) + plane.w;
             let r = n.abs().dot(extent.into());
             // Rounding of the per-point transform and dot product stays far below this.
             let eps = 1e-4 * (1.0 + size + plane.w.abs());
@@ -108,9 +108,7 @@ impl Block {
                 return Side::Outside;
             }
             // NaN planes (degenerate views) fail this and leave the decision to the points.
-            if !(d - r >= -slack + eps) {
-                inside = false;
-            }
+            inside &= d - r >= -slack + eps;
         }
         if inside {
             Side::Inside

@@ -12,7 +12,7 @@ use serde::Serialize;
 use crate::run::write_json;
 
 /// Default ray budget per server frame of the load benchmark (see `--ray-budget`).
-const BENCH_RAY_BUDGET: u64 = 144_000;
+const BENCH_RAY_BUDGET: u64 = 48_000;
 
 /// Arguments of `psao bench serve`.
 #[derive(clap::Args, Debug)]
@@ -39,10 +39,12 @@ pub struct BenchServeArgs {
     /// Update codec.
     #[arg(long, default_value = "compact")]
     pub codec: String,
-    /// Rays per server frame at most. The default fits the 30 Hz frame on 2 cores: Embree
-    /// traces about 13 M closest-hit AO rays/s on 2 threads on Sponza (docs/BENCHMARKS.md),
-    /// and tracing gets a third of the 33 ms frame (culling, publishing, encoding and, here,
-    /// the clients share the cores), so 144 000 rays (9000 points × 16 rays).
+    /// Rays per server frame at most. The default leaves the 30 Hz frame room on 2 cores:
+    /// at ~13 M closest-hit AO rays/s on 2 threads (Embree, Sponza, docs/BENCHMARKS.md)
+    /// 48 000 rays (3000 points × 16 rays) take ~4 ms of the 33 ms frame, because culling
+    /// the visible points, publishing, encoding one update per client and (here) the
+    /// clients themselves need the rest; measured on Sponza with 8 clients, 144 000 rays
+    /// already need more than 2 cores (docs/BENCHMARKS.md).
     #[arg(long, default_value_t = BENCH_RAY_BUDGET)]
     pub ray_budget: u64,
     /// Clients' image size (their aspect shapes the culling frusta).
