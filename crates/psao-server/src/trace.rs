@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use crate::blocks::Side;
 use crate::frustum::Frustum;
-use crate::instance::{InstanceState, NONE};
+use crate::instance::{InstanceState, Points, NONE};
 
 /// Rays traced together per parallel work item. The batch's points are neighbours (the
 /// selection is put in Morton order first) and each point's rays stay together, so a
@@ -84,6 +84,7 @@ struct Visible {
 impl Visible {
     /// Count visible point `index` of `instance` and, when it needs samples, its bin; keep
     /// it as a candidate when its bin is at most `guess`.
+    #[inline]
     fn note(&mut self, instance: u32, index: u32, count: u32, tie: u32, limits: &Limits) {
         self.count += 1;
         if count < limits.max_samples {
@@ -98,6 +99,41 @@ impl Visible {
                     instance,
                     index,
                 });
+            }
+        }
+    }
+
+    /// [`Visible::note`] for every stored point of a block that lies inside a frustum:
+    /// `order` and `ties` are the block's part of [`crate::blocks::CullBlocks`].
+    fn note_block(
+        &mut self,
+        instance: u32,
+        order: &[u32],
+        ties: &[u32],
+        points: &Points,
+        limits: &Limits,
+    ) {
+        if self.hist.is_empty() {
+            self.hist = vec![0; COUNT_LEVELS * TIE_LEVELS];
+        }
+        let hist = &mut self.hist[..COUNT_LEVELS * TIE_LEVELS];
+        for (&i, &tie) in order.iter().zip(ties) {
+            let i = i as usize;
+            if points.slot[i] == NONE {
+                continue;
+            }
+            self.count += 1;
+            let count = points.count[i];
+            if count < limits.max_samples {
+                let b = bin(count, tie);
+                hist[b] += 1;
+                if b <= limits.guess {
+                    self.guessed.push(Candidate {
+                        key: (u64::from(count) << 32) | u64::from(tie),
+                        instance,
+                        index: i as u32,
+                    });
+                }
             }
         }
     }
@@ -188,12 +224,8 @@ pub(crate) fn cull(
             let range = block.start as usize..block.end as usize;
             if inside {
                 acc.blocks.push((ii, b));
-                for k in range {
-                    let i = blocks.order[k] as usize;
-                    if p.slot[i] != NONE {
-                        acc.note(ii, i as u32, p.count[i], blocks.tie[k], &limits);
-                    }
-                }
+                let (order, ties) = (&blocks.order[range.clone()], &blocks.tie[range]);
+                acc.note_block(ii, order, ties, p, &limits);
             } else if !straddling.is_empty() {
                 for k in range {
                     let i = blocks.order[k] as usize;
