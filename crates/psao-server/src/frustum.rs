@@ -47,6 +47,11 @@ impl Frustum {
         }
     }
 
+    /// The six planes (unit normal, offset), `n·p + d ≥ 0` inside.
+    pub(crate) fn planes(&self) -> &[Vec4; 6] {
+        &self.planes
+    }
+
     /// Whether `p` lies inside or within distance `slack` of the frustum (conservatively:
     /// against each plane separately).
     #[inline]

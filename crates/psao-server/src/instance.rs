@@ -7,6 +7,8 @@ use psao_points::{
     DEFAULT_INTERPOLATION_FACTOR,
 };
 
+use crate::blocks::CullBlocks;
+use crate::changes::ChangeLog;
 use crate::ServerError;
 
 /// Marks "no point" in a member list and "not stored" in a point's slot.
@@ -39,6 +41,10 @@ pub(crate) struct InstanceState {
     pub cell_stamp: Vec<u64>,
     /// Largest stamp of this instance.
     pub max_stamp: u64,
+    /// The buckets and cells stamped in recent frames.
+    pub changes: ChangeLog,
+    /// The points in spatial blocks with local bounds, for culling.
+    pub blocks: CullBlocks,
 }
 
 /// Per-point state of one instance.
@@ -58,9 +64,14 @@ pub(crate) struct Points {
 }
 
 impl InstanceState {
-    /// Build the allocation grid from generated points (DESIGN §3 layout); nothing is
-    /// published yet.
-    pub fn new(points: &InstancePoints, transform: Affine3A) -> Result<Self, ServerError> {
+    /// Build the allocation grid from generated points (DESIGN §3 layout) of instance
+    /// `index`; nothing is published yet. `seed` spreads the tracing order.
+    pub fn new(
+        points: &InstancePoints,
+        transform: Affine3A,
+        index: u32,
+        seed: u64,
+    ) -> Result<Self, ServerError> {
         let (alloc, locs) = InstanceGrid::from_points(points, 1.0)?;
         let layout = *alloc.layout();
         let n = points.points.len();
@@ -84,11 +95,11 @@ impl InstanceState {
                 }
             }
         }
-        let world_bounds = world_bounds(&p.position, &transform);
-        Ok(Self {
+        let blocks = CullBlocks::new(&p.position, index, seed);
+        let mut state = Self {
             transform,
             normal_matrix: transform.matrix3.inverse().transpose(),
-            world_bounds,
+            world_bounds: (Vec3::ZERO, Vec3::ZERO),
             slack: points.poisson_radius * DEFAULT_INTERPOLATION_FACTOR,
             poisson_radius: points.poisson_radius_local,
             grid: InstanceGrid::new(layout),
@@ -99,7 +110,36 @@ impl InstanceState {
             members,
             points: p,
             max_stamp: 0,
-        })
+            changes: ChangeLog::default(),
+            blocks,
+        };
+        state.refresh_cull_bounds();
+        Ok(state)
+    }
+
+    /// Recompute the culling bounds (world bounds and the blocks' local bounds) from the
+    /// points' current local positions: call after points moved in local space.
+    pub fn refresh_cull_bounds(&mut self) {
+        self.world_bounds = world_bounds(&self.points.position, &self.transform);
+        self.blocks.refresh_bounds(&self.points.position);
+    }
+
+    /// Store `cell` in published slot `slot` and stamp it (and the change log) with `frame`.
+    pub fn publish_cell(&mut self, slot: u32, cell: Cell, frame: u64) {
+        let stored = self.grid.set_cell(slot, cell);
+        debug_assert!(stored.is_ok(), "allocation slots are valid grid slots");
+        self.cell_stamp[slot as usize] = frame;
+        self.max_stamp = frame;
+        self.changes.cell(frame, slot);
+    }
+
+    /// Store `bucket` in published bucket `b` and stamp it (and the change log) with `frame`.
+    pub fn publish_bucket(&mut self, b: usize, bucket: Bucket, frame: u64) {
+        let stored = self.grid.set_bucket(b, bucket);
+        debug_assert!(stored.is_ok(), "allocation buckets are valid grid buckets");
+        self.bucket_stamp[b] = frame;
+        self.max_stamp = frame;
+        self.changes.bucket(frame, b as u32);
     }
 
     /// The grid layout.
@@ -135,13 +175,15 @@ impl InstanceState {
     }
 
     /// The published content of bucket `b`: the allocation bucket's entries whose cells hold
-    /// a published point, compacted.
+    /// a published point, compacted. Reads the published grid's cells, so refresh those
+    /// (with [`InstanceState::published_cell`]) first.
     pub fn published_bucket(&self, b: usize) -> Bucket {
         let mut bucket = Bucket::default();
+        let cells = self.grid.cells();
         let entries = self.alloc.buckets()[b]
             .entries
             .iter()
-            .filter(|e| e.key != 0 && self.published_cell(e.slot).points[0] != 0);
+            .filter(|e| e.key != 0 && cells.get(e.slot as usize).is_some_and(|c| c.points[0] != 0));
         for (dst, e) in bucket.entries.iter_mut().zip(entries) {
             *dst = *e;
         }

@@ -6,6 +6,8 @@
 //! each server frame [`Server::step`] with the clients' views → [`Server::update_for`] per
 //! client, encoded with a [`psao_delta::Codec`]. Pure computation: no file or network I/O.
 
+mod blocks;
+mod changes;
 mod clients;
 mod config;
 mod error;

@@ -62,10 +62,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
             .unwrap_or_default()
             != cell
         {
-            let stored = inst.grid.set_cell(slot, cell);
-            debug_assert!(stored.is_ok(), "allocation slots are valid grid slots");
-            inst.cell_stamp[slot as usize] = frame;
-            inst.max_stamp = frame;
+            inst.publish_cell(slot, cell, frame);
         }
         dirty_buckets.push(layout.bucket_of(inst.slot_ids[slot as usize]));
     }
@@ -74,10 +71,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     for b in dirty_buckets {
         let bucket = inst.published_bucket(b);
         if inst.grid.buckets()[b] != bucket {
-            let stored = inst.grid.set_bucket(b, bucket);
-            debug_assert!(stored.is_ok(), "allocation buckets are valid grid buckets");
-            inst.bucket_stamp[b] = frame;
-            inst.max_stamp = frame;
+            inst.publish_bucket(b, bucket, frame);
         }
     }
     updates.len()
@@ -113,7 +107,7 @@ mod tests {
             None,
         )
         .unwrap();
-        InstanceState::new(&points, Affine3A::IDENTITY).unwrap()
+        InstanceState::new(&points, Affine3A::IDENTITY, 0, 0).unwrap()
     }
 
     /// A stored point whose x lies in the middle of its cell (room to move 4 steps).

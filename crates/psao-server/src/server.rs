@@ -65,7 +65,19 @@ pub struct Server {
     instances: Vec<InstanceState>,
     clients: Clients,
     frame: u64,
+    /// Frames of change lists kept: a client further behind gets its delta by a scan.
+    history_frames: u64,
+    /// Where culling expects this frame's selection cut (see [`cull`]).
+    cut_guess: usize,
 }
+
+/// Selection histogram bins added to the previous frame's cut to guess the next one (the
+/// cut moves by about one bin per frame while the visible points take their first samples).
+const CUT_GUESS_MARGIN: usize = 4;
+
+/// Server frames whose changed buckets and cells are listed (2 s at 30 Hz): a client that
+/// last received an update longer ago gets its delta by scanning every stamp instead.
+const CHANGE_HISTORY_FRAMES: u64 = 64;
 
 impl Server {
     /// Generate the points of every instance (in parallel), lay out their grids and build
@@ -89,7 +101,8 @@ impl Server {
         let instances = points
             .par_iter()
             .zip(&scene.instances)
-            .map(|(p, inst)| InstanceState::new(p, inst.transform))
+            .enumerate()
+            .map(|(i, (p, inst))| InstanceState::new(p, inst.transform, i as u32, config.seed))
             .collect::<Result<Vec<_>, _>>()?;
         let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
         Ok(Server {
@@ -99,6 +112,8 @@ impl Server {
             instances,
             clients: Clients::default(),
             frame: 0,
+            history_frames: CHANGE_HISTORY_FRAMES,
+            cut_guess: 0,
         })
     }
 
@@ -145,14 +160,23 @@ impl Server {
         let start = Instant::now();
         self.frame += 1;
         let c = &self.config;
+        let max_points =
+            usize::try_from(c.ray_budget / u64::from(c.rays_per_point)).unwrap_or(usize::MAX);
         let frusta: Vec<Frustum> = views
             .iter()
             .map(|v| Frustum::new(v, c.frustum_margin))
             .collect();
-        let (visible, candidates) = cull(&self.instances, &frusta, c.max_samples, c.seed);
-        let max_points =
-            usize::try_from(c.ray_budget / u64::from(c.rays_per_point)).unwrap_or(usize::MAX);
-        let selected = select(candidates, max_points);
+        let culled = cull(
+            &self.instances,
+            &frusta,
+            c.max_samples,
+            max_points,
+            self.cut_guess,
+        );
+        self.cut_guess = culled.cut.saturating_add(CUT_GUESS_MARGIN);
+        let visible = culled.visible;
+        let t_cull = Instant::now();
+        let selected = select(culled.candidates, max_points);
         let traced = trace(
             &self.tracer,
             &self.instances,
@@ -169,7 +193,21 @@ impl Server {
             p.count[t.index as usize] += t.rays;
             rays += u64::from(t.rays);
         }
+        let t_trace = Instant::now();
         let published = self.publish(&traced);
+        let forget = self.frame.saturating_sub(self.history_frames);
+        for inst in &mut self.instances {
+            inst.changes.forget_through(forget);
+        }
+        tracing::debug!(
+            frame = self.frame,
+            visible,
+            traced = traced.len(),
+            cull_ms = (t_cull - start).as_secs_f64() * 1e3,
+            trace_ms = (t_trace - t_cull).as_secs_f64() * 1e3,
+            publish_ms = t_trace.elapsed().as_secs_f64() * 1e3,
+            "step"
+        );
         StepStats {
             visible_points: visible,
             traced_points: traced.len(),
@@ -217,7 +255,7 @@ impl Server {
             .instances
             .par_iter()
             .enumerate()
-            .filter(|(_, inst)| snapshot || inst.max_stamp > since)
+            .filter(|(_, inst)| inst.max_stamp > if snapshot { 0 } else { since })
             .map(|(i, inst)| delta(i as u32, inst, snapshot, since))
             .filter(|d| !d.buckets.is_empty() || !d.cells.is_empty())
             .collect();
@@ -299,8 +337,32 @@ impl Server {
     }
 }
 
-/// The changed (or, for a snapshot, non-empty) buckets and cells of one instance.
+/// The changed (or, for a snapshot, non-empty) buckets and cells of one instance: from
+/// the change log when it reaches back to `since`, else by scanning the stamps.
 fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> InstanceDelta {
+    match (snapshot, inst.changes.since(since)) {
+        (false, Some(changed)) => {
+            let grid = &inst.grid;
+            InstanceDelta {
+                instance: index,
+                buckets: changed
+                    .buckets
+                    .iter()
+                    .map(|&b| (b, grid.buckets()[b as usize]))
+                    .collect(),
+                cells: changed
+                    .cells
+                    .iter()
+                    .map(|&s| (s, grid.cells()[s as usize]))
+                    .collect(),
+            }
+        }
+        _ => scan_delta(index, inst, snapshot, since),
+    }
+}
+
+/// [`delta`] by scanning every bucket and cell of the instance.
+fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> InstanceDelta {
     let grid = &inst.grid;
     let buckets = grid
         .buckets()
@@ -332,5 +394,181 @@ fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> Instan
         instance: index,
         buckets,
         cells,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use psao_scene::{Camera, Instance, Material, Mesh};
+
+    /// A 4 m floor and a 2 m wall standing on it.
+    fn scene() -> Scene {
+        let quad = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| Mesh {
+            positions: vec![a, b, c, d],
+            indices: vec![[0, 2, 1], [0, 3, 2]],
+            ..Default::default()
+        };
+        let floor = quad(
+            Vec3::new(-2.0, 0.0, -2.0),
+            Vec3::new(2.0, 0.0, -2.0),
+            Vec3::new(2.0, 0.0, 2.0),
+            Vec3::new(-2.0, 0.0, 2.0),
+        );
+        let wall = quad(
+            Vec3::new(-1.0, 0.0, 0.0),
+            Vec3::new(-1.0, 2.0, 0.0),
+            Vec3::new(1.0, 2.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+        );
+        let instance = |mesh: usize| Instance {
+            mesh,
+            node: None,
+            transform: Affine3A::IDENTITY,
+            skin: None,
+        };
+        Scene {
+            meshes: vec![floor, wall],
+            materials: vec![Material::default()],
+            instances: vec![instance(0), instance(1)],
+            ao_radius: 0.6,
+            ..Default::default()
+        }
+    }
+
+    /// A camera circling the scene, looking at a point that wanders over the floor.
+    fn view(frame: u32) -> View {
+        let a = frame as f32 * 0.4;
+        let eye = Vec3::new(3.0 * a.cos(), 1.5, 3.0 * a.sin());
+        let target = Vec3::new(0.8 * (a * 1.7).sin(), 0.3, 0.8 * (a * 1.3).cos());
+        View {
+            camera: Camera::look_at(eye, target, 50.0),
+            aspect: 1.5,
+        }
+    }
+
+    /// The published grids as a client mirrors them.
+    fn apply(mirror: &mut [InstanceGrid], update: &Update) {
+        for d in &update.instances {
+            let grid = &mut mirror[d.instance as usize];
+            for &(b, bucket) in &d.buckets {
+                grid.set_bucket(b as usize, bucket).unwrap();
+            }
+            for &(s, cell) in &d.cells {
+                grid.set_cell(s, cell).unwrap();
+            }
+        }
+    }
+
+    #[test]
+    fn change_lists_give_exactly_the_scanned_deltas() {
+        let config = ServerConfig {
+            density: 256.0,
+            ray_budget: 2000,
+            rays_per_point: 4,
+            max_samples: 16,
+            ..ServerConfig::default()
+        };
+        let mut server = Server::new(&scene(), config).unwrap();
+        server.history_frames = 4;
+        // (join frame, frames between updates): the last client falls behind the history.
+        let plan = [(0, 1), (2, 2), (5, 3), (1, 7)];
+        let mut clients: Vec<Option<(ClientId, Vec<InstanceGrid>)>> = vec![None, None, None, None];
+        let (mut from_log, mut scanned) = (0, 0);
+        for frame in 0..36u32 {
+            for (k, &(join, _)) in plan.iter().enumerate() {
+                if frame == join {
+                    let mirror = server
+                        .instance_table()
+                        .iter()
+                        .map(|t| InstanceGrid::new(t.layout))
+                        .collect();
+                    clients[k] = Some((server.add_client(), mirror));
+                }
+            }
+            server.step(&[view(frame), view(frame + 11)]);
+            for (k, &(join, every)) in plan.iter().enumerate() {
+                let Some((id, mirror)) = clients[k].as_mut() else {
+                    continue;
+                };
+                if (frame - join) % every != 0 {
+                    continue;
+                }
+                let c = *server.clients.get_mut(*id).unwrap();
+                let (snapshot, since) = (c.needs_snapshot, c.last_sent);
+                let expected: Vec<InstanceDelta> = server
+                    .instances
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, inst)| snapshot || inst.max_stamp > since)
+                    .map(|(i, inst)| scan_delta(i as u32, inst, snapshot, since))
+                    .filter(|d| !d.buckets.is_empty() || !d.cells.is_empty())
+                    .collect();
+                if !snapshot && !expected.is_empty() {
+                    let logged = server
+                        .instances
+                        .iter()
+                        .all(|i| i.changes.since(since).is_some());
+                    if logged {
+                        from_log += 1;
+                    } else {
+                        scanned += 1;
+                    }
+                }
+                let update = server.update_for(*id);
+                assert_eq!(update.snapshot, snapshot);
+                assert_eq!(update.instances, expected, "client {k} at frame {frame}");
+                apply(mirror, &update);
+                for (i, grid) in mirror.iter().enumerate() {
+                    let server_grid = server.grid(i).unwrap();
+                    assert_eq!(grid.buckets(), server_grid.buckets());
+                    assert_eq!(grid.cells(), server_grid.cells());
+                }
+            }
+        }
+        // Both paths were exercised with real changes.
+        assert!(
+            from_log > 20 && scanned > 2,
+            "{from_log} from the log, {scanned} scanned"
+        );
+    }
+
+    #[test]
+    fn culling_selects_the_same_points_whatever_the_guessed_cut() {
+        let config = ServerConfig {
+            density: 256.0,
+            ray_budget: 4000,
+            rays_per_point: 4,
+            max_samples: 12,
+            ..ServerConfig::default()
+        };
+        let mut server = Server::new(&scene(), config).unwrap();
+        let max_points = 1000;
+        for frame in 0..12 {
+            let views = [view(frame), view(frame + 5)];
+            let frusta: Vec<Frustum> = views
+                .iter()
+                .map(|v| Frustum::new(v, config.frustum_margin))
+                .collect();
+            let run = |guess| {
+                let c = cull(
+                    &server.instances,
+                    &frusta,
+                    config.max_samples,
+                    max_points,
+                    guess,
+                );
+                let ids = |s: Vec<crate::trace::Candidate>| -> Vec<(u32, u32)> {
+                    s.iter().map(|c| (c.instance, c.index)).collect()
+                };
+                (c.visible, c.cut, ids(select(c.candidates, max_points)))
+            };
+            let all = run(usize::MAX);
+            assert!(all.0 > max_points && all.2.len() == max_points);
+            for guess in [0, 1, all.1.saturating_sub(1), all.1, all.1 + 3] {
+                assert_eq!(run(guess), all, "frame {frame}, guess {guess}");
+            }
+            server.step(&views);
+        }
     }
 }

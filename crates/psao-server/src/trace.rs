@@ -1,15 +1,14 @@
 //! Culling, budgeted selection and tracing of AO samples (DESIGN §3 "CPU server").
 
 use glam::Vec3;
-use psao_trace::ao::{ao_rays_range, hash64};
+use psao_trace::ao::ao_rays_range;
 use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
 use rayon::prelude::*;
 
+use crate::blocks::Side;
 use crate::frustum::Frustum;
-use crate::instance::{InstanceState, NONE};
+use crate::instance::{InstanceState, Points, NONE};
 
-/// Points culled per parallel work item.
-const CULL_CHUNK: usize = 8192;
 /// Rays traced together per parallel work item. The batch's points are neighbours (the
 /// selection is put in Morton order first) and each point's rays stay together, so a
 /// 16-ray packet shares its origin: measured faster than re-sorting the rays of a batch
@@ -19,8 +18,8 @@ const BATCH_RAYS: usize = 8192;
 /// A visible point that still needs samples.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Candidate {
-    /// Priority, smallest first: sample count (high half), then a seeded hash of the point
-    /// (low half) so equal counts are spread over the scene instead of taken in index order.
+    /// Priority, smallest first: sample count (high half), then the point's seeded
+    /// tie-break ([`crate::blocks::tie_of`], low half).
     pub key: u64,
     pub instance: u32,
     pub index: u32,
@@ -49,57 +48,257 @@ pub(crate) fn sample_key(instance: u32, index: u32) -> u64 {
     (u64::from(instance) << 32) | u64::from(index)
 }
 
+/// Sample-count levels of the selection histogram (counts from here on share a level).
+const COUNT_LEVELS: usize = 64;
+/// Tie-break levels per count level (the tie's top bits).
+const TIE_LEVELS: usize = 256;
+
+/// The selection histogram bin of a point: monotone in its [`Candidate::key`] (counts
+/// below the last level split by the tie's top bits, the rest share the last bin).
+#[inline]
+fn bin(count: u32, tie: u32) -> usize {
+    let level = count as usize;
+    if level >= COUNT_LEVELS - 1 {
+        COUNT_LEVELS * TIE_LEVELS - 1
+    } else {
+        level * TIE_LEVELS + (tie >> 24) as usize
+    }
+}
+
+/// The visible points found by the first culling pass.
+#[derive(Default)]
+struct Visible {
+    /// Stored points inside some frustum.
+    count: usize,
+    /// Histogram of [`bin`] over the visible points that need samples.
+    hist: Vec<u32>,
+    /// (instance, block) of blocks entirely inside some frustum.
+    blocks: Vec<(u32, u32)>,
+    /// (instance, position in the instance's block order) of visible points of the other
+    /// blocks.
+    points: Vec<(u32, u32)>,
+    /// The candidates in bins up to the guessed cut.
+    guessed: Vec<Candidate>,
+}
+
+impl Visible {
+    /// Count visible point `index` of `instance` and, when it needs samples, its bin; keep
+    /// it as a candidate when its bin is at most `guess`.
+    #[inline]
+    fn note(&mut self, instance: u32, index: u32, count: u32, tie: u32, limits: &Limits) {
+        self.count += 1;
+        if count < limits.max_samples {
+            if self.hist.is_empty() {
+                self.hist = vec![0; COUNT_LEVELS * TIE_LEVELS];
+            }
+            let b = bin(count, tie);
+            self.hist[b] += 1;
+            if b <= limits.guess {
+                self.guessed.push(Candidate {
+                    key: (u64::from(count) << 32) | u64::from(tie),
+                    instance,
+                    index,
+                });
+            }
+        }
+    }
+
+    /// [`Visible::note`] for every stored point of a block that lies inside a frustum:
+    /// `order` and `ties` are the block's part of [`crate::blocks::CullBlocks`].
+    fn note_block(
+        &mut self,
+        instance: u32,
+        order: &[u32],
+        ties: &[u32],
+        points: &Points,
+        limits: &Limits,
+    ) {
+        if self.hist.is_empty() {
+            self.hist = vec![0; COUNT_LEVELS * TIE_LEVELS];
+        }
+        let hist = &mut self.hist[..COUNT_LEVELS * TIE_LEVELS];
+        for (&i, &tie) in order.iter().zip(ties) {
+            let i = i as usize;
+            if points.slot[i] == NONE {
+                continue;
+            }
+            self.count += 1;
+            let count = points.count[i];
+            if count < limits.max_samples {
+                let b = bin(count, tie);
+                hist[b] += 1;
+                if b <= limits.guess {
+                    self.guessed.push(Candidate {
+                        key: (u64::from(count) << 32) | u64::from(tie),
+                        instance,
+                        index: i as u32,
+                    });
+                }
+            }
+        }
+    }
+
+    fn merge(mut self, mut other: Visible) -> Visible {
+        self.count += other.count;
+        if self.hist.is_empty() {
+            self.hist = other.hist;
+        } else {
+            for (a, b) in self.hist.iter_mut().zip(&other.hist) {
+                *a += b;
+            }
+        }
+        self.blocks.append(&mut other.blocks);
+        self.points.append(&mut other.points);
+        self.guessed.append(&mut other.guessed);
+        self
+    }
+}
+
+/// What culling keeps: points with fewer samples than `max_samples`, kept in pass 1 when
+/// their bin is at most `guess`.
+struct Limits {
+    max_samples: u32,
+    guess: usize,
+}
+
+/// What [`cull`] found.
+pub(crate) struct Culled {
+    /// Stored points inside some frustum.
+    pub visible: usize,
+    /// Every candidate [`select`] may keep (and possibly more).
+    pub candidates: Vec<Candidate>,
+    /// The histogram bin up to which candidates were needed (`usize::MAX`: all): a good
+    /// `guess` for the next frame.
+    pub cut: usize,
+}
+
 /// Count the stored points inside any frustum (grown by each instance's reconstruction
-/// reach) and list those with fewer than `max_samples` samples. Deterministic order.
+/// reach) and list those with fewer than `max_samples` samples that may be among the
+/// `max_points` that [`select`] keeps (a superset of them; `select` decides). Blocks are
+/// tested against the frusta first; only blocks straddling a frustum test their points.
+/// One pass counts the candidates per key bin (finding the cut) and keeps those up to
+/// `guess` (the previous frame's cut plus a margin); a second pass over the visible points
+/// runs only when the cut lies beyond the guess. The result does not depend on `guess`.
 pub(crate) fn cull(
     instances: &[InstanceState],
     frusta: &[Frustum],
     max_samples: u32,
-    seed: u64,
-) -> (usize, Vec<Candidate>) {
-    let parts: Vec<(usize, Vec<Candidate>)> = instances
-        .par_iter()
-        .enumerate()
-        .flat_map(|(ii, inst)| {
-            let near: Vec<&Frustum> = frusta
+    max_points: usize,
+    guess: usize,
+) -> Culled {
+    let limits = Limits { max_samples, guess };
+    let near: Vec<Vec<&Frustum>> = instances
+        .iter()
+        .map(|inst| {
+            frusta
                 .iter()
                 .filter(|f| f.may_intersect(inst.world_bounds, inst.slack))
-                .collect();
-            let n = if near.is_empty() {
-                0
-            } else {
-                inst.points.position.len()
-            };
-            let starts: Vec<usize> = (0..n).step_by(CULL_CHUNK).collect();
-            starts.into_par_iter().map(move |start| {
-                let p = &inst.points;
-                let mut visible = 0;
-                let mut out = Vec::new();
-                for i in start..(start + CULL_CHUNK).min(n) {
+                .collect()
+        })
+        .collect();
+    let work: Vec<(u32, u32)> = instances
+        .iter()
+        .enumerate()
+        .filter(|(ii, _)| !near[*ii].is_empty())
+        .flat_map(|(ii, inst)| (0..inst.blocks.blocks.len() as u32).map(move |b| (ii as u32, b)))
+        .collect();
+    let visible = work
+        .par_iter()
+        .fold(Visible::default, |mut acc, &(ii, b)| {
+            let inst = &instances[ii as usize];
+            let p = &inst.points;
+            let blocks = &inst.blocks;
+            let block = &blocks.blocks[b as usize];
+            let mut straddling: Vec<&Frustum> = Vec::new();
+            let mut inside = false;
+            for f in &near[ii as usize] {
+                match block.side(&inst.transform, f, inst.slack) {
+                    Side::Inside => {
+                        inside = true;
+                        break;
+                    }
+                    Side::Straddles => straddling.push(f),
+                    Side::Outside => {}
+                }
+            }
+            let range = block.start as usize..block.end as usize;
+            if inside {
+                acc.blocks.push((ii, b));
+                let (order, ties) = (&blocks.order[range.clone()], &blocks.tie[range]);
+                acc.note_block(ii, order, ties, p, &limits);
+            } else if !straddling.is_empty() {
+                for k in range {
+                    let i = blocks.order[k] as usize;
                     if p.slot[i] == NONE {
                         continue;
                     }
                     let w = inst.transform.transform_point3(p.position[i]);
-                    if !near.iter().any(|f| f.contains(w, inst.slack)) {
-                        continue;
-                    }
-                    visible += 1;
-                    if p.count[i] < max_samples {
-                        let key = sample_key(ii as u32, i as u32);
-                        let tie = hash64(key ^ seed.rotate_left(29)) as u32;
-                        out.push(Candidate {
-                            key: (u64::from(p.count[i]) << 32) | u64::from(tie),
-                            instance: ii as u32,
-                            index: i as u32,
-                        });
+                    if straddling.iter().any(|f| f.contains(w, inst.slack)) {
+                        acc.note(ii, i as u32, p.count[i], blocks.tie[k], &limits);
+                        acc.points.push((ii, k as u32));
                     }
                 }
-                (visible, out)
+            }
+            acc
+        })
+        .reduce(Visible::default, Visible::merge);
+    // The smallest bin that, with all below it, holds `max_points` candidates: every point
+    // `select` keeps lies in a bin up to it.
+    let mut cut = usize::MAX;
+    let mut below = 0usize;
+    for (bin, &n) in visible.hist.iter().enumerate() {
+        below += n as usize;
+        if below >= max_points {
+            cut = bin;
+            break;
+        }
+    }
+    if max_points == 0 {
+        return Culled {
+            visible: visible.count,
+            candidates: Vec::new(),
+            cut: 0,
+        };
+    }
+    if cut <= guess {
+        let mut candidates = visible.guessed;
+        candidates.retain(|c| bin((c.key >> 32) as u32, c.key as u32) <= cut);
+        return Culled {
+            visible: visible.count,
+            candidates,
+            cut,
+        };
+    }
+    let candidate = |ii: u32, k: usize| {
+        let inst = &instances[ii as usize];
+        let i = inst.blocks.order[k];
+        let (count, tie) = (inst.points.count[i as usize], inst.blocks.tie[k]);
+        (inst.points.slot[i as usize] != NONE && count < max_samples && bin(count, tie) <= cut)
+            .then(|| Candidate {
+                key: (u64::from(count) << 32) | u64::from(tie),
+                instance: ii,
+                index: i,
             })
+    };
+    let mut out: Vec<Candidate> = visible
+        .blocks
+        .par_iter()
+        .flat_map_iter(|&(ii, b)| {
+            let block = instances[ii as usize].blocks.blocks[b as usize];
+            (block.start as usize..block.end as usize).filter_map(move |k| candidate(ii, k))
         })
         .collect();
-    let visible = parts.iter().map(|p| p.0).sum();
-    (visible, parts.into_iter().flat_map(|p| p.1).collect())
+    out.par_extend(
+        visible
+            .points
+            .par_iter()
+            .filter_map(|&(ii, k)| candidate(ii, k as usize)),
+    );
+    Culled {
+        visible: visible.count,
+        candidates: out,
+        cut,
+    }
 }
 
 /// Keep the `max_points` candidates that need samples most (fewest samples first), in
@@ -208,4 +407,21 @@ fn trace_batch(
             (j, result)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_are_monotone_in_the_key() {
+        let keys = [0u32, 1, 15, 16, 62, 63, 64, 200, u32::MAX]
+            .into_iter()
+            .flat_map(|c| [0u32, 1 << 24, u32::MAX >> 1, u32::MAX].map(move |t| (c, t)));
+        let mut v: Vec<(u32, u32)> = keys.collect();
+        v.sort_unstable();
+        for w in v.windows(2) {
+            assert!(bin(w[0].0, w[0].1) <= bin(w[1].0, w[1].1), "{w:?}");
+        }
+    }
 }

@@ -11,6 +11,9 @@ use serde::Serialize;
 
 use crate::run::write_json;
 
+/// Default ray budget per server frame of the load benchmark (see `--ray-budget`).
+const BENCH_RAY_BUDGET: u64 = 48_000;
+
 /// Arguments of `psao bench serve`.
 #[derive(clap::Args, Debug)]
 pub struct BenchServeArgs {
@@ -36,9 +39,14 @@ pub struct BenchServeArgs {
     /// Update codec.
     #[arg(long, default_value = "compact")]
     pub codec: String,
-    /// Rays per server frame at most.
-    #[arg(long)]
-    pub ray_budget: Option<u64>,
+    /// Rays per server frame at most. The default leaves the 30 Hz frame room on 2 cores:
+    /// at ~13 M closest-hit AO rays/s on 2 threads (Embree, Sponza, docs/BENCHMARKS.md)
+    /// 48 000 rays (3000 points × 16 rays) take ~4 ms of the 33 ms frame, because culling
+    /// the visible points, publishing, encoding one update per client and (here) the
+    /// clients themselves need the rest; measured on Sponza with 8 clients, 144 000 rays
+    /// already need more than 2 cores (docs/BENCHMARKS.md).
+    #[arg(long, default_value_t = BENCH_RAY_BUDGET)]
+    pub ray_budget: u64,
     /// Clients' image size (their aspect shapes the culling frusta).
     #[arg(long, default_value = "640x360")]
     pub res: String,
@@ -75,12 +83,23 @@ pub struct BenchServeReport {
     pub hz: u32,
     /// Client frames each.
     pub frames: u32,
+    /// Ray budget per server frame.
+    pub ray_budget: u64,
+    /// Mean rays traced per server frame.
+    pub rays_per_frame: f64,
     /// Server frames stepped.
     pub server_frames: u64,
     /// Mean server ms per frame (step + per-client deltas + encode).
     pub server_mean_ms: f64,
     /// 95th percentile of it.
     pub server_p95_ms: f64,
+    /// Mean server ms per frame over the frame period (1000 / hz): below 1 keeps up.
+    pub server_load: f64,
+    /// Server process CPU ms (all threads) per frame.
+    pub server_cpu_ms: f64,
+    /// That over the CPU time of 2 cores in one frame period: the server's share of a
+    /// 2-core machine, independent of other load.
+    pub server_cpu_share_2_cores: f64,
     /// Mean of the step alone.
     pub server_step_ms: f64,
     /// Mean of collecting the clients' updates per frame (all clients).
@@ -138,9 +157,7 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         .arg("--json")
         .arg(&serve_json)
         .stdout(Stdio::piped());
-    if let Some(b) = args.ray_budget {
-        serve.args(["--ray-budget", &b.to_string()]);
-    }
+    serve.args(["--ray-budget", &args.ray_budget.to_string()]);
     let mut server = Guard(serve.spawn().context("cannot start psao serve")?);
     let mut line = String::new();
     let stdout = server.0.stdout.take().context("no server stdout")?;
@@ -221,9 +238,14 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         clients: args.clients,
         hz: args.hz,
         frames: args.frames,
+        ray_budget: args.ray_budget,
+        rays_per_frame: s["mean_rays"].as_f64().unwrap_or(0.0),
         server_frames: s["frames"].as_u64().unwrap_or(0),
         server_mean_ms: s["mean_ms"].as_f64().unwrap_or(0.0),
         server_p95_ms: s["p95_ms"].as_f64().unwrap_or(0.0),
+        server_load: s["mean_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 1000.0,
+        server_cpu_ms: s["cpu_ms"].as_f64().unwrap_or(0.0),
+        server_cpu_share_2_cores: s["cpu_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 2000.0,
         server_step_ms: s["mean_step_ms"].as_f64().unwrap_or(0.0),
         server_update_ms: s["mean_update_ms"].as_f64().unwrap_or(0.0),
         server_encode_ms: s["mean_encode_ms"].as_f64().unwrap_or(0.0),
@@ -231,18 +253,26 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         per_client,
     };
     println!(
-        "{} clients at {} Hz on {}: {} server frames, {:.1} ms mean / {:.1} ms p95 per frame \
-         ({:.1} ms step, {:.1} ms updates, {:.1} ms encoding), {} late",
+        "{} clients at {} Hz on {}: {} server frames, {:.0} rays per frame (budget {}), \
+         {:.1} ms mean ({:.2} of the {:.1} ms period) / {:.1} ms p95 per frame \
+         ({:.1} ms step, {:.1} ms updates, {:.1} ms encoding), {} late; \
+         server CPU {:.1} ms per frame = {:.2} of 2 cores",
         report.clients,
         report.hz,
         report.scene,
         report.server_frames,
+        report.rays_per_frame,
+        report.ray_budget,
         report.server_mean_ms,
+        report.server_load,
+        1000.0 / f64::from(report.hz),
         report.server_p95_ms,
         report.server_step_ms,
         report.server_update_ms,
         report.server_encode_ms,
-        report.late_frames
+        report.late_frames,
+        report.server_cpu_ms,
+        report.server_cpu_share_2_cores
     );
     println!("client  Mbit/s  updates  coalesced  exact");
     for (k, c) in report.per_client.iter().enumerate() {

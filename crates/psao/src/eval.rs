@@ -225,6 +225,7 @@ impl MetricSums {
             method: method.into(),
             points: None,
             server_hz: None,
+            codec: None,
             psnr_ao: mean(&self.ao, |m| m.psnr),
             ssim_ao: mean(&self.ao, |m| m.ssim),
             flip_ao: mean(&self.ao, |m| m.flip),
@@ -284,6 +285,7 @@ fn eval_psao(
     let mut row = sums.row("psao");
     row.points = Some(points);
     row.server_hz = Some(hz);
+    row.codec = Some(config.codec.clone());
     row.mbit_s = pipeline.total_bytes as f64 * 8.0 / seconds / 1e6;
     row.server_ms = server_ms / server_frames.max(1) as f64;
     row.client_ms = client_ms / frames.len().max(1) as f64;

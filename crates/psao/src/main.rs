@@ -5,6 +5,7 @@ mod bench_client;
 mod bench_serve;
 mod bench_trace;
 mod compare;
+mod cpu_time;
 mod demo;
 mod eval;
 mod net;

@@ -16,6 +16,8 @@ pub struct Row {
     pub points: Option<f32>,
     /// Server rate (PSAO only).
     pub server_hz: Option<u32>,
+    /// Update codec (PSAO only).
+    pub codec: Option<String>,
     /// PSNR of AO-only images (dB).
     pub psnr_ao: f64,
     /// SSIM of AO-only images.
@@ -67,17 +69,18 @@ pub struct Report {
 /// The results as a Markdown table.
 pub fn table(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| method | points | server Hz | PSNR AO | SSIM AO | FLIP AO | PSNR comp | SSIM comp | FLIP comp | Mbit/s | server ms | client ms |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| method | points | server Hz | codec | PSNR AO | SSIM AO | FLIP AO | PSNR comp | SSIM comp | FLIP comp | Mbit/s | server ms | client ms |\n\
+         |---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         let opt = |v: Option<String>| v.unwrap_or_else(|| "–".into());
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.2} | {:.4} | {:.4} | {:.2} | {:.4} | {:.4} | {:.2} | {:.1} | {:.1} |",
+            "| {} | {} | {} | {} | {:.2} | {:.4} | {:.4} | {:.2} | {:.4} | {:.4} | {:.2} | {:.1} | {:.1} |",
             r.method,
             opt(r.points.map(|p| format!("{p}"))),
             opt(r.server_hz.map(|h| h.to_string())),
+            opt(r.codec.clone()),
             r.psnr_ao,
             r.ssim_ao,
             r.flip_ao,

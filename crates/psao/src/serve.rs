@@ -27,6 +27,7 @@ use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot};
 
 use crate::args::Resolution;
+use crate::cpu_time::cpu_seconds;
 use crate::net::convert::{entry_of, view_of};
 use crate::net::transport::{accept, FrameReader, FrameWriter, ReadError};
 use crate::pipeline::CLIENT_HZ;
@@ -106,6 +107,11 @@ pub struct ServeStats {
     pub p95_ms: f64,
     /// Mean of the step alone, ms.
     pub mean_step_ms: f64,
+    /// Mean rays traced per server frame.
+    pub mean_rays: f64,
+    /// CPU time of the whole server process (all threads) per server frame, ms: unlike the
+    /// wall times it is not inflated by other processes on a shared machine.
+    pub cpu_ms: f64,
     /// Mean per server frame of collecting the clients' updates (`update_for`), ms.
     pub mean_update_ms: f64,
     /// Mean per server frame of encoding them (codec + framing), ms.
@@ -209,6 +215,8 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         max_clients: args.max_clients,
         step_ms: Vec::new(),
         frame_ms: Vec::new(),
+        rays: 0,
+        cpu_start: None,
         update_ms: 0.0,
         encode_ms: 0.0,
         hash_ms: 0.0,
@@ -407,6 +415,10 @@ struct Simulation {
     max_clients: usize,
     step_ms: Vec<f64>,
     frame_ms: Vec<f64>,
+    /// Rays traced, summed over frames.
+    rays: u64,
+    /// Process CPU seconds when the first frame started.
+    cpu_start: Option<f64>,
     /// Summed over frames: update collection, encoding, hashing (ms).
     update_ms: f64,
     encode_ms: f64,
@@ -434,6 +446,7 @@ impl Simulation {
                     continue;
                 }
                 next = Instant::now();
+                self.cpu_start = cpu_seconds();
             }
             if self.lockstep {
                 // Every client must have sent the camera of its next frame.
@@ -587,6 +600,7 @@ impl Simulation {
         }
         let step = self.server.step(&views);
         self.step_ms.push(step.ms);
+        self.rays += step.rays;
         let th = Instant::now();
         let hash = self
             .sessions
@@ -698,6 +712,10 @@ impl Simulation {
         stats.mean_update_ms = self.update_ms / frames;
         stats.mean_encode_ms = self.encode_ms / frames;
         stats.mean_hash_ms = self.hash_ms / frames;
+        stats.mean_rays = self.rays as f64 / frames;
+        if let (Some(a), Some(b)) = (self.cpu_start, cpu_seconds()) {
+            stats.cpu_ms = (b - a) * 1e3 / frames;
+        }
         stats.state_hash = format!("{:016x}", self.state_hash());
         stats.clients.sort_by_key(|c| c.id);
         tracing::info!(

@@ -1,5 +1,6 @@
 //! `psao volume …`: inspect, convert, render and benchmark sparse volumes (DESIGN §6).
 
+use crate::cpu_time::cpu_seconds;
 use crate::png_io::write_rgb_png;
 use crate::progress;
 use anyhow::{bail, Context, Result};
@@ -474,16 +475,6 @@ fn table(files: &[PathBuf], cluster: &[String], seed: u64) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// CPU seconds used by this process so far (all threads), from `/proc/self/stat` (Linux).
-fn cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    // Fields 14 and 15 of the full line (utime, stime) are 11 and 12 after the name.
-    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
 }
 
 /// Best wall and CPU time of two renderers, run alternately `reps` times each.

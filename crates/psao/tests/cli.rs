@@ -198,6 +198,10 @@ fn eval_writes_the_report_rows() {
         assert!(rows[0].get(key).is_some(), "row lacks {key}");
     }
     assert!(rows[0]["mbit_s"].as_f64().unwrap() > 0.0);
+    assert_eq!(rows[0]["codec"], "compact", "the default codec");
+    assert!(rows[2]["codec"].is_null(), "no codec for SSAO");
+    let table = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(table.contains("| codec |") && table.contains("| compact |"));
     for f in [
         "report.md",
         "quality_vs_points.svg",

@@ -1,0 +1,227 @@
+//! Spatial blocks of an instance's points with local-space bounds, so culling tests a block
+//! against the frusta before (or instead of) its points.
+
+use glam::{Affine3A, Vec3};
+use psao_trace::ao::hash64;
+
+use crate::frustum::Frustum;
+use crate::trace::sample_key;
+
+/// Points per block (the last block of an instance may hold fewer).
+pub(crate) const BLOCK_POINTS: usize = 512;
+
+/// A run of `order` whose points lie in `(lo, hi)` (local space).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Block {
+    pub start: u32,
+    pub end: u32,
+    pub lo: Vec3,
+    pub hi: Vec3,
+}
+
+/// An instance's points in Morton order of their initial local position, cut into blocks.
+pub(crate) struct CullBlocks {
+    /// Point indices, block after block.
+    pub order: Vec<u32>,
+    /// The selection tie-break of each point in `order` (a seeded hash of the point).
+    pub tie: Vec<u32>,
+    pub blocks: Vec<Block>,
+}
+
+/// How a block lies relative to one frustum grown by a slack.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Side {
+    /// Every point of the block is inside.
+    Inside,
+    /// No point of the block is inside.
+    Outside,
+    /// Test the points.
+    Straddles,
+}
+
+/// The selection tie-break of point `index` of instance `instance`: spreads equal sample
+/// counts over the scene instead of taking them in index order.
+pub(crate) fn tie_of(instance: u32, index: u32, seed: u64) -> u32 {
+    hash64(sample_key(instance, index) ^ seed.rotate_left(29)) as u32
+}
+
+impl CullBlocks {
+    /// Blocks of `positions` (instance `instance`, tie-breaks from `seed`).
+    pub fn new(positions: &[Vec3], instance: u32, seed: u64) -> Self {
+        let (lo, hi) = bounds(positions.iter().copied());
+        let scale = 1023.0 / (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
+        let mut keyed: Vec<(u32, u32)> = positions
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| {
+                let q = ((p - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+                (morton3(q.x as u32, q.y as u32, q.z as u32), i as u32)
+            })
+            .collect();
+        keyed.sort_unstable();
+        let order: Vec<u32> = keyed.into_iter().map(|(_, i)| i).collect();
+        let tie = order.iter().map(|&i| tie_of(instance, i, seed)).collect();
+        let blocks = (0..order.len())
+            .step_by(BLOCK_POINTS)
+            .map(|start| Block {
+                start: start as u32,
+                end: (start + BLOCK_POINTS).min(order.len()) as u32,
+                lo: Vec3::ZERO,
+                hi: Vec3::ZERO,
+            })
+            .collect();
+        let mut out = Self { order, tie, blocks };
+        out.refresh_bounds(positions);
+        out
+    }
+
+    /// Recompute every block's bounds from the current `positions` (call after points
+    /// moved in local space; block membership stays).
+    pub fn refresh_bounds(&mut self, positions: &[Vec3]) {
+        for b in &mut self.blocks {
+            let points = self.order[b.start as usize..b.end as usize]
+                .iter()
+                .map(|&i| positions[i as usize]);
+            (b.lo, b.hi) = bounds(points);
+        }
+    }
+}
+
+impl Block {
+    /// Where the block, under `transform`, lies relative to `frustum` grown by `slack`.
+    /// Conservative with a margin for rounding: `Inside` and `Outside` hold for every point
+    /// the per-point test [`Frustum::contains`] would see.
+    pub fn side(&self, transform: &Affine3A, frustum: &Frustum, slack: f32) -> Side {
+        let centre = transform.transform_point3((self.lo + self.hi) * 0.5);
+        let half = (self.hi - self.lo) * 0.5;
+        let m = transform.matrix3;
+        let extent = m.x_axis.abs() * half.x + m.y_axis.abs() * half.y + m.z_axis.abs() * half.z;
+        let size = Vec3::from(extent).max_element() + centre.abs().max_element();
+        let mut inside = true;
+        for plane in frustum.planes() {
+            let n = plane.truncate();
+            let d = n.dot(centre) + plane.w;
+            let r = n.abs().dot(extent.into());
+            // Rounding of the per-point transform and dot product stays far below this.
+            let eps = 1e-4 * (1.0 + size + plane.w.abs());
+            if d + r < -slack - eps {
+                return Side::Outside;
+            }
+            // NaN planes (degenerate views) fail this and leave the decision to the points.
+            inside &= d - r >= -slack + eps;
+        }
+        if inside {
+            Side::Inside
+        } else {
+            Side::Straddles
+        }
+    }
+}
+
+/// Bounds of `points` (an empty box at the origin when there are none).
+fn bounds(points: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
+    let init = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let (lo, hi) = points.fold(init, |(lo, hi), p| (lo.min(p), hi.max(p)));
+    if lo.cmple(hi).all() {
+        (lo, hi)
+    } else {
+        (Vec3::ZERO, Vec3::ZERO)
+    }
+}
+
+/// Interleave the low 10 bits of x, y, z.
+fn morton3(x: u32, y: u32, z: u32) -> u32 {
+    fn spread(mut v: u32) -> u32 {
+        v &= 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    }
+    spread(x) | (spread(y) << 1) | (spread(z) << 2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::View;
+    use glam::Quat;
+    use psao_scene::Camera;
+
+    fn points() -> Vec<Vec3> {
+        (0..30_000)
+            .map(|i| {
+                let h = hash64(i);
+                let f = |s: u32| ((h >> s) & 0xffff) as f32 / 65535.0;
+                Vec3::new(f(0) * 8.0 - 4.0, f(16) * 2.0, f(32) * 8.0 - 4.0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn blocks_cover_every_point_once_and_bound_it() {
+        let p = points();
+        let b = CullBlocks::new(&p, 3, 7);
+        let mut seen = b.order.clone();
+        seen.sort_unstable();
+        assert_eq!(seen, (0..p.len() as u32).collect::<Vec<_>>());
+        assert_eq!(b.blocks.len(), p.len().div_ceil(BLOCK_POINTS));
+        for blk in &b.blocks {
+            for &i in &b.order[blk.start as usize..blk.end as usize] {
+                let q = p[i as usize];
+                assert!(q.cmpge(blk.lo).all() && q.cmple(blk.hi).all());
+            }
+        }
+        assert_eq!(b.tie[0], tie_of(3, b.order[0], 7));
+    }
+
+    #[test]
+    fn refreshed_bounds_hold_moved_points() {
+        let p = points();
+        let mut b = CullBlocks::new(&p, 0, 0);
+        let moved: Vec<Vec3> = p.iter().map(|q| *q * 0.5 + Vec3::X).collect();
+        b.refresh_bounds(&moved);
+        for blk in &b.blocks {
+            for &i in &b.order[blk.start as usize..blk.end as usize] {
+                let q = moved[i as usize];
+                assert!(q.cmpge(blk.lo).all() && q.cmple(blk.hi).all());
+            }
+        }
+    }
+
+    #[test]
+    fn block_sides_agree_with_the_per_point_test() {
+        let p = points();
+        let b = CullBlocks::new(&p, 0, 0);
+        let transform = Affine3A::from_scale_rotation_translation(
+            Vec3::splat(1.5),
+            Quat::from_rotation_y(0.7),
+            Vec3::new(1.0, 0.0, -2.0),
+        );
+        let mut sides = [0; 3];
+        // A narrow view (some blocks outside) and a wide one (some blocks inside).
+        for (eye, target, fov) in [
+            (Vec3::new(0.0, 1.0, 5.0), Vec3::new(2.0, 0.5, -1.0), 25.0),
+            (Vec3::new(0.0, 1.0, 6.0), Vec3::new(1.0, 0.5, 0.0), 40.0),
+        ] {
+            let view = View {
+                camera: Camera::look_at(eye, target, fov),
+                aspect: 1.5,
+            };
+            let f = Frustum::new(&view, 0.1);
+            for blk in &b.blocks {
+                let side = blk.side(&transform, &f, 0.05);
+                sides[side as usize] += 1;
+                let mut inside = b.order[blk.start as usize..blk.end as usize]
+                    .iter()
+                    .map(|&i| f.contains(transform.transform_point3(p[i as usize]), 0.05));
+                match side {
+                    Side::Inside => assert!(inside.all(|x| x)),
+                    Side::Outside => assert!(!inside.any(|x| x)),
+                    Side::Straddles => {}
+                }
+            }
+        }
+        assert!(sides.iter().all(|&n| n > 0), "{sides:?}");
+    }
+}
