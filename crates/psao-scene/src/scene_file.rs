@@ -191,7 +191,9 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
         .volume
         .iter()
         .enumerate()
-        .map(|(i, v)| volume::scene_volume(path, dir, v).map_err(|m| bad(format!("volume {i}: {m}"))))
+        .map(|(i, v)| {
+            volume::scene_volume(path, dir, v).map_err(|m| bad(format!("volume {i}: {m}")))
+        })
         .collect::<Result<Vec<_>, _>>()?;
 
     let mut camera_paths = Vec::with_capacity(file.camera_paths.len());

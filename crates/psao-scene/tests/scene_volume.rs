@@ -36,11 +36,17 @@ fn a_volume_entry_is_placed_and_resolved() {
     assert_eq!(v.translation, Vec3::new(1.0, 2.0, 3.0));
     assert!((v.rotation * Vec3::Z - Vec3::X).length() < 1e-6);
     assert_eq!(v.scale, Vec3::splat(0.5));
-    assert_eq!((v.density_scale, v.format.as_deref(), v.frame), (4.0, Some("bc7"), 1));
+    assert_eq!(
+        (v.density_scale, v.format.as_deref(), v.frame),
+        (4.0, Some("bc7"), 1)
+    );
     // Defaults.
     let (_tmp, r) = scene_with("[[volume]]\nfile = \"smoke.vdb\"\n");
     let v = r.unwrap().volumes.remove(0);
-    assert_eq!((v.scale, v.density_scale, v.format, v.frame), (Vec3::ONE, 1.0, None, 0));
+    assert_eq!(
+        (v.scale, v.density_scale, v.format, v.frame),
+        (Vec3::ONE, 1.0, None, 0)
+    );
     // No entry, no volume.
     assert!(scene_with("").1.unwrap().volumes.is_empty());
 }
@@ -48,14 +54,35 @@ fn a_volume_entry_is_placed_and_resolved() {
 #[test]
 fn bad_volume_entries_name_the_file_and_field() {
     for (toml, needles) in [
-        ("[[volume]]\nfile = \"missing.vdb\"\n", vec!["volume 0", "file", "missing.vdb", "not found"]),
-        ("[[volume]]\nfile = \"smoke.vdb\"\ndensity = 2.0\n", vec!["s.toml", "unknown field `density`"]),
-        ("[[volume]]\nfile = \"smoke.vdb\"\ndensity_scale = -1.0\n", vec!["density_scale", "-1"]),
-        ("[[volume]]\nfile = \"smoke.vdb\"\nscale = [1, 0, 1]\n", vec!["volume 0", "scale"]),
-        ("[[volume]]\nfile = \"smoke.vdb\"\nframe = 1\n", vec!["frame", "1 file"]),
+        (
+            "[[volume]]\nfile = \"missing.vdb\"\n",
+            vec!["volume 0", "file", "missing.vdb", "not found"],
+        ),
+        (
+            "[[volume]]\nfile = \"smoke.vdb\"\ndensity = 2.0\n",
+            vec!["s.toml", "unknown field `density`"],
+        ),
+        (
+            "[[volume]]\nfile = \"smoke.vdb\"\ndensity_scale = -1.0\n",
+            vec!["density_scale", "-1"],
+        ),
+        (
+            "[[volume]]\nfile = \"smoke.vdb\"\nscale = [1, 0, 1]\n",
+            vec!["volume 0", "scale"],
+        ),
+        (
+            "[[volume]]\nfile = \"smoke.vdb\"\nframe = 1\n",
+            vec!["frame", "1 file"],
+        ),
         ("[[volume]]\nfile = []\n", vec!["file", "empty"]),
-        ("[[volume]]\nfile = \"smoke.vdb\"\n[[volume]]\nfile = \"smoke.vdb\"\n", vec!["at most one"]),
-        ("[[volume]]\ntranslation = [0, 0, 0]\n", vec!["missing field `file`"]),
+        (
+            "[[volume]]\nfile = \"smoke.vdb\"\n[[volume]]\nfile = \"smoke.vdb\"\n",
+            vec!["at most one"],
+        ),
+        (
+            "[[volume]]\ntranslation = [0, 0, 0]\n",
+            vec!["missing field `file`"],
+        ),
     ] {
         let (_tmp, r) = scene_with(toml);
         let e = r.err().unwrap_or_else(|| panic!("{toml} loaded"));

@@ -168,7 +168,9 @@ pub(crate) fn trace(
         .par_chunks(per_batch)
         .map_init(
             || medium.map(|m| m.sampler()),
-            |sampler, batch| trace_batch(tracer, sampler.as_deref_mut(), &jobs, batch, radius, seed),
+            |sampler, batch| {
+                trace_batch(tracer, sampler.as_deref_mut(), &jobs, batch, radius, seed)
+            },
         )
         .flatten_iter()
         .collect();

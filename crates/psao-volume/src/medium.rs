@@ -106,11 +106,7 @@ impl PlacedVolume {
         let a = volume.transform.index_to_world(ilo.as_vec3());
         let b = volume.transform.index_to_world(ihi.as_vec3());
         let max = volume.pool.hi;
-        let sigma_per_value = if max > 0.0 {
-            density_scale / max
-        } else {
-            0.0
-        };
+        let sigma_per_value = if max > 0.0 { density_scale / max } else { 0.0 };
         Ok(PlacedVolume {
             frame,
             inverse_rotation: p.rotation.normalize().inverse(),
@@ -190,7 +186,9 @@ impl MediumSampler for PlacedSampler<'_> {
                 let mut rng = Rng::new(stream, 0);
                 transmitted_length(s, &ray, length, p.sigma_per_value, &mut rng)
             }
-            GridClass::LevelSet => level_set_hit(s, &ray, length).map_or(length, |t| t.clamp(0.0, length)),
+            GridClass::LevelSet => {
+                level_set_hit(s, &ray, length).map_or(length, |t| t.clamp(0.0, length))
+            }
         }
     }
 }

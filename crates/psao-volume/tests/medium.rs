@@ -26,7 +26,11 @@ fn slab(sigma: f32, centre: Vec3, rotation: Quat) -> PlacedVolume {
 fn mean_and_error(values: &[f32]) -> (f64, f64) {
     let n = values.len() as f64;
     let mean = values.iter().map(|&v| v as f64).sum::<f64>() / n;
-    let var = values.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let var = values
+        .iter()
+        .map(|&v| (v as f64 - mean).powi(2))
+        .sum::<f64>()
+        / (n - 1.0);
     (mean, (var / n).sqrt())
 }
 
@@ -51,7 +55,10 @@ fn ratio_tracking_matches_the_closed_form_in_a_homogeneous_medium() {
         println!("L {length}: mean {mean:.5} ± {err:.5}, exact {exact:.5}");
         // Four standard errors of 4000 independent walks; the estimate must be informative.
         assert!(err < 0.01 * length as f64, "standard error {err}");
-        assert!((mean - exact).abs() < 4.0 * err, "{mean} vs {exact} ± {err}");
+        assert!(
+            (mean - exact).abs() < 4.0 * err,
+            "{mean} vs {exact} ± {err}"
+        );
     }
 }
 
@@ -115,17 +122,33 @@ fn ao_under_a_homogeneous_medium_matches_the_closed_form() {
     let placed = slab(sigma, Vec3::new(0.0, 0.5, 0.0), Quat::IDENTITY);
     let tracer = Tracer::new(Backend::Obvhs, &floor_scene(false), GeometryMode::Occlusion).unwrap();
     let points: Vec<(Vec3, Vec3)> = (0..256)
-        .map(|i| (Vec3::new((i % 16) as f32 * 0.05 - 0.4, 0.0, (i / 16) as f32 * 0.05 - 0.4), Vec3::Y))
+        .map(|i| {
+            (
+                Vec3::new(
+                    (i % 16) as f32 * 0.05 - 0.4,
+                    0.0,
+                    (i / 16) as f32 * 0.05 - 0.4,
+                ),
+                Vec3::Y,
+            )
+        })
         .collect();
     let spp = 16;
-    let ao = ambient_occlusion_batch_in(&tracer, Some(&placed), &points, radius, spp, 3, |k| k as u64);
+    let ao = ambient_occlusion_batch_in(&tracer, Some(&placed), &points, radius, spp, 3, |k| {
+        k as u64
+    });
     let exact = (1.0 - (-(sigma * radius) as f64).exp()) / (sigma * radius) as f64;
     let (mean, err) = mean_and_error(&ao);
     println!("AO {mean:.5} ± {err:.5}, exact {exact:.5}");
     // 256 points × 16 rays; four standard errors of the per-point means.
     assert!(err < 0.01, "standard error {err}");
-    assert!((mean - exact).abs() < 4.0 * err, "{mean} vs {exact} ± {err}");
-    let again = ambient_occlusion_batch_in(&tracer, Some(&placed), &points, radius, spp, 3, |k| k as u64);
+    assert!(
+        (mean - exact).abs() < 4.0 * err,
+        "{mean} vs {exact} ± {err}"
+    );
+    let again = ambient_occlusion_batch_in(&tracer, Some(&placed), &points, radius, spp, 3, |k| {
+        k as u64
+    });
     assert_eq!(ao, again, "deterministic");
 }
 
@@ -158,7 +181,19 @@ fn placement_rejects_bad_values() {
         ..ok
     };
     assert!(PlacedVolume::new(vol.clone(), 0, flat, 1.0).is_err());
-    let placed = PlacedVolume::new(vol, 0, Placement { scale: Vec3::splat(2.0), ..ok }, 1.0).unwrap();
+    let placed = PlacedVolume::new(
+        vol,
+        0,
+        Placement {
+            scale: Vec3::splat(2.0),
+            ..ok
+        },
+        1.0,
+    )
+    .unwrap();
     let (lo, hi) = placed.world_bounds();
-    assert!((hi - lo - Vec3::splat(1.6)).abs().max_element() < 1e-5, "{lo} {hi}");
+    assert!(
+        (hi - lo - Vec3::splat(1.6)).abs().max_element() < 1e-5,
+        "{lo} {hi}"
+    );
 }

@@ -16,7 +16,7 @@ pub struct CompareArgs {
     #[arg(long)]
     pub json: bool,
     /// Also print both images' mean AO over the pixel rectangle `X0,Y0,X1,Y1` (half-open).
-    #[arg(long, value_delimiter = ',', num_args = 4)]
+    #[arg(long, value_delimiter = ',')]
     pub region: Option<Vec<u32>>,
 }
 
@@ -45,7 +45,11 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     })?;
     if let Some(r) = &args.region {
         if r.len() != 4 || r[0] >= r[2] || r[1] >= r[3] || r[2] > a.width || r[3] > a.height {
-            bail!("--region must be X0,Y0,X1,Y1 inside the {}x{} image", a.width, a.height);
+            bail!(
+                "--region must be X0,Y0,X1,Y1 inside the {}x{} image",
+                a.width,
+                a.height
+            );
         }
         println!(
             "mean AO over {}..{} x {}..{}: {:.4} (reference) vs {:.4} (test)",

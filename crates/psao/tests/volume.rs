@@ -246,16 +246,26 @@ fn a_scene_volume_darkens_reference_ao_and_keys_the_eval_cache() {
         assert!(o.status.success(), "{}", stderr(&o));
     }
     let keys: Vec<_> = std::fs::read_dir(&cache).unwrap().collect();
-    assert_eq!(keys.len(), 2, "the volume is part of the reference cache key");
+    assert_eq!(
+        keys.len(),
+        2,
+        "the volume is part of the reference cache key"
+    );
 }
 
 #[test]
 fn bad_scene_volumes_fail_with_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     for (body, needles) in [
-        ("format = \"f16\"", vec!["fog.toml", "volume format", "fog.psv", ".psv"]),
+        (
+            "format = \"f16\"",
+            vec!["fog.toml", "volume format", "fog.psv", ".psv"],
+        ),
         ("density_scale = -2.0", vec!["fog.toml", "density_scale"]),
-        ("densty_scale = 2.0", vec!["fog.toml", "unknown field `densty_scale`"]),
+        (
+            "densty_scale = 2.0",
+            vec!["fog.toml", "unknown field `densty_scale`"],
+        ),
     ] {
         let scene = volume_scene(dir.path(), "fog.toml", Some(body));
         let o = psao(&[
@@ -283,7 +293,18 @@ fn bad_scene_volumes_fail_with_clear_errors() {
         "[[asset]]\nfile = \"builtin:box\"\n[[volume]]\nfile = \"bad.vdb\"\nformat = \"bc9\"\n",
     )
     .unwrap();
-    let o = psao(&["reference", "--scene", dir.path().join("bad.toml").to_str().unwrap(), "--path", concat!(env!("CARGO_MANIFEST_DIR"), "/../../paths/default_a.toml"), "--out", dir.path().join("y").to_str().unwrap()]);
+    let o = psao(&[
+        "reference",
+        "--scene",
+        dir.path().join("bad.toml").to_str().unwrap(),
+        "--path",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../paths/default_a.toml"),
+        "--out",
+        dir.path().join("y").to_str().unwrap(),
+    ]);
     let e = stderr(&o);
-    assert!(!o.status.success() && e.contains("bad.toml") && e.contains("bc9"), "{e}");
+    assert!(
+        !o.status.success() && e.contains("bad.toml") && e.contains("bc9"),
+        "{e}"
+    );
 }

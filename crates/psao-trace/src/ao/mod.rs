@@ -139,37 +139,38 @@ pub fn ambient_occlusion_batch_in(
         .for_each_init(
             || medium.map(|m| m.sampler()),
             |sampler, (chunk, (out, pts))| {
-            let base = chunk * points_per_chunk;
-            let mut rays = Vec::with_capacity(pts.len() * spp_len);
-            for (i, &(x, n)) in pts.iter().enumerate() {
-                ao_rays(x, n, radius, spp, seed, keys(base + i), &mut rays);
-            }
-            let order = sort_rays_spatially(&rays);
-            let sorted: Vec<Ray> = order.iter().map(|&i| rays[i as usize]).collect();
-            let mut sorted_hits = vec![None; sorted.len()];
-            tracer.intersect(&sorted, &mut sorted_hits);
-            let mut hits = vec![None; rays.len()];
-            for (&i, h) in order.iter().zip(sorted_hits) {
-                hits[i as usize] = h;
-            }
-            let valid = radius.is_finite() && radius > 0.0;
-            for (i, (o, point_hits)) in out.iter_mut().zip(hits.chunks(spp_len)).enumerate() {
-                if !valid {
-                    continue;
+                let base = chunk * points_per_chunk;
+                let mut rays = Vec::with_capacity(pts.len() * spp_len);
+                for (i, &(x, n)) in pts.iter().enumerate() {
+                    ao_rays(x, n, radius, spp, seed, keys(base + i), &mut rays);
                 }
-                let key = keys(base + i);
-                let point_rays = &rays[i * spp_len..(i + 1) * spp_len];
-                let sum: f32 = point_rays
-                    .iter()
-                    .zip(point_hits)
-                    .enumerate()
-                    .map(|(s, (ray, hit))| {
-                        let stream = medium_stream(seed, key, s as u32);
-                        sample_value(ray, hit.as_ref(), radius, sampler.as_deref_mut(), stream)
-                    })
-                    .sum();
-                *o = sum / spp as f32;
-            }
-        });
+                let order = sort_rays_spatially(&rays);
+                let sorted: Vec<Ray> = order.iter().map(|&i| rays[i as usize]).collect();
+                let mut sorted_hits = vec![None; sorted.len()];
+                tracer.intersect(&sorted, &mut sorted_hits);
+                let mut hits = vec![None; rays.len()];
+                for (&i, h) in order.iter().zip(sorted_hits) {
+                    hits[i as usize] = h;
+                }
+                let valid = radius.is_finite() && radius > 0.0;
+                for (i, (o, point_hits)) in out.iter_mut().zip(hits.chunks(spp_len)).enumerate() {
+                    if !valid {
+                        continue;
+                    }
+                    let key = keys(base + i);
+                    let point_rays = &rays[i * spp_len..(i + 1) * spp_len];
+                    let sum: f32 = point_rays
+                        .iter()
+                        .zip(point_hits)
+                        .enumerate()
+                        .map(|(s, (ray, hit))| {
+                            let stream = medium_stream(seed, key, s as u32);
+                            sample_value(ray, hit.as_ref(), radius, sampler.as_deref_mut(), stream)
+                        })
+                        .sum();
+                    *o = sum / spp as f32;
+                }
+            },
+        );
     result
 }
