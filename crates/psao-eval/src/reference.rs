@@ -2,7 +2,8 @@
 
 use crate::AoImage;
 use psao_raster::GBuffer;
-use psao_trace::{ao, Tracer};
+use psao_trace::ao::{self, Medium};
+use psao_trace::Tracer;
 
 /// Settings of a reference AO image.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,6 +29,18 @@ pub fn reference_ao(
     settings: &ReferenceSettings,
     progress: &(dyn Fn(u64) + Sync),
 ) -> AoImage {
+    reference_ao_in(gbuffer, tracer, None, settings, progress)
+}
+
+/// [`reference_ao`] with the rays passing through a participating `medium` (the same
+/// transmittance-weighted estimator as the server's points, [`ao::sample_value`]).
+pub fn reference_ao_in(
+    gbuffer: &GBuffer,
+    tracer: &Tracer,
+    medium: Option<&dyn Medium>,
+    settings: &ReferenceSettings,
+    progress: &(dyn Fn(u64) + Sync),
+) -> AoImage {
     let mut image = AoImage::filled(gbuffer.width, gbuffer.height, 1.0);
     let covered: Vec<usize> = (0..image.data.len())
         .filter(|&i| gbuffer.covered(i))
@@ -38,8 +51,9 @@ pub fn reference_ao(
             .iter()
             .map(|&i| (gbuffer.position[i], gbuffer.normal[i]))
             .collect();
-        let values = ao::ambient_occlusion_batch(
+        let values = ao::ambient_occlusion_batch_in(
             tracer,
+            medium,
             &points,
             settings.radius,
             settings.spp,

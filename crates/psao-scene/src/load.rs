@@ -12,6 +12,8 @@ pub struct LoadedScene {
     pub scene: Scene,
     /// Camera path files, resolved against the scene file's folder (empty for plain assets).
     pub camera_paths: Vec<PathBuf>,
+    /// Volumes placed by the scene file (at most one; files checked to exist, not read).
+    pub volumes: Vec<crate::scene_file::SceneVolume>,
 }
 
 /// Loads `.gltf`, `.glb`, `.obj` or a `.toml` scene file (extension, case-insensitive).
@@ -22,6 +24,7 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
     Ok(LoadedScene {
         scene: load_asset(path)?,
         camera_paths: Vec::new(),
+        volumes: Vec::new(),
     })
 }
 

@@ -12,6 +12,15 @@
 //! # optional, at most one of:
 //! walk = { points = [[0, 0, 0], [4, 0, 0]], speed = 1.2, loop = true, roll = false }
 //! keys = { times = [0, 1], translation = [[0, 2, 0], [0, 0, 0]], rotation_deg = [[0, 0, 0], [90, 0, 0]], interpolation = "linear" }
+//!
+//! [[volume]]                            # optional, at most one: a medium occluding AO rays
+//! file = "../data/smoke.vdb"            # .vdb or .psv, relative; a list of .vdb = flip-book frames
+//! translation = [0.0, 0.0, 0.0]         # optional: placed point = translation + rotation · (scale ⊙ v)
+//! rotation_deg = [0.0, 0.0, 0.0]        # optional, as for assets
+//! scale = 0.1                           # optional, number or [x, y, z], positive
+//! density_scale = 2.0                   # optional (1): extinction per metre at the densest voxel
+//! format = "f16"                        # optional: in-memory bricks for .vdb (f32|f16|unorm8|bc4|bc7)
+//! frame = 0                             # optional: the flip-book frame used (no playback)
 //! ```
 //!
 //! `file` may also be `builtin:sphere` (radius 0.5), `builtin:box` (1 m cube) or
@@ -40,8 +49,11 @@ use crate::load::{load_asset, LoadedScene};
 use crate::model::{Node, Scene, DEFAULT_AO_RADIUS};
 
 mod motion;
+mod volume;
 
 use motion::{KeysEntry, WalkEntry};
+pub use volume::SceneVolume;
+use volume::VolumeEntry;
 
 /// The `file` value naming the built-in default scene.
 pub const BUILTIN_DEFAULT: &str = "builtin:default";
@@ -54,6 +66,8 @@ struct SceneFile {
     camera_paths: Vec<String>,
     #[serde(default)]
     asset: Vec<AssetEntry>,
+    #[serde(default)]
+    volume: Vec<VolumeEntry>,
 }
 
 #[derive(Deserialize)]
@@ -167,6 +181,21 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
         }
     }
 
+    if file.volume.len() > 1 {
+        return Err(bad(format!(
+            "{} [[volume]] entries: at most one volume is supported",
+            file.volume.len()
+        )));
+    }
+    let volumes = file
+        .volume
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            volume::scene_volume(path, dir, v).map_err(|m| bad(format!("volume {i}: {m}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+
     let mut camera_paths = Vec::with_capacity(file.camera_paths.len());
     for p in &file.camera_paths {
         let resolved = dir.join(p);
@@ -181,6 +210,7 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
     Ok(LoadedScene {
         scene,
         camera_paths,
+        volumes,
     })
 }
 

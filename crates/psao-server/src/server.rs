@@ -1,5 +1,6 @@
 //! The [`Server`]: one authoritative point state, stepped once per server frame.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{Affine3A, Vec3};
@@ -7,6 +8,7 @@ use psao_delta::{InstanceDelta, InstanceInfo, Update};
 use psao_points::pack::unpack_ao;
 use psao_points::{generate_scene_points, GenerateParams, InstanceGrid};
 use psao_scene::Scene;
+use psao_trace::ao::Medium;
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
@@ -62,6 +64,7 @@ pub struct Server {
     config: ServerConfig,
     radius: f32,
     tracer: Tracer,
+    medium: Option<Arc<dyn Medium>>,
     instances: Vec<InstanceState>,
     clients: Clients,
     frame: u64,
@@ -83,6 +86,17 @@ impl Server {
     /// Generate the points of every instance (in parallel), lay out their grids and build
     /// the tracer (AO rays skip alpha-masked geometry).
     pub fn new(scene: &Scene, config: ServerConfig) -> Result<Server, ServerError> {
+        Server::with_medium(scene, config, None)
+    }
+
+    /// [`Server::new`] with AO rays passing through a participating `medium` (a volume in the
+    /// scene): each sample's distance is weighted by the medium's transmittance
+    /// ([`psao_trace::ao::sample_value`]).
+    pub fn with_medium(
+        scene: &Scene,
+        config: ServerConfig,
+        medium: Option<Arc<dyn Medium>>,
+    ) -> Result<Server, ServerError> {
         config.validate()?;
         let radius = config.ao_radius.unwrap_or(scene.ao_radius);
         if !(radius.is_finite() && radius > 0.0) {
@@ -109,6 +123,7 @@ impl Server {
             config,
             radius,
             tracer,
+            medium,
             instances,
             clients: Clients::default(),
             frame: 0,
@@ -179,6 +194,7 @@ impl Server {
         let selected = select(culled.candidates, max_points);
         let traced = trace(
             &self.tracer,
+            self.medium.as_deref(),
             &self.instances,
             &selected,
             self.radius,
@@ -307,6 +323,11 @@ impl Server {
     /// The tracer (AO geometry: alpha-masked meshes skipped).
     pub fn tracer(&self) -> &Tracer {
         &self.tracer
+    }
+
+    /// The participating medium AO rays pass through, if any.
+    pub fn medium(&self) -> Option<&dyn Medium> {
+        self.medium.as_deref()
     }
 
     /// Number of instances.

@@ -1,7 +1,7 @@
 //! Culling, budgeted selection and tracing of AO samples (DESIGN §3 "CPU server").
 
 use glam::Vec3;
-use psao_trace::ao::ao_rays_range;
+use psao_trace::ao::{ao_rays_range, medium_stream, sample_value, Medium, MediumSampler};
 use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
 use rayon::prelude::*;
 
@@ -37,7 +37,7 @@ impl Candidate {
 pub(crate) struct Traced {
     pub instance: u32,
     pub index: u32,
-    /// Sum of the new samples' values min(t, R)/R (a miss counts 1).
+    /// Sum of the new samples' values ([`psao_trace::ao::sample_value`]).
     pub sum: f32,
     /// Number of new samples.
     pub rays: u32,
@@ -327,10 +327,12 @@ struct Job {
 
 /// Trace up to `rays_per_point` new samples (never beyond `max_samples`) for each selected
 /// point, in spatially coherent batches (points in Morton order of position and normal
-/// octant) on the rayon pool. Results are in the order of
-/// `selected` and do not depend on the number of threads.
+/// octant) on the rayon pool, through `medium` if any (one medium sampler per work item).
+/// Results are in the order of `selected` and do not depend on the number of threads.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn trace(
     tracer: &Tracer,
+    medium: Option<&dyn Medium>,
     instances: &[InstanceState],
     selected: &[Candidate],
     radius: f32,
@@ -363,7 +365,13 @@ pub(crate) fn trace(
     let per_batch = (BATCH_RAYS / rays_per_point.max(1) as usize).max(1);
     let mut traced: Vec<(u32, Traced)> = order
         .par_chunks(per_batch)
-        .flat_map_iter(|batch| trace_batch(tracer, &jobs, batch, radius, seed))
+        .map_init(
+            || medium.map(|m| m.sampler()),
+            |sampler, batch| {
+                trace_batch(tracer, sampler.as_deref_mut(), &jobs, batch, radius, seed)
+            },
+        )
+        .flatten_iter()
         .collect();
     traced.sort_unstable_by_key(|t| t.0);
     traced.into_iter().map(|t| t.1).collect()
@@ -372,6 +380,7 @@ pub(crate) fn trace(
 /// Trace the jobs `batch` (indices into `jobs`); returns (job index, result) pairs.
 fn trace_batch(
     tracer: &Tracer,
+    mut medium: Option<&mut (dyn MediumSampler + '_)>,
     jobs: &[Job],
     batch: &[u32],
     radius: f32,
@@ -393,9 +402,15 @@ fn trace_batch(
         .map(|&j| {
             let job = &jobs[j as usize];
             let n = job.rays as usize;
-            let sum = hits[at..at + n]
+            let key = sample_key(job.instance, job.index);
+            let sum = rays[at..at + n]
                 .iter()
-                .map(|h| h.map_or(1.0, |h| (h.t / radius).min(1.0)))
+                .zip(&hits[at..at + n])
+                .zip(job.first..)
+                .map(|((ray, hit), i)| {
+                    let stream = medium_stream(seed, key, i);
+                    sample_value(ray, hit.as_ref(), radius, medium.as_deref_mut(), stream)
+                })
                 .sum();
             at += n;
             let result = Traced {

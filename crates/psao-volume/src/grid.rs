@@ -110,6 +110,34 @@ pub struct SparseGrid {
 }
 
 impl SparseGrid {
+    /// A fog grid of constant `density` filling `leaves` 8³ leaves per axis from index 0, with
+    /// cubic voxels of `voxel_size` at the world origin (a homogeneous medium: trilinear
+    /// samples are exactly `density` for index coordinates in `0..=8·leaves − 1`).
+    pub fn constant_fog(leaves: IVec3, voxel_size: f64, density: f32) -> SparseGrid {
+        let mut out = Vec::new();
+        for z in 0..leaves.z {
+            for y in 0..leaves.y {
+                for x in 0..leaves.x {
+                    out.push(Leaf {
+                        origin: IVec3::new(x, y, z) * BRICK as i32,
+                        values: Box::new([density; BRICK_VOXELS]),
+                        mask: [u64::MAX; 8],
+                    });
+                }
+            }
+        }
+        SparseGrid {
+            name: "density".into(),
+            class: GridClass::Fog,
+            transform: Transform {
+                scale: DVec3::splat(voxel_size),
+                translation: DVec3::ZERO,
+            },
+            background: 0.0,
+            leaves: out,
+        }
+    }
+
     /// Number of active voxels.
     pub fn active_voxels(&self) -> u64 {
         self.leaves.iter().map(|l| l.active_count() as u64).sum()

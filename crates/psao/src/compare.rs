@@ -1,7 +1,7 @@
 //! `psao compare`: image metrics between two AO images.
 
 use crate::png_io::read_ao_png;
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -15,6 +15,21 @@ pub struct CompareArgs {
     /// Print JSON (`psnr`, `ssim`, `flip`) instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Also print both images' mean AO over the pixel rectangle `X0,Y0,X1,Y1` (half-open).
+    #[arg(long, value_delimiter = ',')]
+    pub region: Option<Vec<u32>>,
+}
+
+/// Mean of `img` over the half-open pixel rectangle `r` = [x0, y0, x1, y1].
+fn region_mean(img: &psao_eval::AoImage, r: &[u32]) -> f64 {
+    let (mut sum, mut n) = (0.0, 0u64);
+    for y in r[1]..r[3] {
+        for x in r[0]..r[2] {
+            sum += img.data[(y * img.width + x) as usize] as f64;
+            n += 1;
+        }
+    }
+    sum / n as f64
 }
 
 /// Runs `psao compare`.
@@ -28,6 +43,24 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             args.test.display()
         )
     })?;
+    if let Some(r) = &args.region {
+        if r.len() != 4 || r[0] >= r[2] || r[1] >= r[3] || r[2] > a.width || r[3] > a.height {
+            bail!(
+                "--region must be X0,Y0,X1,Y1 inside the {}x{} image",
+                a.width,
+                a.height
+            );
+        }
+        println!(
+            "mean AO over {}..{} x {}..{}: {:.4} (reference) vs {:.4} (test)",
+            r[0],
+            r[2],
+            r[1],
+            r[3],
+            region_mean(&a, r),
+            region_mean(&b, r)
+        );
+    }
     if args.json {
         println!("{}", serde_json::to_string(&m)?);
     } else {

@@ -11,7 +11,9 @@ use crate::run::ServerTuning;
 use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use psao_eval::{compare, reference_ao, ssao, AoImage, Metrics, ReferenceSettings, SsaoSettings};
+use psao_eval::{
+    compare, reference_ao_in, ssao, AoImage, Metrics, ReferenceSettings, SsaoSettings,
+};
 use psao_raster::{rasterize, GBuffer, RasterOptions};
 use psao_scene::path::CameraPath;
 use psao_scene::Scene;
@@ -93,8 +95,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     )];
     for &hz in &args.server_hz {
         for &points in &args.points {
-            let (row, series, middle) =
-                eval_psao(&input.scene, &path, range, &frames, points, hz, args)?;
+            let (row, series, middle) = eval_psao(&input, &path, range, &frames, points, hz, args)?;
             if hz == args.server_hz[0] && (crops.len() == 1) {
                 crops.push((format!("PSAO-{points}"), middle));
             }
@@ -105,7 +106,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let (ssao_row, ssao_middle) = eval_ssao(&input.scene, &path, &frames)?;
     crops.push(("SSAO".into(), ssao_middle));
     rows.push(ssao_row);
-    rows.push(eval_rtao(&input.scene, &frames, args)?);
+    rows.push(eval_rtao(&input, &frames, args)?);
 
     let report = Report {
         scene: input.name.clone(),
@@ -138,7 +139,8 @@ fn prepare_frames(
         args.tuning.backend.unwrap_or_default(),
         args.spp,
         1,
-    )?;
+    )?
+    .with_medium(input.medium());
     let pixels = args.res.width as u64 * args.res.height as u64;
     let bar = progress::bar(pixels * eval_frames.len() as u64, "reference AO", "px");
     let mut frames = Vec::new();
@@ -175,7 +177,8 @@ fn prepare_frames(
 }
 
 /// The cache folder name of a reference configuration: readable parts plus a hash of everything
-/// that changes the images (scene geometry, camera keys, resolution, spp, radius).
+/// that changes the images (scene geometry, camera keys, resolution, spp, radius, and the
+/// volume: its files' bytes, placement, density scale, format and frame).
 fn reference_key(input: &SceneInput, path: &CameraPath, args: &EvalArgs) -> String {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     args.input.scene.hash(&mut h);
@@ -184,6 +187,9 @@ fn reference_key(input: &SceneInput, path: &CameraPath, args: &EvalArgs) -> Stri
     input.scene.ao_radius.to_bits().hash(&mut h);
     let (lo, hi) = input.scene.bounds();
     format!("{lo:?}{hi:?}").hash(&mut h);
+    if let Some(v) = &input.volume {
+        v.key.hash(&mut h);
+    }
     format!(
         "{}_{}_{}_{}spp_{:016x}",
         input.name,
@@ -241,7 +247,7 @@ impl MetricSums {
 
 /// Runs the split pipeline over the whole range and measures the evaluated frames.
 fn eval_psao(
-    scene: &Scene,
+    input: &SceneInput,
     path: &CameraPath,
     range: FrameRange,
     frames: &[EvalFrame],
@@ -249,7 +255,9 @@ fn eval_psao(
     hz: u32,
     args: &EvalArgs,
 ) -> Result<(Row, Series, AoImage)> {
-    let config = args.tuning.config(points, hz, args.res)?;
+    let scene = &input.scene;
+    let mut config = args.tuning.config(points, hz, args.res)?;
+    config.medium = input.medium();
     let mut pipeline = Pipeline::new(scene, &config)?;
     let bar = progress::bar(
         (range.end - range.start) as u64,
@@ -316,8 +324,9 @@ fn eval_ssao(scene: &Scene, path: &CameraPath, frames: &[EvalFrame]) -> Result<(
     Ok((row, middle.context("no evaluated frame")?))
 }
 
-/// Per-pixel RTAO with few rays per pixel.
-fn eval_rtao(scene: &Scene, frames: &[EvalFrame], args: &EvalArgs) -> Result<Row> {
+/// Per-pixel RTAO with few rays per pixel (through the scene's volume, like the reference).
+fn eval_rtao(input: &SceneInput, frames: &[EvalFrame], args: &EvalArgs) -> Result<Row> {
+    let (scene, medium) = (&input.scene, input.medium());
     let tracer = Tracer::new(
         args.tuning.backend.unwrap_or_default(),
         scene,
@@ -332,7 +341,7 @@ fn eval_rtao(scene: &Scene, frames: &[EvalFrame], args: &EvalArgs) -> Result<Row
             seed: 0x7274_616f ^ f.frame as u64,
         };
         let t = Instant::now();
-        let ao = reference_ao(&f.gbuffer, &tracer, &settings, &|_| {});
+        let ao = reference_ao_in(&f.gbuffer, &tracer, medium.as_deref(), &settings, &|_| {});
         ms += t.elapsed().as_secs_f64() * 1e3;
         sums.add(scene, f, &ao)?;
     }

@@ -16,6 +16,7 @@ mod reference;
 mod report;
 mod run;
 mod scene_source;
+mod scene_volume;
 mod serve;
 mod view;
 mod volume_cmd;

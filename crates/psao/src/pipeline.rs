@@ -10,7 +10,9 @@ use psao_eval::AoImage;
 use psao_raster::{GBuffer, RasterOptions, Rasterizer};
 use psao_scene::{Camera, Scene};
 use psao_server::{ClientId, Server, ServerConfig, View};
+use psao_trace::ao::Medium;
 use serde::Serialize;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Client frames per second of scene time (camera paths are sampled at this rate).
@@ -27,6 +29,8 @@ pub struct PipelineConfig {
     pub codec: String,
     /// Client image size.
     pub res: Resolution,
+    /// The participating medium the server's AO rays pass through (the scene's volume).
+    pub medium: Option<Arc<dyn Medium>>,
 }
 
 /// What happened in one client frame.
@@ -83,7 +87,7 @@ impl<'a> Pipeline<'a> {
                 config.server_hz
             );
         }
-        let mut server = Server::new(scene, config.server)
+        let mut server = Server::with_medium(scene, config.server, config.medium.clone())
             .context("cannot start the server (point generation or tracer)")?;
         let client_id = server.add_client();
         let client = ClientState::new(&server.instance_table());

@@ -6,12 +6,14 @@ use crate::progress;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use psao_eval::{reference_ao, AoImage, ReferenceSettings};
+use psao_eval::{reference_ao_in, AoImage, ReferenceSettings};
 use psao_raster::{rasterize, RasterOptions};
 use psao_scene::path::CameraPath;
 use psao_scene::Scene;
+use psao_trace::ao::Medium;
 use psao_trace::{Backend, GeometryMode, Tracer};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Largest accepted rays per pixel.
 pub const MAX_SPP: u32 = 1 << 16;
@@ -58,7 +60,8 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
         args.backend.unwrap_or_default(),
         args.spp,
         args.seed,
-    )?;
+    )?
+    .with_medium(input.medium());
     let pixels = args.res.width as u64 * args.res.height as u64;
     let bar = progress::bar(pixels * frames.len() as u64, "reference AO", "px");
     for &frame in &frames {
@@ -103,6 +106,7 @@ fn select_frames(
 pub struct ReferenceRenderer<'a> {
     scene: &'a Scene,
     tracer: Tracer,
+    medium: Option<Arc<dyn Medium>>,
     spp: u32,
     seed: u64,
 }
@@ -115,9 +119,16 @@ impl<'a> ReferenceRenderer<'a> {
         Ok(Self {
             scene,
             tracer,
+            medium: None,
             spp,
             seed,
         })
+    }
+
+    /// Lets the AO rays pass through `medium` (the scene's volume).
+    pub fn with_medium(mut self, medium: Option<Arc<dyn Medium>>) -> Self {
+        self.medium = medium;
+        self
     }
 
     /// Reference AO of `frame` of `path` at `res`; `progress` counts pixels.
@@ -136,6 +147,12 @@ impl<'a> ReferenceRenderer<'a> {
             radius: self.scene.ao_radius,
             seed: self.seed.wrapping_add(frame as u64),
         };
-        reference_ao(&gbuffer, &self.tracer, &settings, progress)
+        reference_ao_in(
+            &gbuffer,
+            &self.tracer,
+            self.medium.as_deref(),
+            &settings,
+            progress,
+        )
     }
 }

@@ -55,6 +55,7 @@ impl ServerTuning {
             server_hz,
             codec: self.codec.clone(),
             res,
+            medium: None,
         })
     }
 }
@@ -126,7 +127,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let config = args.tuning.config(args.points, args.server_hz, args.res)?;
+    let mut config = args.tuning.config(args.points, args.server_hz, args.res)?;
+    config.medium = input.medium();
     let mut pipeline = Pipeline::new(&input.scene, &config)?;
     tracing::info!(
         "{} points on {} instances",

@@ -4,7 +4,9 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_scene::path::CameraPath;
 use psao_scene::Scene;
+use psao_trace::ao::Medium;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// The name that selects the built-in default scene.
 pub const BUILTIN_SCENE: &str = "default";
@@ -35,7 +37,7 @@ impl SceneArgs {
     }
 }
 
-/// A scene with the camera paths it names.
+/// A scene with the camera paths it names and the volume it places.
 pub struct SceneInput {
     /// Display name (file name or `default`).
     pub name: String,
@@ -43,6 +45,8 @@ pub struct SceneInput {
     pub scene: Scene,
     /// Camera paths that come with the scene (first = default).
     pub paths: Vec<CameraPath>,
+    /// The volume the scene file places, as a medium for AO rays.
+    pub volume: Option<crate::scene_volume::SceneMedium>,
 }
 
 impl SceneInput {
@@ -60,6 +64,7 @@ impl SceneInput {
                 name: BUILTIN_SCENE.into(),
                 scene: psao_scene::builtin::default_scene(),
                 paths,
+                volume: None,
             });
         }
         let file = Path::new(arg);
@@ -72,7 +77,13 @@ impl SceneInput {
                 CameraPath::load(p).with_context(|| format!("scene {arg} names a bad camera path"))
             })
             .collect::<Result<_>>()?;
+        let volume = loaded
+            .volumes
+            .first()
+            .map(crate::scene_volume::load)
+            .transpose()?;
         Ok(Self {
+            volume,
             name: file
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
@@ -80,6 +91,13 @@ impl SceneInput {
             scene: loaded.scene,
             paths,
         })
+    }
+
+    /// The medium AO rays pass through (the scene's volume), if any.
+    pub fn medium(&self) -> Option<Arc<dyn Medium>> {
+        self.volume
+            .as_ref()
+            .map(|v| v.volume.clone() as Arc<dyn Medium>)
     }
 
     /// The camera path named by `--path` (a file), else the scene's first path.

@@ -169,7 +169,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             height: 1,
         },
     )?;
-    let server = Server::new(&input.scene, config.server)
+    let server = Server::with_medium(&input.scene, config.server, input.medium())
         .context("cannot start the server (point generation or tracer)")?;
     tracing::info!(
         "{} points on {} instances; codec {}",

@@ -172,3 +172,139 @@ fn broken_files_fail_with_a_clear_message() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("unknown brick format"));
 }
+
+/// A scene file: the built-in scene plus, when `volume` is given, that `[[volume]]` body
+/// (a homogeneous fog `.psv` covering the whole hall is written next to it as `fog.psv`).
+fn volume_scene(dir: &std::path::Path, name: &str, volume: Option<&str>) -> PathBuf {
+    use psao_volume::{psv, BrickFormat, SparseGrid, Volume};
+    let grid = SparseGrid::constant_fog(glam::IVec3::ONE, 12.5, 1.0);
+    let (vol, _) = Volume::build(&[grid], BrickFormat::F32, None).unwrap();
+    psv::write_file(&vol, &dir.join("fog.psv")).unwrap();
+    let paths = concat!(env!("CARGO_MANIFEST_DIR"), "/../../paths/default_a.toml");
+    let mut text = format!("camera_paths = [\"{paths}\"]\n[[asset]]\nfile = \"builtin:default\"\n");
+    if let Some(v) = volume {
+        text += &format!("[[volume]]\nfile = \"fog.psv\"\ntranslation = [-50, -50, -50]\n{v}\n");
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn mean_png(path: &std::path::Path) -> f64 {
+    let img = image::open(path).unwrap().to_luma16();
+    img.pixels().map(|p| p.0[0] as f64 / 65535.0).sum::<f64>() / img.pixels().len() as f64
+}
+
+#[test]
+fn a_scene_volume_darkens_reference_ao_and_keys_the_eval_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = volume_scene(dir.path(), "plain.toml", None);
+    let fog = volume_scene(dir.path(), "fog.toml", Some("density_scale = 2.0"));
+    let mut means = Vec::new();
+    for scene in [&plain, &fog] {
+        let out = dir.path().join(scene.file_stem().unwrap());
+        let o = psao(&[
+            "reference",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--spp",
+            "8",
+            "--res",
+            "64x36",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        means.push(mean_png(&out.join("ao_00000.png")));
+    }
+    // Every covered pixel's rays run through extinction 2/m: AO ≤ (1 − e^(−1.2)) / 1.2 ≈ 0.58.
+    assert!(means[1] < means[0] - 0.1, "{means:?}");
+
+    let cache = dir.path().join("cache");
+    for scene in [&plain, &fog] {
+        let o = psao(&[
+            "eval",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--frames",
+            "0..1",
+            "--points",
+            "32",
+            "--spp",
+            "4",
+            "--rtao-spp",
+            "1",
+            "--res",
+            "32x18",
+            "--ray-budget",
+            "20000",
+            "--cache",
+            cache.to_str().unwrap(),
+            "--out",
+            dir.path().join("eval").to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let keys: Vec<_> = std::fs::read_dir(&cache).unwrap().collect();
+    assert_eq!(
+        keys.len(),
+        2,
+        "the volume is part of the reference cache key"
+    );
+}
+
+#[test]
+fn bad_scene_volumes_fail_with_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    for (body, needles) in [
+        (
+            "format = \"f16\"",
+            vec!["fog.toml", "volume format", "fog.psv", ".psv"],
+        ),
+        ("density_scale = -2.0", vec!["fog.toml", "density_scale"]),
+        (
+            "densty_scale = 2.0",
+            vec!["fog.toml", "unknown field `densty_scale`"],
+        ),
+    ] {
+        let scene = volume_scene(dir.path(), "fog.toml", Some(body));
+        let o = psao(&[
+            "reference",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--spp",
+            "1",
+            "--res",
+            "8x8",
+            "--out",
+            dir.path().join("x").to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        let e = stderr(&o);
+        assert!(!e.contains("panicked"), "{e}");
+        for n in needles {
+            assert!(e.contains(n), "`{n}` not in: {e}");
+        }
+    }
+    // A .vdb that is not one: the error names the scene and the volume file.
+    std::fs::write(dir.path().join("bad.vdb"), b"not a vdb").unwrap();
+    std::fs::write(
+        dir.path().join("bad.toml"),
+        "[[asset]]\nfile = \"builtin:box\"\n[[volume]]\nfile = \"bad.vdb\"\nformat = \"bc9\"\n",
+    )
+    .unwrap();
+    let o = psao(&[
+        "reference",
+        "--scene",
+        dir.path().join("bad.toml").to_str().unwrap(),
+        "--path",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../paths/default_a.toml"),
+        "--out",
+        dir.path().join("y").to_str().unwrap(),
+    ]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("bad.toml") && e.contains("bc9"),
+        "{e}"
+    );
+}

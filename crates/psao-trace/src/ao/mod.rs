@@ -1,13 +1,19 @@
 //! Ambient occlusion as defined once for all of psao (DESIGN §2): at a point x with normal n,
 //! trace N cosine-weighted hemisphere rays of length R from x offset along n;
-//! AO(x) = mean(min(hit distance, R) / R), a miss counting 1.
+//! AO(x) = mean(min(hit distance, R) / R), a miss counting 1. With a participating
+//! [`Medium`] the hit distance of each ray is weighted by the medium's transmittance (see
+//! [`sample_value`] and the `medium` module).
 
+mod medium;
 mod sampling;
 
 use glam::Vec3;
 use rayon::prelude::*;
 
-pub use sampling::{cosine_hemisphere, hash64, orthonormal_basis, ray_offset, sample_2d};
+pub use medium::{Medium, MediumSampler};
+pub use sampling::{
+    cosine_hemisphere, hash64, medium_stream, orthonormal_basis, ray_offset, sample_2d,
+};
 
 use crate::{sort_rays_spatially, Hit, Ray, Tracer};
 
@@ -39,6 +45,30 @@ pub fn ao_rays_range(
     }));
 }
 
+/// The value of one AO sample: D / R, where L = min(t, R) is the distance to the closest
+/// surface hit (R on a miss) and D = ∫₀ᴸ T(s) ds the transmittance-weighted distance along
+/// the ray through `medium` (D = L without a medium). `stream` seeds the medium's random
+/// choices (use [`medium_stream`] of the sample's seed, key and index). This is the one AO
+/// estimator of psao: the server's points, the reference and the baselines all use it.
+pub fn sample_value(
+    ray: &Ray,
+    hit: Option<&Hit>,
+    radius: f32,
+    medium: Option<&mut (dyn MediumSampler + '_)>,
+    stream: u64,
+) -> f32 {
+    let length = surface_length(hit, radius);
+    match medium {
+        Some(m) => m.transmitted_length(ray.origin, ray.dir, length, stream) / radius,
+        None => length / radius,
+    }
+}
+
+/// min(t, R) for a hit at t, R for a miss.
+fn surface_length(hit: Option<&Hit>, radius: f32) -> f32 {
+    hit.map_or(radius, |h| h.t.min(radius))
+}
+
 /// AO from the closest hits of one point's rays: the mean of min(t, R)/R with a miss counting
 /// 1. Returns 1 (unoccluded) for no rays or a non-positive radius.
 pub fn ao_value(hits: &[Option<Hit>], radius: f32) -> f32 {
@@ -47,7 +77,7 @@ pub fn ao_value(hits: &[Option<Hit>], radius: f32) -> f32 {
     }
     let sum: f32 = hits
         .iter()
-        .map(|h| h.map_or(1.0, |h| (h.t / radius).min(1.0)))
+        .map(|h| surface_length(h.as_ref(), radius) / radius)
         .sum();
     sum / hits.len() as f32
 }
@@ -81,6 +111,21 @@ pub fn ambient_occlusion_batch(
     seed: u64,
     keys: impl Fn(usize) -> u64 + Sync,
 ) -> Vec<f32> {
+    ambient_occlusion_batch_in(tracer, None, points, radius, spp, seed, keys)
+}
+
+/// [`ambient_occlusion_batch`] with the rays passing through `medium` (one medium sampler
+/// per parallel work item). Deterministic: the medium's random numbers of sample i of point
+/// k come from [`medium_stream`]`(seed, key(k), i)`.
+pub fn ambient_occlusion_batch_in(
+    tracer: &Tracer,
+    medium: Option<&dyn Medium>,
+    points: &[(Vec3, Vec3)],
+    radius: f32,
+    spp: u32,
+    seed: u64,
+    keys: impl Fn(usize) -> u64 + Sync,
+) -> Vec<f32> {
     let mut result = vec![1.0; points.len()];
     if spp == 0 {
         return result;
@@ -91,23 +136,41 @@ pub fn ambient_occlusion_batch(
         .par_chunks_mut(points_per_chunk)
         .zip(points.par_chunks(points_per_chunk))
         .enumerate()
-        .for_each(|(chunk, (out, pts))| {
-            let base = chunk * points_per_chunk;
-            let mut rays = Vec::with_capacity(pts.len() * spp_len);
-            for (i, &(x, n)) in pts.iter().enumerate() {
-                ao_rays(x, n, radius, spp, seed, keys(base + i), &mut rays);
-            }
-            let order = sort_rays_spatially(&rays);
-            let sorted: Vec<Ray> = order.iter().map(|&i| rays[i as usize]).collect();
-            let mut sorted_hits = vec![None; sorted.len()];
-            tracer.intersect(&sorted, &mut sorted_hits);
-            let mut hits = vec![None; rays.len()];
-            for (&i, h) in order.iter().zip(sorted_hits) {
-                hits[i as usize] = h;
-            }
-            for (o, point_hits) in out.iter_mut().zip(hits.chunks(spp_len)) {
-                *o = ao_value(point_hits, radius);
-            }
-        });
+        .for_each_init(
+            || medium.map(|m| m.sampler()),
+            |sampler, (chunk, (out, pts))| {
+                let base = chunk * points_per_chunk;
+                let mut rays = Vec::with_capacity(pts.len() * spp_len);
+                for (i, &(x, n)) in pts.iter().enumerate() {
+                    ao_rays(x, n, radius, spp, seed, keys(base + i), &mut rays);
+                }
+                let order = sort_rays_spatially(&rays);
+                let sorted: Vec<Ray> = order.iter().map(|&i| rays[i as usize]).collect();
+                let mut sorted_hits = vec![None; sorted.len()];
+                tracer.intersect(&sorted, &mut sorted_hits);
+                let mut hits = vec![None; rays.len()];
+                for (&i, h) in order.iter().zip(sorted_hits) {
+                    hits[i as usize] = h;
+                }
+                let valid = radius.is_finite() && radius > 0.0;
+                for (i, (o, point_hits)) in out.iter_mut().zip(hits.chunks(spp_len)).enumerate() {
+                    if !valid {
+                        continue;
+                    }
+                    let key = keys(base + i);
+                    let point_rays = &rays[i * spp_len..(i + 1) * spp_len];
+                    let sum: f32 = point_rays
+                        .iter()
+                        .zip(point_hits)
+                        .enumerate()
+                        .map(|(s, (ray, hit))| {
+                            let stream = medium_stream(seed, key, s as u32);
+                            sample_value(ray, hit.as_ref(), radius, sampler.as_deref_mut(), stream)
+                        })
+                        .sum();
+                    *o = sum / spp as f32;
+                }
+            },
+        );
     result
 }

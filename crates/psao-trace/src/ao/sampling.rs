@@ -46,6 +46,13 @@ pub fn sample_2d(seed: u64, key: u64, index: u32) -> (f32, f32) {
     (unit_float(x), unit_float(y))
 }
 
+/// The random stream of the medium sampling of AO sample `index` of point `key`: hashed
+/// from (seed, key, index) with another salt than the sample's direction, so the medium's
+/// random numbers are independent of the direction and of every other sample.
+pub fn medium_stream(seed: u64, key: u64, index: u32) -> u64 {
+    hash64(hash_pair(seed ^ 0x6d65_6469_756d_0000, key) ^ u64::from(index))
+}
+
 /// Two unit vectors that complete the unit vector `n` to a right-handed orthonormal basis,
 /// continuous everywhere except across n.z = 0 where the sign flips (Duff et al. 2017,
 /// "Building an orthonormal basis, revisited"): no branch on a small |n.z|, no singularity.
