@@ -6,6 +6,7 @@
 //! each server frame [`Server::step`] with the clients' views → [`Server::update_for`] per
 //! client, encoded with a [`psao_delta::Codec`]. Pure computation: no file or network I/O.
 
+mod bury;
 mod clients;
 mod config;
 mod error;
@@ -15,6 +16,7 @@ mod publish;
 mod server;
 mod trace;
 
+pub use bury::{BURIAL_MIN_INSIDE, BURIAL_RAYS};
 pub use clients::ClientId;
 pub use config::{ServerConfig, Thresholds};
 pub use error::ServerError;

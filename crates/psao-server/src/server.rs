@@ -10,6 +10,7 @@ use psao_scene::Scene;
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
+use crate::bury::buried;
 use crate::clients::Clients;
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
@@ -65,11 +66,13 @@ pub struct Server {
     instances: Vec<InstanceState>,
     clients: Clients,
     frame: u64,
+    buried_points: usize,
 }
 
 impl Server {
-    /// Generate the points of every instance (in parallel), lay out their grids and build
-    /// the tracer (AO rays skip alpha-masked geometry).
+    /// Generate the points of every instance (in parallel), build the tracer (AO rays skip
+    /// alpha-masked geometry), drop buried points when [`ServerConfig::cull_buried`] is set,
+    /// and lay out the grids of the rest.
     pub fn new(scene: &Scene, config: ServerConfig) -> Result<Server, ServerError> {
         config.validate()?;
         let radius = config.ao_radius.unwrap_or(scene.ao_radius);
@@ -85,13 +88,25 @@ impl Server {
             density: config.density,
             seed: config.seed,
         };
-        let points = generate_scene_points(scene, &params, None)?;
+        let mut points = generate_scene_points(scene, &params, None)?;
+        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
+        let buried_points = if config.cull_buried {
+            let buried = buried(&tracer, scene, &points, config.seed);
+            let mut dropped = 0;
+            for (p, b) in points.iter_mut().zip(&buried) {
+                let mut flags = b.iter();
+                p.points.retain(|_| !flags.next().copied().unwrap_or(false));
+                dropped += b.iter().filter(|&&x| x).count();
+            }
+            dropped
+        } else {
+            0
+        };
         let instances = points
             .par_iter()
             .zip(&scene.instances)
             .map(|(p, inst)| InstanceState::new(p, inst.transform))
             .collect::<Result<Vec<_>, _>>()?;
-        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
         Ok(Server {
             config,
             radius,
@@ -99,6 +114,7 @@ impl Server {
             instances,
             clients: Clients::default(),
             frame: 0,
+            buried_points,
         })
     }
 
@@ -251,6 +267,11 @@ impl Server {
         })
     }
 
+    /// Generated points dropped by the burial test ([`ServerConfig::cull_buried`]).
+    pub fn buried_points(&self) -> usize {
+        self.buried_points
+    }
+
     /// Server frames stepped so far (the frame number of the latest update).
     pub fn frame(&self) -> u64 {
         self.frame
@@ -281,7 +302,8 @@ impl Server {
         self.instances.get(instance).map(|i| &i.grid)
     }
 
-    /// Every generated point of an instance, in generation order (empty when out of range).
+    /// Every kept point of an instance (generated, not buried), in generation order (empty
+    /// when out of range).
     pub fn points(&self, instance: usize) -> impl Iterator<Item = PointInfo> + '_ {
         let inst = self.instances.get(instance);
         let n = inst.map_or(0, |i| i.points.position.len());
