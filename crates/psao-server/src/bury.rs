@@ -9,7 +9,8 @@
 //! buried points a few millimetres below its visible floor). A point is *buried* when almost
 //! every ray leaving it through its hemisphere hits the inside (back side) of single-sided
 //! geometry, i.e. it sits in a closed volume. Points on open faces, points whose rays escape,
-//! and back sides of double-sided materials (which have no inside) are kept.
+//! and back sides of double-sided materials (which have no inside) are kept. Alpha-masked
+//! geometry is skipped by the server's tracer, so it never buries anything.
 
 use glam::{Mat3A, Vec3};
 use psao_points::InstancePoints;
