@@ -59,6 +59,7 @@ impl Neighbourhood {
             self.key = Some((instance, base));
         }
         let (r2, inv_r) = (r * r, 1.0 / r);
+        let plane = params.plane_tolerance * layout.poisson_radius;
         // Branch-free: a rejected point gets weight +0, which leaves both sums unchanged, so
         // the result equals the early-continue formulation bit for bit.
         let mut weight = [0.0f32; MAX_POINTS];
@@ -71,10 +72,16 @@ impl Neighbourhood {
             let d2 = delta.length_squared();
             let d = d2.sqrt();
             let c = ni.dot(delta) / d;
+            let cos_n = ni.dot(n);
             let keep = d2 < r2
-                && ni.dot(n) > params.normal_threshold
+                && cos_n > params.normal_threshold
+                && n.dot(delta).abs() <= plane
                 && (d2 == 0.0 || c * c < params.direction_threshold);
-            weight[i] = if keep { (r - d) * inv_r } else { 0.0 };
+            weight[i] = if keep {
+                (r - d) * inv_r * cos_n.powi(params.normal_exponent)
+            } else {
+                0.0
+            };
         }
         let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
         for (w, ao) in weight.iter().zip(&self.ao).take(self.count) {
@@ -83,9 +90,33 @@ impl Neighbourhood {
         }
         if w_sum > 0.0 {
             ao_sum / w_sum
+        } else if params.nearest_fallback {
+            self.nearest(p, n, plane, params)
         } else {
             1.0
         }
+    }
+
+    /// The fallback of `reconstruct_ao` when no point lies within the radius: the AO of the
+    /// nearest point passing the normal, plane and direction tests (first one on ties), or 1.
+    fn nearest(&self, p: Vec3, n: Vec3, plane: f32, params: &ReconstructParams) -> f32 {
+        let [px, py, pz] = &self.position;
+        let [nx, ny, nz] = &self.normal;
+        let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, 1.0f32);
+        for i in 0..self.count {
+            let delta = Vec3::new(px[i], py[i], pz[i]) - p;
+            let ni = Vec3::new(nx[i], ny[i], nz[i]);
+            let d2 = delta.length_squared();
+            let d = d2.sqrt();
+            let c = ni.dot(delta) / d;
+            let compatible = ni.dot(n) > params.normal_threshold
+                && n.dot(delta).abs() <= plane
+                && (d2 == 0.0 || c * c < params.direction_threshold);
+            if compatible && d2 < nearest_d2 {
+                (nearest_d2, nearest_ao) = (d2, self.ao[i]);
+            }
+        }
+        nearest_ao
     }
 
     /// Decode the valid points of the allocated cells of the block at `base`, in the order

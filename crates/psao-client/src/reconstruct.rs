@@ -2,7 +2,10 @@
 //! reconstruction", paper §3.5).
 
 use glam::{Affine3A, Mat3A, Vec3A};
-use psao_points::{InstanceGrid, ReconstructParams, DEFAULT_INTERPOLATION_FACTOR};
+use psao_points::{
+    InstanceGrid, ReconstructParams, DEFAULT_INTERPOLATION_FACTOR, DEFAULT_NORMAL_EXPONENT,
+    DEFAULT_PLANE_TOLERANCE,
+};
 use psao_raster::GBuffer;
 use rayon::prelude::*;
 
@@ -18,12 +21,21 @@ const MIN_DETERMINANT: f32 = 1e-12;
 pub struct ReconstructSettings {
     /// Reconstruction radius in units of the instance's Poisson radius.
     pub interpolation_factor: f32,
+    /// Tangent-plane tolerance in Poisson radii ([`ReconstructParams::plane_tolerance`]).
+    pub plane_tolerance: f32,
+    /// Exponent of the normal-agreement weight ([`ReconstructParams::normal_exponent`]).
+    pub normal_exponent: i32,
+    /// Nearest-point fallback for holes ([`ReconstructParams::nearest_fallback`]).
+    pub nearest_fallback: bool,
 }
 
 impl Default for ReconstructSettings {
     fn default() -> Self {
         Self {
             interpolation_factor: DEFAULT_INTERPOLATION_FACTOR,
+            plane_tolerance: DEFAULT_PLANE_TOLERANCE,
+            normal_exponent: DEFAULT_NORMAL_EXPONENT,
+            nearest_fallback: true,
         }
     }
 }
@@ -98,6 +110,9 @@ pub fn reconstruct_into(
         .collect();
     let params = ReconstructParams {
         interpolation_factor: settings.interpolation_factor,
+        plane_tolerance: settings.plane_tolerance,
+        normal_exponent: settings.normal_exponent,
+        nearest_fallback: settings.nearest_fallback,
         ..ReconstructParams::default()
     };
     // Zipping row slices tolerates inconsistent attribute lengths: missing pixels stay 1.

@@ -197,6 +197,7 @@ fn deterministic_and_thread_count_independent() {
         &g,
         &ReconstructSettings {
             interpolation_factor: 1.0,
+            ..settings
         },
     );
     assert!(one.iter().zip(&wide).any(|(a, b)| a != b));
@@ -209,13 +210,29 @@ fn matches_reconstruct_ao_bitwise() {
     let scene = common::scene(3.0, 3);
     let state = setup(&scene, 1024.0, pattern);
     let camera = Camera::look_at(Vec3::new(1.0, 2.0, 4.0), Vec3::new(0.0, 0.2, -0.5), 55.0);
-    for factor in [psao_points::DEFAULT_INTERPOLATION_FACTOR, 1.3] {
+    let defaults = ReconstructSettings::default();
+    // The default, a radius small enough to leave holes (the nearest-point fallback runs),
+    // and the same without any of the additions to DESIGN's criteria.
+    let variants = [
+        defaults,
+        ReconstructSettings {
+            interpolation_factor: 1.3,
+            ..defaults
+        },
+        ReconstructSettings {
+            interpolation_factor: 1.3,
+            plane_tolerance: f32::INFINITY,
+            normal_exponent: 0,
+            nearest_fallback: false,
+        },
+    ];
+    for settings in variants {
         let g = render(&scene, &camera, 320, 200);
-        let settings = ReconstructSettings {
-            interpolation_factor: factor,
-        };
         let params = ReconstructParams {
-            interpolation_factor: factor,
+            interpolation_factor: settings.interpolation_factor,
+            plane_tolerance: settings.plane_tolerance,
+            normal_exponent: settings.normal_exponent,
+            nearest_fallback: settings.nearest_fallback,
             ..ReconstructParams::default()
         };
         let ao = reconstruct(&state, &g, &settings);

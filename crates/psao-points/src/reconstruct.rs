@@ -23,6 +23,13 @@ pub const DEFAULT_NORMAL_THRESHOLD: f32 = 0.1;
 /// ignored (they lie in front of or behind the surface, not along it).
 pub const DEFAULT_DIRECTION_THRESHOLD: f32 = 0.7;
 
+/// Default plane tolerance, in Poisson radii: points farther than this from the shaded
+/// position's tangent plane are ignored (our addition to Eq. 3, see [`reconstruct_ao`]).
+pub const DEFAULT_PLANE_TOLERANCE: f32 = 0.5;
+/// Default exponent of the normal-agreement weight `(n·n_i)^k` (our addition, see
+/// [`reconstruct_ao`]).
+pub const DEFAULT_NORMAL_EXPONENT: i32 = 8;
+
 /// Parameters of the reconstruction.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReconstructParams {
@@ -32,6 +39,14 @@ pub struct ReconstructParams {
     pub normal_threshold: f32,
     /// T_d of Eq. 3.
     pub direction_threshold: f32,
+    /// Largest distance `|n·(p_i − p)|` of a used point from the tangent plane at `p`, in
+    /// units of the layout's Poisson radius (`f32::INFINITY` disables the test).
+    pub plane_tolerance: f32,
+    /// Exponent `k` of the extra weight `(n·n_i)^k` (0 disables it).
+    pub normal_exponent: i32,
+    /// When no point lies within `r`, use the AO of the nearest point of the visited cells
+    /// that passes every other test instead of 1 (see [`reconstruct_ao`]).
+    pub nearest_fallback: bool,
 }
 
 impl Default for ReconstructParams {
@@ -40,14 +55,35 @@ impl Default for ReconstructParams {
             interpolation_factor: DEFAULT_INTERPOLATION_FACTOR,
             normal_threshold: DEFAULT_NORMAL_THRESHOLD,
             direction_threshold: DEFAULT_DIRECTION_THRESHOLD,
+            plane_tolerance: DEFAULT_PLANE_TOLERANCE,
+            normal_exponent: DEFAULT_NORMAL_EXPONENT,
+            nearest_fallback: true,
         }
     }
 }
 
 /// AO at local position `p` with local unit normal `n` from the points of the 2×2×2 cells
 /// nearest `p`: weights `w = max(0, (r − |p_i − p|) / r)`, zeroed when `n_i·n ≤ T_n` or
-/// `(n_i·(p_i − p)/|p_i − p|)² ≥ T_d`; returns `Σ w·AO_i / Σ w`, or 1 when `Σ w = 0`.
+/// `(n_i·(p_i − p)/|p_i − p|)² ≥ T_d`; returns `Σ w·AO_i / Σ w`, or the fallback when
+/// `Σ w = 0` (1 in DESIGN; see (3) below).
 /// Allocation-free; at most 8 bucket scans and 56 points.
+///
+/// Two additions to DESIGN §3 / the paper's Eq. 3 (whose criteria stay as they are) fight
+/// the leaking the paper names as a limitation: detail finer than the point spacing (a
+/// groove, a step, a thin bar) puts points of a parallel surface a few millimetres away
+/// inside the radius, where the direction test `(n_i·d̂)² ≥ T_d` does not reject them because
+/// they lie mostly sideways. (1) A point farther than `plane_tolerance × r_max` from the
+/// tangent plane at `p` (`|n·(p_i − p)| >`, with the pixel's normal `n`) is ignored: on a
+/// flat or gently curved surface its own points lie within a fraction of `r_max` of the
+/// plane (quantisation: `r_max / 16` at most; curvature radius ≥ 8 `r_max` keeps every
+/// point within the radius), points of a surface offset by more do not. (2) `w` is
+/// multiplied by `(n·n_i)^normal_exponent`, so on creases points of the other face (tilted
+/// normals) count less than points of the pixel's own face. Both only ever zero or shrink
+/// weights. (3) When no point passes within `r` (a hole: detail narrower than the spacing,
+/// such as a groove bottom, holds too few points of its own), the AO of the nearest point of
+/// the visited cells that passes every test but the radius is used, and 1 only when there
+/// is none: DESIGN's fallback 1 draws such detail as white gaps (a dark groove breaks into
+/// dashes), while the nearest point on the same surface carries nearly the same occlusion.
 pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &ReconstructParams) -> f32 {
     let layout = grid.layout();
     let r = layout.poisson_radius * params.interpolation_factor;
@@ -55,9 +91,11 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
         return 1.0;
     }
     let (r2, inv_r) = (r * r, 1.0 / r);
+    let plane = params.plane_tolerance * layout.poisson_radius;
     let base = layout.nearest_base(p);
     let normals = normal_table();
     let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
+    let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, 1.0f32);
     for (coord, cell) in grid.block_cells(base) {
         for &bits in &cell.points {
             if !is_valid(bits) {
@@ -65,11 +103,12 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
             }
             let delta = layout.unpack_position(coord, bits) - p;
             let d2 = delta.length_squared();
-            if d2 >= r2 {
+            let ni = normals[normal_code(bits) as usize];
+            let cos_n = ni.dot(n);
+            if cos_n <= params.normal_threshold {
                 continue;
             }
-            let ni = normals[normal_code(bits) as usize];
-            if ni.dot(n) <= params.normal_threshold {
+            if n.dot(delta).abs() > plane {
                 continue;
             }
             let d = d2.sqrt();
@@ -79,13 +118,21 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
                     continue;
                 }
             }
-            let w = (r - d) * inv_r;
+            if d2 >= r2 {
+                if d2 < nearest_d2 {
+                    (nearest_d2, nearest_ao) = (d2, unpack_ao(bits));
+                }
+                continue;
+            }
+            let w = (r - d) * inv_r * cos_n.powi(params.normal_exponent);
             w_sum += w;
             ao_sum += w * unpack_ao(bits);
         }
     }
     if w_sum > 0.0 {
         ao_sum / w_sum
+    } else if params.nearest_fallback {
+        nearest_ao
     } else {
         1.0
     }

@@ -154,9 +154,11 @@ fn points_in_front_of_the_surface_are_ignored() {
             "{p}"
         );
     }
-    // Without the heuristic the upper plane leaks in.
+    // Without the heuristic (and the plane test, which also rejects these points) the upper
+    // plane leaks in.
     let leaky = ReconstructParams {
         direction_threshold: 1.1,
+        plane_tolerance: f32::INFINITY,
         ..params
     };
     let mean: f32 = queries(r, 0.0)
@@ -164,6 +166,98 @@ fn points_in_front_of_the_surface_are_ignored() {
         .sum::<f32>()
         / 3600.0;
     assert!(mean > q(0.2) + 0.01, "{mean}");
+}
+
+#[test]
+fn points_off_the_tangent_plane_are_ignored() {
+    // A parallel plane just above the tolerance: most of its points within r lie sideways
+    // enough to pass the direction test, only the plane test keeps them out.
+    let params = ReconstructParams::default();
+    let lower = gen(&common::plane(2.0, 8, 0.0), &Material::default(), 5);
+    let r_max = lower.poisson_radius_local;
+    let h = 0.6 * r_max;
+    assert!(h > params.plane_tolerance * r_max);
+    let upper = gen(&common::plane(2.0, 8, h), &Material::default(), 6);
+    let layout = GridLayout::new(
+        (Vec3::ZERO, Vec3::new(2.0, 2.0, h)),
+        r_max,
+        4.0 * r_max,
+        8.0,
+    )
+    .unwrap();
+    let input = lower
+        .points
+        .iter()
+        .map(|p| (p.position, p.normal, 0.2))
+        .chain(upper.points.iter().map(|p| (p.position, p.normal, 0.9)));
+    let (grid, _) = InstanceGrid::build(layout, input);
+    let r = params.interpolation_factor * r_max;
+    for p in queries(r, 0.0) {
+        let ao = reconstruct_ao(&grid, p, Vec3::Z, &params);
+        assert!((ao - q(0.2)).abs() < 1e-6, "{p}: {ao}");
+    }
+    let leaky = ReconstructParams {
+        plane_tolerance: f32::INFINITY,
+        ..params
+    };
+    let mean: f32 = queries(r, 0.0)
+        .map(|p| reconstruct_ao(&grid, p, Vec3::Z, &leaky))
+        .sum::<f32>()
+        / 3600.0;
+    assert!(mean > q(0.2) + 0.05, "{mean}");
+}
+
+/// A grid holding exactly `points` (local position, normal, AO), Poisson radius 0.01.
+fn tiny_grid(points: &[(Vec3, Vec3, f32)]) -> InstanceGrid {
+    let layout = GridLayout::new((Vec3::ZERO, Vec3::splat(0.2)), 0.01, 0.04, 8.0).unwrap();
+    let (grid, locs) = InstanceGrid::build(layout, points.iter().copied());
+    assert!(locs.iter().all(Option::is_some));
+    grid
+}
+
+#[test]
+fn points_with_the_pixels_normal_weigh_more() {
+    // Two points at the same distance, in the tangent plane: one with the pixel's normal,
+    // one tilted by 60° (cosine 0.5, passes T_n): (n·n_i)^8 makes the tilted one count ~1/256.
+    let params = ReconstructParams::default();
+    let p = Vec3::new(0.1, 0.1, 0.1);
+    let tilted = Vec3::new(0.75f32.sqrt(), 0.0, 0.5);
+    let grid = tiny_grid(&[
+        (p + Vec3::new(0.01, 0.0, 0.0), Vec3::Z, 0.2),
+        (p + Vec3::new(0.0, 0.01, 0.0), tilted, 0.9),
+    ]);
+    let ao = reconstruct_ao(&grid, p, Vec3::Z, &params);
+    // The tilted normal's 8-bit octahedral code has a cosine within 0.5..0.65 of +z.
+    let most = (q(0.9) - q(0.2)) * 0.65f32.powi(8);
+    assert!(ao > q(0.2) && ao < q(0.2) + most, "{ao}");
+    let plain = ReconstructParams {
+        normal_exponent: 0,
+        ..params
+    };
+    let ao = reconstruct_ao(&grid, p, Vec3::Z, &plain);
+    assert!((ao - 0.5 * (q(0.2) + q(0.9))).abs() < 0.01, "{ao}");
+}
+
+#[test]
+fn holes_take_the_nearest_compatible_point() {
+    let params = ReconstructParams::default();
+    let r = params.interpolation_factor * 0.01;
+    // p at 3/4 of cell (2, 2, 2): the visited block spans cells 2..=3 along every axis.
+    let p = Vec3::splat(0.11);
+    let near = (p + Vec3::new(1.2 * r, 0.0, 0.0), Vec3::Z, 0.3);
+    let nearer_but_facing_away = (p + Vec3::new(0.0, 1.1 * r, 0.0), -Vec3::Z, 0.7);
+    let farther = (p + Vec3::new(0.0, 1.4 * r, 0.0), Vec3::Z, 0.9);
+    let grid = tiny_grid(&[near, nearer_but_facing_away, farther]);
+    let ao = reconstruct_ao(&grid, p, Vec3::Z, &params);
+    assert!((ao - q(0.3)).abs() < 1e-6, "{ao}");
+    let design = ReconstructParams {
+        nearest_fallback: false,
+        ..params
+    };
+    assert_eq!(reconstruct_ao(&grid, p, Vec3::Z, &design), 1.0);
+    // Nothing compatible at all: still 1.
+    let grid = tiny_grid(&[nearer_but_facing_away]);
+    assert_eq!(reconstruct_ao(&grid, p, Vec3::Z, &params), 1.0);
 }
 
 #[test]

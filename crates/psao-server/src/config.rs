@@ -45,7 +45,12 @@ pub struct ServerConfig {
     pub frustum_margin: f32,
     /// Publishing thresholds.
     pub thresholds: Thresholds,
-    /// Seed of point generation and AO sampling.
+    /// Drop generated points buried inside closed geometry before they are stored (see
+    /// `bury.rs`: [`crate::BURIAL_MIN_INSIDE`] of [`crate::BURIAL_RAYS`] unbounded rays hit
+    /// the back side of single-sided surfaces), so they take no cell capacity and never
+    /// blend into visible surfaces.
+    pub cull_buried: bool,
+    /// Seed of point generation, the burial test and AO sampling.
     pub seed: u64,
     /// Ray-tracing backend.
     pub backend: Backend,
@@ -53,8 +58,8 @@ pub struct ServerConfig {
 
 impl Default for ServerConfig {
     /// Density 1024, the scene's AO radius, 16 rays per point and frame, 2 M rays per
-    /// frame, 256 samples to converge, 20 % frustum margin, paper thresholds, seed 0, the
-    /// default backend.
+    /// frame, 256 samples to converge, 20 % frustum margin, paper thresholds, buried points
+    /// culled, seed 0, the default backend.
     fn default() -> Self {
         Self {
             density: psao_points::DEFAULT_DENSITY,
@@ -64,6 +69,7 @@ impl Default for ServerConfig {
             max_samples: 256,
             frustum_margin: 0.2,
             thresholds: Thresholds::default(),
+            cull_buried: true,
             seed: 0,
             backend: Backend::default(),
         }

@@ -8,6 +8,7 @@
 
 mod blocks;
 mod changes;
+mod bury;
 mod clients;
 mod config;
 mod error;
@@ -17,6 +18,7 @@ mod publish;
 mod server;
 mod trace;
 
+pub use bury::{BURIAL_MIN_INSIDE, BURIAL_RAYS};
 pub use clients::ClientId;
 pub use config::{ServerConfig, Thresholds};
 pub use error::ServerError;

@@ -12,6 +12,7 @@ use psao_trace::ao::Medium;
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
+use crate::bury::buried;
 use crate::clients::Clients;
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
@@ -72,6 +73,7 @@ pub struct Server {
     history_frames: u64,
     /// Where culling expects this frame's selection cut (see [`cull`]).
     cut_guess: usize,
+    buried_points: usize,
 }
 
 /// Selection histogram bins added to the previous frame's cut to guess the next one (the
@@ -83,8 +85,9 @@ const CUT_GUESS_MARGIN: usize = 4;
 const CHANGE_HISTORY_FRAMES: u64 = 64;
 
 impl Server {
-    /// Generate the points of every instance (in parallel), lay out their grids and build
-    /// the tracer (AO rays skip alpha-masked geometry).
+    /// Generate the points of every instance (in parallel), build the tracer (AO rays skip
+    /// alpha-masked geometry), drop buried points when [`ServerConfig::cull_buried`] is set,
+    /// and lay out the grids of the rest.
     pub fn new(scene: &Scene, config: ServerConfig) -> Result<Server, ServerError> {
         Server::with_medium(scene, config, None)
     }
@@ -111,14 +114,26 @@ impl Server {
             density: config.density,
             seed: config.seed,
         };
-        let points = generate_scene_points(scene, &params, None)?;
+        let mut points = generate_scene_points(scene, &params, None)?;
+        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
+        let buried_points = if config.cull_buried {
+            let buried = buried(&tracer, scene, &points, config.seed);
+            let mut dropped = 0;
+            for (p, b) in points.iter_mut().zip(&buried) {
+                let mut flags = b.iter();
+                p.points.retain(|_| !flags.next().copied().unwrap_or(false));
+                dropped += b.iter().filter(|&&x| x).count();
+            }
+            dropped
+        } else {
+            0
+        };
         let instances = points
             .par_iter()
             .zip(&scene.instances)
             .enumerate()
             .map(|(i, (p, inst))| InstanceState::new(p, inst.transform, i as u32, config.seed))
             .collect::<Result<Vec<_>, _>>()?;
-        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
         Ok(Server {
             config,
             radius,
@@ -129,6 +144,7 @@ impl Server {
             frame: 0,
             history_frames: CHANGE_HISTORY_FRAMES,
             cut_guess: 0,
+            buried_points,
         })
     }
 
@@ -305,6 +321,11 @@ impl Server {
         })
     }
 
+    /// Generated points dropped by the burial test ([`ServerConfig::cull_buried`]).
+    pub fn buried_points(&self) -> usize {
+        self.buried_points
+    }
+
     /// Server frames stepped so far (the frame number of the latest update).
     pub fn frame(&self) -> u64 {
         self.frame
@@ -340,7 +361,8 @@ impl Server {
         self.instances.get(instance).map(|i| &i.grid)
     }
 
-    /// Every generated point of an instance, in generation order (empty when out of range).
+    /// Every kept point of an instance (generated, not buried), in generation order (empty
+    /// when out of range).
     pub fn points(&self, instance: usize) -> impl Iterator<Item = PointInfo> + '_ {
         let inst = self.instances.get(instance);
         let n = inst.map_or(0, |i| i.points.position.len());

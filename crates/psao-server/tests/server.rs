@@ -139,7 +139,10 @@ fn published_ao_matches_the_reference() {
     }
     let mean = sum_err / n as f32;
     println!("{n} points ({occluded} occluded): mean |error| {mean:.4}, worst {worst:.4}");
-    assert!(n > 1000 && occluded > 100, "{n} {occluded}");
+    // The floor points under the boxes (AO ≈ 0, trivially accurate) are buried and dropped
+    // (`ServerConfig::cull_buried`); the occluded points left are visible ones near the boxes'
+    // bases and sides, where accuracy is hardest.
+    assert!(n > 1000 && occluded > 50, "{n} {occluded}");
     // 256 stratified samples, the 8/255 publishing hysteresis, the reference's own noise.
     assert!(mean < 0.015, "mean error {mean}");
     assert!(worst < 0.08, "worst error {worst}");
