@@ -2,7 +2,7 @@
 
 use psao_trace::Backend;
 
-use crate::ServerError;
+use crate::{Invalidation, ServerError};
 
 /// When a point's published record is resent (DESIGN §3 "Server update").
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,6 +45,8 @@ pub struct ServerConfig {
     pub frustum_margin: f32,
     /// Publishing thresholds.
     pub thresholds: Thresholds,
+    /// Which points restart their AO when something moved.
+    pub invalidation: Invalidation,
     /// Seed of point generation and AO sampling.
     pub seed: u64,
     /// Ray-tracing backend.
@@ -53,8 +55,8 @@ pub struct ServerConfig {
 
 impl Default for ServerConfig {
     /// Density 1024, the scene's AO radius, 16 rays per point and frame, 2 M rays per
-    /// frame, 256 samples to converge, 20 % frustum margin, paper thresholds, seed 0, the
-    /// default backend.
+    /// frame, 256 samples to converge, 20 % frustum margin, paper thresholds, proximity
+    /// invalidation, seed 0, the default backend.
     fn default() -> Self {
         Self {
             density: psao_points::DEFAULT_DENSITY,
@@ -64,6 +66,7 @@ impl Default for ServerConfig {
             max_samples: 256,
             frustum_margin: 0.2,
             thresholds: Thresholds::default(),
+            invalidation: Invalidation::Proximity,
             seed: 0,
             backend: Backend::default(),
         }

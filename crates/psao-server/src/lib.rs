@@ -3,11 +3,12 @@
 //! publishing into per-instance hash grids, and per-client deltas of what changed.
 //!
 //! Typical loop: [`Server::new`] → [`Server::instance_table`] (sent once per client) →
-//! each server frame [`Server::step`] with the clients' views → [`Server::update_for`] per
+//! each server frame [`Server::step_at`] with the clients' views and the scene time → [`Server::update_for`] per
 //! client, encoded with a [`psao_delta::Codec`]. Pure computation: no file or network I/O.
 
 mod clients;
 mod config;
+mod dynamics;
 mod error;
 mod frustum;
 mod instance;
@@ -17,6 +18,7 @@ mod trace;
 
 pub use clients::ClientId;
 pub use config::{ServerConfig, Thresholds};
+pub use dynamics::{Invalidation, MotionStats};
 pub use error::ServerError;
 pub use frustum::{Frustum, View};
 pub use server::{PointInfo, Server, StepStats};

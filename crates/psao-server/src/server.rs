@@ -6,11 +6,12 @@ use glam::{Affine3A, Vec3};
 use psao_delta::{InstanceDelta, InstanceInfo, Update};
 use psao_points::pack::unpack_ao;
 use psao_points::{generate_scene_points, GenerateParams, InstanceGrid};
-use psao_scene::Scene;
+use psao_scene::{Motion, Scene};
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
 use crate::clients::Clients;
+use crate::dynamics::Dynamics;
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select, trace};
@@ -27,6 +28,10 @@ pub struct StepStats {
     pub rays: u64,
     /// Points whose published record changed.
     pub published_points: usize,
+    /// Instances that moved or deformed since the previous step.
+    pub moved_instances: usize,
+    /// Points whose AO accumulation restarted because geometry near them moved.
+    pub invalidated_points: usize,
     /// Wall time of the step in milliseconds.
     pub ms: f64,
 }
@@ -55,14 +60,16 @@ impl PointInfo {
     }
 }
 
-/// The PSAO server for one (static) scene: generates the points, accumulates ray-traced AO
-/// for what the clients see within a per-frame ray budget, publishes changes past the
-/// thresholds into per-instance hash grids, and hands each client what it has not seen yet.
+/// The PSAO server for one scene: generates the points, plays the scene's animation at the
+/// server's scene time, accumulates ray-traced AO for what the clients see within a
+/// per-frame ray budget, publishes changes past the thresholds into per-instance hash grids,
+/// and hands each client what it has not seen yet.
 pub struct Server {
     config: ServerConfig,
     radius: f32,
     tracer: Tracer,
     instances: Vec<InstanceState>,
+    dynamics: Dynamics,
     clients: Clients,
     frame: u64,
 }
@@ -86,10 +93,13 @@ impl Server {
             seed: config.seed,
         };
         let points = generate_scene_points(scene, &params, None)?;
+        let dynamics = Dynamics::new(scene, &points, config.invalidation)?;
+        let motion = dynamics.motion();
         let instances = points
             .par_iter()
             .zip(&scene.instances)
-            .map(|(p, inst)| InstanceState::new(p, inst.transform))
+            .zip(motion)
+            .map(|((p, inst), m)| InstanceState::new(p, inst.transform, *m == Motion::Skinned))
             .collect::<Result<Vec<_>, _>>()?;
         let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
         Ok(Server {
@@ -97,6 +107,7 @@ impl Server {
             radius,
             tracer,
             instances,
+            dynamics,
             clients: Clients::default(),
             frame: 0,
         })
@@ -138,11 +149,25 @@ impl Server {
         self.clients.len()
     }
 
-    /// One server frame for the union of `views`: cull points to the extended frusta, spend
-    /// the ray budget on the visible points with the fewest samples, accumulate, and publish
-    /// what moved past the thresholds.
+    /// One server frame for the union of `views` at the current scene time (the time of the
+    /// last [`Server::step_at`]; a static scene has no time): see [`Server::step_at`].
     pub fn step(&mut self, views: &[View]) -> StepStats {
+        let time = self.dynamics.time().unwrap_or(0.0);
+        // Posing at an unchanged time does nothing, so this cannot fail.
+        self.step_at(views, time).unwrap_or_default()
+    }
+
+    /// One server frame for the union of `views` at scene time `time` (seconds): pose the
+    /// scene (tracer, instance transforms, skinned points; proximity invalidation, see
+    /// [`crate::Invalidation`]), cull points to the extended frusta, spend the ray budget on
+    /// the visible points with the fewest samples (invalidated points have none), accumulate,
+    /// and publish what moved past the thresholds. Errors only when the tracer rejects a
+    /// skinned pose (non-finite vertices).
+    pub fn step_at(&mut self, views: &[View], time: f32) -> Result<StepStats, ServerError> {
         let start = Instant::now();
+        let (motion, moved) =
+            self.dynamics
+                .advance(time, &mut self.tracer, &mut self.instances, self.radius)?;
         self.frame += 1;
         let c = &self.config;
         let frusta: Vec<Frustum> = views
@@ -169,31 +194,45 @@ impl Server {
             p.count[t.index as usize] += t.rays;
             rays += u64::from(t.rays);
         }
-        let published = self.publish(&traced);
-        StepStats {
+        // Traced points and points that moved with their triangles may need publishing.
+        let mut candidates: Vec<(u32, u32)> =
+            traced.iter().map(|t| (t.instance, t.index)).collect();
+        if !moved.is_empty() {
+            candidates.extend(moved);
+            candidates.par_sort_unstable();
+            candidates.dedup();
+        }
+        let published = self.publish(&candidates);
+        Ok(StepStats {
             visible_points: visible,
             traced_points: traced.len(),
             rays,
             published_points: published,
+            moved_instances: motion.moved_instances,
+            invalidated_points: motion.invalidated_points,
             ms: start.elapsed().as_secs_f64() * 1e3,
-        }
+        })
     }
 
-    /// Publish the traced points that need it; returns how many were published.
-    fn publish(&mut self, traced: &[crate::trace::Traced]) -> usize {
+    /// Publish the candidate (instance, point) pairs that need it, and refresh the cells and
+    /// buckets points moved out of; returns how many points were published.
+    fn publish(&mut self, candidates: &[(u32, u32)]) -> usize {
         let thresholds = self.config.thresholds;
         let frame = self.frame;
-        // `traced` is sorted by (instance, index): split it per instance.
+        // `candidates` is sorted by (instance, index): split it per instance.
         let mut published = 0;
-        for group in traced.chunk_by(|a, b| a.instance == b.instance) {
-            let inst = &mut self.instances[group[0].instance as usize];
+        for group in candidates.chunk_by(|a, b| a.0 == b.0) {
+            let inst = &mut self.instances[group[0].0 as usize];
             let updates: Vec<(u32, u32)> = group
                 .par_iter()
-                .filter_map(|t| {
-                    republish(inst, t.index as usize, &thresholds).map(|b| (t.index, b))
-                })
+                .filter_map(|&(_, i)| republish(inst, i as usize, &thresholds).map(|b| (i, b)))
                 .collect();
             published += apply(inst, &updates, frame);
+        }
+        for inst in &mut self.instances {
+            if !inst.pending_cells.is_empty() {
+                apply(inst, &[], frame);
+            }
         }
         published
     }
@@ -264,6 +303,12 @@ impl Server {
     /// The AO ray length in use.
     pub fn ao_radius(&self) -> f32 {
         self.radius
+    }
+
+    /// Scene time of the current pose (`None` before the first [`Server::step_at`] of an
+    /// animated scene, and always for a static one).
+    pub fn scene_time(&self) -> Option<f32> {
+        self.dynamics.time()
     }
 
     /// The tracer (AO geometry: alpha-masked meshes skipped).
