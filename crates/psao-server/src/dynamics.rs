@@ -54,6 +54,26 @@ pub struct MotionStats {
     pub changed_cell: usize,
 }
 
+/// The points one [`Dynamics::advance`] restarted.
+#[derive(Debug, Default)]
+pub(crate) struct Restarted {
+    /// Every point of every instance (no lists kept).
+    pub all: bool,
+    /// Otherwise per instance the restarted points, sorted (empty when nothing moved).
+    pub lists: Vec<Vec<u32>>,
+}
+
+impl Restarted {
+    /// Whether point `index` of `instance` was restarted.
+    pub fn contains(&self, instance: u32, index: u32) -> bool {
+        self.all
+            || self
+                .lists
+                .get(instance as usize)
+                .is_some_and(|l| l.binary_search(&index).is_ok())
+    }
+}
+
 /// How the points of one skinned instance sit on its mesh.
 struct SkinBinding {
     mesh: usize,
@@ -137,10 +157,10 @@ impl Dynamics {
         tracer: &mut Tracer,
         instances: &mut [InstanceState],
         radius: f32,
-    ) -> Result<(MotionStats, Vec<(u32, u32)>), ServerError> {
+    ) -> Result<(MotionStats, Vec<(u32, u32)>, Restarted), ServerError> {
         let mut stats = MotionStats::default();
         if !self.animator.is_dynamic() || self.time == Some(time) {
-            return Ok((stats, Vec::new()));
+            return Ok((stats, Vec::new(), Restarted::default()));
         }
         let first = self.time.is_none();
         self.time = Some(time);
@@ -169,7 +189,7 @@ impl Dynamics {
         }
         stats.moved_instances = moved.iter().filter(|&&m| m).count();
         if stats.moved_instances == 0 {
-            return Ok((stats, Vec::new()));
+            return Ok((stats, Vec::new(), Restarted::default()));
         }
         tracer.commit();
 
@@ -186,11 +206,20 @@ impl Dynamics {
             }
         }
 
+        if self.invalidation == Invalidation::Everything {
+            for inst in instances.iter_mut() {
+                inst.points.sum.fill(0.0);
+                inst.points.count.fill(0);
+                stats.invalidated_points += inst.points.count.len();
+            }
+            let all = Restarted {
+                all: true,
+                lists: Vec::new(),
+            };
+            return Ok((stats, publish, all));
+        }
         let invalid: Vec<Vec<u32>> = match self.invalidation {
-            Invalidation::Everything => instances
-                .iter()
-                .map(|inst| (0..inst.points.position.len() as u32).collect())
-                .collect(),
+            Invalidation::Everything => Vec::new(),
             Invalidation::Proximity => {
                 let moves = Moves {
                     prev_transforms: &prev_transforms,
@@ -214,7 +243,11 @@ impl Dynamics {
             }
             stats.invalidated_points += points.len();
         }
-        Ok((stats, publish))
+        let restarted = Restarted {
+            all: false,
+            lists: invalid,
+        };
+        Ok((stats, publish, restarted))
     }
 }
 

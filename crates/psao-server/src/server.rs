@@ -32,6 +32,12 @@ pub struct StepStats {
     pub moved_instances: usize,
     /// Points whose AO accumulation restarted because geometry near them moved.
     pub invalidated_points: usize,
+    /// Traced points among this step's restarted ones, and the rays they got.
+    pub retraced_points: usize,
+    pub retrace_rays: u64,
+    /// Milliseconds of the step spent posing the scene, updating the tracer, moving skinned
+    /// points and invalidating (included in `ms`).
+    pub animate_ms: f64,
     /// Wall time of the step in milliseconds.
     pub ms: f64,
 }
@@ -165,9 +171,10 @@ impl Server {
     /// skinned pose (non-finite vertices).
     pub fn step_at(&mut self, views: &[View], time: f32) -> Result<StepStats, ServerError> {
         let start = Instant::now();
-        let (motion, moved) =
+        let (motion, moved, restarted) =
             self.dynamics
                 .advance(time, &mut self.tracer, &mut self.instances, self.radius)?;
+        let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         let c = &self.config;
         let frusta: Vec<Frustum> = views
@@ -187,8 +194,12 @@ impl Server {
             c.max_samples,
             c.seed,
         );
-        let mut rays = 0u64;
+        let (mut rays, mut retraced_points, mut retrace_rays) = (0u64, 0, 0u64);
         for t in &traced {
+            if restarted.contains(t.instance, t.index) {
+                retraced_points += 1;
+                retrace_rays += u64::from(t.rays);
+            }
             let p = &mut self.instances[t.instance as usize].points;
             p.sum[t.index as usize] += t.sum;
             p.count[t.index as usize] += t.rays;
@@ -210,6 +221,9 @@ impl Server {
             published_points: published,
             moved_instances: motion.moved_instances,
             invalidated_points: motion.invalidated_points,
+            retraced_points,
+            retrace_rays,
+            animate_ms,
             ms: start.elapsed().as_secs_f64() * 1e3,
         })
     }
