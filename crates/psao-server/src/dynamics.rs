@@ -74,6 +74,17 @@ impl Restarted {
     }
 }
 
+/// Everything one [`Dynamics::advance`] did.
+#[derive(Debug, Default)]
+pub(crate) struct Advanced {
+    /// Counts.
+    pub stats: MotionStats,
+    /// (instance, point) pairs that moved with their triangles: candidates for publishing.
+    pub moved: Vec<(u32, u32)>,
+    /// The restarted points.
+    pub restarted: Restarted,
+}
+
 /// How the points of one skinned instance sit on its mesh.
 struct SkinBinding {
     mesh: usize,
@@ -157,10 +168,13 @@ impl Dynamics {
         tracer: &mut Tracer,
         instances: &mut [InstanceState],
         radius: f32,
-    ) -> Result<(MotionStats, Vec<(u32, u32)>, Restarted), ServerError> {
+    ) -> Result<Advanced, ServerError> {
         let mut stats = MotionStats::default();
         if !self.animator.is_dynamic() || self.time == Some(time) {
-            return Ok((stats, Vec::new(), Restarted::default()));
+            return Ok(Advanced {
+                stats,
+                ..Advanced::default()
+            });
         }
         let first = self.time.is_none();
         self.time = Some(time);
@@ -189,7 +203,10 @@ impl Dynamics {
         }
         stats.moved_instances = moved.iter().filter(|&&m| m).count();
         if stats.moved_instances == 0 {
-            return Ok((stats, Vec::new(), Restarted::default()));
+            return Ok(Advanced {
+                stats,
+                ..Advanced::default()
+            });
         }
         tracer.commit();
 
@@ -216,26 +233,25 @@ impl Dynamics {
                 all: true,
                 lists: Vec::new(),
             };
-            return Ok((stats, publish, all));
+            return Ok(Advanced {
+                stats,
+                moved: publish,
+                restarted: all,
+            });
         }
-        let invalid: Vec<Vec<u32>> = match self.invalidation {
-            Invalidation::Everything => Vec::new(),
-            Invalidation::Proximity => {
-                let moves = Moves {
-                    prev_transforms: &prev_transforms,
-                    prev_bounds: &prev_bounds,
-                    bounds: &self.bounds,
-                    moved: &moved,
-                    deformed: &deformed,
-                    radius,
-                };
-                let now: &[InstanceState] = instances;
-                (0..now.len())
-                    .into_par_iter()
-                    .map(|j| moves.invalidated(j, now))
-                    .collect()
-            }
+        let moves = Moves {
+            prev_transforms: &prev_transforms,
+            prev_bounds: &prev_bounds,
+            bounds: &self.bounds,
+            moved: &moved,
+            deformed: &deformed,
+            radius,
         };
+        let now: &[InstanceState] = instances;
+        let invalid: Vec<Vec<u32>> = (0..now.len())
+            .into_par_iter()
+            .map(|j| moves.invalidated(j, now))
+            .collect();
         for (inst, points) in instances.iter_mut().zip(&invalid) {
             for &i in points {
                 inst.points.sum[i as usize] = 0.0;
@@ -247,7 +263,11 @@ impl Dynamics {
             all: false,
             lists: invalid,
         };
-        Ok((stats, publish, restarted))
+        Ok(Advanced {
+            stats,
+            moved: publish,
+            restarted,
+        })
     }
 }
 

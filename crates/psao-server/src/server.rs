@@ -171,9 +171,13 @@ impl Server {
     /// skinned pose (non-finite vertices).
     pub fn step_at(&mut self, views: &[View], time: f32) -> Result<StepStats, ServerError> {
         let start = Instant::now();
-        let (motion, moved, restarted) =
-            self.dynamics
-                .advance(time, &mut self.tracer, &mut self.instances, self.radius)?;
+        let crate::dynamics::Advanced {
+            stats: motion,
+            moved,
+            restarted,
+        } = self
+            .dynamics
+            .advance(time, &mut self.tracer, &mut self.instances, self.radius)?;
         let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         let c = &self.config;
