@@ -18,7 +18,14 @@
 //! Consequently a rigid object's own points keep their local-space AO under its own motion
 //! only where nothing else is within `R` of them; its points near the floor it rolls over are
 //! re-traced, its top is not. `k = j` matters only when `j` deforms, and a deforming
-//! instance's points all moved, so they are all invalidated. Candidates are found per cell
+//! instance's points all moved, so they are all invalidated.
+//!
+//! Rigid motion counts once it is large enough to matter: an instance's "previous pose" is
+//! its *reference* pose, the pose at which it last invalidated points, and it invalidates
+//! again only when its bounds' corners moved more than a tolerance since then (the server
+//! uses `R × ao threshold`: moving an occluder by δ changes a ray's `min(t, R)/R` by about
+//! δ/R, so slower drifts stay below the publishing threshold of 8/255 until they add up).
+//! Boxes are grown by `R + tolerance` to cover that drift. Deformation always counts. Candidates are found per cell
 //! (the boxes in the instance's grid coordinates), then tested point by point. Invalidated
 //! points restart their accumulation (0 samples), which also gives them the tracer's highest
 //! priority (fewest samples first); static converged points are never touched.
@@ -102,6 +109,9 @@ pub(crate) struct Dynamics {
     time: Option<f32>,
     /// Per instance: world bounds of its geometry in the current pose.
     bounds: Vec<Option<(Vec3, Vec3)>>,
+    /// Per instance: transform and world bounds when it last invalidated points (its
+    /// surroundings' AO was last made consistent with this pose).
+    reference: Vec<(Affine3A, Option<(Vec3, Vec3)>)>,
     /// Per instance: its binding when it is skinned.
     skins: Vec<Option<SkinBinding>>,
     invalidation: Invalidation,
@@ -121,8 +131,14 @@ impl Dynamics {
             transforms: scene.instances.iter().map(|i| i.transform).collect(),
             skinned: vec![None; scene.instances.len()],
         };
-        let bounds = (0..scene.instances.len())
+        let bounds: Vec<_> = (0..scene.instances.len())
             .map(|i| animator.world_bounds(&rest, i))
+            .collect();
+        let reference = rest
+            .transforms
+            .iter()
+            .copied()
+            .zip(bounds.clone())
             .collect();
         let skins = animator
             .motion()
@@ -144,6 +160,7 @@ impl Dynamics {
             pose: rest,
             time: None,
             bounds,
+            reference,
             skins,
             invalidation,
         })
@@ -161,13 +178,16 @@ impl Dynamics {
 
     /// Pose the scene at `time`: update the tracer and the instances' transforms, move skinned
     /// points (returning the points to consider for publishing), and invalidate the points
-    /// whose surroundings moved. Nothing happens for a static scene or an unchanged time.
+    /// whose surroundings moved. Rigid motion is accumulated per instance until it displaces
+    /// the instance's bounds by more than `tolerance` since its last invalidation (see the
+    /// module docs). Nothing happens for a static scene or an unchanged time.
     pub fn advance(
         &mut self,
         time: f32,
         tracer: &mut Tracer,
         instances: &mut [InstanceState],
         radius: f32,
+        tolerance: f32,
     ) -> Result<Advanced, ServerError> {
         let mut stats = MotionStats::default();
         if !self.animator.is_dynamic() || self.time == Some(time) {
@@ -179,8 +199,6 @@ impl Dynamics {
         let first = self.time.is_none();
         self.time = Some(time);
         self.animator.pose_into(time, &mut self.pose);
-        let prev_transforms: Vec<Affine3A> = instances.iter().map(|i| i.transform).collect();
-        let prev_bounds = self.bounds.clone();
         let n = instances.len();
         let mut moved = vec![false; n];
         let mut deformed = vec![false; n];
@@ -239,13 +257,25 @@ impl Dynamics {
                 restarted: all,
             });
         }
+        // Instances whose motion since their reference pose matters.
+        let event: Vec<bool> = (0..n)
+            .map(|i| {
+                first
+                    || deformed[i]
+                    || (moved[i]
+                        && displacement(&self.reference[i], &instances[i].transform) > tolerance)
+            })
+            .collect();
+        let prev_transforms: Vec<Affine3A> = self.reference.iter().map(|r| r.0).collect();
+        let prev_bounds: Vec<Option<(Vec3, Vec3)>> = self.reference.iter().map(|r| r.1).collect();
         let moves = Moves {
             prev_transforms: &prev_transforms,
             prev_bounds: &prev_bounds,
             bounds: &self.bounds,
-            moved: &moved,
+            moved: &event,
             deformed: &deformed,
-            radius,
+            // Instances without an event may have drifted by up to `tolerance`.
+            radius: radius + tolerance,
         };
         let now: &[InstanceState] = instances;
         let invalid: Vec<Vec<u32>> = (0..now.len())
@@ -258,6 +288,11 @@ impl Dynamics {
                 inst.points.count[i as usize] = 0;
             }
             stats.invalidated_points += points.len();
+        }
+        for (i, e) in event.iter().enumerate() {
+            if *e {
+                self.reference[i] = (instances[i].transform, self.bounds[i]);
+            }
         }
         let restarted = Restarted {
             all: false,
@@ -430,6 +465,25 @@ fn cell_range(layout: &psao_points::GridLayout, lo: Vec3, hi: Vec3) -> (UVec3, U
             .as_uvec3()
     };
     (c(lo), c(hi))
+}
+
+/// How far the corners of an instance's bounds at its reference pose moved under the change
+/// from the reference transform to `now`.
+fn displacement(reference: &(Affine3A, Option<(Vec3, Vec3)>), now: &Affine3A) -> f32 {
+    let Some((lo, hi)) = reference.1 else {
+        return 0.0;
+    };
+    let delta = *now * inverse(&reference.0);
+    (0..8)
+        .map(|c| {
+            let p = Vec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            );
+            (delta.transform_point3(p) - p).length()
+        })
+        .fold(0.0, f32::max)
 }
 
 /// `t⁻¹`, or the identity for singular or non-finite transforms.

@@ -156,10 +156,11 @@ impl Server {
     }
 
     /// One server frame for the union of `views` at the current scene time (the time of the
-    /// last [`Server::step_at`]; a static scene has no time): see [`Server::step_at`].
+    /// last [`Server::step_at`], 0 before the first; a static scene has no time): see
+    /// [`Server::step_at`]. Only the very first pose of an animated scene can fail (non-finite
+    /// skinned vertices); such a step does nothing and reports empty statistics.
     pub fn step(&mut self, views: &[View]) -> StepStats {
         let time = self.dynamics.time().unwrap_or(0.0);
-        // Posing at an unchanged time does nothing, so this cannot fail.
         self.step_at(views, time).unwrap_or_default()
     }
 
@@ -175,9 +176,13 @@ impl Server {
             stats: motion,
             moved,
             restarted,
-        } = self
-            .dynamics
-            .advance(time, &mut self.tracer, &mut self.instances, self.radius)?;
+        } = self.dynamics.advance(
+            time,
+            &mut self.tracer,
+            &mut self.instances,
+            self.radius,
+            self.radius * self.config.thresholds.ao,
+        )?;
         let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         let c = &self.config;

@@ -366,3 +366,27 @@ fn animated_runs_are_deterministic() {
     };
     assert_eq!(run(1), run(2));
 }
+
+#[test]
+fn slow_drift_invalidates_once_it_adds_up() {
+    // 1 cm per 0.1 s next to the floor; the tolerance is R · 8/255 ≈ 1.9 cm.
+    let scene = moving_box_scene(&[
+        (0.0, Vec3::new(0.0, 0.5, 0.0)),
+        (10.0, Vec3::new(1.0, 0.5, 0.0)),
+    ]);
+    let mut server = Server::new(&scene, config()).unwrap();
+    let views = [wide_view()];
+    converge_at(&mut server, &views, 0.0);
+    let counts: Vec<usize> = (1..=4)
+        .map(|k| {
+            server
+                .step_at(&views, k as f32 * 0.1)
+                .unwrap()
+                .invalidated_points
+        })
+        .collect();
+    assert_eq!(counts[0], 0, "1 cm: below the tolerance");
+    assert!(counts[1] > 0, "2 cm since the reference pose: {counts:?}");
+    assert_eq!(counts[2], 0, "1 cm since the new reference");
+    assert!(counts[3] > 0, "{counts:?}");
+}
