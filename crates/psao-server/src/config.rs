@@ -2,7 +2,7 @@
 
 use psao_trace::Backend;
 
-use crate::ServerError;
+use crate::{Invalidation, ServerError};
 
 /// When a point's published record is resent (DESIGN §3 "Server update").
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -50,6 +50,8 @@ pub struct ServerConfig {
     /// the back side of single-sided surfaces), so they take no cell capacity and never
     /// blend into visible surfaces.
     pub cull_buried: bool,
+    /// Which points restart their AO when something moved.
+    pub invalidation: Invalidation,
     /// Seed of point generation, the burial test and AO sampling.
     pub seed: u64,
     /// Ray-tracing backend.
@@ -59,7 +61,7 @@ pub struct ServerConfig {
 impl Default for ServerConfig {
     /// Density 1024, the scene's AO radius, 16 rays per point and frame, 2 M rays per
     /// frame, 256 samples to converge, 20 % frustum margin, paper thresholds, buried points
-    /// culled, seed 0, the default backend.
+    /// culled, proximity invalidation, seed 0, the default backend.
     fn default() -> Self {
         Self {
             density: psao_points::DEFAULT_DENSITY,
@@ -70,6 +72,7 @@ impl Default for ServerConfig {
             frustum_margin: 0.2,
             thresholds: Thresholds::default(),
             cull_buried: true,
+            invalidation: Invalidation::Proximity,
             seed: 0,
             backend: Backend::default(),
         }

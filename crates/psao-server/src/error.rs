@@ -12,7 +12,10 @@ pub enum ServerError {
     /// Point generation or grid building failed.
     #[error(transparent)]
     Points(#[from] psao_points::PointsError),
-    /// The ray tracer could not be built.
+    /// The scene's animation data cannot be played.
+    #[error(transparent)]
+    Animation(#[from] psao_scene::AnimationError),
+    /// The ray tracer could not be built or updated.
     #[error(transparent)]
     Trace(#[from] psao_trace::TraceError),
 }

@@ -3,7 +3,7 @@
 
 use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use psao_points::{
-    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, CELL_POINTS,
+    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, PointLoc, CELL_POINTS,
     DEFAULT_INTERPOLATION_FACTOR,
 };
 
@@ -45,6 +45,10 @@ pub(crate) struct InstanceState {
     pub changes: ChangeLog,
     /// The points in spatial blocks with local bounds, for culling.
     pub blocks: CullBlocks,
+    /// Published cells and buckets that points left (moved to another cell) since the last
+    /// publish: they must be refreshed even if no point is republished into them.
+    pub pending_cells: Vec<u32>,
+    pub pending_buckets: Vec<usize>,
 }
 
 /// Per-point state of one instance.
@@ -65,15 +69,31 @@ pub(crate) struct Points {
 
 impl InstanceState {
     /// Build the allocation grid from generated points (DESIGN §3 layout) of instance
-    /// `index`; nothing is published yet. `seed` spreads the tracing order.
+    /// `index`; nothing is published yet. `seed` spreads the tracing order. `deforming`
+    /// instances get a grid padded by the mesh's largest extent on every side, so their points
+    /// keep a cell when skinning moves them (cells are virtual: the padding costs no memory).
     pub fn new(
         points: &InstancePoints,
         transform: Affine3A,
         index: u32,
         seed: u64,
+        deforming: bool,
     ) -> Result<Self, ServerError> {
-        let (alloc, locs) = InstanceGrid::from_points(points, 1.0)?;
-        let layout = *alloc.layout();
+        let mut layout = GridLayout::for_points(points)?;
+        if deforming {
+            let hi = layout.origin + layout.dims.as_vec3() * layout.cell_size;
+            let pad = Vec3::splat((hi - layout.origin).max_element());
+            layout = GridLayout::new(
+                (layout.origin - pad, hi + pad),
+                layout.poisson_radius,
+                layout.cell_size,
+                points.area_local,
+            )?;
+        }
+        let (alloc, locs) = InstanceGrid::build(
+            layout,
+            points.points.iter().map(|p| (p.position, p.normal, 1.0)),
+        );
         let n = points.points.len();
         let mut p = Points {
             position: points.points.iter().map(|s| s.position).collect(),
@@ -112,6 +132,8 @@ impl InstanceState {
             max_stamp: 0,
             changes: ChangeLog::default(),
             blocks,
+            pending_cells: Vec::new(),
+            pending_buckets: Vec::new(),
         };
         state.refresh_cull_bounds();
         Ok(state)
@@ -120,7 +142,7 @@ impl InstanceState {
     /// Recompute the culling bounds (world bounds and the blocks' local bounds) from the
     /// points' current local positions: call after points moved in local space.
     pub fn refresh_cull_bounds(&mut self) {
-        self.world_bounds = world_bounds(&self.points.position, &self.transform);
+        self.refresh_world_bounds();
         self.blocks.refresh_bounds(&self.points.position);
     }
 
@@ -140,6 +162,63 @@ impl InstanceState {
         self.bucket_stamp[b] = frame;
         self.max_stamp = frame;
         self.changes.bucket(frame, b as u32);
+    }
+
+    /// Move the instance (rigid motion: points stay in local space).
+    pub fn set_transform(&mut self, transform: Affine3A) {
+        self.transform = transform;
+        self.normal_matrix = transform.matrix3.inverse().transpose();
+    }
+
+    /// Recompute the world bounds after the transform changed (after points moved in local
+    /// space, [`InstanceState::refresh_cull_bounds`] instead).
+    pub fn refresh_world_bounds(&mut self) {
+        self.world_bounds = world_bounds(&self.points.position, &self.transform);
+    }
+
+    /// Store point `i` (already at its new local `position`) in the allocation cell that
+    /// contains it: it leaves its old cell (freed when empty; the old cell and its bucket are
+    /// queued for refreshing, and a publication there is withdrawn) and is inserted into the
+    /// new one (allocated if needed). Overflow or leaving the grid leaves it unstored.
+    pub fn rehome(&mut self, i: usize, position: Vec3, normal: Vec3) {
+        let old = self.points.slot[i];
+        if old != NONE {
+            if let Some(k) = self.members[old as usize]
+                .iter()
+                .position(|&m| m == i as u32)
+            {
+                let loc = PointLoc {
+                    slot: old,
+                    index: k as u8,
+                };
+                let removed = self.alloc.remove(loc);
+                debug_assert!(removed.is_ok(), "members mirror the allocation grid");
+                self.members[old as usize][k] = NONE;
+            }
+            self.pending_cells.push(old);
+            let layout = *self.layout();
+            self.pending_buckets
+                .push(layout.bucket_of(self.slot_ids[old as usize]));
+            if self.points.published_slot[i] == old {
+                self.points.published_slot[i] = NONE;
+            }
+            self.points.slot[i] = NONE;
+        }
+        let Ok(loc) = self.alloc.insert(position, normal, 1.0) else {
+            return;
+        };
+        let cells = self.alloc.cells().len();
+        if self.members.len() < cells {
+            self.members.resize(cells, [NONE; CELL_POINTS]);
+            self.slot_ids.resize(cells, 0);
+            self.cell_stamp.resize(cells, 0);
+        }
+        let layout = *self.layout();
+        if let Some(c) = layout.cell_coord(position) {
+            self.slot_ids[loc.slot as usize] = layout.cell_id(c);
+        }
+        self.members[loc.slot as usize][usize::from(loc.index)] = i as u32;
+        self.points.slot[i] = loc.slot;
     }
 
     /// The grid layout.

@@ -3,7 +3,7 @@
 //! publishing into per-instance hash grids, and per-client deltas of what changed.
 //!
 //! Typical loop: [`Server::new`] → [`Server::instance_table`] (sent once per client) →
-//! each server frame [`Server::step`] with the clients' views → [`Server::update_for`] per
+//! each server frame [`Server::step_at`] with the clients' views and the scene time → [`Server::update_for`] per
 //! client, encoded with a [`psao_delta::Codec`]. Pure computation: no file or network I/O.
 
 mod blocks;
@@ -11,6 +11,7 @@ mod changes;
 mod bury;
 mod clients;
 mod config;
+mod dynamics;
 mod error;
 mod frustum;
 mod instance;
@@ -21,6 +22,7 @@ mod trace;
 pub use bury::{BURIAL_MIN_INSIDE, BURIAL_RAYS};
 pub use clients::ClientId;
 pub use config::{ServerConfig, Thresholds};
+pub use dynamics::{Invalidation, MotionStats};
 pub use error::ServerError;
 pub use frustum::{Frustum, View};
 pub use server::{PointInfo, Server, StepStats};

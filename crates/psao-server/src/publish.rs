@@ -8,17 +8,21 @@ use crate::Thresholds;
 /// The record point `i` should be published with now, or `None` when what clients have is
 /// still good enough: never-traced and unstored points stay unpublished; a point is
 /// (re)published when it was never published, changed cell, or its AO, normal or position
-/// moved past the thresholds since it was last published.
+/// moved past the thresholds since it was last published. A point whose accumulation was
+/// restarted (invalidated, no samples yet) keeps its published AO.
 pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Option<u32> {
     let p = &inst.points;
-    let (slot, count) = (p.slot[i], p.count[i]);
-    if slot == NONE || count == 0 {
+    let (slot, count, old) = (p.slot[i], p.count[i], p.published[i]);
+    if slot == NONE || (count == 0 && old == 0) {
         return None;
     }
     let layout = inst.layout();
-    let ao = p.sum[i] / count as f32;
+    let ao = if count > 0 {
+        p.sum[i] / count as f32
+    } else {
+        unpack_ao(old)
+    };
     let bits = layout.pack(inst.slot_coord(slot)?, p.position[i], p.normal[i], ao);
-    let old = p.published[i];
     if old == 0 || p.published_slot[i] != slot {
         return Some(bits);
     }
@@ -37,7 +41,7 @@ pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Optio
 /// grid, stamping what changed with `frame`. `updates` are (point, record) pairs. Returns the
 /// number of points published.
 pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64) -> usize {
-    let mut dirty_cells = Vec::with_capacity(updates.len());
+    let mut dirty_cells = std::mem::take(&mut inst.pending_cells);
     for &(i, bits) in updates {
         let i = i as usize;
         let p = &mut inst.points;
@@ -51,7 +55,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     dirty_cells.sort_unstable();
     dirty_cells.dedup();
     let layout = *inst.layout();
-    let mut dirty_buckets = Vec::with_capacity(dirty_cells.len());
+    let mut dirty_buckets = std::mem::take(&mut inst.pending_buckets);
     for &slot in &dirty_cells {
         let cell = inst.published_cell(slot);
         if inst
@@ -107,7 +111,7 @@ mod tests {
             None,
         )
         .unwrap();
-        InstanceState::new(&points, Affine3A::IDENTITY, 0, 0).unwrap()
+        InstanceState::new(&points, Affine3A::IDENTITY, 0, 0, false).unwrap()
     }
 
     /// A stored point whose x lies in the middle of its cell (room to move 4 steps).

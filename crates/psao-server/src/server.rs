@@ -7,13 +7,14 @@ use glam::{Affine3A, Vec3};
 use psao_delta::{InstanceDelta, InstanceInfo, Update};
 use psao_points::pack::unpack_ao;
 use psao_points::{generate_scene_points, GenerateParams, InstanceGrid};
-use psao_scene::Scene;
+use psao_scene::{Motion, Scene};
 use psao_trace::ao::Medium;
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
 use crate::bury::buried;
 use crate::clients::Clients;
+use crate::dynamics::Dynamics;
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select, trace};
@@ -30,6 +31,16 @@ pub struct StepStats {
     pub rays: u64,
     /// Points whose published record changed.
     pub published_points: usize,
+    /// Instances that moved or deformed since the previous step.
+    pub moved_instances: usize,
+    /// Points whose AO accumulation restarted because geometry near them moved.
+    pub invalidated_points: usize,
+    /// Traced points among this step's restarted ones, and the rays they got.
+    pub retraced_points: usize,
+    pub retrace_rays: u64,
+    /// Milliseconds of the step spent posing the scene, updating the tracer, moving skinned
+    /// points and invalidating (included in `ms`).
+    pub animate_ms: f64,
     /// Wall time of the step in milliseconds.
     pub ms: f64,
 }
@@ -58,15 +69,17 @@ impl PointInfo {
     }
 }
 
-/// The PSAO server for one (static) scene: generates the points, accumulates ray-traced AO
-/// for what the clients see within a per-frame ray budget, publishes changes past the
-/// thresholds into per-instance hash grids, and hands each client what it has not seen yet.
+/// The PSAO server for one scene: generates the points, plays the scene's animation at the
+/// server's scene time, accumulates ray-traced AO for what the clients see within a
+/// per-frame ray budget, publishes changes past the thresholds into per-instance hash grids,
+/// and hands each client what it has not seen yet.
 pub struct Server {
     config: ServerConfig,
     radius: f32,
     tracer: Tracer,
     medium: Option<Arc<dyn Medium>>,
     instances: Vec<InstanceState>,
+    dynamics: Dynamics,
     clients: Clients,
     frame: u64,
     /// Frames of change lists kept: a client further behind gets its delta by a scan.
@@ -128,11 +141,17 @@ impl Server {
         } else {
             0
         };
+        let dynamics = Dynamics::new(scene, &points, config.invalidation)?;
+        let motion = dynamics.motion();
         let instances = points
             .par_iter()
             .zip(&scene.instances)
+            .zip(motion)
             .enumerate()
-            .map(|(i, (p, inst))| InstanceState::new(p, inst.transform, i as u32, config.seed))
+            .map(|(i, ((p, inst), m))| {
+                let deforming = *m == Motion::Skinned;
+                InstanceState::new(p, inst.transform, i as u32, config.seed, deforming)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Server {
             config,
@@ -140,6 +159,7 @@ impl Server {
             tracer,
             medium,
             instances,
+            dynamics,
             clients: Clients::default(),
             frame: 0,
             history_frames: CHANGE_HISTORY_FRAMES,
@@ -184,11 +204,35 @@ impl Server {
         self.clients.len()
     }
 
-    /// One server frame for the union of `views`: cull points to the extended frusta, spend
-    /// the ray budget on the visible points with the fewest samples, accumulate, and publish
-    /// what moved past the thresholds.
+    /// One server frame for the union of `views` at the current scene time (the time of the
+    /// last [`Server::step_at`], 0 before the first; a static scene has no time): see
+    /// [`Server::step_at`]. Only the very first pose of an animated scene can fail (non-finite
+    /// skinned vertices); such a step does nothing and reports empty statistics.
     pub fn step(&mut self, views: &[View]) -> StepStats {
+        let time = self.dynamics.time().unwrap_or(0.0);
+        self.step_at(views, time).unwrap_or_default()
+    }
+
+    /// One server frame for the union of `views` at scene time `time` (seconds): pose the
+    /// scene (tracer, instance transforms, skinned points; proximity invalidation, see
+    /// [`crate::Invalidation`]), cull points to the extended frusta, spend the ray budget on
+    /// the visible points with the fewest samples (invalidated points have none), accumulate,
+    /// and publish what moved past the thresholds. Errors only when the tracer rejects a
+    /// skinned pose (non-finite vertices).
+    pub fn step_at(&mut self, views: &[View], time: f32) -> Result<StepStats, ServerError> {
         let start = Instant::now();
+        let crate::dynamics::Advanced {
+            stats: motion,
+            moved,
+            restarted,
+        } = self.dynamics.advance(
+            time,
+            &mut self.tracer,
+            &mut self.instances,
+            self.radius,
+            self.radius * self.config.thresholds.ao,
+        )?;
+        let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         let c = &self.config;
         let max_points =
@@ -218,15 +262,27 @@ impl Server {
             c.max_samples,
             c.seed,
         );
-        let mut rays = 0u64;
+        let (mut rays, mut retraced_points, mut retrace_rays) = (0u64, 0, 0u64);
         for t in &traced {
+            if restarted.contains(t.instance, t.index) {
+                retraced_points += 1;
+                retrace_rays += u64::from(t.rays);
+            }
             let p = &mut self.instances[t.instance as usize].points;
             p.sum[t.index as usize] += t.sum;
             p.count[t.index as usize] += t.rays;
             rays += u64::from(t.rays);
         }
         let t_trace = Instant::now();
-        let published = self.publish(&traced);
+        // Traced points and points that moved with their triangles may need publishing.
+        let mut candidates: Vec<(u32, u32)> =
+            traced.iter().map(|t| (t.instance, t.index)).collect();
+        if !moved.is_empty() {
+            candidates.extend(moved);
+            candidates.par_sort_unstable();
+            candidates.dedup();
+        }
+        let published = self.publish(&candidates);
         let forget = self.frame.saturating_sub(self.history_frames);
         for inst in &mut self.instances {
             inst.changes.forget_through(forget);
@@ -235,35 +291,44 @@ impl Server {
             frame = self.frame,
             visible,
             traced = traced.len(),
-            cull_ms = (t_cull - start).as_secs_f64() * 1e3,
+            cull_ms = (t_cull - start).as_secs_f64() * 1e3 - animate_ms,
             trace_ms = (t_trace - t_cull).as_secs_f64() * 1e3,
             publish_ms = t_trace.elapsed().as_secs_f64() * 1e3,
             "step"
         );
-        StepStats {
+        Ok(StepStats {
             visible_points: visible,
             traced_points: traced.len(),
             rays,
             published_points: published,
+            moved_instances: motion.moved_instances,
+            invalidated_points: motion.invalidated_points,
+            retraced_points,
+            retrace_rays,
+            animate_ms,
             ms: start.elapsed().as_secs_f64() * 1e3,
-        }
+        })
     }
 
-    /// Publish the traced points that need it; returns how many were published.
-    fn publish(&mut self, traced: &[crate::trace::Traced]) -> usize {
+    /// Publish the candidate (instance, point) pairs that need it, and refresh the cells and
+    /// buckets points moved out of; returns how many points were published.
+    fn publish(&mut self, candidates: &[(u32, u32)]) -> usize {
         let thresholds = self.config.thresholds;
         let frame = self.frame;
-        // `traced` is sorted by (instance, index): split it per instance.
+        // `candidates` is sorted by (instance, index): split it per instance.
         let mut published = 0;
-        for group in traced.chunk_by(|a, b| a.instance == b.instance) {
-            let inst = &mut self.instances[group[0].instance as usize];
+        for group in candidates.chunk_by(|a, b| a.0 == b.0) {
+            let inst = &mut self.instances[group[0].0 as usize];
             let updates: Vec<(u32, u32)> = group
                 .par_iter()
-                .filter_map(|t| {
-                    republish(inst, t.index as usize, &thresholds).map(|b| (t.index, b))
-                })
+                .filter_map(|&(_, i)| republish(inst, i as usize, &thresholds).map(|b| (i, b)))
                 .collect();
             published += apply(inst, &updates, frame);
+        }
+        for inst in &mut self.instances {
+            if !inst.pending_cells.is_empty() {
+                apply(inst, &[], frame);
+            }
         }
         published
     }
@@ -339,6 +404,12 @@ impl Server {
     /// The AO ray length in use.
     pub fn ao_radius(&self) -> f32 {
         self.radius
+    }
+
+    /// Scene time of the current pose (`None` before the first [`Server::step_at`] of an
+    /// animated scene, and always for a static one).
+    pub fn scene_time(&self) -> Option<f32> {
+        self.dynamics.time()
     }
 
     /// The tracer (AO geometry: alpha-masked meshes skipped).

@@ -65,7 +65,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let compared: Vec<u32> = (1..=COMPARED_FRAMES)
         .map(|k| (k * frames / (COMPARED_FRAMES + 1)) / args.every * args.every)
         .collect();
-    let renderer = ReferenceRenderer::new(&input.scene, config.server.backend, args.spp, 1)?;
+    let mut renderer = ReferenceRenderer::new(&input.scene, config.server.backend, args.spp, 1)?;
     let bar = progress::bar(frames as u64, "demo: split pipeline", "frames");
     let mut records = Vec::new();
     let mut quality = String::new();
@@ -75,7 +75,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         if let Some(img) = image {
             write_frame_images(&args.out, frame, &input.scene, &img)?;
             if compared.contains(&frame) {
-                let reference = renderer.render(&path, frame, args.res, &|_| {});
+                let reference = renderer.render(&path, frame, args.res, &|_| {})?;
                 let ssao_ao = ssao(
                     &img.gbuffer,
                     &camera,

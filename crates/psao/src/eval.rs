@@ -6,18 +6,15 @@ use crate::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
 use crate::png_io::{read_ao_png, write_ao_png};
 use crate::progress;
 use crate::reference::ReferenceRenderer;
-use crate::report::{self, Report, Row, Series};
+use crate::report::{self, Report, Row, Series, ServerWork};
 use crate::run::ServerTuning;
 use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use psao_eval::{
-    compare, reference_ao_in, ssao, AoImage, Metrics, ReferenceSettings, SsaoSettings,
-};
-use psao_raster::{rasterize, GBuffer, RasterOptions};
+use psao_eval::{compare, ssao, AoImage, Metrics, SsaoSettings};
+use psao_raster::GBuffer;
 use psao_scene::path::CameraPath;
-use psao_scene::Scene;
-use psao_trace::{GeometryMode, Tracer};
+use psao_scene::{Animator, Scene};
 use std::hash::{Hash, Hasher};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -106,7 +103,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let (ssao_row, ssao_middle) = eval_ssao(&input.scene, &path, &frames)?;
     crops.push(("SSAO".into(), ssao_middle));
     rows.push(ssao_row);
-    rows.push(eval_rtao(&input, &frames, args)?);
+    rows.push(eval_rtao(&input, &path, &frames, args)?);
 
     let report = Report {
         scene: input.name.clone(),
@@ -120,6 +117,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     };
     report::write(&args.out, &report, &bandwidth, &crops)?;
     println!("{}", report::table(&report.rows));
+    println!("{}", report::work_table(&report.rows));
     println!("wrote {}", args.out.join("report.md").display());
     Ok(())
 }
@@ -131,10 +129,12 @@ fn prepare_frames(
     eval_frames: &[u32],
     args: &EvalArgs,
 ) -> Result<Vec<EvalFrame>> {
-    let cache_dir = args.cache.join(reference_key(input, path, args));
+    let cache_dir = args
+        .cache
+        .join(reference_key(input, path, eval_frames, args)?);
     std::fs::create_dir_all(&cache_dir)
         .with_context(|| format!("cannot create {}", cache_dir.display()))?;
-    let renderer = ReferenceRenderer::new(
+    let mut renderer = ReferenceRenderer::new(
         &input.scene,
         args.tuning.backend.unwrap_or_default(),
         args.spp,
@@ -146,24 +146,21 @@ fn prepare_frames(
     let mut frames = Vec::new();
     for &frame in eval_frames {
         let file = crate::reference::frame_file(&cache_dir, frame);
+        // Posed at the frame's scene time when the scene is animated.
+        let gbuffer = renderer.gbuffer(path, frame, args.res)?;
         let reference = match read_ao_png(&file) {
             Ok(img) if (img.width, img.height) == (args.res.width, args.res.height) => {
                 bar.inc(pixels);
                 img
             }
             _ => {
-                let img = renderer.render(path, frame, args.res, &|n| bar.inc(n));
+                let seed = 1u64.wrapping_add(frame as u64);
+                let img = renderer.trace(&gbuffer, args.spp, seed, &|n| bar.inc(n));
                 write_ao_png(&file, &img)?;
                 // Use exactly what the cache holds, so cached and fresh runs agree.
                 AoImage::from_u16(img.width, img.height, &img.to_u16())
             }
         };
-        let camera = path.camera_at_frame(frame as usize);
-        let gbuffer = rasterize(
-            &input.scene,
-            &camera,
-            &RasterOptions::new(args.res.width, args.res.height),
-        );
         let reference_comp = composite_luma(&input.scene, &gbuffer, &reference);
         frames.push(EvalFrame {
             frame,
@@ -177,10 +174,27 @@ fn prepare_frames(
 }
 
 /// The cache folder name of a reference configuration: readable parts plus a hash of everything
-/// that changes the images (scene geometry, camera keys, resolution, spp, radius, and the
-/// volume: its files' bytes, placement, density scale, format and frame).
-fn reference_key(input: &SceneInput, path: &CameraPath, args: &EvalArgs) -> String {
+/// that changes the images (scene geometry, camera keys, resolution, spp, radius, for an
+/// animated scene its pose at the evaluated frames, and the volume: its files' bytes,
+/// placement, density scale, format and frame).
+fn reference_key(
+    input: &SceneInput,
+    path: &CameraPath,
+    eval_frames: &[u32],
+    args: &EvalArgs,
+) -> Result<String> {
     let mut h = std::collections::hash_map::DefaultHasher::new();
+    let animator = Animator::new(&input.scene).context("the scene's animation cannot be played")?;
+    if animator.is_dynamic() {
+        for &frame in eval_frames {
+            let pose = animator.pose_at(frame as f32 / CLIENT_HZ as f32);
+            format!("{:?}", pose.transforms).hash(&mut h);
+            for g in pose.skinned.iter().flatten() {
+                let sum = g.positions.iter().fold(glam::Vec3::ZERO, |a, p| a + *p);
+                format!("{sum:?}").hash(&mut h);
+            }
+        }
+    }
     args.input.scene.hash(&mut h);
     input.scene.instanced_triangle_count().hash(&mut h);
     format!("{:?}", path.keys).hash(&mut h);
@@ -190,14 +204,14 @@ fn reference_key(input: &SceneInput, path: &CameraPath, args: &EvalArgs) -> Stri
     if let Some(v) = &input.volume {
         v.key.hash(&mut h);
     }
-    format!(
+    Ok(format!(
         "{}_{}_{}_{}spp_{:016x}",
         input.name,
         path.name,
         args.res,
         args.spp,
         h.finish()
-    )
+    ))
 }
 
 fn composite_luma(scene: &Scene, gbuffer: &GBuffer, ao: &AoImage) -> AoImage {
@@ -241,6 +255,7 @@ impl MetricSums {
             mbit_s: 0.0,
             server_ms: 0.0,
             client_ms: 0.0,
+            work: None,
         }
     }
 }
@@ -266,6 +281,10 @@ fn eval_psao(
     );
     let mut sums = MetricSums::default();
     let (mut server_ms, mut server_frames, mut client_ms) = (0.0, 0u32, 0.0);
+    let mut work = ServerWork {
+        invalidation: format!("{:?}", args.tuning.invalidation).to_lowercase(),
+        ..ServerWork::default()
+    };
     let mut per_second =
         vec![0u64; ((range.end - range.start) as usize).div_ceil(CLIENT_HZ as usize)];
     let mut middle = None;
@@ -277,6 +296,12 @@ fn eval_psao(
         if record.server_frame {
             server_ms += record.server_ms;
             server_frames += 1;
+            work.rays += record.rays as f64;
+            work.invalidated_points += record.invalidated_points as f64;
+            work.retraced_points += record.retraced_points as f64;
+            work.retrace_rays += record.retrace_rays as f64;
+            work.animate_ms += record.animate_ms;
+            work.max_server_ms = work.max_server_ms.max(record.server_ms);
         }
         per_second[((frame - range.start) / CLIENT_HZ) as usize] += record.bytes as u64;
         if let (Some(f), Some(img)) = (eval, image) {
@@ -296,6 +321,17 @@ fn eval_psao(
     row.codec = Some(config.codec.clone());
     row.mbit_s = pipeline.total_bytes as f64 * 8.0 / seconds / 1e6;
     row.server_ms = server_ms / server_frames.max(1) as f64;
+    let n = f64::from(server_frames.max(1));
+    for v in [
+        &mut work.rays,
+        &mut work.invalidated_points,
+        &mut work.retraced_points,
+        &mut work.retrace_rays,
+        &mut work.animate_ms,
+    ] {
+        *v /= n;
+    }
+    row.work = Some(work);
     row.client_ms = client_ms / frames.len().max(1) as f64;
     let series = Series {
         label: format!("PSAO-{points} @ {hz} Hz"),
@@ -324,24 +360,33 @@ fn eval_ssao(scene: &Scene, path: &CameraPath, frames: &[EvalFrame]) -> Result<(
     Ok((row, middle.context("no evaluated frame")?))
 }
 
-/// Per-pixel RTAO with few rays per pixel (through the scene's volume, like the reference).
-fn eval_rtao(input: &SceneInput, frames: &[EvalFrame], args: &EvalArgs) -> Result<Row> {
-    let (scene, medium) = (&input.scene, input.medium());
-    let tracer = Tracer::new(
-        args.tuning.backend.unwrap_or_default(),
+/// Per-pixel RTAO with few rays per pixel (on the same pose as the reference, through the
+/// scene's volume like the reference).
+fn eval_rtao(
+    input: &SceneInput,
+    path: &CameraPath,
+    frames: &[EvalFrame],
+    args: &EvalArgs,
+) -> Result<Row> {
+    let scene = &input.scene;
+    let mut renderer = ReferenceRenderer::new(
         scene,
-        GeometryMode::Occlusion,
-    )?;
+        args.tuning.backend.unwrap_or_default(),
+        args.rtao_spp,
+        0,
+    )?
+    .with_medium(input.medium());
     let mut sums = MetricSums::default();
     let mut ms = 0.0;
     for f in frames {
-        let settings = ReferenceSettings {
-            spp: args.rtao_spp,
-            radius: scene.ao_radius,
-            seed: 0x7274_616f ^ f.frame as u64,
-        };
+        renderer.gbuffer(path, f.frame, args.res)?;
         let t = Instant::now();
-        let ao = reference_ao_in(&f.gbuffer, &tracer, medium.as_deref(), &settings, &|_| {});
+        let ao = renderer.trace(
+            &f.gbuffer,
+            args.rtao_spp,
+            0x7274_616f ^ f.frame as u64,
+            &|_| {},
+        );
         ms += t.elapsed().as_secs_f64() * 1e3;
         sums.add(scene, f, &ao)?;
     }

@@ -7,8 +7,8 @@ use anyhow::{bail, Context, Result};
 use psao_client::{ClientState, ReconstructSettings, Shading};
 use psao_delta::Codec;
 use psao_eval::AoImage;
-use psao_raster::{GBuffer, RasterOptions, Rasterizer};
-use psao_scene::{Camera, Scene};
+use psao_raster::{GBuffer, InstancePose, RasterOptions, Rasterizer};
+use psao_scene::{Animator, Camera, Motion, Scene, ScenePose};
 use psao_server::{ClientId, Server, ServerConfig, View};
 use psao_trace::ao::Medium;
 use serde::Serialize;
@@ -48,6 +48,13 @@ pub struct FrameRecord {
     pub changed_cells: usize,
     /// Rays the server traced in this frame.
     pub rays: u64,
+    /// Points the server restarted because geometry near them moved.
+    pub invalidated_points: usize,
+    /// Restarted points the server traced in this frame, and their rays.
+    pub retraced_points: usize,
+    pub retrace_rays: u64,
+    /// Part of `server_ms` spent posing the scene and invalidating points.
+    pub animate_ms: f64,
     /// Server time (step + delta + encode) in ms.
     pub server_ms: f64,
     /// Client time (decode + apply + rasterize + reconstruct) in ms; 0 when nothing was rendered.
@@ -70,7 +77,7 @@ pub struct Pipeline<'a> {
     encoder: Box<dyn Codec>,
     decoder: Box<dyn Codec>,
     client: ClientState,
-    rasterizer: Rasterizer,
+    renderer: ClientRenderer,
     server_hz: u32,
     last_tick: Option<u64>,
     res: Resolution,
@@ -98,7 +105,7 @@ impl<'a> Pipeline<'a> {
             encoder: psao_delta::codec_by_name(&config.codec)?,
             decoder: psao_delta::codec_by_name(&config.codec)?,
             client,
-            rasterizer: Rasterizer::new(),
+            renderer: ClientRenderer::new(scene)?,
             server_hz: config.server_hz,
             last_tick: None,
             res: config.res,
@@ -116,8 +123,9 @@ impl<'a> Pipeline<'a> {
         &self.client
     }
 
-    /// Runs client frame `frame` with `camera`: a server frame first when the server clock ticks,
-    /// then (when `render`) the client's G-buffer and AO reconstruction.
+    /// Runs client frame `frame` with `camera`: a server frame first when the server clock ticks
+    /// (at server scene time `tick / server_hz`), then (when `render`) the client's G-buffer
+    /// and AO reconstruction at client time `frame / 60` (see [`ClientRenderer`]).
     pub fn frame(
         &mut self,
         frame: u32,
@@ -134,10 +142,19 @@ impl<'a> Pipeline<'a> {
             self.last_tick = Some(tick);
             let t = Instant::now();
             let aspect = self.res.width as f32 / self.res.height as f32;
-            let stats = self.server.step(&[View {
+            let view = View {
                 camera: *camera,
                 aspect,
-            }]);
+            };
+            let time = tick as f64 / self.server_hz as f64;
+            let stats = self
+                .server
+                .step_at(&[view], time as f32)
+                .context("the server could not pose the scene")?;
+            record.invalidated_points = stats.invalidated_points;
+            record.animate_ms = stats.animate_ms;
+            record.retraced_points = stats.retraced_points;
+            record.retrace_rays = stats.retrace_rays;
             let update = self.server.update_for(self.client_id);
             let encoded = self.encoder.encode(&update);
             record.server_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -161,24 +178,101 @@ impl<'a> Pipeline<'a> {
         }
         let mut out = None;
         if render {
-            let mut gbuffer = GBuffer::empty(self.res.width, self.res.height);
-            let opts = RasterOptions::new(self.res.width, self.res.height);
-            self.rasterizer
-                .rasterize(self.scene, camera, &opts, &mut gbuffer);
-            let ao =
-                psao_client::reconstruct(&self.client, &gbuffer, &ReconstructSettings::default());
-            out = Some(ClientFrame {
-                ao: AoImage {
-                    width: gbuffer.width,
-                    height: gbuffer.height,
-                    data: ao,
-                },
-                gbuffer,
-            });
+            let time = frame as f32 / CLIENT_HZ as f32;
+            out = Some(
+                self.renderer
+                    .render(self.scene, &self.client, camera, self.res, time)?,
+            );
         }
         record.client_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok((record, out))
     }
+}
+
+/// The client's frame: rasterize, reconstruct AO from the mirrored grids.
+pub struct ClientRenderer {
+    rasterizer: Rasterizer,
+    /// The client's own animation (posed at client time), for animated scenes.
+    animation: Option<(Animator, ScenePose)>,
+}
+
+impl ClientRenderer {
+    /// A renderer for `scene` (errors when its animation data cannot be played).
+    pub fn new(scene: &Scene) -> Result<Self> {
+        let animator = Animator::new(scene).context("the scene's animation cannot be played")?;
+        Ok(Self {
+            rasterizer: Rasterizer::new(),
+            animation: animator
+                .is_dynamic()
+                .then(|| (animator, ScenePose::default())),
+        })
+    }
+
+    /// One client frame at client scene time `time`. A static scene is rasterized as stored.
+    /// On an animated scene every instance is rasterized at the transform of the last server
+    /// update `state` applied (so AO lags with the update instead of ghosting) and skinned
+    /// instances deformed by the client's own animation at `time` (see [`client_poses`]).
+    pub fn render(
+        &mut self,
+        scene: &Scene,
+        state: &ClientState,
+        camera: &Camera,
+        res: Resolution,
+        time: f32,
+    ) -> Result<ClientFrame> {
+        let mut gbuffer = GBuffer::empty(res.width, res.height);
+        let opts = RasterOptions::new(res.width, res.height);
+        match &mut self.animation {
+            None => self
+                .rasterizer
+                .rasterize(scene, camera, &opts, &mut gbuffer),
+            Some((animator, pose)) => {
+                animator.pose_into(time, pose);
+                let poses = client_poses(scene, animator, pose, state);
+                self.rasterizer
+                    .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)
+                    .context("cannot rasterize the posed scene")?;
+            }
+        }
+        let ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());
+        Ok(ClientFrame {
+            ao: AoImage {
+                width: gbuffer.width,
+                height: gbuffer.height,
+                data: ao,
+            },
+            gbuffer,
+        })
+    }
+}
+
+/// What the client rasterizes on an animated scene: every instance at the transform of the
+/// last applied server update (its own pose's transform until one arrived), skinned instances
+/// with the vertices of the client's own `pose` (the server sends no vertices; its AO points
+/// are interpolated onto the client's deformation).
+pub fn client_poses<'p>(
+    scene: &Scene,
+    animator: &Animator,
+    pose: &'p ScenePose,
+    client: &ClientState,
+) -> Vec<InstancePose<'p>> {
+    (0..scene.instances.len())
+        .map(|i| {
+            let own = pose.instance(i);
+            let transform = client
+                .transform(i)
+                .or(own.map(|p| p.transform))
+                .unwrap_or(scene.instances[i].transform);
+            match (animator.motion()[i], own) {
+                (Motion::Skinned, Some(p)) => InstancePose {
+                    transform,
+                    positions: p.positions,
+                    normals: p.normals,
+                },
+                _ => InstancePose::rigid(transform),
+            }
+        })
+        .collect()
 }
 
 /// The composited client image (base shading × AO) as 8-bit sRGB RGB.

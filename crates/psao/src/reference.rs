@@ -7,9 +7,9 @@ use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{reference_ao_in, AoImage, ReferenceSettings};
-use psao_raster::{rasterize, RasterOptions};
+use psao_raster::{rasterize, rasterize_posed, GBuffer, InstancePose, RasterOptions};
 use psao_scene::path::CameraPath;
-use psao_scene::Scene;
+use psao_scene::{Animator, Motion, Scene, ScenePose, PATH_HZ};
 use psao_trace::ao::Medium;
 use psao_trace::{Backend, GeometryMode, Tracer};
 use std::path::{Path, PathBuf};
@@ -55,7 +55,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     let frames = select_frames(&path, args.frame, args.frames)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let renderer = ReferenceRenderer::new(
+    let mut renderer = ReferenceRenderer::new(
         &input.scene,
         args.backend.unwrap_or_default(),
         args.spp,
@@ -65,7 +65,7 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     let pixels = args.res.width as u64 * args.res.height as u64;
     let bar = progress::bar(pixels * frames.len() as u64, "reference AO", "px");
     for &frame in &frames {
-        let image = renderer.render(&path, frame, args.res, &|n| bar.inc(n));
+        let image = renderer.render(&path, frame, args.res, &|n| bar.inc(n))?;
         write_ao_png(&frame_file(&args.out, frame), &image)?;
     }
     bar.finish_and_clear();
@@ -102,13 +102,16 @@ fn select_frames(
     Ok((range.start..range.end).collect())
 }
 
-/// Renders reference AO frames of one static scene.
+/// Renders reference AO frames of a scene, posed at each frame's scene time (`frame / 60`)
+/// when it is animated: the G-buffer and the AO rays see the same pose (skinned meshes are
+/// rebuilt, not refitted, for full tracing quality).
 pub struct ReferenceRenderer<'a> {
     scene: &'a Scene,
     tracer: Tracer,
     medium: Option<Arc<dyn Medium>>,
     spp: u32,
     seed: u64,
+    animation: Option<(Animator, ScenePose)>,
 }
 
 impl<'a> ReferenceRenderer<'a> {
@@ -116,12 +119,16 @@ impl<'a> ReferenceRenderer<'a> {
     pub fn new(scene: &'a Scene, backend: Backend, spp: u32, seed: u64) -> Result<Self> {
         let tracer = Tracer::new(backend, scene, GeometryMode::Occlusion)
             .context("cannot build the ray-tracing structure")?;
+        let animator = Animator::new(scene).context("the scene's animation cannot be played")?;
         Ok(Self {
             scene,
             tracer,
             medium: None,
             spp,
             seed,
+            animation: animator
+                .is_dynamic()
+                .then(|| (animator, ScenePose::default())),
         })
     }
 
@@ -131,24 +138,71 @@ impl<'a> ReferenceRenderer<'a> {
         self
     }
 
+    /// Poses the scene (tracer included) at client frame `frame` and rasterizes `path`'s
+    /// camera of that frame at `res`.
+    pub fn gbuffer(&mut self, path: &CameraPath, frame: u32, res: Resolution) -> Result<GBuffer> {
+        let camera = path.camera_at_frame(frame as usize);
+        let opts = RasterOptions::new(res.width, res.height);
+        let Some((animator, pose)) = &mut self.animation else {
+            return Ok(rasterize(self.scene, &camera, &opts));
+        };
+        animator.pose_into(frame as f32 / PATH_HZ, pose);
+        for (i, motion) in animator.motion().iter().enumerate() {
+            if *motion == Motion::Static {
+                continue;
+            }
+            self.tracer.set_instance_transform(i, pose.transforms[i]);
+            if let Some(g) = &pose.skinned[i] {
+                self.tracer
+                    .rebuild_mesh_positions(self.scene.instances[i].mesh, &g.positions)
+                    .context("cannot trace the posed scene")?;
+            }
+        }
+        self.tracer.commit();
+        let poses: Vec<InstancePose<'_>> = (0..self.scene.instances.len())
+            .filter_map(|i| pose.instance(i))
+            .map(|p| InstancePose {
+                transform: p.transform,
+                positions: p.positions,
+                normals: p.normals,
+            })
+            .collect();
+        rasterize_posed(self.scene, &poses, &camera, &opts).context("cannot rasterize the pose")
+    }
+
     /// Reference AO of `frame` of `path` at `res`; `progress` counts pixels.
     pub fn render(
-        &self,
+        &mut self,
         path: &CameraPath,
         frame: u32,
         res: Resolution,
         progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<AoImage> {
+        let gbuffer = self.gbuffer(path, frame, res)?;
+        Ok(self.trace(
+            &gbuffer,
+            self.spp,
+            self.seed.wrapping_add(frame as u64),
+            progress,
+        ))
+    }
+
+    /// Per-pixel AO of `gbuffer` with `spp` rays per pixel in the pose of the last
+    /// [`Self::gbuffer`].
+    pub fn trace(
+        &self,
+        gbuffer: &GBuffer,
+        spp: u32,
+        seed: u64,
+        progress: &(dyn Fn(u64) + Sync),
     ) -> AoImage {
-        let camera = path.camera_at_frame(frame as usize);
-        let opts = RasterOptions::new(res.width, res.height);
-        let gbuffer = rasterize(self.scene, &camera, &opts);
         let settings = ReferenceSettings {
-            spp: self.spp,
+            spp,
             radius: self.scene.ao_radius,
-            seed: self.seed.wrapping_add(frame as u64),
+            seed,
         };
         reference_ao_in(
-            &gbuffer,
+            gbuffer,
             &self.tracer,
             self.medium.as_deref(),
             &settings,

@@ -36,6 +36,26 @@ pub struct Row {
     pub server_ms: f64,
     /// Mean client (or per-pixel method) time per evaluated frame (ms).
     pub client_ms: f64,
+    /// PSAO server work per server frame (means), `None` for other methods.
+    pub work: Option<ServerWork>,
+}
+
+/// Mean server work per server frame of one PSAO run.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ServerWork {
+    /// `proximity` or `everything`.
+    pub invalidation: String,
+    /// Rays traced.
+    pub rays: f64,
+    /// Points restarted because geometry near them moved.
+    pub invalidated_points: f64,
+    /// Restarted points traced, and their rays.
+    pub retraced_points: f64,
+    pub retrace_rays: f64,
+    /// Server ms spent posing and invalidating.
+    pub animate_ms: f64,
+    /// Largest server ms of a frame.
+    pub max_server_ms: f64,
 }
 
 /// Bandwidth of one PSAO configuration over time.
@@ -95,6 +115,32 @@ pub fn table(rows: &[Row]) -> String {
     s
 }
 
+/// The PSAO rows' server work per server frame as a Markdown table.
+pub fn work_table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| points | server Hz | invalidation | rays | invalidated points | re-traced points | re-trace rays | animate ms | server ms | max server ms |\n\
+         |---:|---:|---|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in rows {
+        let (Some(w), Some(points), Some(hz)) = (&r.work, r.points, r.server_hz) else {
+            continue;
+        };
+        let _ = writeln!(
+            s,
+            "| {points} | {hz} | {} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.1} |",
+            w.invalidation,
+            w.rays,
+            w.invalidated_points,
+            w.retraced_points,
+            w.retrace_rays,
+            w.animate_ms,
+            r.server_ms,
+            w.max_server_ms
+        );
+    }
+    s
+}
+
 /// Writes `report.json` (the list of rows), `report.md`, plots and crops into `dir`.
 pub fn write(
     dir: &Path,
@@ -120,7 +166,7 @@ pub fn write(
         "# psao evaluation: {} / {}\n\n\
          {} px, frames {} (metrics on every {}th frame), reference {} spp. \
          AO-only and composited (base shading × AO, compared on luma) images against the reference.\n\n\
-         Command: `{}`\n\n{}\n",
+         Command: `{}`\n\n{}\n## Server work per server frame (means)\n\n{}\n",
         report.scene,
         report.path,
         report.res,
@@ -128,7 +174,8 @@ pub fn write(
         report.every,
         report.spp,
         report.command,
-        table(&report.rows)
+        table(&report.rows),
+        work_table(&report.rows)
     );
     md.push_str("## Quality vs points\n\n![quality vs points](quality_vs_points.svg)\n\n");
     if multi_rate {
@@ -266,6 +313,15 @@ fn plot_quality_vs_rate(file: &Path, rows: &[Row]) -> Result<()> {
             }
         })
         .collect();
+    let mut lines = lines;
+    if let Some(ssao) = rows.iter().find(|r| r.method == "ssao") {
+        // SSAO runs on the client at every frame: a flat line.
+        lines.push(Line {
+            label: "SSAO".into(),
+            points: vec![(0.0, ssao.psnr_ao), (x_max, ssao.psnr_ao)],
+            markers: false,
+        });
+    }
     let (y_lo, y_hi) = y_range(rows.iter().map(|r| r.psnr_ao));
     let axes = Axes {
         caption: "AO PSNR vs server rate",

@@ -7,7 +7,7 @@ use crate::progress;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use psao_server::ServerConfig;
+use psao_server::{Invalidation, ServerConfig};
 use psao_trace::Backend;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -33,6 +33,28 @@ pub struct ServerTuning {
     /// Seed of point generation and AO sampling.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Which points re-trace after something moved: `proximity` (near moving geometry) or
+    /// `everything` (every visible point each server frame, the published system's approach).
+    #[arg(long, value_enum, default_value = "proximity")]
+    pub invalidation: InvalidationArg,
+}
+
+/// `--invalidation` values.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InvalidationArg {
+    /// Points within the AO radius of geometry that moved relative to them.
+    Proximity,
+    /// Every point, whenever anything moved.
+    Everything,
+}
+
+impl From<InvalidationArg> for Invalidation {
+    fn from(a: InvalidationArg) -> Self {
+        match a {
+            InvalidationArg::Proximity => Invalidation::Proximity,
+            InvalidationArg::Everything => Invalidation::Everything,
+        }
+    }
 }
 
 impl ServerTuning {
@@ -50,6 +72,7 @@ impl ServerTuning {
                 max_samples: self.max_samples,
                 seed: self.seed,
                 backend: self.backend.unwrap_or_default(),
+                invalidation: self.invalidation.into(),
                 ..ServerConfig::default()
             },
             server_hz,

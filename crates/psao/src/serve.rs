@@ -598,7 +598,13 @@ impl Simulation {
                 views.push(v);
             }
         }
-        let step = self.server.step(&views);
+        let step = match self.server.step_at(&views, seconds as f32) {
+            Ok(step) => step,
+            Err(e) => {
+                tracing::error!("server frame at {seconds:.3} s skipped: {e}");
+                return;
+            }
+        };
         self.step_ms.push(step.ms);
         self.rays += step.rays;
         let th = Instant::now();

@@ -10,10 +10,8 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use psao_client::{ClientState, ReconstructSettings};
+use psao_client::ClientState;
 use psao_delta::Codec;
-use psao_eval::AoImage;
-use psao_raster::{GBuffer, RasterOptions, Rasterizer};
 use psao_wire::{
     capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, Welcome, WireError,
     MAX_SERVER_FRAME, PROTOCOL_VERSION,
@@ -24,7 +22,7 @@ use tokio::sync::mpsc;
 use crate::args::Resolution;
 use crate::net::convert::{camera_msg, decode_limit, table_of};
 use crate::net::transport::{connect, ReadError};
-use crate::pipeline::{ClientFrame, CLIENT_HZ};
+use crate::pipeline::{ClientRenderer, CLIENT_HZ};
 use crate::run::{write_frame_images, write_json};
 use crate::scene_source::SceneArgs;
 
@@ -158,7 +156,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
     let aspect = args.res.width as f32 / args.res.height as f32;
-    let mut rasterizer = Rasterizer::new();
+    let mut renderer = ClientRenderer::new(&input.scene)?;
     let mut start = Instant::now();
     let mut lockstep = None;
     for frame in 0..frames {
@@ -204,13 +202,9 @@ pub fn run(args: &ViewArgs) -> Result<()> {
             }
         }
         if let Some(out) = &args.out {
-            let img = render(
-                &mut rasterizer,
-                &input.scene,
-                &client.state,
-                &camera,
-                args.res,
-            );
+            // The client's clock: frame / 60 s (equal to the server's in lockstep).
+            let time = frame as f32 / CLIENT_HZ as f32;
+            let img = renderer.render(&input.scene, &client.state, &camera, args.res, time)?;
             write_frame_images(out, frame, &input.scene, &img)?;
         }
     }
@@ -248,28 +242,6 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// Renders one frame exactly as the in-process pipeline does.
-fn render(
-    rasterizer: &mut Rasterizer,
-    scene: &psao_scene::Scene,
-    state: &ClientState,
-    camera: &psao_scene::Camera,
-    res: Resolution,
-) -> ClientFrame {
-    let mut gbuffer = GBuffer::empty(res.width, res.height);
-    let opts = RasterOptions::new(res.width, res.height);
-    rasterizer.rasterize(scene, camera, &opts, &mut gbuffer);
-    let ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());
-    ClientFrame {
-        ao: AoImage {
-            width: gbuffer.width,
-            height: gbuffer.height,
-            data: ao,
-        },
-        gbuffer,
-    }
 }
 
 /// The frame loop's session state.

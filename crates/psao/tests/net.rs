@@ -21,6 +21,7 @@ const SERVER: &[&str] = &["--points", "96", "--ray-budget", "40000"];
 /// A small room (floor, two walls, a box) and a 2-second camera path through it.
 struct Fixture {
     dir: tempfile::TempDir,
+    scene: &'static str,
 }
 
 impl Fixture {
@@ -49,13 +50,28 @@ impl Fixture {
             [[key]]\ntime = 0.0\nposition = [3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, 0.0]\n\
             [[key]]\ntime = 2.0\nposition = [-3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, -1.0]\n";
         std::fs::write(dir.path().join("path.toml"), path).unwrap();
-        Self { dir }
+        Self {
+            dir,
+            scene: "room.obj",
+        }
+    }
+
+    /// The room with a box sliding over its floor and back (a 1.5 s loop).
+    fn animated() -> Self {
+        let mut fx = Self::new();
+        let scene = "ao_radius = 0.6\n\
+            [[asset]]\nfile = \"room.obj\"\n\
+            [[asset]]\nfile = \"builtin:box\"\nscale = 0.5\n\
+            keys = { times = [0.0, 0.75, 1.5], translation = [[-2.5, 0.25, 2.0], [2.5, 0.25, 2.0], [-2.5, 0.25, 2.0]] }\n";
+        std::fs::write(fx.dir.path().join("moving.toml"), scene).unwrap();
+        fx.scene = "moving.toml";
+        fx
     }
 
     fn scene(&self) -> String {
         self.dir
             .path()
-            .join("room.obj")
+            .join(self.scene)
             .to_string_lossy()
             .into_owned()
     }
@@ -219,6 +235,66 @@ fn lockstep_serve_and_two_views_reproduce_run() {
                 std::fs::read(b.join(&name)).unwrap(),
                 "ws view {name}"
             );
+        }
+    }
+}
+
+#[test]
+fn animated_scene_lockstep_view_matches_run_and_the_server_state() {
+    let fx = Fixture::animated();
+    let server = Serve::start(
+        &fx,
+        "127.0.0.1:0",
+        &["--hz", "30", "--lockstep", "--wait-clients", "1", "--once"],
+    );
+    let (a, r) = (fx.file("a"), fx.file("r"));
+    let json_a = fx.file("a.json");
+    let o = view_cmd(
+        &fx,
+        &server.addr,
+        8,
+        &[
+            "--out",
+            a.to_str().unwrap(),
+            "--json",
+            json_a.to_str().unwrap(),
+        ],
+    )
+    .output()
+    .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(server.wait(10).success());
+    assert_exact(&json(&json_a));
+    let o = Command::new(BIN)
+        .args([
+            "--log",
+            "warn",
+            "run",
+            "--scene",
+            &fx.scene(),
+            "--path",
+            &fx.path(),
+        ])
+        .args(SERVER)
+        .args(["--server-hz", "30", "--frames", "0..8", "--res", "48x32"])
+        .args(["--out", r.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stats = json(&r.join("stats.json"));
+    let invalidated: u64 = stats["per_frame"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["invalidated_points"].as_u64().unwrap())
+        .sum();
+    assert!(invalidated > 0, "the sliding box invalidates floor points");
+    assert_eq!(stats["state_hash"], json(&json_a)["state_hash"]);
+    for f in 0..8 {
+        for kind in ["frame", "ao"] {
+            let name = format!("{kind}_{f:05}.png");
+            let want = std::fs::read(r.join(&name)).unwrap();
+            assert_eq!(want, std::fs::read(a.join(&name)).unwrap(), "view {name}");
         }
     }
 }
