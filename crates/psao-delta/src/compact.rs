@@ -43,7 +43,6 @@ const TRANSFORM_WORDS: usize = 12;
 const KEY_WORDS: usize = 2 * BUCKET_ENTRIES;
 const SLOT_WORDS: usize = BUCKET_ENTRIES;
 
-
 fn key(instance: u32, index: u32) -> u64 {
     (u64::from(instance) << 32) | u64::from(index)
 }

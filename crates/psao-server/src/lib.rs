@@ -7,8 +7,8 @@
 //! client, encoded with a [`psao_delta::Codec`]. Pure computation: no file or network I/O.
 
 mod blocks;
-mod changes;
 mod bury;
+mod changes;
 mod clients;
 mod config;
 mod dynamics;

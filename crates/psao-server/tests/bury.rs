@@ -2,6 +2,7 @@
 //! points on open faces are kept, deterministically for a seed, on every backend.
 
 use glam::{Affine3A, Vec3};
+use psao_scene::builtin::shapes::cuboid;
 use psao_scene::{Instance, Material, Mesh, Scene};
 use psao_server::{Server, ServerConfig};
 use psao_trace::Backend;
@@ -23,36 +24,6 @@ fn square(size: f32) -> Mesh {
     }
 }
 
-/// A closed unit cube centred at the origin with outward normals.
-fn cube() -> Mesh {
-    let mut mesh = Mesh {
-        name: "cube".into(),
-        ..Default::default()
-    };
-    for axis in 0..3 {
-        for sign in [-1.0f32, 1.0] {
-            let mut n = Vec3::ZERO;
-            n[axis] = sign;
-            let (mut u, mut v) = (Vec3::ZERO, Vec3::ZERO);
-            u[(axis + 1) % 3] = 0.5;
-            v[(axis + 2) % 3] = 0.5;
-            let c = n * 0.5;
-            let base = mesh.positions.len() as u32;
-            mesh.positions
-                .extend([c - u - v, c + u - v, c + u + v, c - u + v]);
-            mesh.normals.extend([n; 4]);
-            if sign > 0.0 {
-                mesh.indices
-                    .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
-            } else {
-                mesh.indices
-                    .extend([[base, base + 2, base + 1], [base, base + 3, base + 2]]);
-            }
-        }
-    }
-    mesh
-}
-
 /// Instance 0: an open 4 m floor; 1: a closed cube floating at y = 2; 2: a 0.6 m square
 /// sealed inside the cube; 3: the same square, double-sided material, inside a second cube
 /// (4) — its both sides are buried too.
@@ -66,7 +37,12 @@ fn scene() -> Scene {
     let mut inner_two_sided = square(0.6);
     inner_two_sided.material = 1;
     Scene {
-        meshes: vec![square(4.0), cube(), square(0.6), inner_two_sided],
+        meshes: vec![
+            square(4.0),
+            cuboid(Vec3::splat(0.5)),
+            square(0.6),
+            inner_two_sided,
+        ],
         materials: vec![
             Material::default(),
             Material {
