@@ -70,15 +70,9 @@ impl Neighbourhood {
             let delta = Vec3::new(px[i], py[i], pz[i]) - p;
             let ni = Vec3::new(nx[i], ny[i], nz[i]);
             let d2 = delta.length_squared();
-            let d = d2.sqrt();
-            let c = ni.dot(delta) / d;
-            let cos_n = ni.dot(n);
-            let keep = d2 < r2
-                && cos_n > params.normal_threshold
-                && n.dot(delta).abs() <= plane
-                && (d2 == 0.0 || c * c < params.direction_threshold);
+            let keep = d2 < r2 && compatible(ni, n, delta, d2, plane, params);
             weight[i] = if keep {
-                (r - d) * inv_r * cos_n.powi(params.normal_exponent)
+                (r - d2.sqrt()) * inv_r * ni.dot(n).powi(params.normal_exponent)
             } else {
                 0.0
             };
@@ -107,12 +101,7 @@ impl Neighbourhood {
             let delta = Vec3::new(px[i], py[i], pz[i]) - p;
             let ni = Vec3::new(nx[i], ny[i], nz[i]);
             let d2 = delta.length_squared();
-            let d = d2.sqrt();
-            let c = ni.dot(delta) / d;
-            let compatible = ni.dot(n) > params.normal_threshold
-                && n.dot(delta).abs() <= plane
-                && (d2 == 0.0 || c * c < params.direction_threshold);
-            if compatible && d2 < nearest_d2 {
+            if compatible(ni, n, delta, d2, plane, params) && d2 < nearest_d2 {
                 (nearest_d2, nearest_ao) = (d2, self.ao[i]);
             }
         }
@@ -139,4 +128,21 @@ impl Neighbourhood {
             }
         }
     }
+}
+
+/// The normal, tangent-plane and direction tests of `reconstruct_ao` for a point with normal
+/// `ni` at `delta` (`d2 = |delta|²`) from the shaded position with normal `n`.
+#[inline(always)]
+fn compatible(
+    ni: Vec3,
+    n: Vec3,
+    delta: Vec3,
+    d2: f32,
+    plane: f32,
+    params: &ReconstructParams,
+) -> bool {
+    let c = ni.dot(delta) / d2.sqrt();
+    ni.dot(n) > params.normal_threshold
+        && n.dot(delta).abs() <= plane
+        && (d2 == 0.0 || c * c < params.direction_threshold)
 }

@@ -6,7 +6,7 @@ use crate::error::{Result, VolumeError};
 use crate::grid::GridClass;
 use crate::rng::Rng;
 use crate::sample::Sampler;
-use crate::trace::{level_set_hit, march, IndexRay};
+use crate::trace::{level_set_hit, tentative_collisions, IndexRay};
 use crate::volume::Volume;
 use glam::{Quat, Vec3};
 use psao_trace::ao::{Medium, MediumSampler};
@@ -206,32 +206,20 @@ pub fn transmitted_length(
     sigma_per_value: f32,
     rng: &mut Rng,
 ) -> f32 {
-    let vol = s.volume();
     let (mut weight, mut integral, mut last) = (1.0f32, 0.0f32, 0.0f32);
     if sigma_per_value > 0.0 {
-        march(vol, s.frame(), ray, 0.0, length, |seg| {
-            let mu = vol.majorant(seg.leaf) * sigma_per_value;
-            if mu <= 0.0 {
-                return true;
-            }
-            let mut t = seg.t0;
-            loop {
-                t -= (1.0 - rng.next_f32()).ln() / mu;
-                if t >= seg.t1 {
-                    return true;
+        tentative_collisions(s, ray, length, sigma_per_value, rng, |t, sigma, mu, rng| {
+            integral += weight * (t - last);
+            last = t;
+            weight *= (1.0 - sigma / mu).max(0.0);
+            if weight < ROULETTE_WEIGHT {
+                if rng.next_f32() < 0.5 {
+                    weight = 0.0;
+                    return false;
                 }
-                integral += weight * (t - last);
-                last = t;
-                let sigma = s.trilinear(ray.at(t)).max(0.0) * sigma_per_value;
-                weight *= (1.0 - sigma / mu).max(0.0);
-                if weight < ROULETTE_WEIGHT {
-                    if rng.next_f32() < 0.5 {
-                        weight = 0.0;
-                        return false;
-                    }
-                    weight *= 2.0;
-                }
+                weight *= 2.0;
             }
+            true
         });
     }
     (integral + weight * (length - last).max(0.0)).clamp(0.0, length)

@@ -207,17 +207,19 @@ pub fn transmittance_with(
     }
 }
 
-/// Delta tracking: the first real collision along the ray before `t_max`, sampled with the
-/// per-L3 majorants (extinction = `density_scale` × density).
-pub fn delta_track(
+/// Tentative collisions along `ray` before `t_max`, sampled with the per-L3 majorants
+/// (extinction = `density_scale` × density; empty nodes skipped by HDDA): `visit(t, σ, μ, rng)`
+/// gets each collision distance with the real and the majorant extinction there, in order,
+/// and returns whether to go on. The shared step of delta and ratio tracking.
+pub(crate) fn tentative_collisions(
     s: &mut Sampler,
     ray: &IndexRay,
     t_max: f32,
     density_scale: f32,
     rng: &mut Rng,
-) -> Option<f32> {
+    mut visit: impl FnMut(f32, f32, f32, &mut Rng) -> bool,
+) {
     let vol = s.volume();
-    let mut hit = None;
     march(vol, s.frame(), ray, 0.0, t_max, |seg| {
         let mu = vol.majorant(seg.leaf) * density_scale;
         if mu <= 0.0 {
@@ -230,11 +232,29 @@ pub fn delta_track(
                 return true;
             }
             let sigma = s.trilinear(ray.at(t)).max(0.0) * density_scale;
-            if rng.next_f32() * mu < sigma {
-                hit = Some(t);
+            if !visit(t, sigma, mu, rng) {
                 return false;
             }
         }
+    });
+}
+
+/// Delta tracking: the first real collision along the ray before `t_max`, sampled with the
+/// per-L3 majorants (extinction = `density_scale` × density).
+pub fn delta_track(
+    s: &mut Sampler,
+    ray: &IndexRay,
+    t_max: f32,
+    density_scale: f32,
+    rng: &mut Rng,
+) -> Option<f32> {
+    let mut hit = None;
+    tentative_collisions(s, ray, t_max, density_scale, rng, |t, sigma, mu, rng| {
+        if rng.next_f32() * mu < sigma {
+            hit = Some(t);
+            return false;
+        }
+        true
     });
     hit
 }

@@ -3,7 +3,7 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -176,6 +176,43 @@ fn free_port() -> u16 {
 }
 
 /// A view's JSON must show a final state equal to the server's at its last update.
+/// `psao run` of the fixture's first `frames` frames at the settings the net tests' servers
+/// use, writing frames into `out`.
+fn run_in_process(fx: &Fixture, frames: u32, out: &Path) {
+    let o = Command::new(BIN)
+        .args([
+            "--log",
+            "warn",
+            "run",
+            "--scene",
+            &fx.scene(),
+            "--path",
+            &fx.path(),
+        ])
+        .args(SERVER)
+        .args(["--server-hz", "30", "--res", "48x32"])
+        .args(["--frames", &format!("0..{frames}")])
+        .args(["--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// The composited and AO-only PNGs of the first `frames` frames in `got` are byte-identical
+/// to those in `want`.
+fn assert_same_frames(want: &Path, got: &Path, frames: u32, label: &str) {
+    for f in 0..frames {
+        for kind in ["frame", "ao"] {
+            let name = format!("{kind}_{f:05}.png");
+            assert_eq!(
+                std::fs::read(want.join(&name)).unwrap(),
+                std::fs::read(got.join(&name)).unwrap(),
+                "{label} {name}"
+            );
+        }
+    }
+}
+
 fn assert_exact(stats: &serde_json::Value) {
     assert_eq!(stats["hash_mismatches"], 0, "{stats}");
     assert_eq!(
@@ -205,38 +242,9 @@ fn lockstep_serve_and_two_views_reproduce_run() {
     assert!(va.wait().unwrap().success());
     assert!(server.wait(10).success());
     let r = fx.file("r");
-    let o = Command::new(BIN)
-        .args([
-            "--log",
-            "warn",
-            "run",
-            "--scene",
-            &fx.scene(),
-            "--path",
-            &fx.path(),
-        ])
-        .args(SERVER)
-        .args(["--server-hz", "30", "--frames", "0..5", "--res", "48x32"])
-        .args(["--out", r.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
-    for f in 0..5 {
-        for kind in ["frame", "ao"] {
-            let name = format!("{kind}_{f:05}.png");
-            let want = std::fs::read(r.join(&name)).unwrap();
-            assert_eq!(
-                want,
-                std::fs::read(a.join(&name)).unwrap(),
-                "tcp view {name}"
-            );
-            assert_eq!(
-                want,
-                std::fs::read(b.join(&name)).unwrap(),
-                "ws view {name}"
-            );
-        }
-    }
+    run_in_process(&fx, 5, &r);
+    assert_same_frames(&r, &a, 5, "tcp view");
+    assert_same_frames(&r, &b, 5, "ws view");
 }
 
 #[test]
@@ -265,22 +273,7 @@ fn animated_scene_lockstep_view_matches_run_and_the_server_state() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(server.wait(10).success());
     assert_exact(&json(&json_a));
-    let o = Command::new(BIN)
-        .args([
-            "--log",
-            "warn",
-            "run",
-            "--scene",
-            &fx.scene(),
-            "--path",
-            &fx.path(),
-        ])
-        .args(SERVER)
-        .args(["--server-hz", "30", "--frames", "0..8", "--res", "48x32"])
-        .args(["--out", r.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    run_in_process(&fx, 8, &r);
     let stats = json(&r.join("stats.json"));
     let invalidated: u64 = stats["per_frame"]
         .as_array()
@@ -290,13 +283,7 @@ fn animated_scene_lockstep_view_matches_run_and_the_server_state() {
         .sum();
     assert!(invalidated > 0, "the sliding box invalidates floor points");
     assert_eq!(stats["state_hash"], json(&json_a)["state_hash"]);
-    for f in 0..8 {
-        for kind in ["frame", "ao"] {
-            let name = format!("{kind}_{f:05}.png");
-            let want = std::fs::read(r.join(&name)).unwrap();
-            assert_eq!(want, std::fs::read(a.join(&name)).unwrap(), "view {name}");
-        }
-    }
+    assert_same_frames(&r, &a, 8, "view");
 }
 
 #[test]
