@@ -9,5 +9,5 @@ pub mod ssao;
 
 pub use ao_image::AoImage;
 pub use metrics::{compare, Metrics, MetricsError};
-pub use reference::{reference_ao, reference_ao_in, ReferenceSettings};
+pub use reference::{reference_ao_in, ReferenceSettings};
 pub use ssao::{ssao, SsaoSettings};

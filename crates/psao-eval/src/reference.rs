@@ -19,21 +19,12 @@ pub struct ReferenceSettings {
 /// Pixels handed to the tracer at once; also the granularity of progress reports.
 const PIXELS_PER_BLOCK: usize = 2048;
 
-/// AO at every pixel of `gbuffer` (1 where nothing is covered), traced with `tracer`.
+/// AO at every pixel of `gbuffer` (1 where nothing is covered), traced with `tracer`, the
+/// rays passing through a participating `medium` if any (the same transmittance-weighted
+/// estimator as the server's points, [`ao::sample_value`]).
 ///
 /// `progress` is called with the number of pixels finished since its previous call.
 /// The result does not depend on the number of threads.
-pub fn reference_ao(
-    gbuffer: &GBuffer,
-    tracer: &Tracer,
-    settings: &ReferenceSettings,
-    progress: &(dyn Fn(u64) + Sync),
-) -> AoImage {
-    reference_ao_in(gbuffer, tracer, None, settings, progress)
-}
-
-/// [`reference_ao`] with the rays passing through a participating `medium` (the same
-/// transmittance-weighted estimator as the server's points, [`ao::sample_value`]).
 pub fn reference_ao_in(
     gbuffer: &GBuffer,
     tracer: &Tracer,
