@@ -86,23 +86,26 @@ impl Neighbourhood {
             ao_sum / w_sum
         } else if params.nearest_fallback {
             self.nearest(p, n, plane, params)
+                .or_else(|| ring_nearest(grid, base, p, n, plane, params))
+                .unwrap_or(1.0)
         } else {
             1.0
         }
     }
 
     /// The fallback of `reconstruct_ao` when no point lies within the radius: the AO of the
-    /// nearest point passing the normal, plane and direction tests (first one on ties), or 1.
-    fn nearest(&self, p: Vec3, n: Vec3, plane: f32, params: &ReconstructParams) -> f32 {
+    /// block's nearest point passing the normal, plane and direction tests (first one on
+    /// ties), if any.
+    fn nearest(&self, p: Vec3, n: Vec3, plane: f32, params: &ReconstructParams) -> Option<f32> {
         let [px, py, pz] = &self.position;
         let [nx, ny, nz] = &self.normal;
-        let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, 1.0f32);
+        let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, None);
         for i in 0..self.count {
             let delta = Vec3::new(px[i], py[i], pz[i]) - p;
             let ni = Vec3::new(nx[i], ny[i], nz[i]);
             let d2 = delta.length_squared();
             if compatible(ni, n, delta, d2, plane, params) && d2 < nearest_d2 {
-                (nearest_d2, nearest_ao) = (d2, self.ao[i]);
+                (nearest_d2, nearest_ao) = (d2, Some(self.ao[i]));
             }
         }
         nearest_ao
@@ -128,6 +131,33 @@ impl Neighbourhood {
             }
         }
     }
+}
+
+/// The second fallback of `reconstruct_ao`, when the block has no compatible point: the AO
+/// of the nearest compatible point of the cells around it ([`InstanceGrid::ring_cells`]),
+/// decoded straight from the grid (this path is rare, so nothing is cached).
+fn ring_nearest(
+    grid: &InstanceGrid,
+    base: IVec3,
+    p: Vec3,
+    n: Vec3,
+    plane: f32,
+    params: &ReconstructParams,
+) -> Option<f32> {
+    let layout = grid.layout();
+    let normals = normal_table();
+    let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, None);
+    for (coord, cell) in grid.ring_cells(base) {
+        for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+            let delta = layout.unpack_position(coord, bits) - p;
+            let d2 = delta.length_squared();
+            let ni = normals[normal_code(bits) as usize];
+            if compatible(ni, n, delta, d2, plane, params) && d2 < nearest_d2 {
+                (nearest_d2, nearest_ao) = (d2, Some(unpack_ao(bits)));
+            }
+        }
+    }
+    nearest_ao
 }
 
 /// The normal, tangent-plane and direction tests of `reconstruct_ao` for a point with normal

@@ -211,12 +211,17 @@ fn matches_reconstruct_ao_bitwise() {
     let state = setup(&scene, 1024.0, pattern);
     let camera = Camera::look_at(Vec3::new(1.0, 2.0, 4.0), Vec3::new(0.0, 0.2, -0.5), 55.0);
     let defaults = ReconstructSettings::default();
-    // The default, a radius small enough to leave holes (the nearest-point fallback runs),
-    // and the same without any of the additions to DESIGN's criteria.
+    // The default, a radius small enough to leave holes (the nearest-point fallback runs), a
+    // plane test so strict that whole blocks fail it (the ring fallback runs), and the same
+    // without any of the additions to DESIGN's criteria.
     let variants = [
         defaults,
         ReconstructSettings {
             interpolation_factor: 1.3,
+            ..defaults
+        },
+        ReconstructSettings {
+            plane_tolerance: 0.02,
             ..defaults
         },
         ReconstructSettings {

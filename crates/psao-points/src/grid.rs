@@ -239,6 +239,21 @@ impl InstanceGrid {
         })
     }
 
+    /// The allocated cells around the block of [`Self::block_cells`]: the 4×4×4 block of
+    /// offsets −1..=2 from `base` without its inner 2×2×2, x fastest, then y, then z. This is
+    /// where reconstruction looks for a fallback point when the inner block has none.
+    pub fn ring_cells(&self, base: glam::IVec3) -> impl Iterator<Item = (UVec3, &Cell)> + '_ {
+        (0..64).filter_map(move |k: i32| {
+            let offset = glam::IVec3::new(k & 3, (k >> 2) & 3, k >> 4) - glam::IVec3::ONE;
+            if offset.cmpge(glam::IVec3::ZERO).all() && offset.cmple(glam::IVec3::ONE).all() {
+                return None;
+            }
+            let c = self.layout.checked_coord(base.saturating_add(offset))?;
+            let slot = self.find_cell(c)?;
+            self.cells.get(slot as usize).map(|cell| (c, cell))
+        })
+    }
+
     /// The decoded points of the cell at `coord` (nothing when it is not allocated).
     pub fn cell_points(&self, coord: UVec3) -> impl Iterator<Item = DecodedPoint> + '_ {
         let cell = self.find_cell(coord).map(|s| &self.cells[s as usize]);

@@ -66,7 +66,7 @@ impl Default for ReconstructParams {
 /// nearest `p`: weights `w = max(0, (r − |p_i − p|) / r)`, zeroed when `n_i·n ≤ T_n` or
 /// `(n_i·(p_i − p)/|p_i − p|)² ≥ T_d`; returns `Σ w·AO_i / Σ w`, or the fallback when
 /// `Σ w = 0` (1 in DESIGN; see (3) below).
-/// Allocation-free; at most 8 bucket scans and 56 points.
+/// Allocation-free; at most 8 bucket scans and 56 points, 64 and 448 on the ring fallback.
 ///
 /// Two additions to DESIGN §3 / the paper's Eq. 3 (whose criteria stay as they are) fight
 /// the leaking the paper names as a limitation: detail finer than the point spacing (a
@@ -81,9 +81,11 @@ impl Default for ReconstructParams {
 /// normals) count less than points of the pixel's own face. Both only ever zero or shrink
 /// weights. (3) When no point passes within `r` (a hole: detail narrower than the spacing,
 /// such as a groove bottom, holds too few points of its own), the AO of the nearest point of
-/// the visited cells that passes every test but the radius is used, and 1 only when there
-/// is none: DESIGN's fallback 1 draws such detail as white gaps (a dark groove breaks into
-/// dashes), while the nearest point on the same surface carries nearly the same occlusion.
+/// the visited cells that passes every test but the radius is used; when the 2×2×2 block has
+/// none, the nearest such point of the ring of cells around it
+/// ([`InstanceGrid::ring_cells`]); and 1 only when there is none: DESIGN's fallback 1 draws
+/// such detail as white gaps (a dark groove breaks into dashes), while the nearest point on
+/// the same surface carries nearly the same occlusion.
 pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &ReconstructParams) -> f32 {
     let layout = grid.layout();
     let r = layout.poisson_radius * params.interpolation_factor;
@@ -94,6 +96,20 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
     let plane = params.plane_tolerance * layout.poisson_radius;
     let base = layout.nearest_base(p);
     let normals = normal_table();
+    // Every test but the radius: normal agreement, tangent plane, direction.
+    let passes = |ni: Vec3, delta: Vec3, d2: f32| {
+        if ni.dot(n) <= params.normal_threshold || n.dot(delta).abs() > plane {
+            return false;
+        }
+        let d = d2.sqrt();
+        if d > 0.0 {
+            let c = ni.dot(delta) / d;
+            if c * c >= params.direction_threshold {
+                return false;
+            }
+        }
+        true
+    };
     let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
     let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, 1.0f32);
     for (coord, cell) in grid.block_cells(base) {
@@ -104,19 +120,8 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
             let delta = layout.unpack_position(coord, bits) - p;
             let d2 = delta.length_squared();
             let ni = normals[normal_code(bits) as usize];
-            let cos_n = ni.dot(n);
-            if cos_n <= params.normal_threshold {
+            if !passes(ni, delta, d2) {
                 continue;
-            }
-            if n.dot(delta).abs() > plane {
-                continue;
-            }
-            let d = d2.sqrt();
-            if d > 0.0 {
-                let c = ni.dot(delta) / d;
-                if c * c >= params.direction_threshold {
-                    continue;
-                }
             }
             if d2 >= r2 {
                 if d2 < nearest_d2 {
@@ -124,9 +129,20 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
                 }
                 continue;
             }
-            let w = (r - d) * inv_r * cos_n.powi(params.normal_exponent);
+            let w = (r - d2.sqrt()) * inv_r * ni.dot(n).powi(params.normal_exponent);
             w_sum += w;
             ao_sum += w * unpack_ao(bits);
+        }
+    }
+    if w_sum == 0.0 && params.nearest_fallback && nearest_d2 == f32::INFINITY {
+        for (coord, cell) in grid.ring_cells(base) {
+            for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+                let delta = layout.unpack_position(coord, bits) - p;
+                let d2 = delta.length_squared();
+                if passes(normals[normal_code(bits) as usize], delta, d2) && d2 < nearest_d2 {
+                    (nearest_d2, nearest_ao) = (d2, unpack_ao(bits));
+                }
+            }
         }
     }
     if w_sum > 0.0 {

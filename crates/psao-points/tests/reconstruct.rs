@@ -258,6 +258,14 @@ fn holes_take_the_nearest_compatible_point() {
     // Nothing compatible at all: still 1.
     let grid = tiny_grid(&[nearer_but_facing_away]);
     assert_eq!(reconstruct_ao(&grid, p, Vec3::Z, &params), 1.0);
+    // Nothing compatible in the visited block (cells 2..=3): the nearest compatible point of
+    // the ring of cells around it, here in cell 1 along x (and not a farther one in cell 4).
+    let ring = (p - Vec3::new(0.06, 0.0, 0.0), Vec3::Z, 0.4);
+    let ring_far = (p + Vec3::new(0.0, 0.065, 0.0), Vec3::Z, 0.8);
+    let grid = tiny_grid(&[nearer_but_facing_away, ring, ring_far]);
+    let ao = reconstruct_ao(&grid, p, Vec3::Z, &params);
+    assert!((ao - q(0.4)).abs() < 1e-6, "{ao}");
+    assert_eq!(reconstruct_ao(&grid, p, Vec3::Z, &design), 1.0);
 }
 
 #[test]

@@ -236,6 +236,13 @@ pub struct Scene {
 pub const DEFAULT_AO_RADIUS: f32 = 0.6;
 
 impl Scene {
+    /// Stops all motion: no clip plays and no walker walks, so every node keeps its rest
+    /// transform and the scene is static.
+    pub fn freeze(&mut self) {
+        self.playing.clear();
+        self.walkers.clear();
+    }
+
     /// Total triangle count over all instances.
     pub fn instanced_triangle_count(&self) -> usize {
         self.instances

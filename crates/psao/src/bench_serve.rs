@@ -171,6 +171,7 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     let (input, path) = crate::scene_source::SceneArgs {
         scene: args.scene.clone(),
         path: args.path.clone(),
+        frozen: false,
     }
     .load()?;
     drop(input);

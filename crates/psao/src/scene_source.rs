@@ -26,12 +26,18 @@ pub struct SceneArgs {
     /// Camera path file (default: the scene's first path).
     #[arg(long)]
     pub path: Option<PathBuf>,
+    /// Play none of the scene's animations: the geometry stays in its rest pose.
+    #[arg(long = "static")]
+    pub frozen: bool,
 }
 
 impl SceneArgs {
-    /// Loads the scene and picks the camera path.
+    /// Loads the scene (frozen when `--static` is given) and picks the camera path.
     pub fn load(&self) -> Result<(SceneInput, CameraPath)> {
-        let input = SceneInput::load(&self.scene)?;
+        let mut input = SceneInput::load(&self.scene)?;
+        if self.frozen {
+            input.scene.freeze();
+        }
         let path = input.camera_path(self.path.as_ref())?;
         Ok((input, path))
     }
