@@ -94,15 +94,7 @@ impl Tracer {
         mesh: usize,
         positions: &[Vec3],
     ) -> Result<(), TraceError> {
-        self.check_update(mesh, positions)?;
-        match &mut self.inner {
-            Inner::Obvhs(t) => {
-                t.update_mesh_positions(mesh, positions);
-                Ok(())
-            }
-            #[cfg(feature = "embree")]
-            Inner::Embree(t) => t.update_mesh_positions(mesh, positions),
-        }
+        self.replace_mesh_positions(mesh, positions, false)
     }
 
     /// Replaces the vertex positions of a deforming mesh like
@@ -113,14 +105,30 @@ impl Tracer {
         mesh: usize,
         positions: &[Vec3],
     ) -> Result<(), TraceError> {
+        self.replace_mesh_positions(mesh, positions, true)
+    }
+
+    /// The two above: validate, then refit or `rebuild` in the backend.
+    fn replace_mesh_positions(
+        &mut self,
+        mesh: usize,
+        positions: &[Vec3],
+        rebuild: bool,
+    ) -> Result<(), TraceError> {
         self.check_update(mesh, positions)?;
         match &mut self.inner {
             Inner::Obvhs(t) => {
-                t.rebuild_mesh_positions(mesh, positions);
+                if rebuild {
+                    t.rebuild_mesh_positions(mesh, positions);
+                } else {
+                    t.update_mesh_positions(mesh, positions);
+                }
                 Ok(())
             }
             #[cfg(feature = "embree")]
-            Inner::Embree(t) => t.rebuild_mesh_positions(mesh, positions),
+            Inner::Embree(t) if rebuild => t.rebuild_mesh_positions(mesh, positions),
+            #[cfg(feature = "embree")]
+            Inner::Embree(t) => t.update_mesh_positions(mesh, positions),
         }
     }
 
