@@ -59,6 +59,9 @@ const TRANSFORM_WORDS: usize = 12;
 /// Point choices: 7 reference points, up to 7 earlier points of the same cell, the 7 points
 /// of the previous cell.
 const POINT_CHOICES: u8 = 3 * CELL_POINTS as u8;
+/// Set residual bits up to which the encoder takes a point of the cell's reference for the
+/// same point (moved or re-shaded) and stops looking at other candidates.
+const SAME_POINT_BITS: u32 = 8;
 /// (shift, bits) of the point record's fields below the valid bit (`psao_points::pack`).
 const FIELDS: [(u32, u32); 6] = [(26, 5), (21, 5), (16, 5), (12, 4), (8, 4), (0, 8)];
 /// Bytes per coded bucket entry outside the choice: 8 key, 4 slot.
@@ -113,14 +116,37 @@ fn hashed_key(key: u64, index: u32) -> u64 {
     key.checked_sub(1).map_or(0, |k| k ^ u64::from(index))
 }
 
-/// Zigzag-coded `(word − reference) mod 2^bits` of every field, valid bit cleared.
+/// Bits of the point fields (everything but the valid bit).
+const FIELD_BITS: u32 = !VALID_BIT;
+/// The lowest bit of every field.
+const FIELD_LOW: u32 = field_bits(0);
+/// The highest bit of every field.
+const FIELD_HIGH: u32 = field_bits(1);
+
+/// The lowest (`top` = 0) or highest (`top` = 1) bit of every field of [`FIELDS`].
+const fn field_bits(top: u32) -> u32 {
+    let mut bits = 0;
+    let mut f = 0;
+    while f < FIELDS.len() {
+        let (shift, width) = FIELDS[f];
+        bits |= 1 << (shift + top * (width - 1));
+        f += 1;
+    }
+    bits
+}
+
+/// Zigzag-coded `(word − reference) mod 2^bits` of every field, valid bit cleared. All
+/// fields at once in one word (no borrow crosses a field).
 fn point_residual(word: u32, reference: u32) -> u32 {
-    FIELDS.iter().fold(0, |acc, &(shift, bits)| {
-        let mask = (1u32 << bits) - 1;
-        let d = (word >> shift).wrapping_sub(reference >> shift) & mask;
-        let sign = 0u32.wrapping_sub(d >> (bits - 1)) & mask;
-        acc | ((((d << 1) & mask) ^ sign) << shift)
-    })
+    let (a, b) = (word & FIELD_BITS, reference & FIELD_BITS);
+    let d = (((a | FIELD_HIGH) - (b & !FIELD_HIGH)) ^ ((a ^ !b) & FIELD_HIGH)) & FIELD_BITS;
+    // Negative fields: all their bits set, i.e. from their lowest bit up to their sign bit.
+    let sign = d & FIELD_HIGH;
+    let lows = FIELDS.iter().fold(0, |acc, &(shift, width)| {
+        acc | (((sign >> shift) >> (width - 1)) & 1) << shift
+    });
+    let negative = (sign << 1).wrapping_sub(lows);
+    ((d << 1) & FIELD_BITS & !FIELD_LOW) ^ negative
 }
 
 /// Inverse of [`point_residual`]: the valid point `residual` codes against `reference`.
@@ -131,14 +157,6 @@ fn apply_point_residual(residual: u32, reference: u32) -> u32 {
         let d = (z >> 1) ^ (0u32.wrapping_sub(z & 1) & mask);
         acc | (((reference >> shift).wrapping_add(d) & mask) << shift)
     })
-}
-
-/// Bits the encoder expects a point residual to cost: the significant bits of each field.
-fn point_cost(residual: u32) -> u32 {
-    FIELDS
-        .iter()
-        .map(|&(shift, width)| bits((residual >> shift) & ((1u32 << width) - 1)))
-        .sum()
 }
 
 /// The reference point of choice `c` for point `i` of a cell (see the module doc); `None`
@@ -220,16 +238,22 @@ impl Streams {
         let n = used_points(points);
         for i in 0..n {
             let mut best = (u32::MAX, 0, 0);
+            let mut raw_tried = false;
             for c in 0..POINT_CHOICES {
                 let Some(r) = point_reference(c, i, reference, &points[..i], previous) else {
                     continue;
                 };
+                // Every empty reference codes the point raw: try the first only.
+                if r == 0 && std::mem::replace(&mut raw_tried, true) {
+                    continue;
+                }
                 let residual = point_residual(points[i], r);
-                let cost = point_cost(residual);
+                // Set bits: a cheap stand-in for what the residual costs after zstd.
+                let cost = residual.count_ones();
                 if cost < best.0 {
                     best = (cost, c, residual);
                 }
-                if cost == 0 {
+                if cost == 0 || (c + 1 == CELL_POINTS as u8 && best.0 <= SAME_POINT_BITS) {
                     break;
                 }
             }
@@ -1009,6 +1033,9 @@ mod tests {
         crate::zstd_io::compress(&payload, 1)
     }
 
+    /// A change to a payload, given its section offsets.
+    type Edit = dyn Fn(&mut Vec<u8>, &Offsets);
+
     /// Byte offsets of the payload's sections.
     struct Offsets {
         counts: usize,
@@ -1028,7 +1055,7 @@ mod tests {
         let good = CompactCodec::new().encode(&u);
         let decode = |bytes: &[u8]| CompactCodec::new().decode(bytes);
         assert_eq!(decode(&good).unwrap(), paper_round_trip(&u));
-        let cases: [(&str, Box<dyn Fn(&mut Vec<u8>, &Offsets)>); 8] = [
+        let cases: [(&str, Box<Edit>); 8] = [
             (
                 "point choice",
                 Box::new(|p, o| p[o.point_choices] = POINT_CHOICES),
