@@ -1,46 +1,48 @@
-//! The `compact` codec (DESIGN §4, our default): every record is predicted from the state
-//! last sent for the same slot (or from its neighbours in the same record), indices are
+//! The `compact` codec (DESIGN §4, our default): every record is predicted from a reference
+//! (what was last sent for the same slot, or its neighbour in the update), indices are
 //! delta-coded varints, residuals are split into byte planes per record kind, and the whole
 //! is compressed with zstd at a low level.
 //!
 //! Payload before compression (integers little-endian):
 //! ```text
-//! tag "PSC2" · flags u32 (bit 0 snapshot) · frame u64 · index stream length u32
+//! tag "PSC2" · flags u32 (bit 0 snapshot) · frame u64 · index stream length u32 ·
+//! coded bucket entries E u32 · coded points P u32
 //! index stream (LEB128 varints, zigzag for deltas):
 //!     transform count · per transform: instance − previous instance (previous starts at −1)
 //!     instance count · per instance: instance − previous, bucket count, cell count,
 //!         bucket index − previous (from −1) per bucket, cell slot − previous (from −1) per cell
-//! entry counts: one byte per bucket (in index order), its used entries (0..=8)
-//! cell lengths: one byte per cell (in index order), its points (0..=7)
-//! entry choices: one byte per used bucket entry (0..=7)
-//! point choices: one byte per point (0..=13)
-//! key residuals: 8 byte planes (byte 0 of every entry's residual, then byte 1, …)
-//! slot residuals: 4 byte planes
-//! point residuals: 4 byte planes
-//! transforms: 12 words each (Affine3A columns, f32 bits), XORed, as 4 byte planes
+//! entry counts: one byte per bucket (in index order): (used entries − the reference's) mod 9
+//! cell lengths: one byte per cell (in index order): (points − the reference's) mod 8
+//! entry choices: E bytes (0..=8) · point choices: P bytes (0..=13)
+//! key residuals: 8 byte planes of E u64 (byte 0 of every residual, then byte 1, …)
+//! slot residuals: 4 byte planes of E u32 · point residuals: 4 byte planes of P u32
+//! transforms: 12 words each (Affine3A columns, f32 bits), XORed with the reference, 4 planes
 //! ```
 //! The reference of a slot (instance + bucket index, instance + cell slot, or instance for
 //! transforms) is its content as last sent in this session, empty if never sent; a snapshot
 //! starts from an empty state. Buckets and cells are compacted (used entries first) so they
-//! decode exactly as the `paper` codec does; only used entries and points are coded.
+//! decode exactly as the `paper` codec does; only used entries and points are coded, and the
+//! sums of the decoded counts must equal E and P.
 //!
-//! * Bucket entry `i` names a reference entry with its choice `c`: entry `(i + c) mod 8` of
-//!   the bucket's reference (an empty one when past its used entries). With `t(key) =
-//!   (key − 1) XOR bucket index` (and `t = 0` for an empty entry; a key hashes to its bucket
-//!   by its low bits, which `t` clears), the key residual is `t(key) XOR t(reference key)`
-//!   and the slot residual `slot XOR reference slot`.
-//! * Point `i` of a cell names its reference with its choice `c`: for `c` in 0..=6 point
-//!   `(i + c) mod 7` of the cell's reference (0 when past its points), for `c` in 7..=13
-//!   point `i − (c − 6)` of the same new cell (already decoded). The residual holds, in each
-//!   field's own bits (position x, y, z, octahedral u, v, AO; `psao_points::pack`), the
-//!   zigzag-coded difference `field − reference field` modulo the field's range; the valid
-//!   bit is not coded (every coded point is valid) and must be 0.
+//! * Bucket entry `i` (key ≠ 0) with choice `c` in 0..=7 is coded against entry
+//!   `(i + c) mod 8` of its bucket's reference (an empty one past its used entries): with
+//!   `t(key) = (key − 1) XOR bucket index` (the cell id with the bits that chose its bucket
+//!   cleared) and `t = 0` for an empty entry, the key residual is `t(key) XOR t(reference)`
+//!   and the slot residual `slot XOR reference slot`. Choice 8: the key residual is `t(key)`
+//!   and the slot residual the position of the entry's cell in this instance's cell list of
+//!   the update (a cell published for the first time arrives with its bucket entry).
+//! * Point `i` of a cell with choice `c` in 0..=6 is coded against point `(i + c) mod 7` of
+//!   the cell's reference (0 past its points); with `c` in 7..=13 against point `c − 7` of
+//!   the previous cell of the instance in the update (0 for the first). The residual holds,
+//!   in each field's own bits (position x, y, z, octahedral u, v, AO; `psao_points::pack`),
+//!   the zigzag-coded difference `field − reference field` modulo the field's range; the
+//!   valid bit is not coded (every coded point is valid) and must be 0.
 //!
-//! The encoder picks each choice to make the residual small (a point inserted into or
-//! removed from a cell shifts the others; a moving point changes its position fields by a
-//! little; a new point resembles its neighbour in the cell); any choice decodes exactly.
-//! Both ends must see the same sequence of updates; after a decoding error the decoder's
-//! state is undefined and the session must start again (with a snapshot).
+//! The encoder picks each choice to make the residual small: a point inserted into or removed
+//! from a cell shifts the others, a moving point changes its position fields a little, a new
+//! point resembles a point of the neighbouring cell; any choice decodes exactly. Both ends
+//! must see the same sequence of updates; after a decoding error the decoder's state is
+//! undefined and the session must start again (with a snapshot).
 
 use glam::Affine3A;
 use psao_points::pack::VALID_BIT;
@@ -56,9 +58,8 @@ const TAG: u32 = u32::from_le_bytes(*b"PSC2");
 const FLAG_SNAPSHOT: u32 = 1;
 const HEADER_BYTES: usize = 28;
 const TRANSFORM_WORDS: usize = 12;
-/// Point choices: 7 reference points, up to 7 earlier points of the same cell, the 7 points
-/// of the previous cell.
-const POINT_CHOICES: u8 = 3 * CELL_POINTS as u8;
+/// Point choices: the 7 points of the cell's reference, the 7 points of the previous cell.
+const POINT_CHOICES: u8 = 2 * CELL_POINTS as u8;
 /// Set residual bits up to which the encoder takes a point of the cell's reference for the
 /// same point (moved or re-shaded) and stops looking at other candidates.
 const SAME_POINT_BITS: u32 = 8;
@@ -159,23 +160,18 @@ fn apply_point_residual(residual: u32, reference: u32) -> u32 {
     })
 }
 
-/// The reference point of choice `c` for point `i` of a cell (see the module doc); `None`
-/// for a choice that names a point not decoded yet.
+/// The reference point of choice `c` (below [`POINT_CHOICES`]) for point `i` of a cell
+/// (see the module doc).
 fn point_reference(
     c: u8,
     i: usize,
     reference: &[u32; CELL_POINTS],
-    new: &[u32],
     previous: &[u32; CELL_POINTS],
-) -> Option<u32> {
+) -> u32 {
     let c = usize::from(c);
-    match c / CELL_POINTS {
-        0 => Some(reference[(i + c) % CELL_POINTS]),
-        1 => {
-            let back = c + 1 - CELL_POINTS;
-            i.checked_sub(back).and_then(|k| new.get(k).copied())
-        }
-        _ => previous.get(c - 2 * CELL_POINTS).copied(),
+    match c.checked_sub(CELL_POINTS) {
+        None => reference[(i + c) % CELL_POINTS],
+        Some(k) => previous[k],
     }
 }
 
@@ -236,18 +232,16 @@ impl Streams {
         previous: &[u32; CELL_POINTS],
     ) {
         let n = used_points(points);
-        for i in 0..n {
+        for (i, &point) in points[..n].iter().enumerate() {
             let mut best = (u32::MAX, 0, 0);
             let mut raw_tried = false;
             for c in 0..POINT_CHOICES {
-                let Some(r) = point_reference(c, i, reference, &points[..i], previous) else {
-                    continue;
-                };
+                let r = point_reference(c, i, reference, previous);
                 // Every empty reference codes the point raw: try the first only.
                 if r == 0 && std::mem::replace(&mut raw_tried, true) {
                     continue;
                 }
-                let residual = point_residual(points[i], r);
+                let residual = point_residual(point, r);
                 // Set bits: a cheap stand-in for what the residual costs after zstd.
                 let cost = residual.count_ones();
                 if cost < best.0 {
@@ -652,8 +646,7 @@ fn assemble(
                 if residual & VALID_BIT != 0 {
                     return Err(DeltaError::BadRecord("point residual"));
                 }
-                let reference = point_reference(c, i, &old, &cell.points[..i], &previous)
-                    .ok_or(DeltaError::BadChoice("point"))?;
+                let reference = point_reference(c, i, &old, &previous);
                 cell.points[i] = apply_point_residual(residual, reference);
             }
             r.cells.insert(k, cell.points);
@@ -1055,15 +1048,10 @@ mod tests {
         let good = CompactCodec::new().encode(&u);
         let decode = |bytes: &[u8]| CompactCodec::new().decode(bytes);
         assert_eq!(decode(&good).unwrap(), paper_round_trip(&u));
-        let cases: [(&str, Box<Edit>); 8] = [
+        let cases: [(&str, Box<Edit>); 7] = [
             (
                 "point choice",
                 Box::new(|p, o| p[o.point_choices] = POINT_CHOICES),
-            ),
-            // The first point of a cell has no earlier point in the same cell.
-            (
-                "earlier point",
-                Box::new(|p, o| p[o.point_choices] = CELL_POINTS as u8),
             ),
             (
                 "entry choice",

@@ -64,7 +64,7 @@ pub enum DeltaError {
     /// A bucket entry count above the 8 entries a bucket holds.
     #[error("bucket entry count {0} exceeds 8 entries")]
     EntryCount(usize),
-    /// A reference choice that names no record (out of range, or a point not decoded yet).
+    /// A reference choice out of range (or a cell position past the update's cells).
     #[error("bad reference choice for a {0}")]
     BadChoice(&'static str),
     /// A residual that decodes to no valid record.
