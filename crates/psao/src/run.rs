@@ -24,7 +24,8 @@ pub struct ServerTuning {
     /// Samples after which a point counts as converged and is not traced again.
     #[arg(long, default_value_t = ServerConfig::default().max_samples)]
     pub max_samples: u32,
-    /// Update codec: `compact` (XOR + byte planes + zstd 3) or `paper` (raw records + zstd 15).
+    /// Update codec: `compact` (records predicted from what was last sent + byte planes +
+    /// zstd 3) or `paper` (raw records + zstd 15).
     #[arg(long, default_value = "compact")]
     pub codec: String,
     /// Ray-tracing backend, `obvhs` or `embree` (default: the fastest compiled in).
