@@ -6,8 +6,8 @@ use crate::{CompactCodec, DeltaError, PaperCodec, Update};
 pub const CODEC_NAMES: &[&str] = &["compact", "paper"];
 
 /// Turns updates into bytes and back. Codecs may keep state between calls (e.g. the last
-/// sent state for XOR deltas), so a sender and its receiver each hold one instance and see
-/// the same sequence of updates.
+/// sent state the compact codec predicts from), so a sender and its receiver each hold one
+/// instance and see the same sequence of updates.
 pub trait Codec: Send {
     /// The codec's name, as accepted by [`codec_by_name`].
     fn name(&self) -> &'static str;

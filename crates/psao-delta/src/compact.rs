@@ -1,33 +1,51 @@
-//! The `compact` codec (DESIGN §4, our default): every record is XORed against the state last
-//! sent for the same slot, indices are delta-coded varints in their own stream, payload words
-//! are split into byte planes per record kind, and the whole is compressed with zstd at a low
-//! level.
+//! The `compact` codec (DESIGN §4, our default): every record is predicted from a reference
+//! (what was last sent for the same slot, or its neighbour in the update), indices are
+//! delta-coded varints, residuals are split into byte planes per record kind, and the whole
+//! is compressed with zstd at a low level.
 //!
 //! Payload before compression (integers little-endian):
 //! ```text
-//! tag "PSC1" · flags u32 (bit 0 snapshot) · frame u64 · index stream length u32 ·
-//! cell word count u32
+//! tag "PSC2" · flags u32 (bit 0 snapshot) · frame u64 · index stream length u32 ·
+//! coded bucket entries E u32 · coded points P u32
 //! index stream (LEB128 varints, zigzag for deltas):
 //!     transform count · per transform: instance − previous instance (previous starts at −1)
 //!     instance count · per instance: instance − previous, bucket count, cell count,
 //!         bucket index − previous (from −1) per bucket, cell slot − previous (from −1) per cell
-//! cell lengths: one byte per cell (in index order), its number of points (0..=7)
-//! planes, four groups in this order, each stored as its 4 byte planes (byte 0 of every
-//! word, then byte 1, …):
-//!     transforms: 12 words each (Affine3A columns, f32 bits)
-//!     bucket keys: 16 words each (8 keys, low word then high word)
-//!     bucket slots: 8 words each
-//!     cells: per cell the first max(new length, reference length) words
+//! entry counts: one byte per bucket (in index order): (used entries − the reference's) mod 9
+//! cell lengths: one byte per cell (in index order): (points − the reference's) mod 8
+//! entry choices: E bytes (0..=8) · point choices: P bytes (0..=13)
+//! key residuals: 8 byte planes of E u64 (byte 0 of every residual, then byte 1, …)
+//! slot residuals: 4 byte planes of E u32 · point residuals: 4 byte planes of P u32
+//! transforms: 12 words each (Affine3A columns, f32 bits), XORed with the reference, 4 planes
 //! ```
-//! Every word is XORed with the word at the same position of the same slot (instance +
-//! bucket index, instance + cell slot, or instance for transforms) as last sent in this
-//! session, or with 0 if never sent; a snapshot starts from an empty state. Buckets and cells
-//! are compacted (empty entries last) first, so they decode exactly as the `paper` codec
-//! does. Cell words past both the new and the reference length are zero after XOR and are
-//! not stored. Both ends must see the same sequence of updates; after a decoding error the
-//! decoder's state is undefined and the session must start again (with a snapshot).
+//! The reference of a slot (instance + bucket index, instance + cell slot, or instance for
+//! transforms) is its content as last sent in this session, empty if never sent; a snapshot
+//! starts from an empty state. Buckets and cells are compacted (used entries first) so they
+//! decode exactly as the `paper` codec does; only used entries and points are coded, and the
+//! sums of the decoded counts must equal E and P.
+//!
+//! * Bucket entry `i` (key ≠ 0) with choice `c` in 0..=7 is coded against entry
+//!   `(i + c) mod 8` of its bucket's reference (an empty one past its used entries): with
+//!   `t(key) = (key − 1) XOR bucket index` (the cell id with the bits that chose its bucket
+//!   cleared) and `t = 0` for an empty entry, the key residual is `t(key) XOR t(reference)`
+//!   and the slot residual `slot XOR reference slot`. Choice 8: the key residual is `t(key)`
+//!   and the slot residual the position of the entry's cell in this instance's cell list of
+//!   the update (a cell published for the first time arrives with its bucket entry).
+//! * Point `i` of a cell with choice `c` in 0..=6 is coded against point `(i + c) mod 7` of
+//!   the cell's reference (0 past its points); with `c` in 7..=13 against point `c − 7` of
+//!   the previous cell of the instance in the update (0 for the first). The residual holds,
+//!   in each field's own bits (position x, y, z, octahedral u, v, AO; `psao_points::pack`),
+//!   the zigzag-coded difference `field − reference field` modulo the field's range; the
+//!   valid bit is not coded (every coded point is valid) and must be 0.
+//!
+//! The encoder picks each choice to make the residual small: a point inserted into or removed
+//! from a cell shifts the others, a moving point changes its position fields a little, a new
+//! point resembles a point of the neighbouring cell; any choice decodes exactly. Both ends
+//! must see the same sequence of updates; after a decoding error the decoder's state is
+//! undefined and the session must start again (with a snapshot).
 
 use glam::Affine3A;
+use psao_points::pack::VALID_BIT;
 use psao_points::{Bucket, BucketEntry, Cell, KeyMap, BUCKET_ENTRIES, CELL_POINTS};
 
 use crate::model::{compact_bucket, compact_cell, InstanceDelta, Update};
@@ -36,64 +54,244 @@ use crate::{Codec, DeltaError, MAX_DECODED_BYTES};
 /// zstd level of the compact codec.
 pub const COMPACT_LEVEL: i32 = 3;
 
-const TAG: u32 = u32::from_le_bytes(*b"PSC1");
+const TAG: u32 = u32::from_le_bytes(*b"PSC2");
 const FLAG_SNAPSHOT: u32 = 1;
-const HEADER_BYTES: usize = 24;
+const HEADER_BYTES: usize = 28;
 const TRANSFORM_WORDS: usize = 12;
-const KEY_WORDS: usize = 2 * BUCKET_ENTRIES;
-const SLOT_WORDS: usize = BUCKET_ENTRIES;
+/// Point choices: the 7 points of the cell's reference, the 7 points of the previous cell.
+const POINT_CHOICES: u8 = 2 * CELL_POINTS as u8;
+/// Set residual bits up to which the encoder takes a point of the cell's reference for the
+/// same point (moved or re-shaded) and stops looking at other candidates.
+const SAME_POINT_BITS: u32 = 8;
+/// (shift, bits) of the point record's fields below the valid bit (`psao_points::pack`).
+const FIELDS: [(u32, u32); 6] = [(26, 5), (21, 5), (16, 5), (12, 4), (8, 4), (0, 8)];
+/// Bytes per coded bucket entry outside the choice: 8 key, 4 slot.
+const ENTRY_BYTES: u64 = 12;
+/// Bytes per coded point outside the choice.
+const POINT_BYTES: u64 = 4;
 
 fn key(instance: u32, index: u32) -> u64 {
     (u64::from(instance) << 32) | u64::from(index)
 }
 
-/// What was last sent, per slot: the XOR reference of both ends.
+/// A compacted bucket as the reference keeps it.
+#[derive(Clone, Copy, Default)]
+struct Entries {
+    keys: [u64; BUCKET_ENTRIES],
+    slots: [u32; BUCKET_ENTRIES],
+}
+
+/// What was last sent, per slot: the reference of both ends.
 #[derive(Default, Clone)]
 struct Reference {
     transforms: KeyMap<[u32; TRANSFORM_WORDS]>,
-    keys: KeyMap<[u32; KEY_WORDS]>,
-    slots: KeyMap<[u32; SLOT_WORDS]>,
+    buckets: KeyMap<Entries>,
     cells: KeyMap<[u32; CELL_POINTS]>,
 }
 
-impl Reference {
-    fn clear(&mut self) {
-        *self = Self::default();
+/// Choice of a bucket entry whose slot is coded as its cell's position in the update.
+const RANK_CHOICE: u8 = BUCKET_ENTRIES as u8;
+
+/// Used entries of a compacted bucket (keys non-zero first).
+fn used_entries(keys: &[u64; BUCKET_ENTRIES]) -> usize {
+    keys.iter().take_while(|&&k| k != 0).count()
+}
+
+/// Points of a compacted cell.
+fn used_points(points: &[u32; CELL_POINTS]) -> usize {
+    points.iter().take_while(|&&p| p != 0).count()
+}
+
+/// Significant bits of `v`.
+fn bits(v: u32) -> u32 {
+    32 - v.leading_zeros()
+}
+
+/// Significant bits of `v`.
+fn bits64(v: u64) -> u32 {
+    64 - v.leading_zeros()
+}
+
+/// `(key − 1) XOR index` for a used entry, 0 for an empty one (see the module doc).
+fn hashed_key(key: u64, index: u32) -> u64 {
+    key.checked_sub(1).map_or(0, |k| k ^ u64::from(index))
+}
+
+/// Bits of the point fields (everything but the valid bit).
+const FIELD_BITS: u32 = !VALID_BIT;
+/// The lowest bit of every field.
+const FIELD_LOW: u32 = field_bits(0);
+/// The highest bit of every field.
+const FIELD_HIGH: u32 = field_bits(1);
+
+/// The lowest (`top` = 0) or highest (`top` = 1) bit of every field of [`FIELDS`].
+const fn field_bits(top: u32) -> u32 {
+    let mut bits = 0;
+    let mut f = 0;
+    while f < FIELDS.len() {
+        let (shift, width) = FIELDS[f];
+        bits |= 1 << (shift + top * (width - 1));
+        f += 1;
+    }
+    bits
+}
+
+/// Zigzag-coded `(word − reference) mod 2^bits` of every field, valid bit cleared. All
+/// fields at once in one word (no borrow crosses a field).
+fn point_residual(word: u32, reference: u32) -> u32 {
+    let (a, b) = (word & FIELD_BITS, reference & FIELD_BITS);
+    let d = (((a | FIELD_HIGH) - (b & !FIELD_HIGH)) ^ ((a ^ !b) & FIELD_HIGH)) & FIELD_BITS;
+    // Negative fields: all their bits set, i.e. from their lowest bit up to their sign bit.
+    let sign = d & FIELD_HIGH;
+    let lows = FIELDS.iter().fold(0, |acc, &(shift, width)| {
+        acc | (((sign >> shift) >> (width - 1)) & 1) << shift
+    });
+    let negative = (sign << 1).wrapping_sub(lows);
+    ((d << 1) & FIELD_BITS & !FIELD_LOW) ^ negative
+}
+
+/// Inverse of [`point_residual`]: the valid point `residual` codes against `reference`.
+fn apply_point_residual(residual: u32, reference: u32) -> u32 {
+    FIELDS.iter().fold(VALID_BIT, |acc, &(shift, bits)| {
+        let mask = (1u32 << bits) - 1;
+        let z = (residual >> shift) & mask;
+        let d = (z >> 1) ^ (0u32.wrapping_sub(z & 1) & mask);
+        acc | (((reference >> shift).wrapping_add(d) & mask) << shift)
+    })
+}
+
+/// The reference point of choice `c` (below [`POINT_CHOICES`]) for point `i` of a cell
+/// (see the module doc).
+fn point_reference(
+    c: u8,
+    i: usize,
+    reference: &[u32; CELL_POINTS],
+    previous: &[u32; CELL_POINTS],
+) -> u32 {
+    let c = usize::from(c);
+    match c.checked_sub(CELL_POINTS) {
+        None => reference[(i + c) % CELL_POINTS],
+        Some(k) => previous[k],
     }
 }
 
-/// XOR `words` with the reference stored under `k` and store `words` as the new reference.
-fn xor_encode<const N: usize>(
-    map: &mut KeyMap<[u32; N]>,
-    k: u64,
-    words: [u32; N],
-    out: &mut Vec<u32>,
-) {
-    let prev = map.insert(k, words).unwrap_or([0; N]);
-    out.extend(words.iter().zip(prev).map(|(w, p)| w ^ p));
+/// The codec's byte streams of one update, before layout.
+#[derive(Default)]
+struct Streams {
+    index: Vec<u8>,
+    entry_counts: Vec<u8>,
+    cell_lengths: Vec<u8>,
+    entry_choices: Vec<u8>,
+    point_choices: Vec<u8>,
+    keys: Vec<u64>,
+    slots: Vec<u32>,
+    points: Vec<u32>,
+    transforms: Vec<u32>,
 }
 
-/// Undo [`xor_encode`]: the words after XOR with the reference, stored as the new reference.
-fn xor_decode<const N: usize>(map: &mut KeyMap<[u32; N]>, k: u64, coded: &[u32]) -> [u32; N] {
-    let prev = map.get(&k).copied().unwrap_or([0; N]);
-    let mut words = [0u32; N];
-    for ((w, c), p) in words.iter_mut().zip(coded).zip(prev) {
-        *w = c ^ p;
+impl Streams {
+    /// Code the used entries of compacted `bucket` against `reference`; `ranks` maps the
+    /// cell slots of the instance's delta to their position in its cell list.
+    fn bucket(&mut self, index: u32, bucket: &Bucket, reference: &Entries, ranks: &KeyMap<u32>) {
+        let n = used_entries(&bucket.entries.map(|e| e.key));
+        for (i, e) in bucket.entries[..n].iter().enumerate() {
+            let t = hashed_key(e.key, index);
+            let mut best = (u32::MAX, 0, 0, 0);
+            for c in 0..BUCKET_ENTRIES {
+                let r = (i + c) % BUCKET_ENTRIES;
+                let k = t ^ hashed_key(reference.keys[r], index);
+                let s = e.slot ^ reference.slots[r];
+                let cost = bits64(k) + bits(s);
+                if cost < best.0 {
+                    best = (cost, c as u8, k, s);
+                }
+                if cost == 0 {
+                    break;
+                }
+            }
+            if let Some(&rank) = ranks.get(&u64::from(e.slot)) {
+                let cost = bits64(t) + bits(rank);
+                if cost < best.0 {
+                    best = (cost, RANK_CHOICE, t, rank);
+                }
+            }
+            self.entry_choices.push(best.1);
+            self.keys.push(best.2);
+            self.slots.push(best.3);
+        }
+        let old = used_entries(&reference.keys);
+        self.entry_counts
+            .push(((n + BUCKET_ENTRIES + 1 - old) % (BUCKET_ENTRIES + 1)) as u8);
     }
-    map.insert(k, words);
-    words
-}
 
-fn bucket_words(bucket: &Bucket) -> ([u32; KEY_WORDS], [u32; SLOT_WORDS]) {
-    let b = compact_bucket(bucket);
-    let mut keys = [0u32; KEY_WORDS];
-    let mut slots = [0u32; SLOT_WORDS];
-    for (i, e) in b.entries.iter().enumerate() {
-        keys[2 * i] = e.key as u32;
-        keys[2 * i + 1] = (e.key >> 32) as u32;
-        slots[i] = e.slot;
+    /// Code the points of compacted `points` against `reference`.
+    fn cell(
+        &mut self,
+        points: &[u32; CELL_POINTS],
+        reference: &[u32; CELL_POINTS],
+        previous: &[u32; CELL_POINTS],
+    ) {
+        let n = used_points(points);
+        for (i, &point) in points[..n].iter().enumerate() {
+            let mut best = (u32::MAX, 0, 0);
+            let mut raw_tried = false;
+            for c in 0..POINT_CHOICES {
+                let r = point_reference(c, i, reference, previous);
+                // Every empty reference codes the point raw: try the first only.
+                if r == 0 && std::mem::replace(&mut raw_tried, true) {
+                    continue;
+                }
+                let residual = point_residual(point, r);
+                // Set bits: a cheap stand-in for what the residual costs after zstd.
+                let cost = residual.count_ones();
+                if cost < best.0 {
+                    best = (cost, c, residual);
+                }
+                if cost == 0 || (c + 1 == CELL_POINTS as u8 && best.0 <= SAME_POINT_BITS) {
+                    break;
+                }
+            }
+            self.point_choices.push(best.1);
+            self.points.push(best.2);
+        }
+        let old = used_points(reference);
+        self.cell_lengths
+            .push(((n + CELL_POINTS + 1 - old) % (CELL_POINTS + 1)) as u8);
     }
-    (keys, slots)
+
+    /// The uncompressed payload.
+    fn payload(&self, flags: u32, frame: u64) -> Vec<u8> {
+        let bytes = HEADER_BYTES
+            + self.index.len()
+            + self.entry_counts.len()
+            + self.cell_lengths.len()
+            + self.entry_choices.len() * (1 + ENTRY_BYTES as usize)
+            + self.point_choices.len() * (1 + POINT_BYTES as usize)
+            + self.transforms.len() * 4;
+        let mut out = Vec::with_capacity(bytes);
+        out.extend_from_slice(&TAG.to_le_bytes());
+        out.extend_from_slice(&flags.to_le_bytes());
+        out.extend_from_slice(&frame.to_le_bytes());
+        out.extend_from_slice(&(self.index.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(self.entry_choices.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(self.point_choices.len() as u32).to_le_bytes());
+        for bytes in [
+            &self.index,
+            &self.entry_counts,
+            &self.cell_lengths,
+            &self.entry_choices,
+            &self.point_choices,
+        ] {
+            out.extend_from_slice(bytes);
+        }
+        for plane in 0..8 {
+            out.extend(self.keys.iter().map(|k| (k >> (8 * plane)) as u8));
+        }
+        shuffle_into(&self.slots, &mut out);
+        shuffle_into(&self.points, &mut out);
+        shuffle_into(&self.transforms, &mut out);
+        out
+    }
 }
 
 /// The compact codec. Stateful: one instance per sending or receiving end of a session.
@@ -132,21 +330,6 @@ impl CompactCodec {
     }
 }
 
-/// Word groups of one update, XORed, before byte-plane shuffling.
-#[derive(Default)]
-struct Groups {
-    transforms: Vec<u32>,
-    keys: Vec<u32>,
-    slots: Vec<u32>,
-    cells: Vec<u32>,
-    cell_lengths: Vec<u8>,
-}
-
-/// Words of a cell up to its last non-zero one.
-fn cell_len(words: &[u32; CELL_POINTS]) -> usize {
-    words.iter().rposition(|&w| w != 0).map_or(0, |i| i + 1)
-}
-
 impl Codec for CompactCodec {
     fn name(&self) -> &'static str {
         "compact"
@@ -154,66 +337,61 @@ impl Codec for CompactCodec {
 
     fn encode(&mut self, update: &Update) -> Vec<u8> {
         if update.snapshot {
-            self.reference.clear();
+            self.reference = Reference::default();
         }
         let r = &mut self.reference;
-        let mut index = Vec::new();
-        let mut g = Groups::default();
-        put_varint(&mut index, update.transforms.len() as u64);
+        let mut st = Streams::default();
+        put_varint(&mut st.index, update.transforms.len() as u64);
         let mut prev = -1i64;
         for (instance, t) in &update.transforms {
-            put_delta(&mut index, &mut prev, *instance);
+            put_delta(&mut st.index, &mut prev, *instance);
             let words = t.to_cols_array().map(f32::to_bits);
-            xor_encode(
-                &mut r.transforms,
-                u64::from(*instance),
-                words,
-                &mut g.transforms,
-            );
+            let old = r
+                .transforms
+                .insert(u64::from(*instance), words)
+                .unwrap_or_default();
+            st.transforms
+                .extend(words.iter().zip(old).map(|(w, p)| w ^ p));
         }
-        put_varint(&mut index, update.instances.len() as u64);
+        put_varint(&mut st.index, update.instances.len() as u64);
         let mut prev_instance = -1i64;
         for d in &update.instances {
-            put_delta(&mut index, &mut prev_instance, d.instance);
-            put_varint(&mut index, d.buckets.len() as u64);
-            put_varint(&mut index, d.cells.len() as u64);
+            put_delta(&mut st.index, &mut prev_instance, d.instance);
+            put_varint(&mut st.index, d.buckets.len() as u64);
+            put_varint(&mut st.index, d.cells.len() as u64);
+            let mut ranks = KeyMap::default();
+            for (rank, (s, _)) in d.cells.iter().enumerate() {
+                ranks.entry(u64::from(*s)).or_insert(rank as u32);
+            }
             let mut prev = -1i64;
             for (b, bucket) in &d.buckets {
-                put_delta(&mut index, &mut prev, *b);
-                let (keys, slots) = bucket_words(bucket);
-                xor_encode(&mut r.keys, key(d.instance, *b), keys, &mut g.keys);
-                xor_encode(&mut r.slots, key(d.instance, *b), slots, &mut g.slots);
+                put_delta(&mut st.index, &mut prev, *b);
+                let bucket = compact_bucket(bucket);
+                let entries = Entries {
+                    keys: bucket.entries.map(|e| e.key),
+                    slots: bucket.entries.map(|e| e.slot),
+                };
+                let old = r
+                    .buckets
+                    .insert(key(d.instance, *b), entries)
+                    .unwrap_or_default();
+                st.bucket(*b, &bucket, &old, &ranks);
             }
             let mut prev = -1i64;
+            let mut previous = [0; CELL_POINTS];
             for (s, cell) in &d.cells {
-                put_delta(&mut index, &mut prev, *s);
-                let words = compact_cell(cell).points;
-                let prev = r
+                put_delta(&mut st.index, &mut prev, *s);
+                let points = compact_cell(cell).points;
+                let old = r
                     .cells
-                    .insert(key(d.instance, *s), words)
+                    .insert(key(d.instance, *s), points)
                     .unwrap_or_default();
-                let n = cell_len(&words);
-                g.cell_lengths.push(n as u8);
-                let m = n.max(cell_len(&prev));
-                g.cells
-                    .extend(words[..m].iter().zip(&prev[..m]).map(|(w, p)| w ^ p));
+                st.cell(&points, &old, &previous);
+                previous = points;
             }
         }
-        let words = g.transforms.len() + g.keys.len() + g.slots.len() + g.cells.len();
-        let mut payload =
-            Vec::with_capacity(HEADER_BYTES + index.len() + g.cell_lengths.len() + 4 * words);
-        payload.extend_from_slice(&TAG.to_le_bytes());
         let flags = if update.snapshot { FLAG_SNAPSHOT } else { 0 };
-        payload.extend_from_slice(&flags.to_le_bytes());
-        payload.extend_from_slice(&update.frame.to_le_bytes());
-        payload.extend_from_slice(&(index.len() as u32).to_le_bytes());
-        payload.extend_from_slice(&(g.cells.len() as u32).to_le_bytes());
-        payload.extend_from_slice(&index);
-        payload.extend_from_slice(&g.cell_lengths);
-        for group in [&g.transforms, &g.keys, &g.slots, &g.cells] {
-            shuffle_into(group, &mut payload);
-        }
-        crate::zstd_io::compress(&payload, self.level)
+        crate::zstd_io::compress(&st.payload(flags, update.frame), self.level)
     }
 
     fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError> {
@@ -237,7 +415,6 @@ impl Codec for CompactCodec {
         }
         let frame = u64::from(word(8)) | (u64::from(word(12)) << 32);
         let index_len = word(16) as usize;
-        let cell_words = u64::from(word(20));
         let rest = &payload[HEADER_BYTES..];
         if index_len > rest.len() {
             return Err(DeltaError::Truncated {
@@ -248,34 +425,13 @@ impl Codec for CompactCodec {
         }
         let (index, rest) = rest.split_at(index_len);
         let layout = parse_index(index)?;
-        let cells = layout.cells() as usize;
-        if cells > rest.len() {
-            return Err(DeltaError::Truncated {
-                what: "cell lengths",
-                needed: cells as u64,
-                available: rest.len(),
-            });
-        }
-        let (lengths, planes) = rest.split_at(cells);
-        let words = layout.fixed_words() + cell_words;
-        if planes.len() as u64 != words * 4 {
-            return Err(DeltaError::PlaneSize {
-                expected: words * 4,
-                found: planes.len() as u64,
-            });
-        }
-        if flags & FLAG_SNAPSHOT != 0 {
-            self.reference.clear();
-        }
+        let totals = (word(20) as usize, word(24) as usize);
+        let sections = Sections::split(&layout, totals, rest)?;
         let snapshot = flags & FLAG_SNAPSHOT != 0;
-        assemble(
-            &layout,
-            lengths,
-            planes,
-            frame,
-            snapshot,
-            &mut self.reference,
-        )
+        if snapshot {
+            self.reference = Reference::default();
+        }
+        assemble(&layout, &sections, frame, snapshot, &mut self.reference)
     }
 
     fn set_decode_limit(&mut self, bytes: u64) {
@@ -283,23 +439,18 @@ impl Codec for CompactCodec {
     }
 }
 
-/// The parsed index stream: which slots the planes hold.
+/// The parsed index stream: which slots the sections hold.
 struct IndexLayout {
     transforms: Vec<u32>,
     instances: Vec<(u32, Vec<u32>, Vec<u32>)>,
 }
 
 impl IndexLayout {
-    fn buckets(&self) -> u64 {
-        self.instances.iter().map(|i| i.1.len() as u64).sum()
+    fn buckets(&self) -> usize {
+        self.instances.iter().map(|i| i.1.len()).sum()
     }
-    fn cells(&self) -> u64 {
-        self.instances.iter().map(|i| i.2.len() as u64).sum()
-    }
-    /// Plane words of the transforms and buckets (cells vary in length).
-    fn fixed_words(&self) -> u64 {
-        self.transforms.len() as u64 * TRANSFORM_WORDS as u64
-            + self.buckets() * (KEY_WORDS + SLOT_WORDS) as u64
+    fn cells(&self) -> usize {
+        self.instances.iter().map(|i| i.2.len()).sum()
     }
 }
 
@@ -338,96 +489,180 @@ fn parse_index(bytes: &[u8]) -> Result<IndexLayout, DeltaError> {
     })
 }
 
-/// Rebuild the update from the checked layout and planes, updating the reference state.
+/// The payload after the index stream, split into its sections (sizes checked).
+struct Sections<'a> {
+    entry_counts: &'a [u8],
+    cell_lengths: &'a [u8],
+    entry_choices: &'a [u8],
+    point_choices: &'a [u8],
+    keys: Vec<u64>,
+    slots: Vec<u32>,
+    points: Vec<u32>,
+    transforms: Vec<u32>,
+}
+
+impl<'a> Sections<'a> {
+    /// Split `bytes` for `layout` and the header's totals of (entries, points).
+    fn split(
+        layout: &IndexLayout,
+        (entries, points): (usize, usize),
+        bytes: &'a [u8],
+    ) -> Result<Self, DeltaError> {
+        let (nb, nc) = (layout.buckets(), layout.cells());
+        let transform_bytes = layout.transforms.len() as u64 * TRANSFORM_WORDS as u64 * 4;
+        let expected = (nb + nc) as u64
+            + entries as u64 * (1 + ENTRY_BYTES)
+            + points as u64 * (1 + POINT_BYTES)
+            + transform_bytes;
+        if bytes.len() as u64 != expected {
+            return Err(DeltaError::PlaneSize {
+                expected,
+                found: bytes.len() as u64,
+            });
+        }
+        let (entry_counts, rest) = bytes.split_at(nb);
+        let (cell_lengths, rest) = rest.split_at(nc);
+        let (entry_choices, rest) = rest.split_at(entries);
+        let (point_choices, rest) = rest.split_at(points);
+        let (key_planes, rest) = rest.split_at(entries * 8);
+        let (slot_planes, rest) = rest.split_at(entries * 4);
+        let (point_planes, transform_planes) = rest.split_at(points * 4);
+        let mut keys = vec![0u64; entries];
+        for (plane, bytes) in key_planes.chunks_exact(entries.max(1)).enumerate() {
+            for (k, &b) in keys.iter_mut().zip(bytes) {
+                *k |= u64::from(b) << (8 * plane);
+            }
+        }
+        Ok(Self {
+            entry_counts,
+            cell_lengths,
+            entry_choices,
+            point_choices,
+            keys,
+            slots: unshuffle(slot_planes),
+            points: unshuffle(point_planes),
+            transforms: unshuffle(transform_planes),
+        })
+    }
+}
+
+/// Rebuild the update from the checked layout and sections, updating the reference state.
 fn assemble(
     layout: &IndexLayout,
-    lengths: &[u8],
-    planes: &[u8],
+    s: &Sections,
     frame: u64,
     snapshot: bool,
     r: &mut Reference,
 ) -> Result<Update, DeltaError> {
-    let nt = layout.transforms.len() * TRANSFORM_WORDS;
-    let nb = layout.buckets() as usize;
-    let (t_planes, rest) = planes.split_at(nt * 4);
-    let (k_planes, rest) = rest.split_at(nb * KEY_WORDS * 4);
-    let (s_planes, c_planes) = rest.split_at(nb * SLOT_WORDS * 4);
-    let t_words = unshuffle(t_planes);
-    let k_words = unshuffle(k_planes);
-    let s_words = unshuffle(s_planes);
-    let c_words = unshuffle(c_planes);
-
     let transforms = layout
         .transforms
         .iter()
-        .zip(t_words.chunks_exact(TRANSFORM_WORDS))
+        .zip(s.transforms.chunks_exact(TRANSFORM_WORDS))
         .map(|(&instance, coded)| {
-            let words: [u32; TRANSFORM_WORDS] =
-                xor_decode(&mut r.transforms, u64::from(instance), coded);
+            let old = r
+                .transforms
+                .get(&u64::from(instance))
+                .copied()
+                .unwrap_or_default();
+            let words: [u32; TRANSFORM_WORDS] = std::array::from_fn(|i| coded[i] ^ old[i]);
+            r.transforms.insert(u64::from(instance), words);
             (
                 instance,
                 Affine3A::from_cols_array(&words.map(f32::from_bits)),
             )
         })
         .collect();
-    let mut keys = k_words.chunks_exact(KEY_WORDS);
-    let mut slots = s_words.chunks_exact(SLOT_WORDS);
-    let mut cell_words = &c_words[..];
-    let mut lengths = lengths.iter();
-    let instances = layout
-        .instances
-        .iter()
-        .map(|(instance, bucket_ids, slot_ids)| {
-            let buckets = bucket_ids
-                .iter()
-                .zip(keys.by_ref().zip(slots.by_ref()))
-                .map(|(&b, (kc, sc))| {
-                    let k: [u32; KEY_WORDS] = xor_decode(&mut r.keys, key(*instance, b), kc);
-                    let s: [u32; SLOT_WORDS] = xor_decode(&mut r.slots, key(*instance, b), sc);
-                    let mut bucket = Bucket::default();
-                    for (i, e) in bucket.entries.iter_mut().enumerate() {
-                        *e = BucketEntry {
-                            key: u64::from(k[2 * i]) | (u64::from(k[2 * i + 1]) << 32),
-                            slot: s[i],
-                        };
-                    }
-                    (b, bucket)
-                })
-                .collect();
-            let cells = slot_ids
-                .iter()
-                .zip(lengths.by_ref())
-                .map(|(&s, &n)| {
-                    let k = key(*instance, s);
-                    let prev = r.cells.get(&k).copied().unwrap_or_default();
-                    let n = usize::from(n);
-                    if n > CELL_POINTS {
-                        return Err(DeltaError::CellLength(n));
-                    }
-                    let m = n.max(cell_len(&prev));
-                    let (coded, rest) =
-                        cell_words
-                            .split_at_checked(m)
-                            .ok_or(DeltaError::PlaneSize {
-                                expected: c_words.len() as u64 + m as u64,
-                                found: c_words.len() as u64,
-                            })?;
-                    cell_words = rest;
-                    let mut points = prev;
-                    points.iter_mut().zip(coded).for_each(|(p, c)| *p ^= c);
-                    r.cells.insert(k, points);
-                    Ok((s, Cell { points }))
-                })
-                .collect::<Result<_, _>>()?;
-            Ok(InstanceDelta {
-                instance: *instance,
-                buckets,
-                cells,
-            })
-        })
-        .collect::<Result<_, _>>()?;
-    if !cell_words.is_empty() {
-        return Err(DeltaError::Trailing(cell_words.len()));
+    let mut entry_counts = s.entry_counts.iter();
+    let mut cell_lengths = s.cell_lengths.iter();
+    let mut entry = 0usize;
+    let mut point = 0usize;
+    let mut instances = Vec::with_capacity(layout.instances.len());
+    for (instance, bucket_ids, slot_ids) in &layout.instances {
+        let mut buckets = Vec::with_capacity(bucket_ids.len());
+        for (&b, &code) in bucket_ids.iter().zip(entry_counts.by_ref()) {
+            let k = key(*instance, b);
+            let old = r.buckets.get(&k).copied().unwrap_or_default();
+            let n = (usize::from(code) + used_entries(&old.keys)) % (BUCKET_ENTRIES + 1);
+            if usize::from(code) > BUCKET_ENTRIES {
+                return Err(DeltaError::EntryCount(code.into()));
+            }
+            if entry + n > s.entry_choices.len() {
+                return Err(DeltaError::PlaneSize {
+                    expected: (entry + n) as u64,
+                    found: s.entry_choices.len() as u64,
+                });
+            }
+            let mut bucket = Bucket::default();
+            for i in 0..n {
+                let (c, kr, sr) = (s.entry_choices[entry], s.keys[entry], s.slots[entry]);
+                entry += 1;
+                let (t, slot) = if c == RANK_CHOICE {
+                    let slot = slot_ids
+                        .get(sr as usize)
+                        .ok_or(DeltaError::BadChoice("bucket entry"))?;
+                    (kr, *slot)
+                } else if c < RANK_CHOICE {
+                    let o = (i + usize::from(c)) % BUCKET_ENTRIES;
+                    (kr ^ hashed_key(old.keys[o], b), sr ^ old.slots[o])
+                } else {
+                    return Err(DeltaError::BadChoice("bucket entry"));
+                };
+                let key = (t ^ u64::from(b))
+                    .checked_add(1)
+                    .ok_or(DeltaError::BadRecord("bucket key"))?;
+                bucket.entries[i] = BucketEntry { key, slot };
+            }
+            r.buckets.insert(
+                k,
+                Entries {
+                    keys: bucket.entries.map(|e| e.key),
+                    slots: bucket.entries.map(|e| e.slot),
+                },
+            );
+            buckets.push((b, bucket));
+        }
+        let mut cells = Vec::with_capacity(slot_ids.len());
+        let mut previous = [0; CELL_POINTS];
+        for (&slot, &code) in slot_ids.iter().zip(cell_lengths.by_ref()) {
+            let k = key(*instance, slot);
+            let old = r.cells.get(&k).copied().unwrap_or_default();
+            if usize::from(code) > CELL_POINTS {
+                return Err(DeltaError::CellLength(code.into()));
+            }
+            let n = (usize::from(code) + used_points(&old)) % (CELL_POINTS + 1);
+            if point + n > s.point_choices.len() {
+                return Err(DeltaError::PlaneSize {
+                    expected: (point + n) as u64,
+                    found: s.point_choices.len() as u64,
+                });
+            }
+            let mut cell = Cell::default();
+            for i in 0..n {
+                let (c, residual) = (s.point_choices[point], s.points[point]);
+                point += 1;
+                if c >= POINT_CHOICES {
+                    return Err(DeltaError::BadChoice("point"));
+                }
+                if residual & VALID_BIT != 0 {
+                    return Err(DeltaError::BadRecord("point residual"));
+                }
+                let reference = point_reference(c, i, &old, &previous);
+                cell.points[i] = apply_point_residual(residual, reference);
+            }
+            r.cells.insert(k, cell.points);
+            previous = cell.points;
+            cells.push((slot, cell));
+        }
+        instances.push(InstanceDelta {
+            instance: *instance,
+            buckets,
+            cells,
+        });
+    }
+    if entry != s.entry_choices.len() || point != s.point_choices.len() {
+        return Err(DeltaError::Trailing(
+            s.entry_choices.len() - entry + s.point_choices.len() - point,
+        ));
     }
     Ok(Update {
         frame,
@@ -580,6 +815,95 @@ mod tests {
         p.decode(&bytes).unwrap()
     }
 
+    /// A deterministic pseudo-random sequence (SplitMix64).
+    fn rng(seed: u64) -> impl FnMut() -> u64 {
+        let mut state = seed;
+        move || {
+            state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            z ^ (z >> 31)
+        }
+    }
+
+    /// A session like a server's: cells fill point by point (inserted anywhere, so the
+    /// others shift), points move a little and change AO, buckets gain and lose entries
+    /// whose cells arrive in the same update.
+    fn growing_session(seed: u64, frames: u64) -> Vec<Update> {
+        let mut next = rng(seed);
+        let mut cells: Vec<Vec<u32>> = vec![Vec::new(); 64];
+        let mut buckets: Vec<Vec<BucketEntry>> = vec![Vec::new(); 16];
+        let mut session = Vec::new();
+        for frame in 0..frames {
+            let mut changed_cells = std::collections::BTreeSet::new();
+            let mut changed_buckets = std::collections::BTreeSet::new();
+            for _ in 0..12 {
+                let slot = (next() % 64) as usize;
+                let cell = &mut cells[slot];
+                let r = next();
+                match r % 4 {
+                    0 if cell.len() < CELL_POINTS => {
+                        let at = (r >> 8) as usize % (cell.len() + 1);
+                        cell.insert(at, VALID_BIT | (next() as u32 & 0x7fff_ffff));
+                    }
+                    1 if !cell.is_empty() => {
+                        let at = (r >> 8) as usize % cell.len();
+                        cell[at] = (cell[at] & !0xff) | (next() as u32 & 0xff);
+                    }
+                    2 if !cell.is_empty() => {
+                        let at = (r >> 8) as usize % cell.len();
+                        cell[at] ^= 1 << (16 + (r >> 16) % 15);
+                    }
+                    3 if !cell.is_empty() => {
+                        cell.remove((r >> 8) as usize % cell.len());
+                    }
+                    _ => continue,
+                }
+                changed_cells.insert(slot as u32);
+                let b = slot % 16;
+                let entry = BucketEntry::new(b as u64 + 16 * slot as u64, slot as u32);
+                let bucket = &mut buckets[b];
+                let present = bucket.iter().position(|e| *e == entry);
+                match (cell.is_empty(), present) {
+                    (true, Some(k)) => {
+                        bucket.remove(k);
+                    }
+                    (false, None) => bucket.insert((r >> 32) as usize % (bucket.len() + 1), entry),
+                    _ => continue,
+                }
+                changed_buckets.insert(b as u32);
+            }
+            let to_cell = |c: &Vec<u32>| {
+                let mut cell = Cell::default();
+                cell.points[..c.len()].copy_from_slice(c);
+                cell
+            };
+            let to_bucket = |entries: &Vec<BucketEntry>| {
+                let mut bucket = Bucket::default();
+                bucket.entries[..entries.len()].copy_from_slice(entries);
+                bucket
+            };
+            session.push(Update {
+                frame,
+                snapshot: frame == 0,
+                transforms: vec![(0, Affine3A::from_translation(glam::Vec3::X * frame as f32))],
+                instances: vec![InstanceDelta {
+                    instance: 1,
+                    buckets: changed_buckets
+                        .iter()
+                        .map(|&b| (b, to_bucket(&buckets[b as usize])))
+                        .collect(),
+                    cells: changed_cells
+                        .iter()
+                        .map(|&s| (s, to_cell(&cells[s as usize])))
+                        .collect(),
+                }],
+            });
+        }
+        session
+    }
+
     #[test]
     fn round_trips_a_session_like_the_paper_codec() {
         let mut enc = CompactCodec::new();
@@ -598,6 +922,67 @@ mod tests {
     }
 
     #[test]
+    fn round_trips_growing_shifting_and_moving_records() {
+        for seed in 0..4 {
+            let mut enc = CompactCodec::new();
+            let mut dec = CompactCodec::new();
+            for u in growing_session(seed, 200) {
+                let bytes = enc.encode(&u);
+                assert_eq!(
+                    dec.decode(&bytes).unwrap(),
+                    paper_round_trip(&u),
+                    "seed {seed}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn mutated_payloads_give_errors_or_updates_never_panics() {
+        // The parsers behind zstd's checksum: change a few bytes of real payloads (from a
+        // decoder state that has seen the session so far) and decode.
+        let mut next = rng(11);
+        let mut enc = CompactCodec::new();
+        let mut dec = CompactCodec::new();
+        let (mut rejected, mut accepted) = (0, 0);
+        for u in growing_session(5, 40) {
+            let bytes = enc.encode(&u);
+            let payload = crate::zstd_io::decompress(&bytes, MAX_DECODED_BYTES).unwrap();
+            for _ in 0..50 {
+                let mut bad = payload.clone();
+                for _ in 0..1 + next() % 4 {
+                    let at = (next() % bad.len() as u64) as usize;
+                    bad[at] = next() as u8;
+                }
+                match dec.clone().decode(&crate::zstd_io::compress(&bad, 1)) {
+                    Ok(_) => accepted += 1,
+                    Err(_) => rejected += 1,
+                }
+            }
+            assert_eq!(dec.decode(&bytes).unwrap(), paper_round_trip(&u));
+        }
+        // Most changes hit residual bytes, which decode to other valid records.
+        assert!(rejected > 0 && accepted > 0, "{rejected} / {accepted}");
+    }
+
+    #[test]
+    fn point_residuals_invert_for_any_reference() {
+        let mut next = rng(7);
+        for _ in 0..100_000 {
+            let word = VALID_BIT | (next() as u32 & !VALID_BIT);
+            let reference = next() as u32;
+            let residual = point_residual(word, reference);
+            assert_eq!(residual & VALID_BIT, 0);
+            assert_eq!(apply_point_residual(residual, reference), word);
+        }
+        let p = VALID_BIT | (7 << 26) | (3 << 16) | 200;
+        assert_eq!(point_residual(p, p), 0, "an unchanged point costs nothing");
+        // One step down in x and +2 in AO are small residuals.
+        let moved = p - (1 << 26) + 2;
+        assert_eq!(point_residual(moved, p), (1 << 26) | 4);
+    }
+
+    #[test]
     fn unchanged_records_cost_almost_nothing() {
         let mut enc = CompactCodec::new();
         let first = enc.encode(&update(1, true, 10, 0..2000));
@@ -608,6 +993,138 @@ mod tests {
             again.len(),
             first.len()
         );
+    }
+
+    #[test]
+    fn a_point_inserted_into_a_cell_costs_about_one_point() {
+        // 2000 cells of 3 points, then the same cells with a fourth point inserted first
+        // (every old point shifts by one).
+        let mut next = rng(3);
+        let points: Vec<[u32; 4]> = (0..2000)
+            .map(|_| std::array::from_fn(|_| VALID_BIT | (next() as u32 & 0x7fff_ffff)))
+            .collect();
+        let cells = |with_new: bool| {
+            let cells = points.iter().enumerate().map(|(s, p)| {
+                let mut cell = Cell::default();
+                let src = if with_new { &p[..] } else { &p[1..] };
+                cell.points[..src.len()].copy_from_slice(src);
+                (s as u32, cell)
+            });
+            Update {
+                frame: 0,
+                snapshot: !with_new,
+                transforms: vec![],
+                instances: vec![InstanceDelta {
+                    instance: 0,
+                    buckets: vec![],
+                    cells: cells.collect(),
+                }],
+            }
+        };
+        let mut enc = CompactCodec::new();
+        let first = enc.encode(&cells(false)).len();
+        let grown = enc.encode(&cells(true)).len();
+        assert!(grown * 2 < first, "{grown} bytes after {first}");
+    }
+
+    /// Decompress, let `edit` change the payload (given its section offsets), recompress.
+    fn edited(bytes: &[u8], edit: impl FnOnce(&mut Vec<u8>, &Offsets)) -> Vec<u8> {
+        let mut payload = crate::zstd_io::decompress(bytes, MAX_DECODED_BYTES).unwrap();
+        let word = |i: usize| u32::from_le_bytes(payload[i..i + 4].try_into().unwrap()) as usize;
+        let index = HEADER_BYTES + word(16);
+        let layout = parse_index(&payload[HEADER_BYTES..index]).unwrap();
+        let (entries, words) = (word(20), word(24));
+        let lengths = index + layout.buckets();
+        let entry_choices = lengths + layout.cells();
+        let point_choices = entry_choices + entries;
+        let keys = point_choices + words;
+        let slots = keys + 8 * entries;
+        let offsets = Offsets {
+            counts: index,
+            lengths,
+            entry_choices,
+            point_choices,
+            keys,
+            slots,
+            points: slots + 4 * entries,
+            entries,
+            words,
+        };
+        edit(&mut payload, &offsets);
+        crate::zstd_io::compress(&payload, 1)
+    }
+
+    /// A change to a payload, given its section offsets.
+    type Edit = dyn Fn(&mut Vec<u8>, &Offsets);
+
+    /// Byte offsets of the payload's sections.
+    struct Offsets {
+        counts: usize,
+        lengths: usize,
+        entry_choices: usize,
+        point_choices: usize,
+        keys: usize,
+        slots: usize,
+        points: usize,
+        entries: usize,
+        words: usize,
+    }
+
+    #[test]
+    fn rejects_bad_choices_counts_and_residuals() {
+        let u = update(1, true, 10, 0..20);
+        let good = CompactCodec::new().encode(&u);
+        let decode = |bytes: &[u8]| CompactCodec::new().decode(bytes);
+        assert_eq!(decode(&good).unwrap(), paper_round_trip(&u));
+        let cases: [(&str, Box<Edit>); 7] = [
+            (
+                "point choice",
+                Box::new(|p, o| p[o.point_choices] = POINT_CHOICES),
+            ),
+            (
+                "entry choice",
+                Box::new(|p, o| p[o.entry_choices] = RANK_CHOICE + 1),
+            ),
+            (
+                "rank",
+                Box::new(|p, o| {
+                    p[o.entry_choices] = RANK_CHOICE;
+                    p[o.slots + 3 * o.entries] = 0xff;
+                }),
+            ),
+            ("entry count", Box::new(|p, o| p[o.counts] = 9)),
+            ("cell length", Box::new(|p, o| p[o.lengths] = 8)),
+            (
+                "valid bit",
+                Box::new(|p, o| p[o.points + 3 * o.words] |= 0x80),
+            ),
+            (
+                "key",
+                Box::new(|p, o| {
+                    // key − 1 = residual XOR bucket index = 2^64 − 1: no key.
+                    p[o.entry_choices] = 0;
+                    for plane in 0..8 {
+                        p[o.keys + plane * o.entries] = 0xff;
+                    }
+                    p[o.keys] ^= 7; // the first bucket is bucket 7
+                }),
+            ),
+        ];
+        for (what, edit) in cases {
+            let bytes = edited(&good, |p, o| edit(p, o));
+            assert!(decode(&bytes).is_err(), "{what} accepted");
+        }
+        // Totals in the header that disagree with the counts.
+        let more = edited(&good, |p, o| {
+            let total = (o.words as u32 + 1).to_le_bytes();
+            p[24..28].copy_from_slice(&total);
+            p.insert(o.points, 0);
+        });
+        assert!(matches!(decode(&more), Err(DeltaError::PlaneSize { .. })));
+        let fewer = edited(&good, |p, o| {
+            p[o.lengths] = (p[o.lengths] + 1) % 8;
+        });
+        assert!(decode(&fewer).is_err());
     }
 
     #[test]
@@ -627,21 +1144,34 @@ mod tests {
         // Well-compressed but wrong payloads.
         let z = |p: &[u8]| crate::zstd_io::compress(p, 1);
         assert!(matches!(
-            dec.decode(&z(b"PSD1")),
+            dec.decode(&z(b"PSC2")),
             Err(DeltaError::Truncated { .. })
         ));
+        let mut old = vec![0u8; HEADER_BYTES];
+        old[..4].copy_from_slice(b"PSC1");
+        assert!(matches!(
+            dec.decode(&z(&old)),
+            Err(DeltaError::BadTag { .. })
+        ));
         let mut p = Vec::new();
-        p.extend_from_slice(b"PSC1");
+        p.extend_from_slice(b"PSC2");
         p.extend_from_slice(&0u32.to_le_bytes());
         p.extend_from_slice(&7u64.to_le_bytes());
         p.extend_from_slice(&3u32.to_le_bytes());
+        p.extend_from_slice(&0u32.to_le_bytes());
         p.extend_from_slice(&0u32.to_le_bytes());
         p.extend_from_slice(&[1, 2, 0]); // one transform, no instances, but no planes
         assert!(matches!(
             dec.decode(&z(&p)),
             Err(DeltaError::PlaneSize { .. })
         ));
-        let mut huge = p[..24].to_vec();
+        let mut totals = p.clone();
+        totals[20..28].copy_from_slice(&[0xff; 8]); // 4 G entries and points claimed
+        assert!(matches!(
+            dec.decode(&z(&totals)),
+            Err(DeltaError::PlaneSize { .. })
+        ));
+        let mut huge = p[..HEADER_BYTES].to_vec();
         huge[16] = 11;
         huge.extend_from_slice(&[0xff; 10]); // a varint longer than 64 bits
         huge.push(0);
@@ -649,7 +1179,7 @@ mod tests {
             dec.decode(&z(&huge)),
             Err(DeltaError::BadVarint(_))
         ));
-        let mut count = p[..24].to_vec();
+        let mut count = p[..HEADER_BYTES].to_vec();
         count[16] = 5;
         count.extend_from_slice(&[0xff, 0xff, 0xff, 0xff, 0x0f]); // 4 G transforms
         assert!(matches!(

@@ -61,4 +61,13 @@ pub enum DeltaError {
     /// A cell length above the 7 points a cell holds.
     #[error("cell length {0} exceeds 7 points")]
     CellLength(usize),
+    /// A bucket entry count above the 8 entries a bucket holds.
+    #[error("bucket entry count {0} exceeds 8 entries")]
+    EntryCount(usize),
+    /// A reference choice out of range (or a cell position past the update's cells).
+    #[error("bad reference choice for a {0}")]
+    BadChoice(&'static str),
+    /// A residual that decodes to no valid record.
+    #[error("bad {0}")]
+    BadRecord(&'static str),
 }

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use crate::WireError;
 
 /// Protocol version spoken here; a hello with another version is refused.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Longest access token, bytes.
 pub const MAX_TOKEN: usize = 256;
 /// Longest free-text field (names, reasons, error messages), bytes.

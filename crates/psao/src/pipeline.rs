@@ -57,6 +57,8 @@ pub struct FrameRecord {
     pub animate_ms: f64,
     /// Server time (step + delta + encode) in ms.
     pub server_ms: f64,
+    /// Part of `server_ms` spent encoding the update.
+    pub encode_ms: f64,
     /// Client time (decode + apply + rasterize + reconstruct) in ms; 0 when nothing was rendered.
     pub client_ms: f64,
 }
@@ -156,7 +158,9 @@ impl<'a> Pipeline<'a> {
             record.retraced_points = stats.retraced_points;
             record.retrace_rays = stats.retrace_rays;
             let update = self.server.update_for(self.client_id);
+            let t_encode = Instant::now();
             let encoded = self.encoder.encode(&update);
+            record.encode_ms = t_encode.elapsed().as_secs_f64() * 1e3;
             record.server_ms = t.elapsed().as_secs_f64() * 1e3;
             record.server_frame = true;
             record.rays = stats.rays;

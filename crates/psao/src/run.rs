@@ -24,7 +24,8 @@ pub struct ServerTuning {
     /// Samples after which a point counts as converged and is not traced again.
     #[arg(long, default_value_t = ServerConfig::default().max_samples)]
     pub max_samples: u32,
-    /// Update codec: `compact` (XOR + byte planes + zstd 3) or `paper` (raw records + zstd 15).
+    /// Update codec: `compact` (records predicted from what was last sent + byte planes +
+    /// zstd 3) or `paper` (raw records + zstd 15).
     #[arg(long, default_value = "compact")]
     pub codec: String,
     /// Ray-tracing backend, `obvhs` or `embree` (default: the fastest compiled in).
@@ -136,8 +137,20 @@ pub struct RunStats {
     pub mbit_s: f64,
     /// Hash of the client's final buckets + cells.
     pub state_hash: String,
+    /// Mean time to encode one update, ms over the server frames.
+    pub encode_ms: f64,
     /// Per-frame records.
     pub per_frame: Vec<FrameRecord>,
+}
+
+/// Mean [`FrameRecord::encode_ms`] over the server frames (0 without any).
+fn mean_encode_ms(records: &[FrameRecord]) -> f64 {
+    let server: Vec<f64> = records
+        .iter()
+        .filter(|r| r.server_frame)
+        .map(|r| r.encode_ms)
+        .collect();
+    server.iter().sum::<f64>() / server.len().max(1) as f64
 }
 
 /// Runs `psao run`.
@@ -183,6 +196,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         total_bytes: pipeline.total_bytes,
         mbit_s: pipeline.total_bytes as f64 * 8.0 / seconds / 1e6,
         state_hash: format!("{:016x}", pipeline.client().state_hash()),
+        encode_ms: mean_encode_ms(&records),
         per_frame: records,
     };
     let stats_file = args.out.join("stats.json");
