@@ -111,7 +111,7 @@ mod tests {
             None,
         )
         .unwrap();
-        InstanceState::new(&points, Affine3A::IDENTITY, 0, 0, false).unwrap()
+        InstanceState::new(&points, Affine3A::IDENTITY, 0, 0, false, 256).unwrap()
     }
 
     /// A stored point whose x lies in the middle of its cell (room to move 4 steps).
