@@ -18,8 +18,6 @@ use crate::dynamics::{Dynamics, Restarted};
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select, trace};
-#[cfg(test)]
-use crate::Invalidation;
 use crate::{ClientId, Frustum, ServerConfig, ServerError, View};
 
 /// What one [`Server::step`] did.

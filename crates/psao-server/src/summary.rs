@@ -161,57 +161,93 @@ impl BlockSummaries {
                 self.state(blocks, points, blocks.order[k] as usize, k)
             })
             .collect();
-        let update =
-            |b: usize, entries: &mut [u32], listed: &mut [u16], stored: &mut u32, len: &mut u16| {
-                let Ok(g) = groups.binary_search_by_key(&b, |g| g.0) else {
-                    return;
-                };
-                let (_, from, to) = groups[g];
-                for (&k, &new) in ks[from..to].iter().zip(&states[from..to]) {
-                    let offset = k as usize - b * BLOCK_POINTS;
-                    let old = std::mem::replace(&mut listed[offset], new);
-                    if old == new {
-                        continue;
-                    }
-                    if old == UNSTORED {
-                        *stored += 1;
-                    } else if new == UNSTORED {
-                        *stored -= 1;
-                    }
-                    let mut n = usize::from(*len);
-                    if old <= LAST_BIN {
-                        let e = entry(old, offset);
-                        let at = entries[..n].partition_point(|&x| x < e);
-                        debug_assert_eq!(entries[at], e, "listed entries mirror `listed`");
-                        entries.copy_within(at + 1..n, at);
-                        n -= 1;
-                    }
-                    if new <= LAST_BIN {
-                        let e = entry(new, offset);
-                        let at = entries[..n].partition_point(|&x| x < e);
-                        entries.copy_within(at..n, at + 1);
-                        entries[at] = e;
-                        n += 1;
-                    }
-                    *len = n as u16;
+        let update = |(b, from, to): (usize, usize, usize),
+                      entries: &mut [u32],
+                      listed: &mut [u16],
+                      stored: &mut u32,
+                      len: &mut u16| {
+            // The entries leaving and joining the block.
+            let (mut gone, mut added) = (Vec::new(), Vec::new());
+            for (&k, &new) in ks[from..to].iter().zip(&states[from..to]) {
+                let offset = k as usize - b * BLOCK_POINTS;
+                let old = std::mem::replace(&mut listed[offset], new);
+                if old == new {
+                    continue;
                 }
-            };
-        self.entries
-            .par_chunks_mut(BLOCK_POINTS)
-            .zip(self.listed.par_chunks_mut(BLOCK_POINTS))
-            .zip(self.stored.par_iter_mut())
-            .zip(self.len.par_iter_mut())
-            .enumerate()
-            .with_min_len(64)
-            .for_each(|(b, (((entries, listed), stored), len))| {
-                update(b, entries, listed, stored, len)
-            });
+                if old == UNSTORED {
+                    *stored += 1;
+                } else if new == UNSTORED {
+                    *stored -= 1;
+                }
+                if old <= LAST_BIN {
+                    gone.push(entry(old, offset));
+                }
+                if new <= LAST_BIN {
+                    added.push(entry(new, offset));
+                }
+            }
+            if gone.is_empty() && added.is_empty() {
+                return;
+            }
+            gone.sort_unstable();
+            added.sort_unstable();
+            // One merge pass: the kept entries and the added ones.
+            let n = usize::from(*len);
+            let mut buffer = [0u32; BLOCK_POINTS];
+            let mut n_kept = 0;
+            let mut g = gone.iter().peekable();
+            for &e in &entries[..n] {
+                if g.peek() == Some(&&e) {
+                    g.next();
+                } else {
+                    buffer[n_kept] = e;
+                    n_kept += 1;
+                }
+            }
+            let kept = &buffer[..n_kept];
+            debug_assert!(g.next().is_none(), "listed entries mirror `listed`");
+            let (mut a, mut c) = (0, 0);
+            for slot in entries.iter_mut().take(kept.len() + added.len()) {
+                if c == added.len() || (a < kept.len() && kept[a] < added[c]) {
+                    *slot = kept[a];
+                    a += 1;
+                } else {
+                    *slot = added[c];
+                    c += 1;
+                }
+            }
+            *len = (kept.len() + added.len()) as u16;
+        };
+        // The blocks with changes (groups ascend by block), then their updates in parallel.
+        let mut parts = self
+            .entries
+            .chunks_mut(BLOCK_POINTS)
+            .zip(self.listed.chunks_mut(BLOCK_POINTS))
+            .zip(self.stored.iter_mut())
+            .zip(self.len.iter_mut())
+            .enumerate();
+        let work: Vec<_> = groups
+            .iter()
+            .filter_map(|g| parts.find(|(b, _)| *b == g.0).map(|(_, parts)| (*g, parts)))
+            .collect();
+        work.into_par_iter().with_min_len(16).for_each(
+            |(g, (((entries, listed), stored), len))| update(g, entries, listed, stored, len),
+        );
     }
 
     /// Stored points of block `b`.
     #[inline]
     pub fn stored(&self, b: usize) -> u32 {
         self.stored[b]
+    }
+
+    /// Stored points among positions `range` of [`CullBlocks::order`].
+    #[inline]
+    pub fn stored_in(&self, range: std::ops::Range<usize>) -> usize {
+        self.listed[range]
+            .iter()
+            .filter(|&&s| s != UNSTORED)
+            .count()
     }
 
     /// The listed entries of block `b` (its unconverged stored points), ascending.
@@ -269,6 +305,7 @@ mod tests {
                 .collect();
             expected.sort_unstable();
             assert_eq!(s.stored(b) as usize, stored, "block {b}");
+            assert_eq!(s.stored_in(range.clone()), stored, "block {b}");
             assert_eq!(s.entries(b), &expected[..], "block {b}");
         }
     }
@@ -300,18 +337,20 @@ mod tests {
             let mut changed = Vec::new();
             for i in 0..n {
                 let h = hash64(i as u64 ^ (round << 40));
-                match h % 11 {
+                match h % 29 {
                     0 | 1 => p.count[i] = (p.count[i] + 16).min(max),
                     2 => p.count[i] = 0,
                     3 => p.slot[i] = if p.slot[i] == NONE { i as u32 } else { NONE },
                     _ => continue,
                 }
                 changed.push(i as u32);
-                if h % 5 == 0 {
+                if h.is_multiple_of(5) {
                     changed.push(i as u32);
                 }
             }
             changed.reverse();
+            // Few enough for the incremental path.
+            assert!(changed.len() < n / 4, "{}", changed.len());
             s.refresh(&blocks, &p, &changed);
             assert_consistent(&s, &blocks, &p, max);
         }

@@ -7,7 +7,7 @@ use psao_trace::ao::{ao_rays_range, medium_stream, sample_value, Medium, MediumS
 use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
 use rayon::prelude::*;
 
-use crate::blocks::{Side, BLOCK_POINTS};
+use crate::blocks::{side, Side, BLOCK_POINTS, SUBS_PER_BLOCK, SUB_POINTS};
 use crate::frustum::Frustum;
 use crate::instance::{InstanceState, NONE};
 use crate::summary::{bin, bin_of, count_up_to, offset_of, LAST_BIN};
@@ -50,6 +50,9 @@ pub(crate) struct Traced {
 pub(crate) fn sample_key(instance: u32, index: u32) -> u64 {
     (u64::from(instance) << 32) | u64::from(index)
 }
+
+// A sub-block is one word of a block's visibility mask.
+const _: () = assert!(SUB_POINTS == 64 && BLOCK_POINTS.is_multiple_of(SUB_POINTS));
 
 /// A block with visible points to select from: its instance, the position of its first
 /// point in the instance's block order, and the summary entries of its visible unconverged
@@ -100,11 +103,11 @@ pub(crate) fn cull(
         .filter(|(ii, _)| !near[*ii].is_empty())
         .flat_map(|(ii, inst)| (0..inst.blocks.blocks.len() as u32).map(move |b| (ii as u32, b)))
         .collect();
-    let (visible, blocks) = work
+    let (visible, blocks, window) = work
         .par_iter()
         .fold(
-            || (0usize, Vec::new()),
-            |(mut visible, mut out), &(ii, b)| {
+            || (0usize, Vec::new(), BinWindow::around(guess)),
+            |(mut visible, mut out, mut window), &(ii, b)| {
                 let inst = &instances[ii as usize];
                 let block = &inst.blocks.blocks[b as usize];
                 let mut straddling: Vec<&Frustum> = Vec::new();
@@ -126,39 +129,67 @@ pub(crate) fn cull(
                 } else if !straddling.is_empty() {
                     let mut mask = [0u64; BLOCK_POINTS / 64];
                     let (p, order) = (&inst.points, &inst.blocks.order);
-                    for k in block.start as usize..block.end as usize {
-                        let i = order[k] as usize;
-                        if p.slot[i] == NONE {
+                    let start = block.start as usize;
+                    let subs = &inst.blocks.subs[b as usize * SUBS_PER_BLOCK..];
+                    let mut sub_straddling: Vec<&Frustum> = Vec::new();
+                    for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
+                        let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
+                        sub_straddling.clear();
+                        let mut sub_inside = false;
+                        for f in &straddling {
+                            match side(subs[j], &inst.transform, f, inst.slack) {
+                                Side::Inside => {
+                                    sub_inside = true;
+                                    break;
+                                }
+                                Side::Straddles => sub_straddling.push(f),
+                                Side::Outside => {}
+                            }
+                        }
+                        if sub_inside {
+                            // Listed entries are stored points: marking all is enough.
+                            visible += inst.summaries.stored_in(range);
+                            mask[(k0 - start) / 64] = u64::MAX;
                             continue;
                         }
-                        let w = inst.transform.transform_point3(p.position[i]);
-                        if straddling.iter().any(|f| f.contains(w, inst.slack)) {
-                            visible += 1;
-                            let offset = k - block.start as usize;
-                            mask[offset / 64] |= 1 << (offset % 64);
+                        if sub_straddling.is_empty() {
+                            continue;
+                        }
+                        for k in range {
+                            let i = order[k] as usize;
+                            if p.slot[i] == NONE {
+                                continue;
+                            }
+                            let w = inst.transform.transform_point3(p.position[i]);
+                            if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
+                                visible += 1;
+                                let offset = k - start;
+                                mask[offset / 64] |= 1 << (offset % 64);
+                            }
                         }
                     }
                     let seen =
                         |e: &&u32| mask[offset_of(**e) / 64] & (1 << (offset_of(**e) % 64)) != 0;
                     Cow::Owned(summary.iter().filter(seen).copied().collect())
                 } else {
-                    return (visible, out);
+                    return (visible, out, window);
                 };
                 if !entries.is_empty() {
+                    window.add(&entries);
                     out.push(VisibleBlock {
                         instance: ii,
                         start: block.start,
                         entries,
                     });
                 }
-                (visible, out)
+                (visible, out, window)
             },
         )
         .reduce(
-            || (0, Vec::new()),
-            |(n, mut a), (m, mut b)| {
+            || (0, Vec::new(), BinWindow::around(guess)),
+            |(n, mut a, w), (m, mut b, v)| {
                 a.append(&mut b);
-                (n + m, a)
+                (n + m, a, w.merge(&v))
             },
         );
     if max_points == 0 {
@@ -168,11 +199,12 @@ pub(crate) fn cull(
             cut: 0,
         };
     }
-    let total: usize = blocks.iter().map(|b| b.entries.len()).sum();
-    let cut = if total <= max_points {
+    let cut = if window.total <= max_points {
         LAST_BIN
     } else {
-        find_cut(&blocks, max_points, guess)
+        window
+            .cut(max_points)
+            .unwrap_or_else(|start| find_cut(&blocks, max_points, start))
     };
     let candidates = blocks
         .par_iter()
@@ -191,7 +223,7 @@ pub(crate) fn cull(
                 }
             })
         })
-        .collect();
+        .collect::<Vec<_>>();
     Culled {
         visible,
         candidates,
@@ -199,15 +231,79 @@ pub(crate) fn cull(
     }
 }
 
+/// Selection bins counted around the guessed cut in the culling pass.
+const WINDOW_BINS: usize = 32;
+/// Bins of the window below the guess (the cut mostly moves up as points take samples).
+const WINDOW_BELOW: u16 = 4;
+
+/// Entry counts of a window of bins, and of the entries below it and in all.
+#[derive(Clone, Copy)]
+struct BinWindow {
+    first: u16,
+    below: usize,
+    total: usize,
+    counts: [u32; WINDOW_BINS],
+}
+
+impl BinWindow {
+    /// An empty window starting a little below `guess`.
+    fn around(guess: u16) -> Self {
+        Self {
+            first: guess.min(LAST_BIN).saturating_sub(WINDOW_BELOW),
+            below: 0,
+            total: 0,
+            counts: [0; WINDOW_BINS],
+        }
+    }
+
+    /// Count ascending `entries`.
+    fn add(&mut self, entries: &[u32]) {
+        self.total += entries.len();
+        let below = match self.first {
+            0 => 0,
+            f => count_up_to(entries, f - 1),
+        };
+        self.below += below;
+        for &e in &entries[below..] {
+            let at = usize::from(bin_of(e) - self.first);
+            if at >= WINDOW_BINS {
+                break;
+            }
+            self.counts[at] += 1;
+        }
+    }
+
+    fn merge(mut self, other: &BinWindow) -> Self {
+        self.below += other.below;
+        self.total += other.total;
+        for (a, b) in self.counts.iter_mut().zip(&other.counts) {
+            *a += b;
+        }
+        self
+    }
+
+    /// The smallest bin holding, with all below it, `max_points` entries when it lies in
+    /// the window; otherwise `Err` with a bin to search from.
+    fn cut(&self, max_points: usize) -> Result<u16, u16> {
+        if self.below >= max_points {
+            return Err(self.first.saturating_sub(1));
+        }
+        let mut n = self.below;
+        for (j, &c) in self.counts.iter().enumerate() {
+            n += c as usize;
+            if n >= max_points {
+                return Ok(self.first + j as u16);
+            }
+        }
+        Err((usize::from(self.first) + WINDOW_BINS).min(usize::from(LAST_BIN)) as u16)
+    }
+}
+
 /// The smallest bin that, with all below it, holds at least `max_points` of the entries of
 /// `blocks` (which hold more than `max_points`): galloping from `guess`, then bisecting.
 fn find_cut(blocks: &[VisibleBlock], max_points: usize, guess: u16) -> u16 {
     let enough = |bin: u16| -> bool {
-        let n: usize = blocks
-            .par_iter()
-            .with_min_len(256)
-            .map(|b| count_up_to(&b.entries, bin))
-            .sum();
+        let n: usize = blocks.iter().map(|b| count_up_to(&b.entries, bin)).sum();
         n >= max_points
     };
     // Invariant: `lo` (-1: none) has too few entries, `hi` enough.
