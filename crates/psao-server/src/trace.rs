@@ -457,7 +457,12 @@ fn trace_batch(
                 .zip(&hits[at..at + n])
                 .zip(job.first..)
                 .map(|((ray, hit), i)| {
-                    let stream = medium_stream(seed, key, i);
+                    // The stream only matters to a medium.
+                    let stream = if medium.is_some() {
+                        medium_stream(seed, key, i)
+                    } else {
+                        0
+                    };
                     sample_value(ray, hit.as_ref(), radius, medium.as_deref_mut(), stream)
                 })
                 .sum();
