@@ -109,44 +109,60 @@ impl CullBlocks {
 }
 
 impl Block {
-    /// Where the block, under `transform`, lies relative to `frustum` grown by `slack`
-    /// (see [`side`]).
-    pub fn side(&self, transform: &Affine3A, frustum: &Frustum, slack: f32) -> Side {
-        side((self.lo, self.hi), transform, frustum, slack)
+    /// The block placed in the world by `transform`.
+    pub fn world(&self, transform: &Affine3A) -> WorldBox {
+        WorldBox::new((self.lo, self.hi), transform)
     }
 }
 
-/// Where the local box `(lo, hi)`, under `transform`, lies relative to `frustum` grown by
-/// `slack`. Conservative with a margin for rounding: `Inside` and `Outside` hold for every
-/// point in the box that the per-point test [`Frustum::contains`] would see.
-pub(crate) fn side(
-    (lo, hi): (Vec3, Vec3),
-    transform: &Affine3A,
-    frustum: &Frustum,
-    slack: f32,
-) -> Side {
-    let centre = transform.transform_point3((lo + hi) * 0.5);
-    let half = (hi - lo) * 0.5;
-    let m = transform.matrix3;
-    let extent = m.x_axis.abs() * half.x + m.y_axis.abs() * half.y + m.z_axis.abs() * half.z;
-    let size = Vec3::from(extent).max_element() + centre.abs().max_element();
-    let mut inside = true;
-    for plane in frustum.planes() {
-        let n = plane.truncate();
-        let d = n.dot(centre) + plane.w;
-        let r = n.abs().dot(extent.into());
-        // Rounding of the per-point transform and dot product stays far below this.
-        let eps = 1e-4 * (1.0 + size + plane.w.abs());
-        if d + r < -slack - eps {
-            return Side::Outside;
+/// A local box placed in the world: centre, half extents along the world axes, and its
+/// magnitude (for the rounding margin). Computed once, tested against several frusta.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct WorldBox {
+    centre: Vec3,
+    extent: Vec3,
+    size: f32,
+}
+
+impl WorldBox {
+    /// The box `(lo, hi)` under `transform`.
+    #[inline]
+    pub fn new((lo, hi): (Vec3, Vec3), transform: &Affine3A) -> Self {
+        let centre = transform.transform_point3((lo + hi) * 0.5);
+        let half = (hi - lo) * 0.5;
+        let m = transform.matrix3;
+        let extent = m.x_axis.abs() * half.x + m.y_axis.abs() * half.y + m.z_axis.abs() * half.z;
+        let extent = Vec3::from(extent);
+        Self {
+            centre,
+            extent,
+            size: extent.max_element() + centre.abs().max_element(),
         }
-        // NaN planes (degenerate views) fail this and leave the decision to the points.
-        inside &= d - r >= -slack + eps;
     }
-    if inside {
-        Side::Inside
-    } else {
-        Side::Straddles
+
+    /// Where the box lies relative to `frustum` grown by `slack`. Conservative with a
+    /// margin for rounding: `Inside` and `Outside` hold for every point in the box that the
+    /// per-point test [`Frustum::contains`] would see.
+    #[inline]
+    pub fn side(&self, frustum: &Frustum, slack: f32) -> Side {
+        let mut inside = true;
+        for plane in frustum.planes() {
+            let n = plane.truncate();
+            let d = n.dot(self.centre) + plane.w;
+            let r = n.abs().dot(self.extent);
+            // Rounding of the per-point transform and dot product stays far below this.
+            let eps = 1e-4 * (1.0 + self.size + plane.w.abs());
+            if d + r < -slack - eps {
+                return Side::Outside;
+            }
+            // NaN planes (degenerate views) fail this and leave the decision to the points.
+            inside &= d - r >= -slack + eps;
+        }
+        if inside {
+            Side::Inside
+        } else {
+            Side::Straddles
+        }
     }
 }
 
@@ -259,7 +275,7 @@ mod tests {
                 (*s, start..(start + SUB_POINTS as u32).min(p.len() as u32))
             });
             for (bounds, range) in blocks.chain(subs) {
-                let side = side(bounds, &transform, &f, 0.05);
+                let side = WorldBox::new(bounds, &transform).side(&f, 0.05);
                 sides[side as usize] += 1;
                 let mut inside = b.order[range.start as usize..range.end as usize]
                     .iter()

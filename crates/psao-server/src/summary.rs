@@ -15,6 +15,8 @@ pub(crate) const LAST_BIN: u16 = 0xFFFD;
 const CONVERGED: u16 = 0xFFFE;
 /// `listed` value of a point that is not stored.
 const UNSTORED: u16 = 0xFFFF;
+/// Changed entries of a block up to which they are shifted in place rather than merged.
+const FEW_CHANGES: usize = 8;
 /// Sample counts with a level of their own; counts from here on share [`LAST_BIN`].
 const COUNT_LEVELS: u32 = 255;
 
@@ -189,6 +191,24 @@ impl BlockSummaries {
             if gone.is_empty() && added.is_empty() {
                 return;
             }
+            if gone.len() + added.len() <= FEW_CHANGES {
+                // Shift entries in place (cheaper than a merge pass for a few changes).
+                let mut n = usize::from(*len);
+                for e in gone {
+                    let at = entries[..n].partition_point(|&x| x < e);
+                    debug_assert_eq!(entries[at], e, "listed entries mirror `listed`");
+                    entries.copy_within(at + 1..n, at);
+                    n -= 1;
+                }
+                for e in added {
+                    let at = entries[..n].partition_point(|&x| x < e);
+                    entries.copy_within(at..n, at + 1);
+                    entries[at] = e;
+                    n += 1;
+                }
+                *len = n as u16;
+                return;
+            }
             gone.sort_unstable();
             added.sort_unstable();
             // One merge pass: the kept entries and the added ones.
@@ -354,6 +374,14 @@ mod tests {
             s.refresh(&blocks, &p, &changed);
             assert_consistent(&s, &blocks, &p, max);
         }
+        // A few changes per block (shifted in place rather than merged).
+        let few: Vec<u32> = (0..n as u32).step_by(97).collect();
+        for &i in &few {
+            let i = i as usize;
+            p.count[i] = if p.count[i] == 0 { 5 } else { 0 };
+        }
+        s.refresh(&blocks, &p, &few);
+        assert_consistent(&s, &blocks, &p, max);
         // A rebuild after changes nobody reported matches as well.
         for i in 0..n {
             p.count[i] = (p.count[i] * 3 + 1) % (max + 2);

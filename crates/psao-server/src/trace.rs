@@ -7,7 +7,7 @@ use psao_trace::ao::{ao_rays_range, medium_stream, sample_value, Medium, MediumS
 use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
 use rayon::prelude::*;
 
-use crate::blocks::{side, Side, BLOCK_POINTS, SUBS_PER_BLOCK, SUB_POINTS};
+use crate::blocks::{Side, WorldBox, BLOCK_POINTS, SUBS_PER_BLOCK, SUB_POINTS};
 use crate::frustum::Frustum;
 use crate::instance::{InstanceState, NONE};
 use crate::summary::{bin, bin_of, count_up_to, offset_of, LAST_BIN};
@@ -112,8 +112,9 @@ pub(crate) fn cull(
                 let block = &inst.blocks.blocks[b as usize];
                 let mut straddling: Vec<&Frustum> = Vec::new();
                 let mut inside = false;
+                let placed = block.world(&inst.transform);
                 for f in &near[ii as usize] {
-                    match block.side(&inst.transform, f, inst.slack) {
+                    match placed.side(f, inst.slack) {
                         Side::Inside => {
                             inside = true;
                             break;
@@ -136,8 +137,9 @@ pub(crate) fn cull(
                         let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
                         sub_straddling.clear();
                         let mut sub_inside = false;
+                        let placed = WorldBox::new(subs[j], &inst.transform);
                         for f in &straddling {
-                            match side(subs[j], &inst.transform, f, inst.slack) {
+                            match placed.side(f, inst.slack) {
                                 Side::Inside => {
                                     sub_inside = true;
                                     break;
