@@ -9,6 +9,11 @@ use crate::trace::sample_key;
 
 /// Points per block (the last block of an instance may hold fewer).
 pub(crate) const BLOCK_POINTS: usize = 512;
+/// Points per sub-block: blocks straddling a frustum test their sub-blocks before their
+/// points.
+pub(crate) const SUB_POINTS: usize = 64;
+/// Sub-blocks per block.
+pub(crate) const SUBS_PER_BLOCK: usize = BLOCK_POINTS / SUB_POINTS;
 
 /// A run of `order` whose points lie in `(lo, hi)` (local space).
 #[derive(Clone, Copy, Debug)]
@@ -26,6 +31,9 @@ pub(crate) struct CullBlocks {
     /// The selection tie-break of each point in `order` (a seeded hash of the point).
     pub tie: Vec<u32>,
     pub blocks: Vec<Block>,
+    /// Local bounds of each run of [`SUB_POINTS`] points of `order` (sub-block `j` of block
+    /// `b` is `subs[b * SUBS_PER_BLOCK + j]`; a short last block has fewer).
+    pub subs: Vec<(Vec3, Vec3)>,
 }
 
 /// How a block lies relative to one frustum grown by a slack.
@@ -61,7 +69,7 @@ impl CullBlocks {
         keyed.sort_unstable();
         let order: Vec<u32> = keyed.into_iter().map(|(_, i)| i).collect();
         let tie = order.iter().map(|&i| tie_of(instance, i, seed)).collect();
-        let blocks = (0..order.len())
+        let blocks: Vec<Block> = (0..order.len())
             .step_by(BLOCK_POINTS)
             .map(|start| Block {
                 start: start as u32,
@@ -70,40 +78,80 @@ impl CullBlocks {
                 hi: Vec3::ZERO,
             })
             .collect();
-        let mut out = Self { order, tie, blocks };
+        let subs = vec![(Vec3::ZERO, Vec3::ZERO); blocks.len() * SUBS_PER_BLOCK];
+        let mut out = Self {
+            order,
+            tie,
+            blocks,
+            subs,
+        };
         out.refresh_bounds(positions);
         out
     }
 
-    /// Recompute every block's bounds from the current `positions` (call after points
-    /// moved in local space; block membership stays).
+    /// Recompute every block's and sub-block's bounds from the current `positions` (call
+    /// after points moved in local space; membership stays).
     pub fn refresh_bounds(&mut self, positions: &[Vec3]) {
-        for b in &mut self.blocks {
-            let points = self.order[b.start as usize..b.end as usize]
+        let order = &self.order;
+        for (k, sub) in order.chunks(SUB_POINTS).zip(&mut self.subs) {
+            *sub = bounds(k.iter().map(|&i| positions[i as usize]));
+        }
+        for (b, block) in self.blocks.iter_mut().enumerate() {
+            let n = (block.end - block.start) as usize;
+            let subs = &self.subs[b * SUBS_PER_BLOCK..][..n.div_ceil(SUB_POINTS)];
+            let init = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            let (lo, hi) = subs
                 .iter()
-                .map(|&i| positions[i as usize]);
-            (b.lo, b.hi) = bounds(points);
+                .fold(init, |(lo, hi), s| (lo.min(s.0), hi.max(s.1)));
+            (block.lo, block.hi) = (lo, hi);
         }
     }
 }
 
 impl Block {
-    /// Where the block, under `transform`, lies relative to `frustum` grown by `slack`.
-    /// Conservative with a margin for rounding: `Inside` and `Outside` hold for every point
-    /// the per-point test [`Frustum::contains`] would see.
-    pub fn side(&self, transform: &Affine3A, frustum: &Frustum, slack: f32) -> Side {
-        let centre = transform.transform_point3((self.lo + self.hi) * 0.5);
-        let half = (self.hi - self.lo) * 0.5;
+    /// The block placed in the world by `transform`.
+    pub fn world(&self, transform: &Affine3A) -> WorldBox {
+        WorldBox::new((self.lo, self.hi), transform)
+    }
+}
+
+/// A local box placed in the world: centre, half extents along the world axes, and its
+/// magnitude (for the rounding margin). Computed once, tested against several frusta.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct WorldBox {
+    centre: Vec3,
+    extent: Vec3,
+    size: f32,
+}
+
+impl WorldBox {
+    /// The box `(lo, hi)` under `transform`.
+    #[inline]
+    pub fn new((lo, hi): (Vec3, Vec3), transform: &Affine3A) -> Self {
+        let centre = transform.transform_point3((lo + hi) * 0.5);
+        let half = (hi - lo) * 0.5;
         let m = transform.matrix3;
         let extent = m.x_axis.abs() * half.x + m.y_axis.abs() * half.y + m.z_axis.abs() * half.z;
-        let size = Vec3::from(extent).max_element() + centre.abs().max_element();
+        let extent = Vec3::from(extent);
+        Self {
+            centre,
+            extent,
+            size: extent.max_element() + centre.abs().max_element(),
+        }
+    }
+
+    /// Where the box lies relative to `frustum` grown by `slack`. Conservative with a
+    /// margin for rounding: `Inside` and `Outside` hold for every point in the box that the
+    /// per-point test [`Frustum::contains`] would see.
+    #[inline]
+    pub fn side(&self, frustum: &Frustum, slack: f32) -> Side {
         let mut inside = true;
         for plane in frustum.planes() {
             let n = plane.truncate();
-            let d = n.dot(centre) + plane.w;
-            let r = n.abs().dot(extent.into());
+            let d = n.dot(self.centre) + plane.w;
+            let r = n.abs().dot(self.extent);
             // Rounding of the per-point transform and dot product stays far below this.
-            let eps = 1e-4 * (1.0 + size + plane.w.abs());
+            let eps = 1e-4 * (1.0 + self.size + plane.w.abs());
             if d + r < -slack - eps {
                 return Side::Outside;
             }
@@ -172,6 +220,10 @@ mod tests {
                 assert!(q.cmpge(blk.lo).all() && q.cmple(blk.hi).all());
             }
         }
+        for (k, &i) in b.order.iter().enumerate() {
+            let (lo, hi) = b.subs[k / SUB_POINTS];
+            assert!(p[i as usize].cmpge(lo).all() && p[i as usize].cmple(hi).all());
+        }
         assert_eq!(b.tie[0], tie_of(3, b.order[0], 7));
     }
 
@@ -186,6 +238,10 @@ mod tests {
                 let q = moved[i as usize];
                 assert!(q.cmpge(blk.lo).all() && q.cmple(blk.hi).all());
             }
+        }
+        for (k, &i) in b.order.iter().enumerate() {
+            let (lo, hi) = b.subs[k / SUB_POINTS];
+            assert!(moved[i as usize].cmpge(lo).all() && moved[i as usize].cmple(hi).all());
         }
     }
 
@@ -209,10 +265,19 @@ mod tests {
                 aspect: 1.5,
             };
             let f = Frustum::new(&view, 0.1);
-            for blk in &b.blocks {
-                let side = blk.side(&transform, &f, 0.05);
+            let blocks = b
+                .blocks
+                .iter()
+                .map(|blk| ((blk.lo, blk.hi), blk.start..blk.end));
+            let used = p.len().div_ceil(SUB_POINTS);
+            let subs = b.subs[..used].iter().enumerate().map(|(j, s)| {
+                let start = (j * SUB_POINTS) as u32;
+                (*s, start..(start + SUB_POINTS as u32).min(p.len() as u32))
+            });
+            for (bounds, range) in blocks.chain(subs) {
+                let side = WorldBox::new(bounds, &transform).side(&f, 0.05);
                 sides[side as usize] += 1;
-                let mut inside = b.order[blk.start as usize..blk.end as usize]
+                let mut inside = b.order[range.start as usize..range.end as usize]
                     .iter()
                     .map(|&i| f.contains(transform.transform_point3(p[i as usize]), 0.05));
                 match side {

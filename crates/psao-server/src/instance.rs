@@ -9,6 +9,7 @@ use psao_points::{
 
 use crate::blocks::CullBlocks;
 use crate::changes::ChangeLog;
+use crate::summary::BlockSummaries;
 use crate::ServerError;
 
 /// Marks "no point" in a member list and "not stored" in a point's slot.
@@ -45,6 +46,8 @@ pub(crate) struct InstanceState {
     pub changes: ChangeLog,
     /// The points in spatial blocks with local bounds, for culling.
     pub blocks: CullBlocks,
+    /// Per block: stored points and unconverged points by selection bin.
+    pub summaries: BlockSummaries,
     /// Published cells and buckets that points left (moved to another cell) since the last
     /// publish: they must be refreshed even if no point is republished into them.
     pub pending_cells: Vec<u32>,
@@ -72,12 +75,14 @@ impl InstanceState {
     /// `index`; nothing is published yet. `seed` spreads the tracing order. `deforming`
     /// instances get a grid padded by the mesh's largest extent on every side, so their points
     /// keep a cell when skinning moves them (cells are virtual: the padding costs no memory).
+    /// Points count as converged at `max_samples` samples.
     pub fn new(
         points: &InstancePoints,
         transform: Affine3A,
         index: u32,
         seed: u64,
         deforming: bool,
+        max_samples: u32,
     ) -> Result<Self, ServerError> {
         let mut layout = GridLayout::for_points(points)?;
         if deforming {
@@ -116,6 +121,7 @@ impl InstanceState {
             }
         }
         let blocks = CullBlocks::new(&p.position, index, seed);
+        let summaries = BlockSummaries::new(&blocks, &p, max_samples);
         let mut state = Self {
             transform,
             normal_matrix: transform.matrix3.inverse().transpose(),
@@ -132,6 +138,7 @@ impl InstanceState {
             max_stamp: 0,
             changes: ChangeLog::default(),
             blocks,
+            summaries,
             pending_cells: Vec::new(),
             pending_buckets: Vec::new(),
         };
@@ -144,6 +151,17 @@ impl InstanceState {
     pub fn refresh_cull_bounds(&mut self) {
         self.refresh_world_bounds();
         self.blocks.refresh_bounds(&self.points.position);
+    }
+
+    /// Bring the block summaries of `changed` points up to date (after their sample count or
+    /// storage changed).
+    pub fn refresh_summaries(&mut self, changed: &[u32]) {
+        self.summaries.refresh(&self.blocks, &self.points, changed);
+    }
+
+    /// Recompute every block summary (after most points changed).
+    pub fn rebuild_summaries(&mut self) {
+        self.summaries.rebuild(&self.blocks, &self.points);
     }
 
     /// Store `cell` in published slot `slot` and stamp it (and the change log) with `frame`.

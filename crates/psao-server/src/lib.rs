@@ -17,6 +17,7 @@ mod frustum;
 mod instance;
 mod publish;
 mod server;
+mod summary;
 mod trace;
 
 pub use bury::{BURIAL_MIN_INSIDE, BURIAL_RAYS};

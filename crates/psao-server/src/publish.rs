@@ -1,6 +1,8 @@
 //! Thresholded publishing into the authoritative grids (DESIGN §3 "Server update").
 
 use psao_points::pack::{unpack_ao, unpack_normal, POSITION_STEPS};
+use psao_points::{Bucket, Cell};
+use rayon::prelude::*;
 
 use crate::instance::{InstanceState, NONE};
 use crate::Thresholds;
@@ -52,12 +54,17 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
             dirty_cells.push(old_slot);
         }
     }
-    dirty_cells.sort_unstable();
+    dirty_cells.par_sort_unstable();
     dirty_cells.dedup();
     let layout = *inst.layout();
     let mut dirty_buckets = std::mem::take(&mut inst.pending_buckets);
-    for &slot in &dirty_cells {
-        let cell = inst.published_cell(slot);
+    // The new contents are read in parallel, then stored where they changed.
+    let view: &InstanceState = inst;
+    let cells: Vec<(u32, Cell)> = dirty_cells
+        .par_iter()
+        .map(|&slot| (slot, view.published_cell(slot)))
+        .collect();
+    for (slot, cell) in cells {
         if inst
             .grid
             .cells()
@@ -70,13 +77,16 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
         }
         dirty_buckets.push(layout.bucket_of(inst.slot_ids[slot as usize]));
     }
-    dirty_buckets.sort_unstable();
+    dirty_buckets.par_sort_unstable();
     dirty_buckets.dedup();
-    for b in dirty_buckets {
-        let bucket = inst.published_bucket(b);
-        if inst.grid.buckets()[b] != bucket {
-            inst.publish_bucket(b, bucket, frame);
-        }
+    let view: &InstanceState = inst;
+    let buckets: Vec<(usize, Bucket)> = dirty_buckets
+        .par_iter()
+        .map(|&b| (b, view.published_bucket(b)))
+        .filter(|(b, bucket)| view.grid.buckets()[*b] != *bucket)
+        .collect();
+    for (b, bucket) in buckets {
+        inst.publish_bucket(b, bucket, frame);
     }
     updates.len()
 }
@@ -111,7 +121,7 @@ mod tests {
             None,
         )
         .unwrap();
-        InstanceState::new(&points, Affine3A::IDENTITY, 0, 0, false).unwrap()
+        InstanceState::new(&points, Affine3A::IDENTITY, 0, 0, false, 256).unwrap()
     }
 
     /// A stored point whose x lies in the middle of its cell (room to move 4 steps).

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use crate::bury::buried;
 use crate::clients::Clients;
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, Restarted};
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select, trace};
@@ -84,14 +84,10 @@ pub struct Server {
     frame: u64,
     /// Frames of change lists kept: a client further behind gets its delta by a scan.
     history_frames: u64,
-    /// Where culling expects this frame's selection cut (see [`cull`]).
-    cut_guess: usize,
+    /// Where culling starts searching this frame's selection cut (see [`cull`]).
+    cut_guess: u16,
     buried_points: usize,
 }
-
-/// Selection histogram bins added to the previous frame's cut to guess the next one (the
-/// cut moves by about one bin per frame while the visible points take their first samples).
-const CUT_GUESS_MARGIN: usize = 4;
 
 /// Server frames whose changed buckets and cells are listed (2 s at 30 Hz): a client that
 /// last received an update longer ago gets its delta by scanning every stamp instead.
@@ -150,7 +146,15 @@ impl Server {
             .enumerate()
             .map(|(i, ((p, inst), m))| {
                 let deforming = *m == Motion::Skinned;
-                InstanceState::new(p, inst.transform, i as u32, config.seed, deforming)
+                let (index, seed) = (i as u32, config.seed);
+                InstanceState::new(
+                    p,
+                    inst.transform,
+                    index,
+                    seed,
+                    deforming,
+                    config.max_samples,
+                )
             })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Server {
@@ -232,6 +236,7 @@ impl Server {
             self.radius,
             self.radius * self.config.thresholds.ao,
         )?;
+        self.refresh_summaries(&restarted, &moved);
         let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         let c = &self.config;
@@ -241,14 +246,8 @@ impl Server {
             .iter()
             .map(|v| Frustum::new(v, c.frustum_margin))
             .collect();
-        let culled = cull(
-            &self.instances,
-            &frusta,
-            c.max_samples,
-            max_points,
-            self.cut_guess,
-        );
-        self.cut_guess = culled.cut.saturating_add(CUT_GUESS_MARGIN);
+        let culled = cull(&self.instances, &frusta, max_points, self.cut_guess);
+        self.cut_guess = culled.cut;
         let visible = culled.visible;
         let t_cull = Instant::now();
         let selected = select(culled.candidates, max_points);
@@ -272,6 +271,11 @@ impl Server {
             p.sum[t.index as usize] += t.sum;
             p.count[t.index as usize] += t.rays;
             rays += u64::from(t.rays);
+        }
+        // `traced` is in (instance, index) order.
+        for group in traced.chunk_by(|a, b| a.instance == b.instance) {
+            let changed: Vec<u32> = group.iter().map(|t| t.index).collect();
+            self.instances[group[0].instance as usize].refresh_summaries(&changed);
         }
         let t_trace = Instant::now();
         // Traced points and points that moved with their triangles may need publishing.
@@ -308,6 +312,25 @@ impl Server {
             animate_ms,
             ms: start.elapsed().as_secs_f64() * 1e3,
         })
+    }
+
+    /// Bring the block summaries up to date after posing: the `restarted` points lost their
+    /// samples and the `moved` ones may have changed storage.
+    fn refresh_summaries(&mut self, restarted: &Restarted, moved: &[(u32, u32)]) {
+        if restarted.all {
+            self.instances
+                .par_iter_mut()
+                .for_each(InstanceState::rebuild_summaries);
+        } else {
+            for (inst, list) in self.instances.iter_mut().zip(&restarted.lists) {
+                inst.refresh_summaries(list);
+            }
+        }
+        // `moved` comes in runs of one instance.
+        for group in moved.chunk_by(|a, b| a.0 == b.0) {
+            let changed: Vec<u32> = group.iter().map(|m| m.1).collect();
+            self.instances[group[0].0 as usize].refresh_summaries(&changed);
+        }
     }
 
     /// Publish the candidate (instance, point) pairs that need it, and refresh the cells and
@@ -514,6 +537,7 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Invalidation;
     use psao_scene::{Camera, Instance, Material, Mesh};
 
     /// A 4 m floor and a 2 m wall standing on it.
@@ -647,6 +671,62 @@ mod tests {
         );
     }
 
+    /// The (visible count, selection) by testing every point against the frusta.
+    fn brute_force(
+        server: &Server,
+        frusta: &[Frustum],
+        max_points: usize,
+    ) -> (usize, Vec<(u32, u32)>) {
+        let max_samples = server.config.max_samples;
+        let mut visible = 0;
+        let mut keyed = Vec::new();
+        for (ii, inst) in server.instances.iter().enumerate() {
+            let p = &inst.points;
+            for i in 0..p.position.len() {
+                let w = inst.transform.transform_point3(p.position[i]);
+                if p.slot[i] == NONE || !frusta.iter().any(|f| f.contains(w, inst.slack)) {
+                    continue;
+                }
+                visible += 1;
+                if p.count[i] < max_samples {
+                    let tie = crate::blocks::tie_of(ii as u32, i as u32, server.config.seed);
+                    keyed.push((
+                        (u64::from(p.count[i]) << 32) | u64::from(tie),
+                        ii as u32,
+                        i as u32,
+                    ));
+                }
+            }
+        }
+        keyed.sort_unstable();
+        let mut ids: Vec<(u32, u32)> = keyed.iter().take(max_points).map(|k| (k.1, k.2)).collect();
+        ids.sort_unstable();
+        (visible, ids)
+    }
+
+    /// Every instance's block summaries equal ones computed afresh from its points.
+    fn assert_summaries_current(server: &Server) {
+        for (ii, inst) in server.instances.iter().enumerate() {
+            let fresh = crate::summary::BlockSummaries::new(
+                &inst.blocks,
+                &inst.points,
+                server.config.max_samples,
+            );
+            for b in 0..inst.blocks.blocks.len() {
+                assert_eq!(
+                    inst.summaries.stored(b),
+                    fresh.stored(b),
+                    "instance {ii} block {b}"
+                );
+                assert_eq!(
+                    inst.summaries.entries(b),
+                    fresh.entries(b),
+                    "instance {ii} block {b}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn culling_selects_the_same_points_whatever_the_guessed_cut() {
         let config = ServerConfig {
@@ -658,6 +738,7 @@ mod tests {
         };
         let mut server = Server::new(&scene(), config).unwrap();
         let max_points = 1000;
+        let mut cuts = Vec::new();
         for frame in 0..12 {
             let views = [view(frame), view(frame + 5)];
             let frusta: Vec<Frustum> = views
@@ -665,24 +746,149 @@ mod tests {
                 .map(|v| Frustum::new(v, config.frustum_margin))
                 .collect();
             let run = |guess| {
-                let c = cull(
-                    &server.instances,
-                    &frusta,
-                    config.max_samples,
-                    max_points,
-                    guess,
-                );
+                let c = cull(&server.instances, &frusta, max_points, guess);
                 let ids = |s: Vec<crate::trace::Candidate>| -> Vec<(u32, u32)> {
                     s.iter().map(|c| (c.instance, c.index)).collect()
                 };
                 (c.visible, c.cut, ids(select(c.candidates, max_points)))
             };
-            let all = run(usize::MAX);
+            let all = run(u16::MAX);
             assert!(all.0 > max_points && all.2.len() == max_points);
-            for guess in [0, 1, all.1.saturating_sub(1), all.1, all.1 + 3] {
+            assert_eq!(
+                brute_force(&server, &frusta, max_points),
+                (all.0, all.2.clone())
+            );
+            for guess in [
+                0,
+                1,
+                all.1.saturating_sub(1),
+                all.1,
+                all.1.saturating_add(3),
+            ] {
                 assert_eq!(run(guess), all, "frame {frame}, guess {guess}");
             }
+            cuts.push(all.1);
             server.step(&views);
+        }
+        assert!(
+            cuts.windows(2).any(|w| w[0] != w[1]),
+            "the cut moves: {cuts:?}"
+        );
+    }
+
+    /// The test scene plus a skinned strip swinging over the floor and the wall sliding
+    /// along x, both played from t = 0.
+    fn animated_scene() -> Scene {
+        use glam::{Mat4, Quat};
+        use psao_scene::{AnimatedProperty, Animation, Channel, Interpolation, Node, Skin};
+        let mut scene = scene();
+        let node = |name: &str, parent: Option<usize>, translation: Vec3| Node {
+            name: name.into(),
+            parent,
+            translation,
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        };
+        let mut strip = Mesh::default();
+        for y in [0.0f32, 1.0, 2.0] {
+            for x in [-0.25f32, 0.25] {
+                strip.positions.push(Vec3::new(x, y + 0.2, 0.8));
+                strip.normals.push(Vec3::Z);
+                strip.joints.push([0, 1, 0, 0]);
+                strip.weights.push([1.0 - y / 2.0, y / 2.0, 0.0, 0.0]);
+            }
+        }
+        strip.indices = vec![[0, 1, 3], [0, 3, 2], [2, 3, 5], [2, 5, 4]];
+        scene.meshes.push(strip);
+        scene.nodes = vec![
+            node("wall", None, Vec3::ZERO),
+            node("strip", None, Vec3::ZERO),
+            node("root", None, Vec3::ZERO),
+            node("upper", Some(2), Vec3::new(0.0, 1.2, 0.0)),
+        ];
+        scene.instances[1].node = Some(0);
+        scene.instances.push(Instance {
+            mesh: 2,
+            node: Some(1),
+            transform: Affine3A::IDENTITY,
+            skin: Some(0),
+        });
+        scene.skins.push(Skin {
+            name: "strip".into(),
+            joints: vec![2, 3],
+            inverse_bind: vec![
+                Mat4::IDENTITY,
+                Mat4::from_translation(Vec3::new(0.0, -1.2, 0.0)),
+            ],
+        });
+        let swing = |a: f32| Quat::from_rotation_z(a).to_array();
+        scene.animations.push(Animation {
+            name: "move".into(),
+            channels: vec![
+                Channel {
+                    node: 3,
+                    property: AnimatedProperty::Rotation,
+                    interpolation: Interpolation::Linear,
+                    times: vec![0.0, 1.0, 2.0],
+                    values: [swing(0.0), swing(1.2), swing(0.0)].concat(),
+                },
+                Channel {
+                    node: 0,
+                    property: AnimatedProperty::Translation,
+                    interpolation: Interpolation::Linear,
+                    times: vec![0.0, 2.0],
+                    values: [0.0, 0.0, 0.0, 0.8, 0.0, 0.0].to_vec(),
+                },
+            ],
+        });
+        scene.playing.push(0);
+        scene
+    }
+
+    #[test]
+    fn summaries_stay_current_under_tracing_invalidation_and_skinning() {
+        for invalidation in [Invalidation::Proximity, Invalidation::Everything] {
+            let config = ServerConfig {
+                density: 256.0,
+                ray_budget: 3000,
+                rays_per_point: 4,
+                max_samples: 8,
+                invalidation,
+                ..ServerConfig::default()
+            };
+            let mut server = Server::new(&animated_scene(), config).unwrap();
+            assert_summaries_current(&server);
+            let (mut invalidated, mut converged) = (0, 0);
+            for frame in 0..24u32 {
+                let views = [view(frame), view(frame + 7)];
+                // Pause the animation now and then so that points converge.
+                let time = (frame.min(6) + frame.saturating_sub(16)) as f32 * 0.1;
+                let stats = server.step_at(&views, time).unwrap();
+                invalidated += stats.invalidated_points;
+                assert_summaries_current(&server);
+                let frusta: Vec<Frustum> = views
+                    .iter()
+                    .map(|v| Frustum::new(v, config.frustum_margin))
+                    .collect();
+                let c = cull(&server.instances, &frusta, 750, server.cut_guess);
+                let ids: Vec<(u32, u32)> = select(c.candidates, 750)
+                    .iter()
+                    .map(|c| (c.instance, c.index))
+                    .collect();
+                assert_eq!(
+                    brute_force(&server, &frusta, 750),
+                    (c.visible, ids),
+                    "frame {frame}"
+                );
+                converged += server
+                    .points(0)
+                    .filter(|p| p.samples >= config.max_samples)
+                    .count();
+            }
+            assert!(
+                invalidated > 0 && converged > 0,
+                "{invalidation:?}: {invalidated} {converged}"
+            );
         }
     }
 }
