@@ -1,5 +1,5 @@
 //! Scene-file motion: `walk`, `keys` and the built-in shape assets, and the repository's
-//! dynamic scene files.
+//! dynamic scene files, and freezing a scene (`--static`).
 
 mod common;
 
@@ -195,4 +195,13 @@ fn sponza_dynamic_objects_move_in_the_courtyard() {
         (lo.y - 0.09).abs() < 2e-3 && (hi.y - 0.59).abs() < 2e-3,
         "{lo} {hi}"
     );
+}
+
+#[test]
+fn a_frozen_scene_is_static() {
+    let mut scene = psao_scene::builtin::default_scene();
+    assert!(scene.is_dynamic().unwrap(), "the hall's movers play");
+    scene.freeze();
+    assert!(!scene.is_dynamic().unwrap());
+    assert!(scene.playing.is_empty() && scene.walkers.is_empty());
 }
