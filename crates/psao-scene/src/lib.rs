@@ -1,5 +1,6 @@
 //! Scene data model and import: glTF 2.0, OBJ, scene files, the built-in default scene and camera paths.
 
+pub mod affine;
 pub mod anim;
 pub mod builtin;
 pub mod camera;

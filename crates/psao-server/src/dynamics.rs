@@ -32,6 +32,7 @@
 
 use glam::{Affine3A, UVec3, Vec3};
 use psao_points::InstancePoints;
+use psao_scene::affine::{box_corners, invert_or_identity as inverse, transformed_box};
 use psao_scene::{Animator, Motion, ScenePose, SkinnedGeometry};
 use psao_trace::{Tracer, DEFAULT_MAX_COST_RATIO};
 use rayon::prelude::*;
@@ -476,40 +477,14 @@ fn displacement(reference: &(Affine3A, Option<(Vec3, Vec3)>), now: &Affine3A) ->
         return 0.0;
     };
     let delta = *now * inverse(&reference.0);
-    (0..8)
-        .map(|c| {
-            let p = Vec3::new(
-                if c & 1 == 0 { lo.x } else { hi.x },
-                if c & 2 == 0 { lo.y } else { hi.y },
-                if c & 4 == 0 { lo.z } else { hi.z },
-            );
-            (delta.transform_point3(p) - p).length()
-        })
+    box_corners(lo, hi)
+        .iter()
+        .map(|&p| (delta.transform_point3(p) - p).length())
         .fold(0.0, f32::max)
-}
-
-/// `t⁻¹`, or the identity for singular or non-finite transforms.
-fn inverse(t: &Affine3A) -> Affine3A {
-    if t.is_finite() && t.matrix3.determinant().is_normal() {
-        t.inverse()
-    } else {
-        Affine3A::IDENTITY
-    }
 }
 
 /// The axis-aligned box (in the target space) of box `(lo, hi)` grown by `r` and then mapped
 /// by `t`.
 fn map_box((lo, hi): (Vec3, Vec3), r: f32, t: &Affine3A) -> (Vec3, Vec3) {
-    let (lo, hi) = (lo - Vec3::splat(r), hi + Vec3::splat(r));
-    let mut out = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    for c in 0..8 {
-        let p = Vec3::new(
-            if c & 1 == 0 { lo.x } else { hi.x },
-            if c & 2 == 0 { lo.y } else { hi.y },
-            if c & 4 == 0 { lo.z } else { hi.z },
-        );
-        let q = t.transform_point3(p);
-        out = (out.0.min(q), out.1.max(q));
-    }
-    out
+    transformed_box(t, lo - Vec3::splat(r), hi + Vec3::splat(r))
 }

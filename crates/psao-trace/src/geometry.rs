@@ -70,23 +70,6 @@ pub(crate) fn usable_inverse(transform: &Affine3A) -> Option<Affine3A> {
     inverse.is_finite().then_some(inverse)
 }
 
-/// World-space bounds of the local box (`lo`, `hi`) under `transform`.
-pub(crate) fn transformed_bounds(transform: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) {
-    let mut out_lo = Vec3::splat(f32::INFINITY);
-    let mut out_hi = Vec3::splat(f32::NEG_INFINITY);
-    for corner in 0..8 {
-        let p = Vec3::new(
-            if corner & 1 == 0 { lo.x } else { hi.x },
-            if corner & 2 == 0 { lo.y } else { hi.y },
-            if corner & 4 == 0 { lo.z } else { hi.z },
-        );
-        let w = transform.transform_point3(p);
-        out_lo = out_lo.min(w);
-        out_hi = out_hi.max(w);
-    }
-    (out_lo, out_hi)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -100,14 +83,5 @@ mod tests {
         let inv = usable_inverse(&t).unwrap();
         let p = Vec3::new(0.2, -3.0, 5.0);
         assert!((inv.transform_point3(t.transform_point3(p)) - p).length() < 1e-5);
-    }
-
-    #[test]
-    fn rotated_bounds_grow() {
-        let t = Affine3A::from_rotation_z(std::f32::consts::FRAC_PI_4);
-        let (lo, hi) = transformed_bounds(&t, Vec3::splat(-1.0), Vec3::splat(1.0));
-        let r = 2f32.sqrt();
-        assert!((lo - Vec3::new(-r, -r, -1.0)).length() < 1e-5);
-        assert!((hi - Vec3::new(r, r, 1.0)).length() < 1e-5);
     }
 }

@@ -14,7 +14,7 @@ use obvhs::{traverse, BvhBuildParams};
 use psao_scene::Scene;
 use rayon::prelude::*;
 
-use crate::geometry::{transformed_bounds, usable_inverse};
+use crate::geometry::usable_inverse;
 use crate::{Hit, Ray};
 
 /// Most primitives a CWBVH leaf may hold (the format's limit).
@@ -391,7 +391,7 @@ impl ObvhsTracer {
             else {
                 continue;
             };
-            let (lo, hi) = transformed_bounds(&transform, blas.lo, blas.hi);
+            let (lo, hi) = psao_scene::affine::transformed_box(&transform, blas.lo, blas.hi);
             aabbs.push(Aabb::new(lo.into(), hi.into()));
             items.push(TopItem {
                 inverse,

@@ -156,12 +156,7 @@ fn depth_range(vol: &Volume, frame: usize, eye: Vec3) -> (f32, f32) {
     let (lo, hi) = vol.world_bounds(frame);
     let mut near = f32::INFINITY;
     let mut far: f32 = 0.0;
-    for k in 0..8 {
-        let c = Vec3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
+    for c in psao_scene::affine::box_corners(lo, hi) {
         near = near.min((c - eye).length());
         far = far.max((c - eye).length());
     }

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use glam::{Affine3A, Quat, Vec3};
 use rayon::prelude::*;
 
+use crate::affine::{invert_or_identity, transformed_box};
 use crate::model::{Channel, Node, Scene};
 use sample::Sampled;
 use skin::BindMesh;
@@ -311,18 +312,7 @@ impl Animator {
         if lo.cmpgt(hi).any() {
             return None;
         }
-        let corners = (0..8).map(|c| {
-            Vec3::new(
-                if c & 1 == 0 { lo.x } else { hi.x },
-                if c & 2 == 0 { lo.y } else { hi.y },
-                if c & 4 == 0 { lo.z } else { hi.z },
-            )
-        });
-        Some(bounds(
-            &corners
-                .map(|p| transform.transform_point3(p))
-                .collect::<Vec<_>>(),
-        ))
+        Some(transformed_box(&transform, lo, hi))
     }
 
     /// The pose at scene time `time` (seconds).
@@ -558,14 +548,4 @@ fn bounds(points: &[Vec3]) -> (Vec3, Vec3) {
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     )
-}
-
-/// `transform⁻¹`, or the identity when it is singular or non-finite.
-fn invert_or_identity(transform: &Affine3A) -> Affine3A {
-    let det = transform.matrix3.determinant();
-    if transform.is_finite() && det.is_normal() {
-        transform.inverse()
-    } else {
-        Affine3A::IDENTITY
-    }
 }
