@@ -164,6 +164,25 @@ impl WorldBox {
             Side::Straddles
         }
     }
+
+    /// Whether the box lies inside one of `frusta` (grown by `slack`); when it does not,
+    /// `straddling` (cleared first) holds the frusta it straddles.
+    pub fn classify<'f>(
+        &self,
+        frusta: impl IntoIterator<Item = &'f Frustum>,
+        slack: f32,
+        straddling: &mut Vec<&'f Frustum>,
+    ) -> bool {
+        straddling.clear();
+        for f in frusta {
+            match self.side(f, slack) {
+                Side::Inside => return true,
+                Side::Straddles => straddling.push(f),
+                Side::Outside => {}
+            }
+        }
+        false
+    }
 }
 
 /// Bounds of `points` (an empty box at the origin when there are none).

@@ -7,7 +7,7 @@ use psao_trace::ao::{ao_rays_range, medium_stream, sample_value, Medium, MediumS
 use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
 use rayon::prelude::*;
 
-use crate::blocks::{Side, WorldBox, BLOCK_POINTS, SUBS_PER_BLOCK, SUB_POINTS};
+use crate::blocks::{WorldBox, BLOCK_POINTS, SUBS_PER_BLOCK, SUB_POINTS};
 use crate::frustum::Frustum;
 use crate::instance::{InstanceState, NONE};
 use crate::summary::{bin, bin_of, count_up_to, offset_of, LAST_BIN};
@@ -111,18 +111,11 @@ pub(crate) fn cull(
                 let inst = &instances[ii as usize];
                 let block = &inst.blocks.blocks[b as usize];
                 let mut straddling: Vec<&Frustum> = Vec::new();
-                let mut inside = false;
-                let placed = block.world(&inst.transform);
-                for f in &near[ii as usize] {
-                    match placed.side(f, inst.slack) {
-                        Side::Inside => {
-                            inside = true;
-                            break;
-                        }
-                        Side::Straddles => straddling.push(f),
-                        Side::Outside => {}
-                    }
-                }
+                let inside = block.world(&inst.transform).classify(
+                    near[ii as usize].iter().copied(),
+                    inst.slack,
+                    &mut straddling,
+                );
                 let summary = inst.summaries.entries(b as usize);
                 let entries = if inside {
                     visible += inst.summaries.stored(b as usize) as usize;
@@ -135,19 +128,11 @@ pub(crate) fn cull(
                     let mut sub_straddling: Vec<&Frustum> = Vec::new();
                     for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
                         let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
-                        sub_straddling.clear();
-                        let mut sub_inside = false;
-                        let placed = WorldBox::new(subs[j], &inst.transform);
-                        for f in &straddling {
-                            match placed.side(f, inst.slack) {
-                                Side::Inside => {
-                                    sub_inside = true;
-                                    break;
-                                }
-                                Side::Straddles => sub_straddling.push(f),
-                                Side::Outside => {}
-                            }
-                        }
+                        let sub_inside = WorldBox::new(subs[j], &inst.transform).classify(
+                            straddling.iter().copied(),
+                            inst.slack,
+                            &mut sub_straddling,
+                        );
                         if sub_inside {
                             // Listed entries are stored points: marking all is enough.
                             visible += inst.summaries.stored_in(range);
