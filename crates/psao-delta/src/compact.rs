@@ -102,6 +102,35 @@ fn used_points(points: &[u32; CELL_POINTS]) -> usize {
     points.iter().take_while(|&&p| p != 0).count()
 }
 
+/// The count byte of a record holding `n` of at most `capacity` entries whose reference held
+/// `old`: `(n − old) mod (capacity + 1)`.
+fn count_code(n: usize, old: usize, capacity: usize) -> u8 {
+    ((n + capacity + 1 - old) % (capacity + 1)) as u8
+}
+
+/// Inverse of [`count_code`], checked: the code must be at most `capacity` (else
+/// `out_of_range(code)`) and the `n` coded records must fit in a plane of `plane` records
+/// of which `at` are used.
+fn decode_count(
+    code: u8,
+    old: usize,
+    capacity: usize,
+    (at, plane): (usize, usize),
+    out_of_range: fn(usize) -> DeltaError,
+) -> Result<usize, DeltaError> {
+    if usize::from(code) > capacity {
+        return Err(out_of_range(code.into()));
+    }
+    let n = (usize::from(code) + old) % (capacity + 1);
+    if at + n > plane {
+        return Err(DeltaError::PlaneSize {
+            expected: (at + n) as u64,
+            found: plane as u64,
+        });
+    }
+    Ok(n)
+}
+
 /// Significant bits of `v`.
 fn bits(v: u32) -> u32 {
     32 - v.leading_zeros()
@@ -220,8 +249,7 @@ impl Streams {
             self.slots.push(best.3);
         }
         let old = used_entries(&reference.keys);
-        self.entry_counts
-            .push(((n + BUCKET_ENTRIES + 1 - old) % (BUCKET_ENTRIES + 1)) as u8);
+        self.entry_counts.push(count_code(n, old, BUCKET_ENTRIES));
     }
 
     /// Code the points of compacted `points` against `reference`.
@@ -255,8 +283,7 @@ impl Streams {
             self.points.push(best.2);
         }
         let old = used_points(reference);
-        self.cell_lengths
-            .push(((n + CELL_POINTS + 1 - old) % (CELL_POINTS + 1)) as u8);
+        self.cell_lengths.push(count_code(n, old, CELL_POINTS));
     }
 
     /// The uncompressed payload.
@@ -582,16 +609,13 @@ fn assemble(
         for (&b, &code) in bucket_ids.iter().zip(entry_counts.by_ref()) {
             let k = key(*instance, b);
             let old = r.buckets.get(&k).copied().unwrap_or_default();
-            let n = (usize::from(code) + used_entries(&old.keys)) % (BUCKET_ENTRIES + 1);
-            if usize::from(code) > BUCKET_ENTRIES {
-                return Err(DeltaError::EntryCount(code.into()));
-            }
-            if entry + n > s.entry_choices.len() {
-                return Err(DeltaError::PlaneSize {
-                    expected: (entry + n) as u64,
-                    found: s.entry_choices.len() as u64,
-                });
-            }
+            let n = decode_count(
+                code,
+                used_entries(&old.keys),
+                BUCKET_ENTRIES,
+                (entry, s.entry_choices.len()),
+                DeltaError::EntryCount,
+            )?;
             let mut bucket = Bucket::default();
             for i in 0..n {
                 let (c, kr, sr) = (s.entry_choices[entry], s.keys[entry], s.slots[entry]);
@@ -626,16 +650,13 @@ fn assemble(
         for (&slot, &code) in slot_ids.iter().zip(cell_lengths.by_ref()) {
             let k = key(*instance, slot);
             let old = r.cells.get(&k).copied().unwrap_or_default();
-            if usize::from(code) > CELL_POINTS {
-                return Err(DeltaError::CellLength(code.into()));
-            }
-            let n = (usize::from(code) + used_points(&old)) % (CELL_POINTS + 1);
-            if point + n > s.point_choices.len() {
-                return Err(DeltaError::PlaneSize {
-                    expected: (point + n) as u64,
-                    found: s.point_choices.len() as u64,
-                });
-            }
+            let n = decode_count(
+                code,
+                used_points(&old),
+                CELL_POINTS,
+                (point, s.point_choices.len()),
+                DeltaError::CellLength,
+            )?;
             let mut cell = Cell::default();
             for i in 0..n {
                 let (c, residual) = (s.point_choices[point], s.points[point]);
