@@ -13,6 +13,10 @@ pub trait Codec: Send {
     fn name(&self) -> &'static str;
     /// Encode one update.
     fn encode(&mut self, update: &Update) -> Vec<u8>;
+    /// Take the state encoding `update` leaves without producing the bytes: for a codec in
+    /// the same state as one that encoded `update` (same name, and its receiver holds the
+    /// server's state at the same frame), whose bytes are sent instead.
+    fn advance(&mut self, update: &Update);
     /// Decode one update; malformed input gives an error, never a panic or an unbounded
     /// allocation.
     fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError>;

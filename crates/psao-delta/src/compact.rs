@@ -81,12 +81,59 @@ struct Entries {
     slots: [u32; BUCKET_ENTRIES],
 }
 
-/// What was last sent, per slot: the reference of both ends.
+impl Entries {
+    /// The keys and slots of compacted `bucket`.
+    fn of(bucket: &Bucket) -> Self {
+        Self {
+            keys: bucket.entries.map(|e| e.key),
+            slots: bucket.entries.map(|e| e.slot),
+        }
+    }
+}
+
+/// What was last sent, per slot: the decoder's reference.
 #[derive(Default, Clone)]
 struct Reference {
     transforms: KeyMap<[u32; TRANSFORM_WORDS]>,
     buckets: KeyMap<Entries>,
     cells: KeyMap<[u32; CELL_POINTS]>,
+}
+
+/// What the encoder last sent, stored densely by instance, bucket index and cell slot: the
+/// server's indices are dense, so vectors replace the hash maps the decoder needs (its indices
+/// come from the wire and must not size an allocation). Looks up exactly as [`Reference`].
+#[derive(Default, Clone)]
+struct Sent {
+    transforms: Vec<[u32; TRANSFORM_WORDS]>,
+    buckets: Vec<Vec<Entries>>,
+    cells: Vec<Vec<[u32; CELL_POINTS]>>,
+}
+
+impl Sent {
+    /// Forget everything (a snapshot follows), keeping the allocations.
+    fn clear(&mut self) {
+        self.transforms.clear();
+        self.buckets.iter_mut().for_each(Vec::clear);
+        self.cells.iter_mut().for_each(Vec::clear);
+    }
+}
+
+/// Store `new` at `index` of `v` (growing it with empty records) and return what was there.
+fn swap_in<T: Copy + Default>(v: &mut Vec<T>, index: u32, new: T) -> T {
+    let i = index as usize;
+    if i >= v.len() {
+        v.resize(i + 1, T::default());
+    }
+    std::mem::replace(&mut v[i], new)
+}
+
+/// The per-instance vector of `v` for `instance`, created empty when missing.
+fn instance_of<T>(v: &mut Vec<Vec<T>>, instance: u32) -> &mut Vec<T> {
+    let i = instance as usize;
+    if i >= v.len() {
+        v.resize_with(i + 1, Vec::new);
+    }
+    &mut v[i]
 }
 
 /// Choice of a bucket entry whose slot is coded as its cell's position in the update.
@@ -324,7 +371,10 @@ impl Streams {
 /// The compact codec. Stateful: one instance per sending or receiving end of a session.
 #[derive(Clone)]
 pub struct CompactCodec {
+    /// The decoder's reference.
     reference: Reference,
+    /// The encoder's reference.
+    sent: Sent,
     level: i32,
     decode_limit: u64,
 }
@@ -341,6 +391,10 @@ impl std::fmt::Debug for CompactCodec {
             .field("level", &self.level)
             .field("decode_limit", &self.decode_limit)
             .field("reference_cells", &self.reference.cells.len())
+            .field(
+                "sent_cells",
+                &self.sent.cells.iter().map(Vec::len).sum::<usize>(),
+            )
             .finish()
     }
 }
@@ -351,38 +405,48 @@ impl CompactCodec {
     pub fn new() -> Self {
         Self {
             reference: Reference::default(),
+            sent: Sent::default(),
             level: COMPACT_LEVEL,
             decode_limit: MAX_DECODED_BYTES,
         }
     }
-}
 
-impl Codec for CompactCodec {
-    fn name(&self) -> &'static str {
-        "compact"
-    }
-
-    fn encode(&mut self, update: &Update) -> Vec<u8> {
+    /// Take `update` into the encoder's reference and, with `streams`, code it there against
+    /// the reference it replaces.
+    fn record(&mut self, update: &Update, mut streams: Option<&mut Streams>) {
         if update.snapshot {
-            self.reference = Reference::default();
+            self.sent.clear();
         }
-        let r = &mut self.reference;
-        let mut st = Streams::default();
-        put_varint(&mut st.index, update.transforms.len() as u64);
+        let r = &mut self.sent;
+        if let Some(st) = streams.as_deref_mut() {
+            put_varint(&mut st.index, update.transforms.len() as u64);
+        }
         let mut prev = -1i64;
         for (instance, t) in &update.transforms {
-            put_delta(&mut st.index, &mut prev, *instance);
             let words = t.to_cols_array().map(f32::to_bits);
-            let old = r
-                .transforms
-                .insert(u64::from(*instance), words)
-                .unwrap_or_default();
-            st.transforms
-                .extend(words.iter().zip(old).map(|(w, p)| w ^ p));
+            let old = swap_in(&mut r.transforms, *instance, words);
+            if let Some(st) = streams.as_deref_mut() {
+                put_delta(&mut st.index, &mut prev, *instance);
+                st.transforms
+                    .extend(words.iter().zip(old).map(|(w, p)| w ^ p));
+            }
         }
-        put_varint(&mut st.index, update.instances.len() as u64);
+        if let Some(st) = streams.as_deref_mut() {
+            put_varint(&mut st.index, update.instances.len() as u64);
+        }
         let mut prev_instance = -1i64;
         for d in &update.instances {
+            let sent_buckets = instance_of(&mut r.buckets, d.instance);
+            let Some(st) = streams.as_deref_mut() else {
+                for (b, bucket) in &d.buckets {
+                    swap_in(sent_buckets, *b, Entries::of(&compact_bucket(bucket)));
+                }
+                let sent_cells = instance_of(&mut r.cells, d.instance);
+                for (s, cell) in &d.cells {
+                    swap_in(sent_cells, *s, compact_cell(cell).points);
+                }
+                continue;
+            };
             put_delta(&mut st.index, &mut prev_instance, d.instance);
             put_varint(&mut st.index, d.buckets.len() as u64);
             put_varint(&mut st.index, d.cells.len() as u64);
@@ -394,31 +458,37 @@ impl Codec for CompactCodec {
             for (b, bucket) in &d.buckets {
                 put_delta(&mut st.index, &mut prev, *b);
                 let bucket = compact_bucket(bucket);
-                let entries = Entries {
-                    keys: bucket.entries.map(|e| e.key),
-                    slots: bucket.entries.map(|e| e.slot),
-                };
-                let old = r
-                    .buckets
-                    .insert(key(d.instance, *b), entries)
-                    .unwrap_or_default();
+                let old = swap_in(sent_buckets, *b, Entries::of(&bucket));
                 st.bucket(*b, &bucket, &old, &ranks);
             }
             let mut prev = -1i64;
             let mut previous = [0; CELL_POINTS];
+            let sent_cells = instance_of(&mut r.cells, d.instance);
             for (s, cell) in &d.cells {
                 put_delta(&mut st.index, &mut prev, *s);
                 let points = compact_cell(cell).points;
-                let old = r
-                    .cells
-                    .insert(key(d.instance, *s), points)
-                    .unwrap_or_default();
+                let old = swap_in(sent_cells, *s, points);
                 st.cell(&points, &old, &previous);
                 previous = points;
             }
         }
+    }
+}
+
+impl Codec for CompactCodec {
+    fn name(&self) -> &'static str {
+        "compact"
+    }
+
+    fn encode(&mut self, update: &Update) -> Vec<u8> {
+        let mut st = Streams::default();
+        self.record(update, Some(&mut st));
         let flags = if update.snapshot { FLAG_SNAPSHOT } else { 0 };
         crate::zstd_io::compress(&st.payload(flags, update.frame), self.level)
+    }
+
+    fn advance(&mut self, update: &Update) {
+        self.record(update, None);
     }
 
     fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError> {
@@ -636,13 +706,7 @@ fn assemble(
                     .ok_or(DeltaError::BadRecord("bucket key"))?;
                 bucket.entries[i] = BucketEntry { key, slot };
             }
-            r.buckets.insert(
-                k,
-                Entries {
-                    keys: bucket.entries.map(|e| e.key),
-                    slots: bucket.entries.map(|e| e.slot),
-                },
-            );
+            r.buckets.insert(k, Entries::of(&bucket));
             buckets.push((b, bucket));
         }
         let mut cells = Vec::with_capacity(slot_ids.len());
@@ -940,6 +1004,68 @@ mod tests {
             let bytes = enc.encode(u);
             assert_eq!(dec.decode(&bytes).unwrap(), paper_round_trip(u));
         }
+    }
+
+    /// `updates` merged into one, as the server coalesces them: later records win, and the
+    /// last update's frame and transforms are kept.
+    fn coalesce(updates: &[Update]) -> Update {
+        let mut buckets = std::collections::BTreeMap::new();
+        let mut cells = std::collections::BTreeMap::new();
+        for u in updates {
+            for d in &u.instances {
+                buckets.extend(d.buckets.iter().map(|(b, v)| ((d.instance, *b), *v)));
+                cells.extend(d.cells.iter().map(|(c, v)| ((d.instance, *c), *v)));
+            }
+        }
+        let last = updates.last().expect("updates to coalesce");
+        let instances: std::collections::BTreeSet<u32> =
+            buckets.keys().chain(cells.keys()).map(|k| k.0).collect();
+        Update {
+            frame: last.frame,
+            snapshot: updates[0].snapshot,
+            transforms: last.transforms.clone(),
+            instances: instances
+                .into_iter()
+                .map(|i| InstanceDelta {
+                    instance: i,
+                    buckets: buckets
+                        .iter()
+                        .filter(|k| k.0 .0 == i)
+                        .map(|(k, v)| (k.1, *v))
+                        .collect(),
+                    cells: cells
+                        .iter()
+                        .filter(|k| k.0 .0 == i)
+                        .map(|(k, v)| (k.1, *v))
+                        .collect(),
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn receivers_in_the_same_state_get_the_same_bytes() {
+        let session = growing_session(7, 24);
+        let (head, tail) = session.split_at(16);
+        // One client got every update, one got the first and then the rest coalesced, one
+        // only advanced through them (the server sent it another client's bytes).
+        let mut every = CompactCodec::new();
+        let mut coalesced = CompactCodec::new();
+        let mut advanced = CompactCodec::new();
+        for u in head {
+            every.encode(u);
+            advanced.advance(u);
+        }
+        coalesced.encode(&head[0]);
+        coalesced.encode(&coalesce(&head[1..]));
+        let mut changed = 0;
+        for u in tail {
+            let bytes = every.encode(u);
+            assert_eq!(coalesced.encode(u), bytes, "frame {}", u.frame);
+            assert_eq!(advanced.encode(u), bytes, "frame {}", u.frame);
+            changed += u.changed_cells();
+        }
+        assert!(changed > 0, "the tail changes cells");
     }
 
     #[test]

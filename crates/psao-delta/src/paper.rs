@@ -47,6 +47,8 @@ impl Codec for PaperCodec {
         compress(&serialize(update))
     }
 
+    fn advance(&mut self, _update: &Update) {}
+
     fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError> {
         deserialize(&decompress(bytes)?)
     }

@@ -42,6 +42,11 @@ impl Clients {
         self.states.remove(&id.0);
     }
 
+    /// State of a client.
+    pub fn get(&self, id: ClientId) -> Option<&ClientState> {
+        self.states.get(&id.0)
+    }
+
     /// Mutable state of a client.
     pub fn get_mut(&mut self, id: ClientId) -> Option<&mut ClientState> {
         self.states.get_mut(&id.0)

@@ -361,16 +361,53 @@ impl Server {
     /// non-empty bucket and cell), plus all instance transforms. An unknown id gets a
     /// snapshot without being registered.
     pub fn update_for(&mut self, id: ClientId) -> psao_delta::Update {
-        let frame = self.frame;
-        let (snapshot, since) = match self.clients.get_mut(id) {
-            Some(c) => {
-                let taken = (c.needs_snapshot, c.last_sent);
-                c.needs_snapshot = false;
-                c.last_sent = frame;
-                taken
+        let (snapshot, since) = self.take_pending(id);
+        self.update_since(snapshot, since)
+    }
+
+    /// [`Server::update_for`] for several clients at once: clients due the same update (each
+    /// a snapshot, or each last updated at the same frame) share one. Returns the groups, in
+    /// the order of their first member in `ids`, members in the order of `ids`.
+    pub fn updates_for(&mut self, ids: &[ClientId]) -> Vec<(Vec<ClientId>, psao_delta::Update)> {
+        let mut groups: Vec<((bool, u64), Vec<ClientId>)> = Vec::new();
+        for &id in ids {
+            let key = self.pending(id);
+            match groups.iter_mut().find(|g| g.0 == key) {
+                Some(g) => g.1.push(id),
+                None => groups.push((key, vec![id])),
             }
-            None => (true, 0),
-        };
+        }
+        groups
+            .into_iter()
+            .map(|((snapshot, since), members)| {
+                for &m in &members {
+                    self.take_pending(m);
+                }
+                (members, self.update_since(snapshot, since))
+            })
+            .collect()
+    }
+
+    /// (snapshot, frame of the last update) the client is due; unknown ids get snapshots.
+    fn pending(&self, id: ClientId) -> (bool, u64) {
+        match self.clients.get(id) {
+            Some(c) if !c.needs_snapshot => (false, c.last_sent),
+            _ => (true, 0),
+        }
+    }
+
+    /// [`Server::pending`], recording that the client is sent an update of this frame.
+    fn take_pending(&mut self, id: ClientId) -> (bool, u64) {
+        let due = self.pending(id);
+        if let Some(c) = self.clients.get_mut(id) {
+            c.needs_snapshot = false;
+            c.last_sent = self.frame;
+        }
+        due
+    }
+
+    /// The update of a client last updated at frame `since` (or due a snapshot).
+    fn update_since(&self, snapshot: bool, since: u64) -> psao_delta::Update {
         let instances = self
             .instances
             .par_iter()
@@ -380,7 +417,7 @@ impl Server {
             .filter(|d| !d.buckets.is_empty() || !d.cells.is_empty())
             .collect();
         Update {
-            frame,
+            frame: self.frame,
             snapshot,
             transforms: self.transforms(),
             instances,
@@ -672,6 +709,55 @@ mod tests {
     }
 
     /// The (visible count, selection) by testing every point against the frusta.
+    #[test]
+    fn clients_due_the_same_update_share_it() {
+        let config = ServerConfig {
+            density: 256.0,
+            ray_budget: 2000,
+            rays_per_point: 4,
+            max_samples: 16,
+            ..ServerConfig::default()
+        };
+        let mut server = Server::new(&scene(), config).unwrap();
+        let (a, b, c) = (
+            server.add_client(),
+            server.add_client(),
+            server.add_client(),
+        );
+        server.step(&[view(0)]);
+        // All three are due a snapshot.
+        let first = server.updates_for(&[a, b, c]);
+        assert_eq!(first.len(), 1);
+        assert_eq!(first[0].0, vec![a, b, c]);
+        assert!(first[0].1.snapshot);
+        server.step(&[view(1)]);
+        // `b` skips this frame (coalesced), `c` asks for a resync.
+        server.resync(c);
+        let second = server.updates_for(&[c, a]);
+        assert_eq!(second.len(), 2);
+        assert_eq!(second[0].0, vec![c]);
+        assert!(second[0].1.snapshot);
+        assert_eq!(second[1].0, vec![a]);
+        assert!(!second[1].1.snapshot);
+        server.step(&[view(2)]);
+        // `a` and `c` now hold frame 2's predecessor; `b` is a frame further behind.
+        let third = server.updates_for(&[a, b, c]);
+        assert_eq!(third.len(), 2);
+        assert_eq!(third[0].0, vec![a, c]);
+        assert_eq!(third[1].0, vec![b]);
+        // Each group's update is what `update_for` would have given its members.
+        let mut lone = Server::new(&scene(), *server.config()).unwrap();
+        let (la, lb) = (lone.add_client(), lone.add_client());
+        for (f, due) in [(0, vec![la, lb]), (1, vec![la]), (2, vec![la, lb])] {
+            lone.step(&[view(f)]);
+            let updates: Vec<_> = due.iter().map(|&id| lone.update_for(id)).collect();
+            if f == 2 {
+                assert_eq!(updates[0], third[0].1);
+                assert_eq!(updates[1], third[1].1);
+            }
+        }
+    }
+
     fn brute_force(
         server: &Server,
         frusta: &[Frustum],

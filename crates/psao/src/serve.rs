@@ -7,7 +7,7 @@
 //! frames. With `--lockstep` the server steps once per round of camera messages instead of
 //! on a clock, which makes a session reproduce `psao run` exactly.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -615,30 +615,67 @@ impl Simulation {
             .then(|| self.state_hash());
         self.hash_ms += th.elapsed().as_secs_f64() * 1e3;
         let frame = self.server.frame();
-        // Collect the updates (the server is shared), then encode them in parallel.
+        // Collect the updates (clients due the same one share it), then encode each once, in
+        // parallel: the other clients of a group only advance their codec's state (one codec
+        // for the whole server), which equals the encoder's because their decoders hold the
+        // same state.
         let tu = Instant::now();
         let mut due = Vec::new();
-        for (&id, s) in &mut self.sessions {
+        for s in self.sessions.values_mut() {
             s.stats.frames += 1;
             let room = s.out.capacity() > 0 && s.unacked.len() < ACK_WINDOW;
             if !lockstep && !room {
                 s.stats.coalesced += 1;
                 continue;
             }
-            let update = self.server.update_for(s.id);
-            due.push((id, s, update));
+            due.push(s.id);
         }
+        let groups = self.server.updates_for(&due);
         let te = Instant::now();
         self.update_ms += (te - tu).as_secs_f64() * 1e3;
-        let encoded: Vec<(u32, Option<Vec<u8>>)> = due
+        let update_of: HashMap<ClientId, usize> = groups
+            .iter()
+            .enumerate()
+            .flat_map(|(g, (members, _))| members.iter().map(move |m| (*m, g)))
+            .collect();
+        // The first session of each group encodes, the others advance.
+        let mut encoders: HashSet<usize> = HashSet::new();
+        let jobs: Vec<(&mut Session, usize, bool)> = self
+            .sessions
+            .values_mut()
+            .filter_map(|s| {
+                let g = *update_of.get(&s.id)?;
+                let first = encoders.insert(g);
+                Some((s, g, first))
+            })
+            .collect();
+        let payloads: Vec<(&mut Session, usize, Option<Vec<u8>>)> = jobs
             .into_par_iter()
-            .map(|(id, s, update)| {
+            .map(|(s, g, first)| {
+                let update = &groups[g].1;
+                if first {
+                    let payload = s.codec.encode(update);
+                    (s, g, Some(payload))
+                } else {
+                    s.codec.advance(update);
+                    (s, g, None)
+                }
+            })
+            .collect();
+        let shared: HashMap<usize, Vec<u8>> = payloads
+            .iter()
+            .filter_map(|(_, g, payload)| Some((*g, payload.clone()?)))
+            .collect();
+        let encoded: Vec<(u32, Option<Vec<u8>>)> = payloads
+            .into_par_iter()
+            .map(|(s, g, payload)| {
+                let update = &groups[g].1;
                 let delta = Delta {
                     frame,
                     scene_time: seconds,
                     client_frame: if lockstep { s.pending.take() } else { None },
                     state_hash: if s.want_hash { hash } else { None },
-                    payload: s.codec.encode(&update),
+                    payload: payload.unwrap_or_else(|| shared[&g].clone()),
                 };
                 let message = if update.snapshot {
                     s.stats.snapshots += 1;
@@ -646,7 +683,7 @@ impl Simulation {
                 } else {
                     Message::Delta(delta)
                 };
-                (id, encode_frame(&message).ok())
+                (s.id.0, encode_frame(&message).ok())
             })
             .collect();
         self.encode_ms += te.elapsed().as_secs_f64() * 1e3;
