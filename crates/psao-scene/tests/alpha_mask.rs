@@ -207,7 +207,13 @@ fn crc32(bytes: &[u8]) -> u32 {
 #[test]
 fn base_colour_alpha_scales_the_texture_and_decides_alone_without_one() {
     let tmp = tempfile::tempdir().unwrap();
-    let path = write(tmp.path(), "quad", &checker_png(), ImageSource::BufferView, "MASK");
+    let path = write(
+        tmp.path(),
+        "quad",
+        &checker_png(),
+        ImageSource::BufferView,
+        "MASK",
+    );
     let mut material = psao_scene::gltf::load(&path).unwrap().materials.remove(0);
     let (opaque_uv, clear_uv) = (Some(Vec2::splat(0.01)), Some(Vec2::new(0.3, 0.01)));
     assert!(material.opaque_at(opaque_uv) && !material.opaque_at(clear_uv));
