@@ -229,3 +229,42 @@ fn base_colour_alpha_scales_the_texture_and_decides_alone_without_one() {
     material.base_color.w = 0.0;
     assert!(material.opaque_at(None));
 }
+
+#[test]
+fn the_mask_reads_the_uv_set_its_texture_names() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = write(
+        tmp.path(),
+        "set1",
+        &checker_png(),
+        ImageSource::BufferView,
+        "MASK",
+    );
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let attributes = &mut json["meshes"][0]["primitives"][0]["attributes"];
+    attributes["TEXCOORD_1"] = attributes["TEXCOORD_0"].take();
+    attributes.as_object_mut().unwrap().remove("TEXCOORD_0");
+    json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["texCoord"] = 1.into();
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    let scene = psao_scene::gltf::load(&path).unwrap();
+    assert_eq!(
+        scene.materials[0].alpha_texture.as_ref().unwrap().tex_coord,
+        1
+    );
+    assert_eq!(scene.meshes[0].uvs.len(), 4);
+    // Texel (1, 0) is opaque, (3, 0) cut out (see mask_texture_is_read_from_every_source).
+    let bary = |x: f32, y: f32| {
+        let uv = (Vec2::new(x, y) + 0.5) / SIZE as f32;
+        Vec3::new(1.0 - uv.x, uv.y, uv.x - uv.y)
+    };
+    assert!(scene.opaque_at(0, 0, bary(1.0, 0.0)));
+    assert!(!scene.opaque_at(0, 0, bary(3.0, 0.0)));
+    // Without that set the texture cannot be addressed: the factor alone decides.
+    let attributes = &mut json["meshes"][0]["primitives"][0]["attributes"];
+    attributes.as_object_mut().unwrap().remove("TEXCOORD_1");
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    let scene = psao_scene::gltf::load(&path).unwrap();
+    assert!(scene.meshes[0].uvs.is_empty());
+    assert!(scene.opaque_at(0, 0, bary(3.0, 0.0)));
+}
