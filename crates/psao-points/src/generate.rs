@@ -26,7 +26,8 @@ pub const MAX_SPAWNED: u32 = 1 << 31;
 /// the candidate with respect to the triangle's three vertices); return `true` to keep the
 /// point (the texel is opaque), `false` to reject it (masked out). Textures are not loaded by
 /// this crate: the caller samples its alpha texture at the interpolated UV and compares with
-/// the material's cutoff. Only consulted for materials with [`AlphaMode::Mask`].
+/// the material's cutoff, as [`Scene::opaque_at`] does. Only consulted for materials with
+/// [`AlphaMode::Mask`].
 pub type AlphaTest<'a> = &'a (dyn Fn(u32, Vec3) -> bool + Sync);
 
 /// Scene-level alpha hook: like [`AlphaTest`] with the mesh index first.

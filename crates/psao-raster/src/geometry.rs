@@ -4,6 +4,7 @@ use glam::{Mat3A, Vec3, Vec4};
 use psao_scene::Scene;
 use rayon::prelude::*;
 
+use crate::mask::Cut;
 use crate::pose::InstancePose;
 use crate::view::View;
 
@@ -28,6 +29,15 @@ pub(crate) struct PosedInstance<'a> {
     pub normal_matrix: Option<Mat3A>,
     /// Whether back faces may be culled (the material is single-sided).
     pub single_sided: bool,
+    /// How the material's alpha mask cuts the surface.
+    pub cut: Cut<'a>,
+}
+
+/// (instance, triangle within its mesh) of global triangle `id`, given the first global id
+/// of each instance.
+pub(crate) fn locate(first_id: &[u32], id: u32) -> Option<(usize, u32)> {
+    let instance = first_id.partition_point(|&f| f <= id).checked_sub(1)?;
+    Some((instance, id - first_id[instance]))
 }
 
 impl PosedInstance<'_> {
@@ -76,6 +86,10 @@ pub(crate) fn pose_instances<'a>(
         .zip(poses)
         .map(|((buf, inst), pose)| {
             let mesh = scene.meshes.get(inst.mesh);
+            let material = mesh.and_then(|m| scene.materials.get(m.material));
+            let cut = mesh
+                .zip(material)
+                .map_or(Cut::Nothing, |(m, mat)| Cut::of(m, mat, buf.world.len()));
             let normals = mesh
                 .map(|m| pose.normals.unwrap_or(&m.normals))
                 .filter(|n| n.len() == buf.world.len());
@@ -88,10 +102,8 @@ pub(crate) fn pose_instances<'a>(
                 clip: &buf.clip,
                 normals,
                 normal_matrix,
-                single_sided: !matches!(
-                    mesh.and_then(|m| scene.materials.get(m.material)),
-                    Some(m) if m.double_sided
-                ),
+                single_sided: !matches!(material, Some(m) if m.double_sided),
+                cut,
             }
         })
         .collect()

@@ -9,11 +9,14 @@
 //! triangle. Use a [`Rasterizer`] and one [`GBuffer`] per view in frame loops to reuse memory.
 //!
 //! Both windings are rasterized unless [`RasterOptions::cull_backfaces`]; fragments beyond the
-//! camera's far distance are dropped.
+//! camera's far distance are dropped, and so are fragments of alpha-masked materials where the
+//! surface is cut out ([`psao_scene::Material::opaque_at`] at the pixel centre's texture
+//! coordinates), so what lies behind shows through.
 
 mod clip;
 mod gbuffer;
 mod geometry;
+mod mask;
 mod pose;
 mod raster;
 mod rasterizer;

@@ -1,6 +1,7 @@
 //! Visibility pass: bins screen triangles into horizontal bands and scan-converts one band into
 //! a (nearest depth, triangle id) buffer.
 
+use crate::mask::MaskTest;
 use crate::setup::SetupTri;
 
 /// Rows per band; each band is rasterized by one task that owns its pixels.
@@ -75,18 +76,19 @@ fn pack(inv_depth: f64, id: u32) -> u64 {
 
 /// Scan-converts `tris[items]` into `vis`, the band of `rows` rows starting at row `y0` of a
 /// `width`-pixel-wide image, keeping the nearest fragment (lowest id on ties) that is not
-/// beyond the far plane (`inv_far` = 1/far).
+/// beyond the far plane (`inv_far` = 1/far) nor cut out by its alpha mask (`masks`).
 pub(crate) fn rasterize_band(
     tris: &[SetupTri],
     items: &[u32],
     (y0, rows, width): (u32, u32, u32),
-    inv_far: f64,
+    (inv_far, masks): (f64, &MaskTest<'_>),
     vis: &mut VisibilityBand,
 ) {
     vis.key.clear();
     vis.key.resize((rows * width) as usize, 0);
     for &i in items {
         let t = &tris[i as usize];
+        let mask = if t.masked { masks.triangle(t.id) } else { None };
         let (step_x, step_y) = t.steps();
         let (min_x, min_y) = (u32::from(t.min_x), u32::from(t.min_y));
         let ys = min_y.max(y0)..=u32::from(t.max_y).min(y0 + rows - 1);
@@ -106,11 +108,27 @@ pub(crate) fn rasterize_band(
             let [a, b, c] = t.inv_depth;
             let row_inv = b * y as f64 + c;
             let (x0, x1) = (min_x as usize + lo as usize, min_x as usize + hi as usize);
-            for (x, key) in (x0..=x1).zip(&mut vis.key[row + x0..=row + x1]) {
-                let inv = a * x as f64 + row_inv;
-                // Also rejects negative and NaN values, whose f32 bits would sort wrongly.
-                let k = if inv >= inv_far { pack(inv, t.id) } else { 0 };
-                *key = (*key).max(k);
+            let keys = (x0..=x1).zip(&mut vis.key[row + x0..=row + x1]);
+            match &mask {
+                None => {
+                    for (x, key) in keys {
+                        let inv = a * x as f64 + row_inv;
+                        // Also rejects negative and NaN values, whose f32 bits would sort wrongly.
+                        let k = if inv >= inv_far { pack(inv, t.id) } else { 0 };
+                        *key = (*key).max(k);
+                    }
+                }
+                Some(m) => {
+                    for (x, key) in keys {
+                        let inv = a * x as f64 + row_inv;
+                        if inv >= inv_far {
+                            let k = pack(inv, t.id);
+                            if k > *key && m.keeps(x as u32, y) {
+                                *key = k;
+                            }
+                        }
+                    }
+                }
             }
         }
     }

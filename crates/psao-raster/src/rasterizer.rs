@@ -4,6 +4,7 @@ use psao_scene::{Camera, Scene};
 use rayon::prelude::*;
 
 use crate::geometry::{self, PosedInstance, VertexBuffers};
+use crate::mask::{Cut, MaskTest};
 use crate::pose::{validate_poses, InstancePose, PoseError};
 use crate::raster::{self, Bins, VisibilityBand, BAND_ROWS};
 use crate::resolve::Resolver;
@@ -93,13 +94,18 @@ impl Rasterizer {
             instances: &instances,
             first_id: &first_id,
         };
+        let masks = MaskTest {
+            view: &view,
+            instances: &instances,
+            first_id: &first_id,
+        };
         let (tris, bins) = (&self.tris, &self.bins);
         out.bands_mut(BAND_ROWS)
             .into_par_iter()
             .enumerate()
             .for_each_init(VisibilityBand::default, |vis, (b, mut band)| {
                 let rows = (band.y0, band.rows(), width);
-                raster::rasterize_band(tris, bins.band(b), rows, view.inv_far, vis);
+                raster::rasterize_band(tris, bins.band(b), rows, (view.inv_far, &masks), vis);
                 resolver.resolve_band(vis, &mut band);
             });
     }
@@ -142,6 +148,11 @@ fn setup_triangles(
         .for_each(|(out, &(i, start))| {
             out.clear();
             let inst = &instances[i];
+            let masked = match inst.cut {
+                Cut::Nothing => false,
+                Cut::Everything => return,
+                Cut::Texels { .. } => true,
+            };
             for tri in start..(start + SETUP_CHUNK).min(inst.indices.len()) {
                 let id = u64::from(first_id[i]) + tri as u64;
                 if id >= u64::from(u32::MAX) {
@@ -149,7 +160,7 @@ fn setup_triangles(
                 }
                 if let Some((idx, world)) = inst.triangle(tri) {
                     let clip = idx.map(|v| inst.clip[v as usize]);
-                    setup.push(id as u32, world, clip, inst.single_sided, out);
+                    setup.push(id as u32, world, clip, (inst.single_sided, masked), out);
                 }
             }
         });

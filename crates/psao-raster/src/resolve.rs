@@ -4,7 +4,7 @@
 use glam::{Vec2, Vec3};
 
 use crate::gbuffer::BandMut;
-use crate::geometry::PosedInstance;
+use crate::geometry::{locate, PosedInstance};
 use crate::raster::VisibilityBand;
 use crate::view::View;
 
@@ -28,14 +28,8 @@ struct Triangle {
     triangle: u32,
     /// World-space vertices.
     p: [Vec3; 3],
-    /// Numerator of u as an affine function of the pixel (see [`View::pixel_affine`]):
-    /// Möller–Trumbore rearranged so that u and v at pixel (x, y) are ratios of affine
-    /// functions of x and y.
-    u_num: Vec3,
-    /// Numerator of v, see `u_num`.
-    v_num: Vec3,
-    /// Common denominator of u and v, see `u_num`.
-    den: Vec3,
+    /// Barycentrics per pixel.
+    bary: BaryPlane,
     /// Unit face normal turned towards the eye (`None` for a degenerate triangle).
     face_normal: Option<Vec3>,
     /// How the shading normal is found.
@@ -78,7 +72,7 @@ impl Resolver<'_> {
 
     /// Writes pixel `p` of `band`, which shows `tri` at image pixel (`x`, `y`).
     fn shade(&self, tri: &Triangle, x: u32, y: u32, band: &mut BandMut<'_>, p: usize) {
-        let barycentric = barycentrics(tri, x as f32, y as f32);
+        let barycentric = tri.bary.at(x, y);
         let (u, v) = (barycentric.x, barycentric.y);
         let w = 1.0 - u - v;
         let position = w * tri.p[0] + u * tri.p[1] + v * tri.p[2];
@@ -110,8 +104,7 @@ impl Resolver<'_> {
 
     /// Per-triangle data of global triangle `id`.
     fn triangle(&self, id: u32) -> Option<Triangle> {
-        let instance = self.first_id.partition_point(|&f| f <= id).checked_sub(1)?;
-        let triangle = id - self.first_id[instance];
+        let (instance, triangle) = locate(self.first_id, id)?;
         let posed = &self.instances[instance];
         let (idx, p) = posed.triangle(triangle as usize)?;
         let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
@@ -141,31 +134,55 @@ impl Resolver<'_> {
             instance: instance as u32,
             triangle,
             p,
-            u_num: self.view.pixel_affine(e2.cross(s)),
-            v_num: self.view.pixel_affine(s.cross(e1)),
-            den: self.view.pixel_affine(e2.cross(e1)),
+            bary: BaryPlane::new(self.view, p),
             face_normal,
             shading,
         })
     }
 }
 
-/// Barycentrics (u, v) of where the eye ray through the centre of pixel (`x`, `y`) meets the
-/// plane of `tri`, clamped into the triangle (the centroid when the ray is parallel to the
-/// plane).
-fn barycentrics(tri: &Triangle, x: f32, y: f32) -> Vec2 {
-    let at = |f: Vec3| f.x + f.y * x + f.z * y;
-    let uv = Vec2::new(at(tri.u_num), at(tri.v_num)) * at(tri.den).recip();
-    if !uv.is_finite() {
-        return Vec2::splat(1.0 / 3.0);
+/// The barycentrics of one world-space triangle as seen through each pixel centre:
+/// Möller–Trumbore rearranged so that u and v at pixel (x, y) are ratios of affine functions
+/// of x and y (see [`View::pixel_affine`]).
+pub(crate) struct BaryPlane {
+    /// Numerator of u.
+    u_num: Vec3,
+    /// Numerator of v.
+    v_num: Vec3,
+    /// Common denominator of u and v.
+    den: Vec3,
+}
+
+impl BaryPlane {
+    /// The plane of world-space triangle `p` in `view`.
+    pub fn new(view: &View, p: [Vec3; 3]) -> Self {
+        let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+        let s = view.origin - p[0];
+        Self {
+            u_num: view.pixel_affine(e2.cross(s)),
+            v_num: view.pixel_affine(s.cross(e1)),
+            den: view.pixel_affine(e2.cross(e1)),
+        }
     }
-    // Nearest point of u, v ≥ 0, u + v ≤ 1; up to the sub-pixel snapping error this only moves
-    // points that lie on an edge.
-    let c = uv.max(Vec2::ZERO);
-    let sum = c.x + c.y;
-    if sum > 1.0 {
-        c / sum
-    } else {
-        c
+
+    /// Barycentrics (u, v) of where the eye ray through the centre of pixel (`x`, `y`) meets
+    /// the plane, clamped into the triangle (the centroid when the ray is parallel to the
+    /// plane).
+    pub fn at(&self, x: u32, y: u32) -> Vec2 {
+        let (x, y) = (x as f32, y as f32);
+        let at = |f: Vec3| f.x + f.y * x + f.z * y;
+        let uv = Vec2::new(at(self.u_num), at(self.v_num)) * at(self.den).recip();
+        if !uv.is_finite() {
+            return Vec2::splat(1.0 / 3.0);
+        }
+        // Nearest point of u, v ≥ 0, u + v ≤ 1; up to the sub-pixel snapping error this only
+        // moves points that lie on an edge.
+        let c = uv.max(Vec2::ZERO);
+        let sum = c.x + c.y;
+        if sum > 1.0 {
+            c / sum
+        } else {
+            c
+        }
     }
 }

@@ -44,6 +44,8 @@ pub(crate) struct SetupTri {
     pub max_y: u16,
     /// Global triangle id.
     pub id: u32,
+    /// Whether its fragments pass an alpha test (see [`crate::mask`]).
+    pub masked: bool,
 }
 
 impl SetupTri {
@@ -79,13 +81,14 @@ impl<'a> TriangleSetup<'a> {
     }
 
     /// Appends the screen triangles of world triangle `world` (clip coordinates `clip`) to `out`.
-    /// Back faces are culled when the setup culls and the triangle is `single_sided`.
+    /// Back faces are culled when the setup culls and the triangle is `single_sided`; `masked`
+    /// marks triangles whose fragments pass an alpha test.
     pub fn push(
         &self,
         id: u32,
         world: [Vec3; 3],
         clip: [Vec4; 3],
-        single_sided: bool,
+        (single_sided, masked): (bool, bool),
         out: &mut Vec<SetupTri>,
     ) {
         if !clip.iter().all(|v| v.is_finite()) {
@@ -108,7 +111,7 @@ impl<'a> TriangleSetup<'a> {
         for i in 1..verts.len() - 1 {
             let tri = [fixed[0], fixed[i], fixed[i + 1]];
             if let Some(t) = self.edges(tri, inv_depth, id, single_sided && self.cull_backfaces) {
-                out.push(t);
+                out.push(SetupTri { masked, ..t });
             }
         }
     }
@@ -184,6 +187,7 @@ impl<'a> TriangleSetup<'a> {
             max_x: max_x as u16,
             max_y: max_y as u16,
             id,
+            masked: false,
         })
     }
 }

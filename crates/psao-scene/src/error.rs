@@ -75,6 +75,16 @@ pub enum SceneError {
         /// What is unsupported.
         message: String,
     },
+    /// An image the scene needs (an alpha mask) is missing, corrupt or in an unsupported format.
+    #[error("{}: {image}: {message}", path.display())]
+    Image {
+        /// The scene file that refers to the image.
+        path: PathBuf,
+        /// Which image and what uses it.
+        image: String,
+        /// What is wrong.
+        message: String,
+    },
     /// An asset listed in a scene file failed to load.
     #[error("{}: asset failed to load: {source}", scene.display())]
     Asset {
@@ -96,7 +106,8 @@ impl SceneError {
             | Self::MissingBuffer { path, .. }
             | Self::NonFinite { path, .. }
             | Self::TooLarge { path, .. }
-            | Self::Unsupported { path, .. } => path,
+            | Self::Unsupported { path, .. }
+            | Self::Image { path, .. } => path,
             Self::Asset { scene, .. } => scene,
         }
     }
@@ -138,6 +149,14 @@ impl SceneError {
             what: what.into(),
             size,
             limit,
+        }
+    }
+
+    pub(crate) fn image(path: &Path, image: &str, message: impl Into<String>) -> Self {
+        Self::Image {
+            path: path.to_path_buf(),
+            image: image.to_owned(),
+            message: message.into(),
         }
     }
 

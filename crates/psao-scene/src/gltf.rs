@@ -3,7 +3,11 @@
 //! The node hierarchy is kept ([`Scene::nodes`], same indices as the file) and flattened
 //! into [`Instance`]s: one per (node, triangle primitive) of the displayed scene (the
 //! default scene, else every root), with the node's world transform at rest. Each
-//! primitive becomes one shared [`Mesh`]. Images and textures are never read.
+//! primitive becomes one shared [`Mesh`]. Textures are read only for alpha masks: the
+//! base-colour image of each `MASK` material is decoded (PNG from a buffer view, a data URI
+//! or a file next to the glTF; JPEG has no alpha and is not read) into its
+//! [`Material::alpha_texture`], with the sampler's wrap modes and the UV set it uses (that
+//! set becomes [`Mesh::uvs`]). `KHR_texture_transform` is not applied.
 //!
 //! Clips that drive disjoint nodes all play; of clips sharing nodes only the first plays.
 //!
@@ -14,6 +18,7 @@ mod accessor;
 mod animation;
 mod buffers;
 mod hierarchy;
+mod images;
 mod precheck;
 mod primitive;
 
@@ -26,8 +31,14 @@ use ::gltf::material::AlphaMode as GltfAlphaMode;
 use ::gltf::Document;
 use glam::Vec4;
 
+pub use self::images::{MAX_IMAGE_BYTES, MAX_IMAGE_SIDE};
+
 use self::accessor::BufferData;
+use self::images::MaskImages;
+use crate::alpha::{AlphaTexture, Wrap};
 use crate::error::{read_file, SceneError};
+#[cfg(doc)]
+use crate::model::Mesh;
 use crate::model::{AlphaMode, Animation, Instance, Material, Scene, DEFAULT_AO_RADIUS};
 
 /// Loads a `.gltf` or `.glb` file (the format is detected from the content).
@@ -44,12 +55,14 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
     precheck::precheck(&root, path)?;
     let document = guard(path, || Document::from_json(root))?.map_err(bad)?;
     let buffers = buffers::load_buffers(&document, blob, path)?;
+    let masks = images::mask_images(&document, &buffers, path)?;
     build(
         &document,
         &BufferData {
             path,
             buffers: &buffers,
         },
+        &masks,
     )
 }
 
@@ -61,13 +74,13 @@ fn guard<T>(path: &Path, f: impl FnOnce() -> T) -> Result<T, SceneError> {
     })
 }
 
-/// Builds the scene from a parsed document and its loaded buffers.
-fn build(doc: &Document, data: &BufferData) -> Result<Scene, SceneError> {
+/// Builds the scene from a parsed document, its loaded buffers and decoded alpha masks.
+fn build(doc: &Document, data: &BufferData, masks: &MaskImages) -> Result<Scene, SceneError> {
     let tree = hierarchy::build(doc, data.path)?;
     let mut scene = Scene {
         materials: doc
             .materials()
-            .map(|m| material(&m, data.path))
+            .map(|m| material(&m, masks, data.path))
             .collect::<Result<_, _>>()?,
         skins: doc
             .skins()
@@ -166,7 +179,11 @@ fn convert_mesh(
                 scene.materials.len() - 1
             }),
         };
-        if let Some(mesh) = primitive::convert(&prim, name, material, data)? {
+        let mask_uvs = scene.materials[material]
+            .alpha_texture
+            .as_ref()
+            .map(|t| t.tex_coord);
+        if let Some(mesh) = primitive::convert(&prim, name, material, mask_uvs, data)? {
             scene.meshes.push(mesh);
             ids.push(scene.meshes.len() - 1);
         }
@@ -174,8 +191,9 @@ fn convert_mesh(
     Ok(ids)
 }
 
-/// Converts a glTF material (factors only; textures are ignored).
-fn material(m: &::gltf::Material, path: &Path) -> Result<Material, SceneError> {
+/// Converts a glTF material: its factors, and for a `MASK` material the alpha texture
+/// decoded in `masks` (textures are otherwise ignored).
+fn material(m: &::gltf::Material, masks: &MaskImages, path: &Path) -> Result<Material, SceneError> {
     let name = m.name().map_or_else(
         || format!("material{}", m.index().unwrap_or(0)),
         str::to_owned,
@@ -191,16 +209,41 @@ fn material(m: &::gltf::Material, path: &Path) -> Result<Material, SceneError> {
     {
         return Err(SceneError::non_finite(path, format!("material '{name}'")));
     }
+    let alpha_mode = match m.alpha_mode() {
+        GltfAlphaMode::Opaque => AlphaMode::Opaque,
+        GltfAlphaMode::Mask => AlphaMode::Mask { cutoff },
+        GltfAlphaMode::Blend => AlphaMode::Blend,
+    };
+    let alpha_texture = match (alpha_mode, pbr.base_color_texture()) {
+        (AlphaMode::Mask { .. }, Some(info)) => {
+            let texture = info.texture();
+            let image = masks.get(&texture.source().index()).cloned().flatten();
+            let sampler = texture.sampler();
+            image.map(|image| AlphaTexture {
+                image,
+                tex_coord: info.tex_coord(),
+                wrap_s: wrap(sampler.wrap_s()),
+                wrap_t: wrap(sampler.wrap_t()),
+            })
+        }
+        _ => None,
+    };
     Ok(Material {
         name,
         base_color,
         double_sided: m.double_sided(),
-        alpha_mode: match m.alpha_mode() {
-            GltfAlphaMode::Opaque => AlphaMode::Opaque,
-            GltfAlphaMode::Mask => AlphaMode::Mask { cutoff },
-            GltfAlphaMode::Blend => AlphaMode::Blend,
-        },
+        alpha_mode,
         metallic,
         roughness,
+        alpha_texture,
     })
+}
+
+fn wrap(mode: ::gltf::texture::WrappingMode) -> Wrap {
+    use ::gltf::texture::WrappingMode as W;
+    match mode {
+        W::Repeat => Wrap::Repeat,
+        W::ClampToEdge => Wrap::ClampToEdge,
+        W::MirroredRepeat => Wrap::MirroredRepeat,
+    }
 }

@@ -1,6 +1,7 @@
 //! Scene data model and import: glTF 2.0, OBJ, scene files, the built-in default scene and camera paths.
 
 pub mod affine;
+pub mod alpha;
 pub mod anim;
 pub mod builtin;
 pub mod camera;
@@ -13,6 +14,7 @@ pub mod obj;
 pub mod path;
 pub mod scene_file;
 
+pub use alpha::{AlphaImage, AlphaTexture, Wrap};
 pub use anim::{AnimationError, Animator, Motion, PosedInstance, ScenePose, SkinnedGeometry};
 pub use camera::Camera;
 pub use error::{SceneError, MAX_ELEMENTS};

@@ -2,6 +2,8 @@
 
 use glam::{Affine3A, Mat4, Quat, Vec2, Vec3, Vec4};
 
+use crate::alpha::AlphaTexture;
+
 /// A triangle mesh in its own local space (one glTF primitive or one OBJ object).
 #[derive(Clone, Debug, Default)]
 pub struct Mesh {
@@ -11,7 +13,8 @@ pub struct Mesh {
     pub positions: Vec<Vec3>,
     /// Unit vertex normals, one per position (computed when the file has none).
     pub normals: Vec<Vec3>,
-    /// Texture coordinates, one per position, or empty when the file has none.
+    /// Texture coordinates, one per position, or empty when the file has none: the set the
+    /// material's [`Material::alpha_texture`] is addressed with, else `TEXCOORD_0`.
     pub uvs: Vec<Vec2>,
     /// Triangles as counter-clockwise (front-facing) vertex index triples.
     pub indices: Vec<[u32; 3]>,
@@ -29,9 +32,10 @@ pub enum AlphaMode {
     /// Fully opaque.
     #[default]
     Opaque,
-    /// Alpha-tested with the given cutoff; rays skip such geometry (DESIGN §2).
+    /// Alpha-tested with the given cutoff; rays skip such geometry (DESIGN §2), points and
+    /// rasterized fragments on masked-out texels are dropped.
     Mask {
-        /// Texels with alpha below this are cut out.
+        /// Surface where alpha (texture alpha × base-colour alpha) is below this is cut out.
         cutoff: f32,
     },
     /// Alpha-blended (treated as opaque for AO).
@@ -53,6 +57,9 @@ pub struct Material {
     pub metallic: f32,
     /// glTF roughness factor (1 for OBJ).
     pub roughness: f32,
+    /// Alpha channel of the base-colour texture, loaded only for [`AlphaMode::Mask`]
+    /// materials whose texture has one (`None`: the alpha is `base_color.w` everywhere).
+    pub alpha_texture: Option<AlphaTexture>,
 }
 
 impl Default for Material {
@@ -64,6 +71,7 @@ impl Default for Material {
             alpha_mode: AlphaMode::Opaque,
             metallic: 0.0,
             roughness: 1.0,
+            alpha_texture: None,
         }
     }
 }
@@ -76,6 +84,37 @@ impl Material {
     /// True when AO rays pass through this material's geometry.
     pub fn skipped_by_rays(&self) -> bool {
         matches!(self.alpha_mode, AlphaMode::Mask { .. })
+    }
+    /// Whether the surface is present (not cut out) where its texture coordinates are `uv`:
+    /// always for non-masked materials; for [`AlphaMode::Mask`], whether
+    /// `base_color.w × texture alpha ≥ cutoff`, the texture counting only when it and `uv`
+    /// are both given.
+    pub fn opaque_at(&self, uv: Option<Vec2>) -> bool {
+        let AlphaMode::Mask { cutoff } = self.alpha_mode else {
+            return true;
+        };
+        let texel = match (&self.alpha_texture, uv) {
+            (Some(t), Some(uv)) => t.sample(uv),
+            _ => 1.0,
+        };
+        self.base_color.w * texel >= cutoff
+    }
+    /// Whether [`Material::opaque_at`] depends on the texture coordinates (a masked material
+    /// with an alpha texture); otherwise `opaque_at(None)` holds for the whole surface.
+    pub fn has_texel_mask(&self) -> bool {
+        matches!(self.alpha_mode, AlphaMode::Mask { .. }) && self.alpha_texture.is_some()
+    }
+}
+
+impl Mesh {
+    /// Texture coordinates at barycentrics `bary` (weights of the three vertices) of triangle
+    /// `tri`; `None` without UVs or for an out-of-range triangle or vertex.
+    pub fn uv_at(&self, tri: u32, bary: Vec3) -> Option<Vec2> {
+        let [a, b, c] = self
+            .indices
+            .get(tri as usize)?
+            .map(|i| self.uvs.get(i as usize));
+        Some(*a? * bary.x + *b? * bary.y + *c? * bary.z)
     }
 }
 
@@ -241,6 +280,17 @@ impl Scene {
     pub fn freeze(&mut self) {
         self.playing.clear();
         self.walkers.clear();
+    }
+
+    /// Whether mesh `mesh` is present (not alpha-cut, see [`Material::opaque_at`]) at
+    /// barycentrics `bary` of triangle `tri`; `true` for a missing mesh or material.
+    pub fn opaque_at(&self, mesh: usize, tri: u32, bary: Vec3) -> bool {
+        let Some(m) = self.meshes.get(mesh) else {
+            return true;
+        };
+        self.materials.get(m.material).is_none_or(|mat| {
+            mat.opaque_at(mat.has_texel_mask().then(|| m.uv_at(tri, bary)).flatten())
+        })
     }
 
     /// Total triangle count over all instances.

@@ -94,8 +94,8 @@ pub struct Server {
 const CHANGE_HISTORY_FRAMES: u64 = 64;
 
 impl Server {
-    /// Generate the points of every instance (in parallel), build the tracer (AO rays skip
-    /// alpha-masked geometry), drop buried points when [`ServerConfig::cull_buried`] is set,
+    /// Generate the points of every instance (in parallel; none on alpha-masked-out texels,
+    /// see [`Scene::opaque_at`]), build the tracer (AO rays skip alpha-masked geometry), drop buried points when [`ServerConfig::cull_buried`] is set,
     /// and lay out the grids of the rest.
     pub fn new(scene: &Scene, config: ServerConfig) -> Result<Server, ServerError> {
         Server::with_medium(scene, config, None)
@@ -123,7 +123,8 @@ impl Server {
             density: config.density,
             seed: config.seed,
         };
-        let mut points = generate_scene_points(scene, &params, None)?;
+        let opaque = |mesh: usize, tri: u32, bary: Vec3| scene.opaque_at(mesh, tri, bary);
+        let mut points = generate_scene_points(scene, &params, Some(&opaque))?;
         let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
         let buried_points = if config.cull_buried {
             let buried = buried(&tracer, scene, &points, config.seed);

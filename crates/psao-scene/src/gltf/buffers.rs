@@ -1,4 +1,4 @@
-//! Loading glTF buffers (GLB chunk, external files, base64 data URIs) without touching images.
+//! Loading glTF buffers (GLB chunk, external files, base64 data URIs) and reading URIs.
 
 use std::path::{Path, PathBuf};
 
@@ -30,8 +30,8 @@ pub(super) fn load_buffers(
             Source::Bin => blob
                 .take()
                 .ok_or_else(|| missing(format!("buffer {i} refers to a missing GLB BIN chunk")))?,
-            Source::Uri(uri) => read_uri(uri, path).map_err(|e| match e {
-                UriError::Scene(e) => e,
+            Source::Uri(uri) => read_uri(uri, path, u64::MAX).map_err(|e| match e {
+                UriError::Io(file, e) => SceneError::io(&file, e),
                 UriError::Bad(msg) => SceneError::parse(path, "glTF", format!("buffer {i}: {msg}")),
             })?,
         };
@@ -47,18 +47,29 @@ pub(super) fn load_buffers(
     Ok(out)
 }
 
-enum UriError {
-    Scene(SceneError),
+/// Why a URI could not be read.
+pub(super) enum UriError {
+    /// The file it names could not be read.
+    Io(PathBuf, std::io::Error),
+    /// The URI is malformed, unsupported or names too much data.
     Bad(String),
 }
 
-/// Reads a buffer URI: `data:…;base64,…`, `file:` or a percent-encoded relative path.
-fn read_uri(uri: &str, gltf_path: &Path) -> Result<Vec<u8>, UriError> {
+/// Reads a URI: `data:…;base64,…`, `file:` or a percent-encoded path relative to the glTF
+/// file; at most `max_bytes` (a longer file is not read).
+pub(super) fn read_uri(uri: &str, gltf_path: &Path, max_bytes: u64) -> Result<Vec<u8>, UriError> {
+    let too_long =
+        |len: u64| UriError::Bad(format!("{len} bytes, more than the limit of {max_bytes}"));
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest
             .split_once(";base64,")
             .ok_or_else(|| UriError::Bad("data URI is not base64".into()))?;
-        return decode_base64(payload).ok_or_else(|| UriError::Bad("invalid base64 data".into()));
+        let data =
+            decode_base64(payload).ok_or_else(|| UriError::Bad("invalid base64 data".into()))?;
+        return match data.len() as u64 {
+            len if len > max_bytes => Err(too_long(len)),
+            _ => Ok(data),
+        };
     }
     let relative = if let Some(rest) = uri.strip_prefix("file://") {
         rest
@@ -75,7 +86,13 @@ fn read_uri(uri: &str, gltf_path: &Path) -> Result<Vec<u8>, UriError> {
         .parent()
         .unwrap_or_else(|| Path::new(""))
         .join(decoded);
-    std::fs::read(&file).map_err(|e| UriError::Scene(SceneError::io(&file, e)))
+    let len = std::fs::metadata(&file)
+        .map_err(|e| UriError::Io(file.clone(), e))?
+        .len();
+    if len > max_bytes {
+        return Err(too_long(len));
+    }
+    std::fs::read(&file).map_err(|e| UriError::Io(file, e))
 }
 
 /// Decodes `%XX` escapes; `None` for malformed escapes or non-UTF-8 results.

@@ -10,11 +10,14 @@ use crate::error::SceneError;
 use crate::geometry::{area_weighted_normals, repair_normals};
 use crate::model::Mesh;
 
-/// Converts a primitive; `Ok(None)` (with a warning) for non-triangle modes.
+/// Converts a primitive; `Ok(None)` (with a warning) for non-triangle modes. The UVs are
+/// read from `TEXCOORD_<mask_uvs>` when the material's alpha texture uses that set, else
+/// from `TEXCOORD_0`.
 pub(super) fn convert(
     prim: &Primitive,
     name: String,
     material: usize,
+    mask_uvs: Option<u32>,
     data: &BufferData,
 ) -> Result<Option<Mesh>, SceneError> {
     if prim.mode() != Mode::Triangles {
@@ -90,14 +93,24 @@ pub(super) fn convert(
         None => area_weighted_normals(&positions, &indices),
     };
 
-    let uvs = match prim.get(&Semantic::TexCoords(0)) {
+    let uv_set = mask_uvs.unwrap_or(0);
+    let uv_attr = format!("TEXCOORD_{uv_set}");
+    let uvs = match prim.get(&Semantic::TexCoords(uv_set)) {
         Some(acc) => {
-            let uv = data.floats(&acc, &[Dimensions::Vec2], &what("TEXCOORD_0"))?;
+            let uv = data.floats(&acc, &[Dimensions::Vec2], &what(&uv_attr))?;
             let uvs: Vec<Vec2> = uv.chunks_exact(2).map(Vec2::from_slice).collect();
-            count_matches(uvs.len(), "TEXCOORD_0")?;
+            count_matches(uvs.len(), &uv_attr)?;
             uvs
         }
-        None => Vec::new(),
+        None => {
+            if mask_uvs.is_some() {
+                tracing::warn!(
+                    "{}: {name}: no {uv_attr} for the alpha mask: only the alpha factor applies",
+                    data.path.display()
+                );
+            }
+            Vec::new()
+        }
     };
 
     let (joints, weights) = match (
