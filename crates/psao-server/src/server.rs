@@ -274,10 +274,10 @@ impl Server {
             rays += u64::from(t.rays);
         }
         // `traced` is in (instance, index) order.
-        for group in traced.chunk_by(|a, b| a.instance == b.instance) {
-            let changed: Vec<u32> = group.iter().map(|t| t.index).collect();
-            self.instances[group[0].instance as usize].refresh_summaries(&changed);
-        }
+        let changed = runs_of(traced.iter().map(|t| (t.instance, t.index)));
+        per_instance(&mut self.instances, changed, |inst, list| {
+            inst.refresh_summaries(list)
+        });
         let t_trace = Instant::now();
         // Traced points and points that moved with their triangles may need publishing.
         let mut candidates: Vec<(u32, u32)> =
@@ -323,15 +323,17 @@ impl Server {
                 .par_iter_mut()
                 .for_each(InstanceState::rebuild_summaries);
         } else {
-            for (inst, list) in self.instances.iter_mut().zip(&restarted.lists) {
-                inst.refresh_summaries(list);
-            }
+            self.instances
+                .par_iter_mut()
+                .zip(&restarted.lists)
+                .for_each(|(inst, list)| inst.refresh_summaries(list));
         }
         // `moved` comes in runs of one instance.
-        for group in moved.chunk_by(|a, b| a.0 == b.0) {
-            let changed: Vec<u32> = group.iter().map(|m| m.1).collect();
-            self.instances[group[0].0 as usize].refresh_summaries(&changed);
-        }
+        per_instance(
+            &mut self.instances,
+            runs_of(moved.iter().copied()),
+            |inst, list| inst.refresh_summaries(list),
+        );
     }
 
     /// Publish the candidate (instance, point) pairs that need it, and refresh the cells and
@@ -340,15 +342,16 @@ impl Server {
         let thresholds = self.config.thresholds;
         let frame = self.frame;
         // `candidates` is sorted by (instance, index): split it per instance.
-        let mut published = 0;
-        for group in candidates.chunk_by(|a, b| a.0 == b.0) {
-            let inst = &mut self.instances[group[0].0 as usize];
-            let updates: Vec<(u32, u32)> = group
+        let groups = runs_of(candidates.iter().copied());
+        let published = per_instance(&mut self.instances, groups, |inst, list| {
+            let updates: Vec<(u32, u32)> = list
                 .par_iter()
-                .filter_map(|&(_, i)| republish(inst, i as usize, &thresholds).map(|b| (i, b)))
+                .filter_map(|&i| republish(inst, i as usize, &thresholds).map(|b| (i, b)))
                 .collect();
-            published += apply(inst, &updates, frame);
-        }
+            apply(inst, &updates, frame)
+        })
+        .into_iter()
+        .sum();
         for inst in &mut self.instances {
             if !inst.pending_cells.is_empty() {
                 apply(inst, &[], frame);
@@ -514,6 +517,40 @@ impl Server {
 
 /// The changed (or, for a snapshot, non-empty) buckets and cells of one instance: from
 /// the change log when it reaches back to `since`, else by scanning the stamps.
+/// The point lists of each instance in (instance, point) pairs that come in runs of one
+/// instance (each instance in one run).
+fn runs_of(pairs: impl Iterator<Item = (u32, u32)>) -> Vec<(u32, Vec<u32>)> {
+    let mut runs: Vec<(u32, Vec<u32>)> = Vec::new();
+    for (instance, point) in pairs {
+        match runs.last_mut() {
+            Some(run) if run.0 == instance => run.1.push(point),
+            _ => runs.push((instance, vec![point])),
+        }
+    }
+    runs
+}
+
+/// `f` on each instance of `runs` (at most one run per instance) with its point list, in
+/// parallel over the instances; results in the order of `runs`.
+fn per_instance<R: Send>(
+    instances: &mut [InstanceState],
+    runs: Vec<(u32, Vec<u32>)>,
+    f: impl Fn(&mut InstanceState, &[u32]) -> R + Sync,
+) -> Vec<R> {
+    debug_assert!(
+        runs.windows(2).all(|w| w[0].0 != w[1].0),
+        "one run per instance"
+    );
+    let mut free: Vec<Option<&mut InstanceState>> = instances.iter_mut().map(Some).collect();
+    let jobs: Vec<(&mut InstanceState, Vec<u32>)> = runs
+        .into_iter()
+        .filter_map(|(i, list)| Some((free.get_mut(i as usize)?.take()?, list)))
+        .collect();
+    jobs.into_par_iter()
+        .map(|(inst, list)| f(inst, &list))
+        .collect()
+}
+
 fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> InstanceDelta {
     match (snapshot, inst.changes.since(since)) {
         (false, Some(changed)) => {

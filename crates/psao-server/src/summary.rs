@@ -261,6 +261,12 @@ impl BlockSummaries {
         self.stored[b]
     }
 
+    /// Whether the point at position `k` of [`CullBlocks::order`] is stored.
+    #[inline]
+    pub fn is_stored(&self, k: usize) -> bool {
+        self.listed[k] != UNSTORED
+    }
+
     /// Stored points among positions `range` of [`CullBlocks::order`].
     #[inline]
     pub fn stored_in(&self, range: std::ops::Range<usize>) -> usize {

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use crate::blocks::{WorldBox, BLOCK_POINTS, SUBS_PER_BLOCK, SUB_POINTS};
 use crate::frustum::Frustum;
-use crate::instance::{InstanceState, NONE};
+use crate::instance::InstanceState;
 use crate::summary::{bin, bin_of, count_up_to, offset_of, LAST_BIN};
 
 /// Rays traced together per parallel work item. The batch's points are neighbours (the
@@ -103,39 +103,45 @@ pub(crate) fn cull(
         .filter(|(ii, _)| !near[*ii].is_empty())
         .flat_map(|(ii, inst)| (0..inst.blocks.blocks.len() as u32).map(move |b| (ii as u32, b)))
         .collect();
-    let (visible, blocks, window) = work
+    // Fold state: visible count, blocks, bin window, and scratch lists of the frusta a block
+    // and a sub-block straddle (reused from block to block).
+    let fresh = || {
+        let scratch: (Vec<&Frustum>, Vec<&Frustum>) = (Vec::new(), Vec::new());
+        (0usize, Vec::new(), BinWindow::around(guess), scratch)
+    };
+    let (visible, blocks, window, _) = work
         .par_iter()
         .fold(
-            || (0usize, Vec::new(), BinWindow::around(guess)),
-            |(mut visible, mut out, mut window), &(ii, b)| {
+            fresh,
+            |(mut visible, mut out, mut window, mut scratch), &(ii, b)| {
                 let inst = &instances[ii as usize];
                 let block = &inst.blocks.blocks[b as usize];
-                let mut straddling: Vec<&Frustum> = Vec::new();
+                let (straddling, sub_straddling) = &mut scratch;
                 let inside = block.world(&inst.transform).classify(
                     near[ii as usize].iter().copied(),
                     inst.slack,
-                    &mut straddling,
+                    straddling,
                 );
-                let summary = inst.summaries.entries(b as usize);
+                let summaries = &inst.summaries;
+                let summary = summaries.entries(b as usize);
                 let entries = if inside {
-                    visible += inst.summaries.stored(b as usize) as usize;
+                    visible += summaries.stored(b as usize) as usize;
                     Cow::Borrowed(summary)
                 } else if !straddling.is_empty() {
                     let mut mask = [0u64; BLOCK_POINTS / 64];
-                    let (p, order) = (&inst.points, &inst.blocks.order);
+                    let positions = &inst.blocks.position;
                     let start = block.start as usize;
                     let subs = &inst.blocks.subs[b as usize * SUBS_PER_BLOCK..];
-                    let mut sub_straddling: Vec<&Frustum> = Vec::new();
                     for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
                         let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
                         let sub_inside = WorldBox::new(subs[j], &inst.transform).classify(
                             straddling.iter().copied(),
                             inst.slack,
-                            &mut sub_straddling,
+                            sub_straddling,
                         );
                         if sub_inside {
                             // Listed entries are stored points: marking all is enough.
-                            visible += inst.summaries.stored_in(range);
+                            visible += summaries.stored_in(range);
                             mask[(k0 - start) / 64] = u64::MAX;
                             continue;
                         }
@@ -143,11 +149,10 @@ pub(crate) fn cull(
                             continue;
                         }
                         for k in range {
-                            let i = order[k] as usize;
-                            if p.slot[i] == NONE {
+                            if !summaries.is_stored(k) {
                                 continue;
                             }
-                            let w = inst.transform.transform_point3(p.position[i]);
+                            let w = inst.transform.transform_point3(positions[k]);
                             if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
                                 visible += 1;
                                 let offset = k - start;
@@ -159,7 +164,7 @@ pub(crate) fn cull(
                         |e: &&u32| mask[offset_of(**e) / 64] & (1 << (offset_of(**e) % 64)) != 0;
                     Cow::Owned(summary.iter().filter(seen).copied().collect())
                 } else {
-                    return (visible, out, window);
+                    return (visible, out, window, scratch);
                 };
                 if !entries.is_empty() {
                     window.add(&entries);
@@ -169,16 +174,13 @@ pub(crate) fn cull(
                         entries,
                     });
                 }
-                (visible, out, window)
+                (visible, out, window, scratch)
             },
         )
-        .reduce(
-            || (0, Vec::new(), BinWindow::around(guess)),
-            |(n, mut a, w), (m, mut b, v)| {
-                a.append(&mut b);
-                (n + m, a, w.merge(&v))
-            },
-        );
+        .reduce(fresh, |(n, mut a, w, s), (m, mut b, v, _)| {
+            a.append(&mut b);
+            (n + m, a, w.merge(&v), s)
+        });
     if max_points == 0 {
         return Culled {
             visible,

@@ -54,6 +54,11 @@ pub struct BenchServeArgs {
     /// of the whole state per update on both ends).
     #[arg(long)]
     pub verify: bool,
+    /// Run the clients at this `nice` level (1–19, lower priority than the server), so
+    /// the server gets the two cores first, as it would with the clients on other machines.
+    /// Needs the `nice` program.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=19))]
+    pub client_nice: Option<u8>,
     /// Write the report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -93,6 +98,9 @@ pub struct BenchServeReport {
     pub server_mean_ms: f64,
     /// 95th percentile of it.
     pub server_p95_ms: f64,
+    /// Median of it (robust to the start: the snapshots and the frames before the clients'
+    /// cameras arrived).
+    pub server_median_ms: f64,
     /// Mean server ms per frame over the frame period (1000 / hz): below 1 keeps up.
     pub server_load: f64,
     /// Server process CPU ms (all threads) per frame.
@@ -178,7 +186,14 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     let total = path.frame_count() as u32;
     let mut views = Vec::new();
     for k in 0..args.clients {
-        let mut c = Command::new(&exe);
+        let mut c = match args.client_nice {
+            Some(n) => {
+                let mut c = Command::new("nice");
+                c.arg(format!("-n{n}")).arg(&exe);
+                c
+            }
+            None => Command::new(&exe),
+        };
         c.args([
             "--log",
             "warn",
@@ -199,7 +214,16 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         if let Some(p) = &args.path {
             c.arg("--path").arg(p);
         }
-        views.push(Guard(c.spawn().context("cannot start psao view")?));
+        views.push(Guard(c.spawn().with_context(|| {
+            format!(
+                "cannot start psao view{}",
+                if args.client_nice.is_some() {
+                    " through `nice`"
+                } else {
+                    ""
+                }
+            )
+        })?));
     }
     for (k, v) in views.iter_mut().enumerate() {
         let status = v.0.wait()?;
@@ -244,6 +268,7 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         server_frames: s["frames"].as_u64().unwrap_or(0),
         server_mean_ms: s["mean_ms"].as_f64().unwrap_or(0.0),
         server_p95_ms: s["p95_ms"].as_f64().unwrap_or(0.0),
+        server_median_ms: s["median_ms"].as_f64().unwrap_or(0.0),
         server_load: s["mean_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 1000.0,
         server_cpu_ms: s["cpu_ms"].as_f64().unwrap_or(0.0),
         server_cpu_share_2_cores: s["cpu_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 2000.0,
@@ -255,7 +280,7 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     };
     println!(
         "{} clients at {} Hz on {}: {} server frames, {:.0} rays per frame (budget {}), \
-         {:.1} ms mean ({:.2} of the {:.1} ms period) / {:.1} ms p95 per frame \
+         {:.1} ms mean ({:.2} of the {:.1} ms period) / {:.1} ms median / {:.1} ms p95 per frame \
          ({:.1} ms step, {:.1} ms updates, {:.1} ms encoding), {} late; \
          server CPU {:.1} ms per frame = {:.2} of 2 cores",
         report.clients,
@@ -267,6 +292,7 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         report.server_mean_ms,
         report.server_load,
         1000.0 / f64::from(report.hz),
+        report.server_median_ms,
         report.server_p95_ms,
         report.server_step_ms,
         report.server_update_ms,

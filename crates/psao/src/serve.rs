@@ -105,6 +105,8 @@ pub struct ServeStats {
     pub mean_ms: f64,
     /// 95th percentile of it, ms.
     pub p95_ms: f64,
+    /// Median of it, ms.
+    pub median_ms: f64,
     /// Mean of the step alone, ms.
     pub mean_step_ms: f64,
     /// Mean rays traced per server frame.
@@ -750,6 +752,7 @@ impl Simulation {
         stats.frames = self.server.frame();
         stats.mean_ms = mean(&self.frame_ms);
         stats.p95_ms = percentile(&self.frame_ms, 0.95);
+        stats.median_ms = percentile(&self.frame_ms, 0.5);
         stats.mean_step_ms = mean(&self.step_ms);
         let frames = self.frame_ms.len().max(1) as f64;
         stats.mean_update_ms = self.update_ms / frames;
