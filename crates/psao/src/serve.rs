@@ -221,6 +221,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         cpu_start: None,
         update_ms: 0.0,
         encode_ms: 0.0,
+        unsent: None,
         hash_ms: 0.0,
     };
     let stats = sim.run();
@@ -425,6 +426,8 @@ struct Simulation {
     update_ms: f64,
     encode_ms: f64,
     hash_ms: f64,
+    /// The last frame's updates, sent during the next frame (not in lockstep).
+    unsent: Option<FrameUpdates>,
 }
 
 impl Simulation {
@@ -590,8 +593,10 @@ impl Simulation {
         );
     }
 
-    /// Step once for the union of the clients' views and send each client with room its
-    /// update (lockstep: every client, waiting for room).
+    /// Step once for the union of the clients' views and collect the update of each client
+    /// with room (lockstep: every client, waiting for room). Lockstep encodes and sends them
+    /// at once; otherwise they are encoded and sent during the next frame's step, which
+    /// they overlap (a server frame of latency for the use of both cores).
     fn frame(&mut self, seconds: f64, lockstep: bool) {
         let t = Instant::now();
         let mut views: Vec<View> = Vec::new();
@@ -600,7 +605,19 @@ impl Simulation {
                 views.push(v);
             }
         }
-        let step = match self.server.step_at(&views, seconds as f32) {
+        let previous = self.unsent.take();
+        let (server, sessions, rt) = (&mut self.server, &mut self.sessions, &self.rt);
+        let (step, sent) = rayon::join(
+            || server.step_at(&views, seconds as f32),
+            || previous.map(|u| send_updates(sessions, u, false, rt)),
+        );
+        if let Some((gone, ms)) = sent {
+            self.encode_ms += ms;
+            for id in gone {
+                self.handle(Event::Leave(id));
+            }
+        }
+        let step = match step {
             Ok(step) => step,
             Err(e) => {
                 tracing::error!("server frame at {seconds:.3} s skipped: {e}");
@@ -616,11 +633,6 @@ impl Simulation {
             .any(|s| s.want_hash)
             .then(|| self.state_hash());
         self.hash_ms += th.elapsed().as_secs_f64() * 1e3;
-        let frame = self.server.frame();
-        // Collect the updates (clients due the same one share it), then encode each once, in
-        // parallel: the other clients of a group only advance their codec's state (one codec
-        // for the whole server), which equals the encoder's because their decoders hold the
-        // same state.
         let tu = Instant::now();
         let mut due = Vec::new();
         for s in self.sessions.values_mut() {
@@ -632,85 +644,29 @@ impl Simulation {
             }
             due.push(s.id);
         }
-        let groups = self.server.updates_for(&due);
-        let te = Instant::now();
-        self.update_ms += (te - tu).as_secs_f64() * 1e3;
-        let update_of: HashMap<ClientId, usize> = groups
-            .iter()
-            .enumerate()
-            .flat_map(|(g, (members, _))| members.iter().map(move |m| (*m, g)))
-            .collect();
-        // The first session of each group encodes, the others advance.
-        let mut encoders: HashSet<usize> = HashSet::new();
-        let jobs: Vec<(&mut Session, usize, bool)> = self
-            .sessions
-            .values_mut()
-            .filter_map(|s| {
-                let g = *update_of.get(&s.id)?;
-                let first = encoders.insert(g);
-                Some((s, g, first))
-            })
-            .collect();
-        let payloads: Vec<(&mut Session, usize, Option<Vec<u8>>)> = jobs
-            .into_par_iter()
-            .map(|(s, g, first)| {
-                let update = &groups[g].1;
-                if first {
-                    let payload = s.codec.encode(update);
-                    (s, g, Some(payload))
-                } else {
-                    s.codec.advance(update);
-                    (s, g, None)
-                }
-            })
-            .collect();
-        let shared: HashMap<usize, Vec<u8>> = payloads
-            .iter()
-            .filter_map(|(_, g, payload)| Some((*g, payload.clone()?)))
-            .collect();
-        let encoded: Vec<(u32, Option<Vec<u8>>)> = payloads
-            .into_par_iter()
-            .map(|(s, g, payload)| {
-                let update = &groups[g].1;
-                let delta = Delta {
-                    frame,
-                    scene_time: seconds,
-                    client_frame: if lockstep { s.pending.take() } else { None },
-                    state_hash: if s.want_hash { hash } else { None },
-                    payload: payload.unwrap_or_else(|| shared[&g].clone()),
-                };
-                let message = if update.snapshot {
-                    s.stats.snapshots += 1;
-                    Message::Snapshot(delta)
-                } else {
-                    Message::Delta(delta)
-                };
-                (s.id.0, encode_frame(&message).ok())
-            })
-            .collect();
-        self.encode_ms += te.elapsed().as_secs_f64() * 1e3;
-        let mut gone = Vec::new();
-        for (id, bytes) in encoded {
-            let (Some(s), Some(bytes)) = (self.sessions.get_mut(&id), bytes) else {
-                gone.push(id);
-                continue;
-            };
-            s.stats.bytes += bytes.len() as u64;
-            s.stats.updates += 1;
-            s.unacked.push_back(frame);
-            let sent = if lockstep {
-                self.rt.block_on(s.out.send(bytes)).is_ok()
-            } else {
-                s.out.try_send(bytes).is_ok()
-            };
-            if !sent {
-                gone.push(id);
-            }
+        let updates = FrameUpdates {
+            frame: self.server.frame(),
+            seconds,
+            hash,
+            groups: self.server.updates_for(&due),
+        };
+        self.update_ms += tu.elapsed().as_secs_f64() * 1e3;
+        if lockstep {
+            self.send_now(updates, true);
+        } else {
+            self.unsent = Some(updates);
         }
+        self.frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+
+    /// Encode and send `updates` now (see [`send_updates`]) and drop the sessions that are
+    /// gone.
+    fn send_now(&mut self, updates: FrameUpdates, lockstep: bool) {
+        let (gone, ms) = send_updates(&mut self.sessions, updates, lockstep, &self.rt);
+        self.encode_ms += ms;
         for id in gone {
             self.handle(Event::Leave(id));
         }
-        self.frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
     }
 
     /// Lockstep round without a server frame: tell each client its frame is done.
@@ -735,6 +691,9 @@ impl Simulation {
 
     /// Say bye to everyone and collect the statistics.
     fn shutdown(mut self) -> ServeStats {
+        if let Some(u) = self.unsent.take() {
+            self.send_now(u, false);
+        }
         let bye = encode_frame(&Message::Bye(Bye {
             reason: "server shutting down".into(),
         }));
@@ -773,6 +732,108 @@ impl Simulation {
         );
         stats
     }
+}
+
+/// One server frame's updates, collected but not yet encoded: clients due the same update
+/// share it (see [`Server::updates_for`]).
+struct FrameUpdates {
+    frame: u64,
+    seconds: f64,
+    /// The server's state hash at this frame, for clients that verify.
+    hash: Option<u64>,
+    groups: Vec<(Vec<ClientId>, psao_delta::Update)>,
+}
+
+/// Encode `updates` and queue them to their sessions (lockstep: waiting for room, with the
+/// camera frame each answers); returns the sessions whose connection is gone and the ms
+/// taken. Each group's update is encoded once, in parallel with the others: the other
+/// clients of a group only advance their codec's state (one codec for the whole server),
+/// which equals the encoder's because their decoders hold the same state.
+fn send_updates(
+    sessions: &mut BTreeMap<u32, Session>,
+    updates: FrameUpdates,
+    lockstep: bool,
+    rt: &tokio::runtime::Handle,
+) -> (Vec<u32>, f64) {
+    let te = Instant::now();
+    let FrameUpdates {
+        frame,
+        seconds,
+        hash,
+        groups,
+    } = updates;
+    let update_of: HashMap<ClientId, usize> = groups
+        .iter()
+        .enumerate()
+        .flat_map(|(g, (members, _))| members.iter().map(move |m| (*m, g)))
+        .collect();
+    // The first session of each group encodes, the others advance; sessions that left
+    // since the update was collected are skipped.
+    let mut encoders: HashSet<usize> = HashSet::new();
+    let jobs: Vec<(&mut Session, usize, bool)> = sessions
+        .values_mut()
+        .filter_map(|s| {
+            let g = *update_of.get(&s.id)?;
+            let first = encoders.insert(g);
+            Some((s, g, first))
+        })
+        .collect();
+    let payloads: Vec<(&mut Session, usize, Option<Vec<u8>>)> = jobs
+        .into_par_iter()
+        .map(|(s, g, first)| {
+            let update = &groups[g].1;
+            if first {
+                let payload = s.codec.encode(update);
+                (s, g, Some(payload))
+            } else {
+                s.codec.advance(update);
+                (s, g, None)
+            }
+        })
+        .collect();
+    let shared: HashMap<usize, Vec<u8>> = payloads
+        .iter()
+        .filter_map(|(_, g, payload)| Some((*g, payload.clone()?)))
+        .collect();
+    let encoded: Vec<(&mut Session, Option<Vec<u8>>)> = payloads
+        .into_par_iter()
+        .map(|(s, g, payload)| {
+            let delta = Delta {
+                frame,
+                scene_time: seconds,
+                client_frame: if lockstep { s.pending.take() } else { None },
+                state_hash: if s.want_hash { hash } else { None },
+                payload: payload.unwrap_or_else(|| shared[&g].clone()),
+            };
+            let message = if groups[g].1.snapshot {
+                s.stats.snapshots += 1;
+                Message::Snapshot(delta)
+            } else {
+                Message::Delta(delta)
+            };
+            let bytes = encode_frame(&message).ok();
+            (s, bytes)
+        })
+        .collect();
+    let mut gone = Vec::new();
+    for (s, bytes) in encoded {
+        let Some(bytes) = bytes else {
+            gone.push(s.id.0);
+            continue;
+        };
+        s.stats.bytes += bytes.len() as u64;
+        s.stats.updates += 1;
+        s.unacked.push_back(frame);
+        let sent = if lockstep {
+            rt.block_on(s.out.send(bytes)).is_ok()
+        } else {
+            s.out.try_send(bytes).is_ok()
+        };
+        if !sent {
+            gone.push(s.id.0);
+        }
+    }
+    (gone, te.elapsed().as_secs_f64() * 1e3)
 }
 
 fn mean(v: &[f64]) -> f64 {
