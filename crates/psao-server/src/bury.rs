@@ -26,6 +26,7 @@ pub const BURIAL_RAYS: u32 = 8;
 /// grazing hit may be judged the wrong side) without saving a buried point, while a point
 /// with two escaping rays sees the open scene and is kept.
 pub const BURIAL_MIN_INSIDE: u32 = 7;
+const _: () = assert!(BURIAL_MIN_INSIDE >= 1 && BURIAL_MIN_INSIDE <= BURIAL_RAYS);
 /// Points handled together per parallel work item.
 const CHUNK_POINTS: usize = 1024;
 /// Decorrelates the burial rays from the AO rays of the same points.
@@ -78,34 +79,43 @@ pub(crate) fn buried(
     let probes: Vec<Ray> = jobs.iter().map(|j| Ray::new(j.2, j.3, 1.0)).collect();
     let order = sort_rays_spatially(&probes);
     let seed = seed ^ BURIAL_SEED_SALT;
+    // Rays that hit inside, for points `chunk` (indices into `jobs`) and ray indices `rays`.
+    let inside_hits = |chunk: &[u32], range: std::ops::Range<u32>| -> Vec<u32> {
+        let per = range.len();
+        let mut rays = Vec::with_capacity(chunk.len() * per);
+        for &j in chunk {
+            let (ii, k, x, n) = jobs[j as usize];
+            let key = (u64::from(ii) << 32) | u64::from(k);
+            let origin = ray_offset(x, n);
+            rays.extend(range.clone().map(|i| burial_ray(seed, key, i, origin, n)));
+        }
+        let mut out = vec![None; rays.len()];
+        tracer.intersect(&rays, &mut out);
+        rays.chunks(per.max(1))
+            .zip(out.chunks(per.max(1)))
+            .map(|(rays, hits)| {
+                rays.iter()
+                    .zip(hits)
+                    .filter(|(r, h)| h.is_some_and(|h| hits_inside(scene, &sides, r, &h)))
+                    .count() as u32
+            })
+            .collect()
+    };
+    // A point whose first rays all escape is kept whatever the others do, so they are traced
+    // first and only the rest trace all of theirs: the same verdicts as tracing every ray.
+    let first = BURIAL_RAYS - BURIAL_MIN_INSIDE + 1;
     let hits: Vec<(u32, bool)> = order
         .par_chunks(CHUNK_POINTS)
         .flat_map_iter(|chunk| {
-            let mut rays = Vec::with_capacity(chunk.len() * BURIAL_RAYS as usize);
-            for &j in chunk {
-                let (ii, k, x, n) = jobs[j as usize];
-                let key = (u64::from(ii) << 32) | u64::from(k);
-                let origin = ray_offset(x, n);
-                rays.extend((0..BURIAL_RAYS).map(|i| {
-                    let (u1, u2) = sample_2d(hash64(seed), key, i);
-                    Ray::new(origin, cosine_hemisphere(n, u1, u2), f32::INFINITY)
-                }));
+            let early = inside_hits(chunk, 0..first);
+            // Positions in `chunk` of the points that need their other rays.
+            let open: Vec<usize> = (0..chunk.len()).filter(|&at| early[at] > 0).collect();
+            let open_points: Vec<u32> = open.iter().map(|&at| chunk[at]).collect();
+            let rest = inside_hits(&open_points, first..BURIAL_RAYS);
+            let mut verdicts: Vec<(u32, bool)> = chunk.iter().map(|&j| (j, false)).collect();
+            for (&at, m) in open.iter().zip(rest) {
+                verdicts[at].1 = early[at] + m >= BURIAL_MIN_INSIDE;
             }
-            let mut out = vec![None; rays.len()];
-            tracer.intersect(&rays, &mut out);
-            let per = BURIAL_RAYS as usize;
-            let verdicts: Vec<(u32, bool)> = chunk
-                .iter()
-                .zip(rays.chunks(per).zip(out.chunks(per)))
-                .map(|(&j, (rays, hits))| {
-                    let inside = rays
-                        .iter()
-                        .zip(hits)
-                        .filter(|(r, h)| h.is_some_and(|h| hits_inside(scene, &sides, r, &h)))
-                        .count() as u32;
-                    (j, inside >= BURIAL_MIN_INSIDE)
-                })
-                .collect();
             verdicts
         })
         .collect();
@@ -115,6 +125,13 @@ pub(crate) fn buried(
         out[ii as usize][k as usize] = b;
     }
     out
+}
+
+/// Burial ray `i` of the point with sample key `key` at `origin` (already offset) with
+/// normal `n`.
+fn burial_ray(seed: u64, key: u64, i: u32, origin: Vec3, n: Vec3) -> Ray {
+    let (u1, u2) = sample_2d(hash64(seed), key, i);
+    Ray::new(origin, cosine_hemisphere(n, u1, u2), f32::INFINITY)
 }
 
 /// Whether `ray` hit the back side (judged by the interpolated vertex normal, else the face
@@ -152,4 +169,98 @@ fn hits_inside(scene: &Scene, sides: &[Side], ray: &Ray, hit: &Hit) -> bool {
         face
     };
     side.normal_matrix.mul_vec3(local).dot(ray.dir) > 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Affine3A;
+    use psao_points::SurfacePoint;
+    use psao_scene::builtin::shapes::cuboid;
+    use psao_scene::{Instance, Material};
+    use psao_trace::{Backend, GeometryMode};
+
+    #[test]
+    fn two_rounds_give_the_verdicts_of_every_ray() {
+        // A closed box missing its top: points inside see the opening with some rays only,
+        // so their inside counts spread over 0..=8 and the verdict's edge is exercised.
+        let mut open_box = cuboid(Vec3::splat(1.0));
+        open_box.indices.retain(|t| {
+            let c = (open_box.positions[t[0] as usize]
+                + open_box.positions[t[1] as usize]
+                + open_box.positions[t[2] as usize])
+                / 3.0;
+            c.y < 0.99
+        });
+        let scene = Scene {
+            meshes: vec![open_box],
+            materials: vec![Material::default()],
+            instances: vec![Instance {
+                mesh: 0,
+                node: None,
+                transform: Affine3A::IDENTITY,
+                skin: None,
+            }],
+            ao_radius: 0.6,
+            ..Scene::default()
+        };
+        let point = |k: u64| {
+            let h = hash64(k);
+            let f = |s: u32| ((h >> s) & 0xffff) as f32 / 65535.0 * 1.8 - 0.9;
+            let normal = Vec3::new(f(0), f(16), f(32)).normalize_or(Vec3::Y);
+            SurfacePoint {
+                triangle: 0,
+                bary: Vec3::new(1.0, 0.0, 0.0),
+                position: Vec3::new(f(8), f(24), f(40)),
+                normal,
+                back_face: false,
+            }
+        };
+        let points = vec![InstancePoints {
+            points: (0..3000).map(point).collect(),
+            poisson_radius: 0.01,
+            poisson_radius_local: 0.01,
+            area: 1.0,
+            area_local: 1.0,
+            sides: 1,
+            local_bounds: (Vec3::splat(-1.0), Vec3::splat(1.0)),
+            spawned: 3000,
+            alpha_rejected: 0,
+        }];
+        let tracer = Tracer::new(Backend::default(), &scene, GeometryMode::Occlusion).unwrap();
+        let seed = 11;
+        let verdicts = buried(&tracer, &scene, &points, seed);
+        let sides = [Side {
+            normal_matrix: Mat3A::IDENTITY,
+            double_sided: false,
+        }];
+        let mut counts = [0usize; BURIAL_RAYS as usize + 1];
+        for (k, p) in points[0].points.iter().enumerate() {
+            let origin = ray_offset(p.position, p.normal);
+            let key = k as u64;
+            let rays: Vec<Ray> = (0..BURIAL_RAYS)
+                .map(|i| burial_ray(seed ^ BURIAL_SEED_SALT, key, i, origin, p.normal))
+                .collect();
+            let mut hits = vec![None; rays.len()];
+            tracer.intersect(&rays, &mut hits);
+            let inside = rays
+                .iter()
+                .zip(&hits)
+                .filter(|(r, h)| h.is_some_and(|h| hits_inside(&scene, &sides, r, &h)))
+                .count();
+            counts[inside] += 1;
+            assert_eq!(
+                verdicts[0][k],
+                inside as u32 >= BURIAL_MIN_INSIDE,
+                "point {k}"
+            );
+        }
+        // Both verdicts and the counts around the edge occur.
+        let edge = BURIAL_MIN_INSIDE as usize;
+        assert!(counts[edge - 1] > 0 && counts[edge] > 0, "{counts:?}");
+        assert!(
+            counts[0] > 0 && counts[BURIAL_RAYS as usize] > 0,
+            "{counts:?}"
+        );
+    }
 }
