@@ -369,6 +369,8 @@ impl Streams {
 }
 
 /// The compact codec. Stateful: one instance per sending or receiving end of a session.
+/// The encoder's memory grows with the largest instance, bucket index and cell slot it is
+/// given (the server's dense indices); the decoder's with what it decodes.
 #[derive(Clone)]
 pub struct CompactCodec {
     /// The decoder's reference.

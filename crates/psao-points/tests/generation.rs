@@ -267,19 +267,7 @@ fn whole_sponza_timing() {
     let Some(meshes) = common::sponza(usize::MAX) else {
         return;
     };
-    let scene = Scene {
-        instances: (0..meshes.len())
-            .map(|i| Instance {
-                mesh: i,
-                node: None,
-                transform: Affine3A::IDENTITY,
-                skin: None,
-            })
-            .collect(),
-        meshes,
-        materials: vec![Material::default()],
-        ..Default::default()
-    };
+    let scene = Scene::of_meshes(meshes);
     let t0 = Instant::now();
     let all = generate_scene_points(&scene, &params(1), None).unwrap();
     let gen = t0.elapsed();

@@ -275,6 +275,25 @@ pub struct Scene {
 pub const DEFAULT_AO_RADIUS: f32 = 0.6;
 
 impl Scene {
+    /// A static scene placing each of `meshes` once, untransformed, with one default
+    /// material and the default AO radius.
+    pub fn of_meshes(meshes: Vec<Mesh>) -> Scene {
+        Scene {
+            instances: (0..meshes.len())
+                .map(|mesh| Instance {
+                    mesh,
+                    node: None,
+                    transform: Affine3A::IDENTITY,
+                    skin: None,
+                })
+                .collect(),
+            meshes,
+            materials: vec![Material::default()],
+            ao_radius: DEFAULT_AO_RADIUS,
+            ..Scene::default()
+        }
+    }
+
     /// Stops all motion: no clip plays and no walker walks, so every node keeps its rest
     /// transform and the scene is static.
     pub fn freeze(&mut self) {

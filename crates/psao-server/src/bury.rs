@@ -174,10 +174,8 @@ fn hits_inside(scene: &Scene, sides: &[Side], ray: &Ray, hit: &Hit) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Affine3A;
     use psao_points::SurfacePoint;
     use psao_scene::builtin::shapes::cuboid;
-    use psao_scene::{Instance, Material};
     use psao_trace::{Backend, GeometryMode};
 
     #[test]
@@ -192,18 +190,7 @@ mod tests {
                 / 3.0;
             c.y < 0.99
         });
-        let scene = Scene {
-            meshes: vec![open_box],
-            materials: vec![Material::default()],
-            instances: vec![Instance {
-                mesh: 0,
-                node: None,
-                transform: Affine3A::IDENTITY,
-                skin: None,
-            }],
-            ao_radius: 0.6,
-            ..Scene::default()
-        };
+        let scene = Scene::of_meshes(vec![open_box]);
         let point = |k: u64| {
             let h = hash64(k);
             let f = |s: u32| ((h >> s) & 0xffff) as f32 / 65535.0 * 1.8 - 0.9;

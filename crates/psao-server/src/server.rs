@@ -673,16 +673,20 @@ mod tests {
         }
     }
 
-    #[test]
-    fn change_lists_give_exactly_the_scanned_deltas() {
-        let config = ServerConfig {
+    /// A few points with few samples each, so a handful of frames change the grids.
+    fn small_config() -> ServerConfig {
+        ServerConfig {
             density: 256.0,
             ray_budget: 2000,
             rays_per_point: 4,
             max_samples: 16,
             ..ServerConfig::default()
-        };
-        let mut server = Server::new(&scene(), config).unwrap();
+        }
+    }
+
+    #[test]
+    fn change_lists_give_exactly_the_scanned_deltas() {
+        let mut server = Server::new(&scene(), small_config()).unwrap();
         server.history_frames = 4;
         // (join frame, frames between updates): the last client falls behind the history.
         let plan = [(0, 1), (2, 2), (5, 3), (1, 7)];
@@ -746,17 +750,9 @@ mod tests {
         );
     }
 
-    /// The (visible count, selection) by testing every point against the frusta.
     #[test]
     fn clients_due_the_same_update_share_it() {
-        let config = ServerConfig {
-            density: 256.0,
-            ray_budget: 2000,
-            rays_per_point: 4,
-            max_samples: 16,
-            ..ServerConfig::default()
-        };
-        let mut server = Server::new(&scene(), config).unwrap();
+        let mut server = Server::new(&scene(), small_config()).unwrap();
         let (a, b, c) = (
             server.add_client(),
             server.add_client(),
@@ -784,7 +780,7 @@ mod tests {
         assert_eq!(third[0].0, vec![a, c]);
         assert_eq!(third[1].0, vec![b]);
         // Each group's update is what `update_for` would have given its members.
-        let mut lone = Server::new(&scene(), *server.config()).unwrap();
+        let mut lone = Server::new(&scene(), small_config()).unwrap();
         let (la, lb) = (lone.add_client(), lone.add_client());
         for (f, due) in [(0, vec![la, lb]), (1, vec![la]), (2, vec![la, lb])] {
             lone.step(&[view(f)]);
@@ -796,6 +792,7 @@ mod tests {
         }
     }
 
+    /// The (visible count, selection) by testing every point against the frusta.
     fn brute_force(
         server: &Server,
         frusta: &[Frustum],

@@ -98,20 +98,7 @@ fn floor_scene(wall: bool) -> Scene {
     if wall {
         meshes.push(quad(Vec3::ZERO, Vec3::Y * 20.0, Vec3::Z * 20.0));
     }
-    Scene {
-        instances: (0..meshes.len())
-            .map(|mesh| Instance {
-                mesh,
-                node: None,
-                transform: Affine3A::IDENTITY,
-                skin: None,
-            })
-            .collect(),
-        meshes,
-        materials: vec![Material::default()],
-        ao_radius: 0.6,
-        ..Default::default()
-    }
+    Scene::of_meshes(meshes)
 }
 
 #[test]

@@ -611,11 +611,8 @@ impl Simulation {
             || server.step_at(&views, seconds as f32),
             || previous.map(|u| send_updates(sessions, u, false, rt)),
         );
-        if let Some((gone, ms)) = sent {
-            self.encode_ms += ms;
-            for id in gone {
-                self.handle(Event::Leave(id));
-            }
+        if let Some(sent) = sent {
+            self.sent(sent);
         }
         let step = match step {
             Ok(step) => step,
@@ -662,7 +659,12 @@ impl Simulation {
     /// Encode and send `updates` now (see [`send_updates`]) and drop the sessions that are
     /// gone.
     fn send_now(&mut self, updates: FrameUpdates, lockstep: bool) {
-        let (gone, ms) = send_updates(&mut self.sessions, updates, lockstep, &self.rt);
+        let sent = send_updates(&mut self.sessions, updates, lockstep, &self.rt);
+        self.sent(sent);
+    }
+
+    /// Account what [`send_updates`] returned: its time, and the sessions that are gone.
+    fn sent(&mut self, (gone, ms): (Vec<u32>, f64)) {
         self.encode_ms += ms;
         for id in gone {
             self.handle(Event::Leave(id));

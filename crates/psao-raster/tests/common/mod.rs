@@ -18,18 +18,7 @@ pub fn scene_of(tris: &[[Vec3; 3]]) -> Scene {
         mesh.normals.extend_from_slice(&[n; 3]);
         mesh.indices.push([base, base + 1, base + 2]);
     }
-    Scene {
-        meshes: vec![mesh],
-        materials: vec![Material::default()],
-        instances: vec![Instance {
-            mesh: 0,
-            node: None,
-            transform: Affine3A::IDENTITY,
-            skin: None,
-        }],
-        ao_radius: psao_scene::DEFAULT_AO_RADIUS,
-        ..Scene::default()
-    }
+    Scene::of_meshes(vec![mesh])
 }
 
 /// Camera basis (forward, right, up) as the camera defines it.
