@@ -9,7 +9,7 @@ use psao_points::{
     generate_instance_points, generate_scene_points, max_poisson_radius, GenerateParams,
     InstanceGrid, InstancePoints, PointsError,
 };
-use psao_scene::{AlphaMode, Instance, Material, Mesh, Scene};
+use psao_scene::{AlphaMode, Material, Mesh, Scene};
 
 fn params(seed: u64) -> GenerateParams {
     GenerateParams {

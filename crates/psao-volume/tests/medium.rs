@@ -2,8 +2,8 @@
 //! transmittance-weighted length against closed forms, the placement, the box test, and
 //! transmittance-weighted AO through `psao-trace`.
 
-use glam::{Affine3A, IVec3, Quat, Vec3};
-use psao_scene::{Instance, Material, Mesh, Scene};
+use glam::{IVec3, Quat, Vec3};
+use psao_scene::{Mesh, Scene};
 use psao_trace::ao::{ambient_occlusion_batch, ambient_occlusion_batch_in, Medium};
 use psao_trace::{Backend, GeometryMode, Tracer};
 use psao_volume::*;

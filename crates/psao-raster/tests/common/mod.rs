@@ -2,8 +2,8 @@
 //! reference ray caster (a small median-split BVH).
 #![allow(dead_code)]
 
-use glam::{Affine3A, DVec3, Vec3};
-use psao_scene::{Camera, Instance, Material, Mesh, Scene};
+use glam::{DVec3, Vec3};
+use psao_scene::{Camera, Mesh, Scene};
 
 /// A scene with one mesh (flat normals, vertices not shared) and one identity instance.
 pub fn scene_of(tris: &[[Vec3; 3]]) -> Scene {
