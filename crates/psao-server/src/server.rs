@@ -95,8 +95,9 @@ const CHANGE_HISTORY_FRAMES: u64 = 64;
 
 impl Server {
     /// Generate the points of every instance (in parallel; none on alpha-masked-out texels,
-    /// see [`Scene::opaque_at`]), build the tracer (AO rays skip alpha-masked geometry), drop buried points when [`ServerConfig::cull_buried`] is set,
-    /// and lay out the grids of the rest.
+    /// see [`Scene::opaque_at`]), build the tracer (AO rays skip alpha-masked geometry), drop
+    /// buried points when [`ServerConfig::cull_buried`] is set, and lay out the grids of the
+    /// rest.
     pub fn new(scene: &Scene, config: ServerConfig) -> Result<Server, ServerError> {
         Server::with_medium(scene, config, None)
     }
