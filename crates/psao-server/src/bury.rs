@@ -102,7 +102,8 @@ pub(crate) fn buried(
             .collect()
     };
     // A point whose first rays all escape is kept whatever the others do, so they are traced
-    // first and only the rest trace all of theirs: the same verdicts as tracing every ray.
+    // first and only the rest trace all of theirs: the same verdicts as tracing every ray
+    // (up to a backend's choice between coincident faces, which may follow the batching).
     let first = BURIAL_RAYS - BURIAL_MIN_INSIDE + 1;
     let hits: Vec<(u32, bool)> = order
         .par_chunks(CHUNK_POINTS)
