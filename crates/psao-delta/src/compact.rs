@@ -438,39 +438,38 @@ impl CompactCodec {
         }
         let mut prev_instance = -1i64;
         for d in &update.instances {
-            let sent_buckets = instance_of(&mut r.buckets, d.instance);
-            let Some(st) = streams.as_deref_mut() else {
-                for (b, bucket) in &d.buckets {
-                    swap_in(sent_buckets, *b, Entries::of(&compact_bucket(bucket)));
+            // When coding: the instance's index entries, and where each cell slot stands in
+            // this delta (for bucket entries coded by rank).
+            let ranks = streams.as_deref_mut().map(|st| {
+                put_delta(&mut st.index, &mut prev_instance, d.instance);
+                put_varint(&mut st.index, d.buckets.len() as u64);
+                put_varint(&mut st.index, d.cells.len() as u64);
+                let mut ranks = KeyMap::default();
+                for (rank, (s, _)) in d.cells.iter().enumerate() {
+                    ranks.entry(u64::from(*s)).or_insert(rank as u32);
                 }
-                let sent_cells = instance_of(&mut r.cells, d.instance);
-                for (s, cell) in &d.cells {
-                    swap_in(sent_cells, *s, compact_cell(cell).points);
-                }
-                continue;
-            };
-            put_delta(&mut st.index, &mut prev_instance, d.instance);
-            put_varint(&mut st.index, d.buckets.len() as u64);
-            put_varint(&mut st.index, d.cells.len() as u64);
-            let mut ranks = KeyMap::default();
-            for (rank, (s, _)) in d.cells.iter().enumerate() {
-                ranks.entry(u64::from(*s)).or_insert(rank as u32);
-            }
+                ranks
+            });
             let mut prev = -1i64;
+            let sent_buckets = instance_of(&mut r.buckets, d.instance);
             for (b, bucket) in &d.buckets {
-                put_delta(&mut st.index, &mut prev, *b);
                 let bucket = compact_bucket(bucket);
                 let old = swap_in(sent_buckets, *b, Entries::of(&bucket));
-                st.bucket(*b, &bucket, &old, &ranks);
+                if let (Some(st), Some(ranks)) = (streams.as_deref_mut(), &ranks) {
+                    put_delta(&mut st.index, &mut prev, *b);
+                    st.bucket(*b, &bucket, &old, ranks);
+                }
             }
             let mut prev = -1i64;
             let mut previous = [0; CELL_POINTS];
             let sent_cells = instance_of(&mut r.cells, d.instance);
             for (s, cell) in &d.cells {
-                put_delta(&mut st.index, &mut prev, *s);
                 let points = compact_cell(cell).points;
                 let old = swap_in(sent_cells, *s, points);
-                st.cell(&points, &old, &previous);
+                if let Some(st) = streams.as_deref_mut() {
+                    put_delta(&mut st.index, &mut prev, *s);
+                    st.cell(&points, &old, &previous);
+                }
                 previous = points;
             }
         }
