@@ -79,7 +79,7 @@ pub(crate) fn buried(
     let probes: Vec<Ray> = jobs.iter().map(|j| Ray::new(j.2, j.3, 1.0)).collect();
     let order = sort_rays_spatially(&probes);
     let seed = seed ^ BURIAL_SEED_SALT;
-    // Rays that hit inside, for points `chunk` (indices into `jobs`) and ray indices `rays`.
+    // Per point of `chunk` (indices into `jobs`): how many of its rays `range` hit an inside.
     let inside_hits = |chunk: &[u32], range: std::ops::Range<u32>| -> Vec<u32> {
         let per = range.len();
         let mut rays = Vec::with_capacity(chunk.len() * per);
@@ -93,12 +93,7 @@ pub(crate) fn buried(
         tracer.intersect(&rays, &mut out);
         rays.chunks(per.max(1))
             .zip(out.chunks(per.max(1)))
-            .map(|(rays, hits)| {
-                rays.iter()
-                    .zip(hits)
-                    .filter(|(r, h)| h.is_some_and(|h| hits_inside(scene, &sides, r, &h)))
-                    .count() as u32
-            })
+            .map(|(rays, hits)| inside_count(scene, &sides, rays, hits))
             .collect()
     };
     // A point whose first rays all escape is kept whatever the others do, so they are traced
@@ -126,6 +121,14 @@ pub(crate) fn buried(
         out[ii as usize][k as usize] = b;
     }
     out
+}
+
+/// How many of `rays` (with their `hits`) hit the inside of single-sided geometry.
+fn inside_count(scene: &Scene, sides: &[Side], rays: &[Ray], hits: &[Option<Hit>]) -> u32 {
+    rays.iter()
+        .zip(hits)
+        .filter(|(r, h)| h.is_some_and(|h| hits_inside(scene, sides, r, &h)))
+        .count() as u32
 }
 
 /// Burial ray `i` of the point with sample key `key` at `origin` (already offset) with
@@ -231,17 +234,9 @@ mod tests {
                 .collect();
             let mut hits = vec![None; rays.len()];
             tracer.intersect(&rays, &mut hits);
-            let inside = rays
-                .iter()
-                .zip(&hits)
-                .filter(|(r, h)| h.is_some_and(|h| hits_inside(&scene, &sides, r, &h)))
-                .count();
-            counts[inside] += 1;
-            assert_eq!(
-                verdicts[0][k],
-                inside as u32 >= BURIAL_MIN_INSIDE,
-                "point {k}"
-            );
+            let inside = inside_count(&scene, &sides, &rays, &hits);
+            counts[inside as usize] += 1;
+            assert_eq!(verdicts[0][k], inside >= BURIAL_MIN_INSIDE, "point {k}");
         }
         // Both verdicts and the counts around the edge occur.
         let edge = BURIAL_MIN_INSIDE as usize;
