@@ -793,8 +793,10 @@ fn send_updates(
             }
         })
         .collect();
+    // Copies of the encoded payloads for the other clients of groups with several.
     let shared: HashMap<usize, Vec<u8>> = payloads
         .iter()
+        .filter(|(_, g, _)| groups[*g].0.len() > 1)
         .filter_map(|(_, g, payload)| Some((*g, payload.clone()?)))
         .collect();
     let encoded: Vec<(&mut Session, Option<Vec<u8>>)> = payloads
