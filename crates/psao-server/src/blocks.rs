@@ -30,8 +30,6 @@ pub(crate) struct CullBlocks {
     pub order: Vec<u32>,
     /// The selection tie-break of each point in `order` (a seeded hash of the point).
     pub tie: Vec<u32>,
-    /// The local position of each point in `order` (so culling reads them in order).
-    pub position: Vec<Vec3>,
     pub blocks: Vec<Block>,
     /// Local bounds of each run of [`SUB_POINTS`] points of `order` (sub-block `j` of block
     /// `b` is `subs[b * SUBS_PER_BLOCK + j]`; a short last block has fewer).
@@ -82,7 +80,6 @@ impl CullBlocks {
             .collect();
         let subs = vec![(Vec3::ZERO, Vec3::ZERO); blocks.len() * SUBS_PER_BLOCK];
         let mut out = Self {
-            position: Vec::with_capacity(order.len()),
             order,
             tie,
             blocks,
@@ -92,13 +89,10 @@ impl CullBlocks {
         out
     }
 
-    /// Recompute every block's and sub-block's bounds, and the ordered positions, from the
-    /// current `positions` (call after points moved in local space; membership stays).
+    /// Recompute every block's and sub-block's bounds from the current `positions` (call
+    /// after points moved in local space; membership stays).
     pub fn refresh_bounds(&mut self, positions: &[Vec3]) {
         let order = &self.order;
-        self.position.clear();
-        self.position
-            .extend(order.iter().map(|&i| positions[i as usize]));
         for (k, sub) in order.chunks(SUB_POINTS).zip(&mut self.subs) {
             *sub = bounds(k.iter().map(|&i| positions[i as usize]));
         }

@@ -129,7 +129,7 @@ pub(crate) fn cull(
                     Cow::Borrowed(summary)
                 } else if !straddling.is_empty() {
                     let mut mask = [0u64; BLOCK_POINTS / 64];
-                    let positions = &inst.blocks.position;
+                    let (positions, order) = (&inst.points.position, &inst.blocks.order);
                     let start = block.start as usize;
                     let subs = &inst.blocks.subs[b as usize * SUBS_PER_BLOCK..];
                     for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
@@ -152,7 +152,9 @@ pub(crate) fn cull(
                             if !summaries.is_stored(k) {
                                 continue;
                             }
-                            let w = inst.transform.transform_point3(positions[k]);
+                            let w = inst
+                                .transform
+                                .transform_point3(positions[order[k] as usize]);
                             if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
                                 visible += 1;
                                 let offset = k - start;
