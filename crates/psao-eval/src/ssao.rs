@@ -182,9 +182,9 @@ fn unit_hash(seed: u64, index: u64) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::{Affine3A, Vec2};
+    use glam::Vec2;
     use psao_raster::{rasterize, RasterOptions};
-    use psao_scene::{Instance, Material, Mesh, Scene};
+    use psao_scene::{Mesh, Scene};
 
     /// A floor with a wall standing on it along z = 0.
     fn corner_scene() -> Scene {
@@ -214,19 +214,7 @@ mod tests {
             ],
             Vec3::Z,
         );
-        let inst = |mesh| Instance {
-            mesh,
-            node: None,
-            transform: Affine3A::IDENTITY,
-            skin: None,
-        };
-        Scene {
-            meshes: vec![floor, wall],
-            materials: vec![Material::default()],
-            instances: vec![inst(0), inst(1)],
-            ao_radius: 0.6,
-            ..Default::default()
-        }
+        Scene::of_meshes(vec![floor, wall])
     }
 
     #[test]
