@@ -1,7 +1,7 @@
 //! Animation on the server (DESIGN §3 "Server update" and "CPU server"): the scene is posed at
 //! the server's scene time, the tracer follows (top level for rigid motion, refit/rebuild for
 //! skinned meshes), skinned points follow their triangles through the hash grid, and
-//! **proximity invalidation** restarts the AO of exactly the points whose surroundings moved.
+//! **proximity invalidation** re-traces exactly the points whose surroundings moved.
 //!
 //! # Which points are invalidated
 //!
@@ -25,10 +25,24 @@
 //! again only when its bounds' corners moved more than a tolerance since then (the server
 //! uses `R × ao threshold`: moving an occluder by δ changes a ray's `min(t, R)/R` by about
 //! δ/R, so slower drifts stay below the publishing threshold of 8/255 until they add up).
-//! Boxes are grown by `R + tolerance` to cover that drift. Deformation always counts. Candidates are found per cell
-//! (the boxes in the instance's grid coordinates), then tested point by point. Invalidated
-//! points restart their accumulation (0 samples), which also gives them the tracer's highest
-//! priority (fewest samples first); static converged points are never touched.
+//! Boxes are grown by `R + tolerance` to cover that drift. Deformation always counts.
+//! Candidates are found per cell (the boxes in the instance's grid coordinates), then tested
+//! point by point; static converged points are never touched.
+//!
+//! # What an invalidated point forgets
+//!
+//! An invalidated point keeps the fraction `tolerance / (tolerance + δ)` of its samples,
+//! where δ is how far the geometry near it moved since they were traced (the two instances'
+//! displacements since their reference poses; a skinned instance's largest vertex
+//! displacement). Under the same first-order model, a sample that saw an occluder δ away from
+//! where it is now is off by about δ/R, so forgetting at this rate keeps the running
+//! estimate's bias under steady motion near the publishing threshold, while a jump far
+//! beyond the tolerance (an object lifted away) restarts the point, and its contact shadow
+//! follows within one server frame. Points near moving geometry therefore average over the
+//! last few server frames instead of starting from nothing each time, and since points the
+//! tracer skipped keep losing samples, they move up the tracer's priority (fewest samples
+//! first): under a tight ray budget every invalidated point is re-traced in turn, none is
+//! starved by the fixed tie-break.
 
 use glam::{Affine3A, UVec3, Vec3};
 use psao_points::InstancePoints;
@@ -100,6 +114,8 @@ struct SkinBinding {
     triangle: Vec<u32>,
     bary: Vec<Vec3>,
     back_face: Vec<bool>,
+    /// World positions of the mesh's vertices at the instance's reference pose.
+    reference: Vec<Vec3>,
 }
 
 /// The server's animation state.
@@ -110,9 +126,13 @@ pub(crate) struct Dynamics {
     time: Option<f32>,
     /// Per instance: world bounds of its geometry in the current pose.
     bounds: Vec<Option<(Vec3, Vec3)>>,
+    /// Per instance: mesh-space bounds of its geometry in the current pose.
+    mesh_bounds: Vec<Option<(Vec3, Vec3)>>,
     /// Per instance: transform and world bounds when it last invalidated points (its
     /// surroundings' AO was last made consistent with this pose).
     reference: Vec<(Affine3A, Option<(Vec3, Vec3)>)>,
+    /// Per instance: mesh-space bounds at its reference pose.
+    reference_mesh_bounds: Vec<Option<(Vec3, Vec3)>>,
     /// Per instance: its binding when it is skinned.
     skins: Vec<Option<SkinBinding>>,
     invalidation: Invalidation,
@@ -135,6 +155,9 @@ impl Dynamics {
         let bounds: Vec<_> = (0..scene.instances.len())
             .map(|i| animator.world_bounds(&rest, i))
             .collect();
+        let mesh_bounds: Vec<_> = (0..scene.instances.len())
+            .map(|i| animator.mesh_bounds(&rest, i))
+            .collect();
         let reference = rest
             .transforms
             .iter()
@@ -153,6 +176,11 @@ impl Dynamics {
                     triangle: p.points.iter().map(|s| s.triangle).collect(),
                     bary: p.points.iter().map(|s| s.bary).collect(),
                     back_face: p.points.iter().map(|s| s.back_face).collect(),
+                    reference: scene.meshes[inst.mesh]
+                        .positions
+                        .iter()
+                        .map(|&v| inst.transform.transform_point3(v))
+                        .collect(),
                 })
             })
             .collect();
@@ -161,6 +189,8 @@ impl Dynamics {
             pose: rest,
             time: None,
             bounds,
+            reference_mesh_bounds: mesh_bounds.clone(),
+            mesh_bounds,
             reference,
             skins,
             invalidation,
@@ -219,6 +249,7 @@ impl Dynamics {
                 deformed[i] = true;
             }
             self.bounds[i] = self.animator.world_bounds(&self.pose, i);
+            self.mesh_bounds[i] = self.animator.mesh_bounds(&self.pose, i);
         }
         stats.moved_instances = moved.iter().filter(|&&m| m).count();
         if stats.moved_instances == 0 {
@@ -260,14 +291,20 @@ impl Dynamics {
                 restarted: all,
             });
         }
-        // Instances whose motion since their reference pose matters.
-        let event: Vec<bool> = (0..n)
-            .map(|i| {
-                first
-                    || deformed[i]
-                    || (moved[i]
-                        && displacement(&self.reference[i], &instances[i].transform) > tolerance)
+        // How far each instance's geometry moved since its reference pose, and whether that
+        // matters (an event).
+        let shift: Vec<f32> = (0..n)
+            .map(|i| match (&self.skins[i], &self.pose.skinned[i]) {
+                _ if first => f32::INFINITY,
+                (Some(skin), Some(geo)) if deformed[i] => {
+                    skin_displacement(skin, geo, &instances[i].transform)
+                }
+                _ if moved[i] => displacement(&self.reference[i], &instances[i].transform),
+                _ => 0.0,
             })
+            .collect();
+        let event: Vec<bool> = (0..n)
+            .map(|i| first || deformed[i] || (moved[i] && shift[i] > tolerance))
             .collect();
         let prev_transforms: Vec<Affine3A> = self.reference.iter().map(|r| r.0).collect();
         let prev_bounds: Vec<Option<(Vec3, Vec3)>> = self.reference.iter().map(|r| r.1).collect();
@@ -275,31 +312,51 @@ impl Dynamics {
             prev_transforms: &prev_transforms,
             prev_bounds: &prev_bounds,
             bounds: &self.bounds,
+            prev_mesh_bounds: &self.reference_mesh_bounds,
+            mesh_bounds: &self.mesh_bounds,
             moved: &event,
             deformed: &deformed,
+            shift: &shift,
             // Instances without an event may have drifted by up to `tolerance`.
             radius: radius + tolerance,
         };
         let now: &[InstanceState] = instances;
-        let invalid: Vec<Vec<u32>> = (0..now.len())
+        let invalid: Vec<Vec<(u32, f32)>> = (0..now.len())
             .into_par_iter()
             .map(|j| moves.invalidated(j, now))
             .collect();
         for (inst, points) in instances.iter_mut().zip(&invalid) {
-            for &i in points {
-                inst.points.sum[i as usize] = 0.0;
-                inst.points.count[i as usize] = 0;
+            for &(i, motion) in points {
+                let i = i as usize;
+                let count = inst.points.count[i];
+                let kept = (count as f32 * kept_fraction(motion, tolerance)) as u32;
+                inst.points.sum[i] = if count == 0 {
+                    0.0
+                } else {
+                    inst.points.sum[i] * kept as f32 / count as f32
+                };
+                inst.points.count[i] = kept;
             }
             stats.invalidated_points += points.len();
         }
         for (i, e) in event.iter().enumerate() {
             if *e {
                 self.reference[i] = (instances[i].transform, self.bounds[i]);
+                self.reference_mesh_bounds[i] = self.mesh_bounds[i];
+                if let (Some(skin), Some(geo)) = (&mut self.skins[i], &self.pose.skinned[i]) {
+                    let t = instances[i].transform;
+                    skin.reference.clear();
+                    skin.reference
+                        .extend(geo.positions.iter().map(|&v| t.transform_point3(v)));
+                }
             }
         }
         let restarted = Restarted {
             all: false,
-            lists: invalid,
+            lists: invalid
+                .into_iter()
+                .map(|l| l.into_iter().map(|(i, _)| i).collect())
+                .collect(),
         };
         Ok(Advanced {
             stats,
@@ -362,8 +419,12 @@ struct Moves<'a> {
     prev_transforms: &'a [Affine3A],
     prev_bounds: &'a [Option<(Vec3, Vec3)>],
     bounds: &'a [Option<(Vec3, Vec3)>],
+    prev_mesh_bounds: &'a [Option<(Vec3, Vec3)>],
+    mesh_bounds: &'a [Option<(Vec3, Vec3)>],
     moved: &'a [bool],
     deformed: &'a [bool],
+    /// Per instance: how far its geometry moved since its reference pose.
+    shift: &'a [f32],
     radius: f32,
 }
 
@@ -381,14 +442,13 @@ impl Moves<'_> {
         !before.abs_diff_eq(after, 1e-6)
     }
 
-    /// The points of instance `j` of `now` to restart (sorted, unique).
-    fn invalidated(&self, j: usize, now: &[InstanceState]) -> Vec<u32> {
+    /// The points of instance `j` of `now` whose surroundings moved, each with how far the
+    /// nearby geometry moved relative to it (sorted by point, unique).
+    fn invalidated(&self, j: usize, now: &[InstanceState]) -> Vec<(u32, f32)> {
         let inst = &now[j];
-        if self.deformed[j] {
-            return (0..inst.points.position.len() as u32).collect();
-        }
         // Local-space boxes (grown by R) of the geometry that moved relative to j, in the
-        // previous pose (under j's previous transform) and the current one.
+        // previous pose (under j's previous transform) and the current one, each with the
+        // motion between the two.
         let prev_to_local = inverse(&self.prev_transforms[j]);
         let to_local = inverse(&inst.transform);
         let sources: Box<dyn Iterator<Item = usize>> = if self.moved[j] {
@@ -398,35 +458,68 @@ impl Moves<'_> {
         };
         let mut boxes = Vec::new();
         for k in sources.filter(|&k| k != j && self.moved_relative(j, k, now)) {
-            if let Some(b) = self.prev_bounds[k] {
-                boxes.push(map_box(b, self.radius, &prev_to_local));
-            }
-            if let Some(b) = self.bounds[k] {
-                boxes.push(map_box(b, self.radius, &to_local));
+            let motion = self.shift[j] + self.shift[k];
+            let poses = [
+                (
+                    self.prev_bounds[k],
+                    self.prev_mesh_bounds[k],
+                    &prev_to_local,
+                    &self.prev_transforms[k],
+                    &self.prev_transforms[j],
+                ),
+                (
+                    self.bounds[k],
+                    self.mesh_bounds[k],
+                    &to_local,
+                    &now[k].transform,
+                    &inst.transform,
+                ),
+            ];
+            for (world, mesh, into_j, t_k, t_j) in poses {
+                if let Some(b) = world {
+                    boxes.push(Near {
+                        cells: map_box(b, self.radius, into_j),
+                        exact: mesh.map(|m| ExactBox::new(m, self.radius, t_k, t_j)),
+                        motion,
+                    });
+                }
             }
         }
         let layout = inst.layout();
         let grid_hi = layout.origin + layout.dims.as_vec3() * layout.cell_size;
-        boxes.retain(|(lo, hi)| lo.cmple(grid_hi).all() && hi.cmpge(layout.origin).all());
+        boxes.retain(|b| b.cells.0.cmple(grid_hi).all() && b.cells.1.cmpge(layout.origin).all());
+        // The largest motion among the geometry within reach of `p`.
+        let motion_at = |p: Vec3| {
+            boxes
+                .iter()
+                .filter(|b| b.reaches(p))
+                .map(|b| b.motion)
+                .reduce(f32::max)
+        };
+        if self.deformed[j] {
+            // Every point moved with the mesh.
+            let own = self.shift[j];
+            return (0..inst.points.position.len())
+                .map(|i| {
+                    let near = motion_at(inst.points.position[i]).unwrap_or(0.0);
+                    (i as u32, own.max(near))
+                })
+                .collect();
+        }
         if boxes.is_empty() {
             return Vec::new();
         }
-        let inside = |p: Vec3| {
-            boxes
-                .iter()
-                .any(|(lo, hi)| p.cmpge(*lo).all() && p.cmple(*hi).all())
-        };
         let mut out = Vec::new();
         let slots = inst.members.len();
-        for &(lo, hi) in &boxes {
-            let (c0, c1) = cell_range(layout, lo, hi);
+        for b in &boxes {
+            let (c0, c1) = cell_range(layout, b.cells.0, b.cells.1);
             let span = (c1 - c0 + UVec3::ONE).as_u64vec3();
             if span.x * span.y * span.z <= slots as u64 {
                 for z in c0.z..=c1.z {
                     for y in c0.y..=c1.y {
                         for x in c0.x..=c1.x {
                             if let Some(s) = inst.alloc.find_cell(UVec3::new(x, y, z)) {
-                                push_members(inst, s, &inside, &mut out);
+                                push_members(inst, s, &motion_at, &mut out);
                             }
                         }
                     }
@@ -437,24 +530,143 @@ impl Moves<'_> {
                         .slot_coord(s)
                         .is_some_and(|c| c.cmpge(c0).all() && c.cmple(c1).all());
                     if hit {
-                        push_members(inst, s, &inside, &mut out);
+                        push_members(inst, s, &motion_at, &mut out);
                     }
                 }
             }
         }
-        out.sort_unstable();
-        out.dedup();
+        // Every box containing a point gives it the same (largest) motion: duplicates agree.
+        out.sort_unstable_by_key(|&(i, _)| i);
+        out.dedup_by_key(|&mut (i, _)| i);
         out
     }
 }
 
-/// Append the members of slot `s` whose position passes `inside`.
-fn push_members(inst: &InstanceState, s: u32, inside: &impl Fn(Vec3) -> bool, out: &mut Vec<u32>) {
-    for &m in &inst.members[s as usize] {
-        if m != NONE && inside(inst.points.position[m as usize]) {
-            out.push(m);
+/// Geometry of one instance in one pose, as seen from the instance whose points are tested.
+struct Near {
+    /// Local-space box (in the tested instance) of the geometry's bounds grown by the reach:
+    /// a superset of the points within reach, for finding candidate cells.
+    cells: (Vec3, Vec3),
+    /// The exact test, when the geometry's transform allows it.
+    exact: Option<ExactBox>,
+    /// How far the geometry moved relative to the tested instance.
+    motion: f32,
+}
+
+impl Near {
+    /// Whether local point `p` (of the tested instance) may lie within reach of the geometry.
+    fn reaches(&self, p: Vec3) -> bool {
+        let (lo, hi) = self.cells;
+        p.cmpge(lo).all() && p.cmple(hi).all() && self.exact.as_ref().is_none_or(|e| e.reaches(p))
+    }
+}
+
+/// The geometry's mesh-space bounds with the map from the tested instance's local space into
+/// that mesh space, for a Euclidean distance test: tighter than growing world-space boxes
+/// by the reach along the axes, above all for rotated instances.
+struct ExactBox {
+    /// Tested instance's local space → the geometry's mesh space.
+    to_mesh: Affine3A,
+    lo: Vec3,
+    hi: Vec3,
+    /// The reach in mesh-space units (at most; shorter where the transform stretches).
+    reach: f32,
+}
+
+impl ExactBox {
+    /// The test for mesh bounds `(lo, hi)` under world transform `t_k`, from points in the
+    /// local space of the instance with world transform `t_j`, with world-space `reach`. The
+    /// reach is converted with a lower bound of `t_k`'s smallest stretch, so the test never
+    /// misses a point within reach.
+    fn new((lo, hi): (Vec3, Vec3), reach: f32, t_k: &Affine3A, t_j: &Affine3A) -> Self {
+        Self {
+            to_mesh: inverse(t_k) * *t_j,
+            lo,
+            hi,
+            reach: reach / min_stretch(t_k),
         }
     }
+
+    fn reaches(&self, p: Vec3) -> bool {
+        let q = self.to_mesh.transform_point3(p);
+        let outside = (self.lo - q).max(q - self.hi).max(Vec3::ZERO);
+        outside.length_squared() <= self.reach * self.reach
+    }
+}
+
+/// A lower bound of the factor by which `t` shortens any vector: the shortest column when the
+/// columns are orthogonal (rotation and scale), else `1 / ‖t⁻¹‖_F`. Zero for a singular
+/// transform (which makes the reach infinite: the exact test then accepts everything).
+fn min_stretch(t: &Affine3A) -> f32 {
+    let m = t.matrix3;
+    let (x, y, z) = (
+        Vec3::from(m.x_axis),
+        Vec3::from(m.y_axis),
+        Vec3::from(m.z_axis),
+    );
+    let scale = x.length().max(y.length()).max(z.length());
+    let tolerance = 1e-4 * scale * scale;
+    let orthogonal =
+        x.dot(y).abs() <= tolerance && y.dot(z).abs() <= tolerance && x.dot(z).abs() <= tolerance;
+    let stretch = if orthogonal {
+        x.length().min(y.length()).min(z.length())
+    } else {
+        let inv = m.inverse();
+        let norm = (inv.x_axis.length_squared()
+            + inv.y_axis.length_squared()
+            + inv.z_axis.length_squared())
+        .sqrt();
+        1.0 / norm
+    };
+    if stretch.is_finite() {
+        stretch
+    } else {
+        0.0
+    }
+}
+
+/// Append the members of slot `s` that lie in some box (`motion_at` gives the motion there).
+fn push_members(
+    inst: &InstanceState,
+    s: u32,
+    motion_at: &impl Fn(Vec3) -> Option<f32>,
+    out: &mut Vec<(u32, f32)>,
+) {
+    for &m in &inst.members[s as usize] {
+        if m != NONE {
+            if let Some(motion) = motion_at(inst.points.position[m as usize]) {
+                out.push((m, motion));
+            }
+        }
+    }
+}
+
+/// The fraction of its accumulated samples a point keeps when geometry within `R` of it
+/// moved by `motion` since those samples were traced: `tolerance / (tolerance + motion)`.
+/// Moving an occluder by δ biases an old sample by about δ/R (module docs); with samples
+/// forgotten at this rate, the bias of the running estimate under steady motion stays near
+/// `tolerance / R`, the publishing threshold. A jump far beyond the tolerance restarts the
+/// point (contact shadows follow within one server frame); a zero tolerance always does.
+fn kept_fraction(motion: f32, tolerance: f32) -> f32 {
+    if motion <= 0.0 {
+        1.0
+    } else if motion.is_finite() {
+        tolerance / (tolerance + motion)
+    } else {
+        0.0
+    }
+}
+
+/// How far the vertices of a skinned instance moved since its reference pose (world space).
+fn skin_displacement(skin: &SkinBinding, geo: &SkinnedGeometry, transform: &Affine3A) -> f32 {
+    if skin.reference.len() != geo.positions.len() {
+        return f32::INFINITY;
+    }
+    geo.positions
+        .iter()
+        .zip(&skin.reference)
+        .map(|(&v, &r)| (transform.transform_point3(v) - r).length())
+        .fold(0.0, f32::max)
 }
 
 /// The cells (inclusive range, clamped to the grid) a local box overlaps.
@@ -487,4 +699,106 @@ fn displacement(reference: &(Affine3A, Option<(Vec3, Vec3)>), now: &Affine3A) ->
 /// by `t`.
 fn map_box((lo, hi): (Vec3, Vec3), r: f32, t: &Affine3A) -> (Vec3, Vec3) {
     transformed_box(t, lo - Vec3::splat(r), hi + Vec3::splat(r))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Mat3, Quat};
+
+    /// The smallest singular value of `m`, by brute force over directions.
+    fn brute_min_stretch(m: Mat3) -> f32 {
+        let mut best = f32::INFINITY;
+        for a in 0..90 {
+            for b in 0..180 {
+                let (t, p) = (
+                    a as f32 * 2.0_f32.to_radians(),
+                    b as f32 * 2.0_f32.to_radians(),
+                );
+                let d = Vec3::new(t.sin() * p.cos(), t.cos(), t.sin() * p.sin());
+                best = best.min((m * d).length());
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn min_stretch_is_a_lower_bound_and_exact_for_rotation_and_scale() {
+        let rotated = Affine3A::from_scale_rotation_translation(
+            Vec3::new(2.0, 3.0, 4.0),
+            Quat::from_rotation_y(0.7),
+            Vec3::ONE,
+        );
+        assert!((min_stretch(&rotated) - 2.0).abs() < 1e-5);
+        let sheared = Affine3A::from_mat3(Mat3::from_cols(
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.9, 1.0, 0.0),
+            Vec3::new(0.0, 0.3, 0.5),
+        ));
+        let bound = min_stretch(&sheared);
+        assert!(bound > 0.0 && bound <= brute_min_stretch(sheared.matrix3.into()) + 1e-4);
+        assert_eq!(
+            min_stretch(&Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0))),
+            0.0
+        );
+    }
+
+    #[test]
+    fn the_exact_box_test_is_tight_for_a_rotated_box_and_never_misses() {
+        // A unit cube turned 45° about y, 2× scaled; points in the world frame (t_j = I).
+        let t_k = Affine3A::from_scale_rotation_translation(
+            Vec3::splat(2.0),
+            Quat::from_rotation_y(std::f32::consts::FRAC_PI_4),
+            Vec3::ZERO,
+        );
+        let reach = 0.5;
+        let exact = ExactBox::new((Vec3::ZERO, Vec3::ONE), reach, &t_k, &Affine3A::IDENTITY);
+        // World distance to the turned cube, by dense sampling of its surface.
+        let distance = |p: Vec3| {
+            let n = 24;
+            let mut best = f32::INFINITY;
+            for a in 0..=n {
+                for b in 0..=n {
+                    let (u, v) = (a as f32 / n as f32, b as f32 / n as f32);
+                    for q in [
+                        Vec3::new(0.0, u, v),
+                        Vec3::new(1.0, u, v),
+                        Vec3::new(u, 0.0, v),
+                        Vec3::new(u, 1.0, v),
+                        Vec3::new(u, v, 0.0),
+                        Vec3::new(u, v, 1.0),
+                    ] {
+                        best = best.min((t_k.transform_point3(q) - p).length());
+                    }
+                }
+            }
+            best
+        };
+        let mut rng = 12345u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let (mut inside_box, mut rejected) = (0, 0);
+        for _ in 0..400 {
+            let p = Vec3::new(next() * 5.0 - 2.5, next() * 3.0 - 0.5, next() * 5.0 - 2.5);
+            let d = distance(p);
+            if d <= reach * 0.98 {
+                assert!(exact.reaches(p), "missed {p} at {d}");
+            }
+            if d > reach * 1.02 {
+                // Outside the reach but maybe inside the grown world box.
+                let (lo, hi) = transformed_box(&t_k, Vec3::ZERO, Vec3::ONE);
+                let grown = p.cmpge(lo - reach).all() && p.cmple(hi + reach).all();
+                inside_box += usize::from(grown);
+                rejected += usize::from(grown && !exact.reaches(p));
+            }
+        }
+        assert!(
+            inside_box > 20 && rejected > inside_box / 2,
+            "{rejected} of {inside_box}"
+        );
+    }
 }

@@ -390,3 +390,97 @@ fn slow_drift_invalidates_once_it_adds_up() {
     assert_eq!(counts[2], 0, "1 cm since the new reference");
     assert!(counts[3] > 0, "{counts:?}");
 }
+
+#[test]
+fn small_motion_keeps_part_of_the_history() {
+    // The box slides 3 cm along the floor per server frame (tolerance ≈ 1.9 cm): nearby
+    // floor points keep tolerance / (tolerance + shift) of their samples.
+    let scene = moving_box_scene(&[
+        (0.0, Vec3::new(0.0, 0.5, 0.0)),
+        (10.0, Vec3::new(3.0, 0.5, 0.0)),
+    ]);
+    let cfg = ServerConfig {
+        max_samples: 64,
+        ..config()
+    };
+    let mut server = Server::new(&scene, cfg).unwrap();
+    let views = [wide_view()];
+    converge_at(&mut server, &views, 0.0);
+    let before: Vec<_> = server.points(0).collect();
+    let stats = server.step_at(&views, 0.1).unwrap();
+    assert!(stats.invalidated_points > 0);
+    let after: Vec<_> = server.points(0).collect();
+    let tolerance = 0.6 * cfg.thresholds.ao;
+    let kept = tolerance / (tolerance + 0.03);
+    let mut near = 0;
+    for (b, a) in before.iter().zip(&after) {
+        if a.samples < b.samples {
+            near += 1;
+            let forgotten = (b.samples as f32 * kept) as u32;
+            assert!(
+                a.samples == forgotten || a.samples == forgotten + cfg.rays_per_point,
+                "{} samples -> {} (keep {kept})",
+                b.samples,
+                a.samples
+            );
+        }
+    }
+    assert!(near > 0, "some floor points forgot part of their samples");
+}
+
+#[test]
+fn a_tight_budget_re_traces_every_point_near_steady_motion_in_turn() {
+    // The box slides 3 cm per server frame without stopping; the budget covers half of the
+    // points it invalidates. With a fixed tie-break and restarts to zero samples, the same
+    // half would win every frame and the other half would never be re-traced.
+    let scene = moving_box_scene(&[
+        (0.0, Vec3::new(0.0, 0.5, 0.0)),
+        (10.0, Vec3::new(3.0, 0.5, 0.0)),
+    ]);
+    let views = [wide_view()];
+    let rays_per_point = config().rays_per_point;
+    let mut probe = Server::new(&scene, config()).unwrap();
+    converge_at(&mut probe, &views, 0.0);
+    let demand = probe.step_at(&views, 0.1).unwrap().invalidated_points as u64;
+    let cfg = ServerConfig {
+        ray_budget: (demand / 2).max(1) * u64::from(rays_per_point),
+        ..config()
+    };
+    let mut server = Server::new(&scene, cfg).unwrap();
+    while server.step_at(&views, 0.0).unwrap().traced_points > 0 {}
+    // Floor points beside the box, within R of it on its whole way (x of the box ≤ 0.75 m).
+    let steady: Vec<usize> = server
+        .points(0)
+        .enumerate()
+        .filter(|(_, p)| {
+            let q = p.position;
+            p.stored && q.x.abs() < 0.3 && q.z > 0.5 && q.z < 0.8
+        })
+        .map(|(i, _)| i)
+        .collect();
+    assert!(steady.len() >= 5, "{}", steady.len());
+    let mut traced = vec![false; steady.len()];
+    for k in 1..=25 {
+        let stats = server.step_at(&views, k as f32 * 0.1).unwrap();
+        assert!(
+            stats.traced_points < stats.invalidated_points,
+            "the budget is tight"
+        );
+        if k <= 8 {
+            continue; // untraced points may still hold many old samples
+        }
+        // After eight frames an untraced point has fewer than `rays_per_point` samples (it
+        // keeps at most half per frame), a point traced this frame at least that many.
+        let now: Vec<_> = server.points(0).collect();
+        for (t, &i) in traced.iter_mut().zip(&steady) {
+            *t |= now[i].samples >= rays_per_point;
+        }
+    }
+    let starved = traced.iter().filter(|t| !**t).count();
+    assert_eq!(
+        starved,
+        0,
+        "{starved} of {} points never re-traced",
+        steady.len()
+    );
+}

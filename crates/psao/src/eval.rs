@@ -45,6 +45,11 @@ pub struct EvalArgs {
     /// Rays per pixel of the few-spp per-pixel RTAO baseline.
     #[arg(long, default_value_t = 4)]
     pub rtao_spp: u32,
+    /// Server frames run at the first frame's time and camera before the measured range
+    /// (not counted in any statistic), so the range starts from an accumulated state instead
+    /// of a cold start.
+    #[arg(long, default_value_t = 0)]
+    pub warm_up: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
     /// Folder of cached reference images.
@@ -274,6 +279,10 @@ fn eval_psao(
     let mut config = args.tuning.config(points, hz, args.res)?;
     config.medium = input.medium();
     let mut pipeline = Pipeline::new(scene, &config)?;
+    if args.warm_up > 0 {
+        let camera = path.camera_at_frame(range.start as usize);
+        pipeline.warm_up(range.start, &camera, args.warm_up)?;
+    }
     let bar = progress::bar(
         (range.end - range.start) as u64,
         &format!("PSAO-{points} @ {hz} Hz"),

@@ -125,6 +125,32 @@ impl<'a> Pipeline<'a> {
         &self.client
     }
 
+    /// Runs `server_frames` server frames at the scene time of client frame `frame`, seen
+    /// from `camera`, and applies their updates to the client without counting their bytes:
+    /// the state of a server that has been running for a while before the measured frames.
+    pub fn warm_up(&mut self, frame: u32, camera: &Camera, server_frames: u32) -> Result<()> {
+        let tick = frame as u64 * self.server_hz as u64 / CLIENT_HZ as u64;
+        let time = (tick as f64 / self.server_hz as f64) as f32;
+        let view = View {
+            camera: *camera,
+            aspect: self.res.width as f32 / self.res.height as f32,
+        };
+        for _ in 0..server_frames {
+            self.server
+                .step_at(&[view], time)
+                .context("the server could not pose the scene")?;
+            let encoded = self.encoder.encode(&self.server.update_for(self.client_id));
+            let update = self
+                .decoder
+                .decode(&encoded)
+                .context("the client could not decode the server's update")?;
+            self.client
+                .apply(&update)
+                .context("the client could not apply the server's update")?;
+        }
+        Ok(())
+    }
+
     /// Runs client frame `frame` with `camera`: a server frame first when the server clock ticks
     /// (at server scene time `tick / server_hz`), then (when `render`) the client's G-buffer
     /// and AO reconstruction at client time `frame / 60` (see [`ClientRenderer`]).

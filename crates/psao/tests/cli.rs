@@ -216,3 +216,39 @@ fn eval_writes_the_report_rows() {
     let again = json(&out.join("report.json"));
     assert_eq!(rows[0]["psnr_ao"], again[0]["psnr_ao"]);
 }
+
+#[test]
+fn eval_warm_up_starts_the_range_from_an_accumulated_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let psnr = |warm_up: &str| {
+        let out = dir.path().join(format!("eval_{warm_up}"));
+        let o = psao(&[
+            "eval",
+            "--frames",
+            "0..1",
+            "--points",
+            "64",
+            "--spp",
+            "4",
+            "--rtao-spp",
+            "1",
+            "--res",
+            "48x27",
+            "--ray-budget",
+            "2000",
+            "--warm-up",
+            warm_up,
+            "--out",
+            out.to_str().unwrap(),
+            "--cache",
+            cache.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        json(&out.join("report.json"))[0]["psnr_ao"]
+            .as_f64()
+            .unwrap()
+    };
+    let (cold, warm) = (psnr("0"), psnr("20"));
+    assert!(warm > cold + 1.0, "cold {cold} dB, warm {warm} dB");
+}

@@ -305,14 +305,18 @@ impl Animator {
     /// out of range or the mesh has no vertices.
     pub fn world_bounds(&self, pose: &ScenePose, i: usize) -> Option<(Vec3, Vec3)> {
         let transform = *pose.transforms.get(i)?;
+        let (lo, hi) = self.mesh_bounds(pose, i)?;
+        Some(transformed_box(&transform, lo, hi))
+    }
+
+    /// Mesh-space bounds (min, max) of instance `i` in `pose`: its skinned vertices where the
+    /// pose has them, else its mesh's box; `None` as for [`Self::world_bounds`].
+    pub fn mesh_bounds(&self, pose: &ScenePose, i: usize) -> Option<(Vec3, Vec3)> {
         let (lo, hi) = match pose.skinned.get(i).and_then(Option::as_ref) {
             Some(g) => bounds(&g.positions),
             None => *self.local_bounds.get(i)?,
         };
-        if lo.cmpgt(hi).any() {
-            return None;
-        }
-        Some(transformed_box(&transform, lo, hi))
+        (lo.cmple(hi).all()).then_some((lo, hi))
     }
 
     /// The pose at scene time `time` (seconds).
