@@ -509,35 +509,48 @@ impl Moves<'_> {
         if boxes.is_empty() {
             return Vec::new();
         }
-        let mut out = Vec::new();
+        // The slots of the cells any box overlaps, each once (enumerated by cell range, or by
+        // slot when some box spans more cells than there are slots).
         let slots = inst.members.len();
-        for b in &boxes {
-            let (c0, c1) = cell_range(layout, b.cells.0, b.cells.1);
-            let span = (c1 - c0 + UVec3::ONE).as_u64vec3();
-            if span.x * span.y * span.z <= slots as u64 {
+        let ranges: Vec<(UVec3, UVec3)> = boxes
+            .iter()
+            .map(|b| cell_range(layout, b.cells.0, b.cells.1))
+            .collect();
+        let span = |(c0, c1): &(UVec3, UVec3)| {
+            let d = (*c1 - *c0 + UVec3::ONE).as_u64vec3();
+            d.x * d.y * d.z
+        };
+        let hit: Vec<u32> = if ranges.iter().any(|r| span(r) > slots as u64) {
+            (0..slots as u32)
+                .filter(|&s| {
+                    inst.slot_coord(s).is_some_and(|c| {
+                        ranges
+                            .iter()
+                            .any(|(c0, c1)| c.cmpge(*c0).all() && c.cmple(*c1).all())
+                    })
+                })
+                .collect()
+        } else {
+            let mut hit = Vec::new();
+            for (c0, c1) in &ranges {
                 for z in c0.z..=c1.z {
                     for y in c0.y..=c1.y {
                         for x in c0.x..=c1.x {
-                            if let Some(s) = inst.alloc.find_cell(UVec3::new(x, y, z)) {
-                                push_members(inst, s, &motion_at, &mut out);
-                            }
+                            hit.extend(inst.alloc.find_cell(UVec3::new(x, y, z)));
                         }
                     }
                 }
-            } else {
-                for s in 0..slots as u32 {
-                    let hit = inst
-                        .slot_coord(s)
-                        .is_some_and(|c| c.cmpge(c0).all() && c.cmple(c1).all());
-                    if hit {
-                        push_members(inst, s, &motion_at, &mut out);
-                    }
-                }
             }
+            hit.sort_unstable();
+            hit.dedup();
+            hit
+        };
+        let mut out = Vec::new();
+        for s in hit {
+            push_members(inst, s, &motion_at, &mut out);
         }
-        // Every box containing a point gives it the same (largest) motion: duplicates agree.
+        // A point is a member of one slot: no duplicates.
         out.sort_unstable_by_key(|&(i, _)| i);
-        out.dedup_by_key(|&mut (i, _)| i);
         out
     }
 }
