@@ -582,7 +582,8 @@ struct ExactBox {
     to_mesh: Affine3A,
     lo: Vec3,
     hi: Vec3,
-    /// The reach in mesh-space units (at most; shorter where the transform stretches).
+    /// The reach in mesh-space units: the world reach divided by the transform's smallest
+    /// stretch, so at least the reach in any direction.
     reach: f32,
 }
 

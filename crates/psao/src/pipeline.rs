@@ -125,6 +125,17 @@ impl<'a> Pipeline<'a> {
         &self.client
     }
 
+    /// The client decodes and applies one encoded update.
+    fn receive(&mut self, encoded: &[u8]) -> Result<()> {
+        let update = self
+            .decoder
+            .decode(encoded)
+            .context("the client could not decode the server's update")?;
+        self.client
+            .apply(&update)
+            .context("the client could not apply the server's update")
+    }
+
     /// Runs `server_frames` server frames at the scene time of client frame `frame`, seen
     /// from `camera`, and applies their updates to the client without counting their bytes:
     /// the state of a server that has been running for a while before the measured frames.
@@ -140,13 +151,7 @@ impl<'a> Pipeline<'a> {
                 .step_at(&[view], time)
                 .context("the server could not pose the scene")?;
             let encoded = self.encoder.encode(&self.server.update_for(self.client_id));
-            let update = self
-                .decoder
-                .decode(&encoded)
-                .context("the client could not decode the server's update")?;
-            self.client
-                .apply(&update)
-                .context("the client could not apply the server's update")?;
+            self.receive(&encoded)?;
         }
         Ok(())
     }
@@ -198,13 +203,7 @@ impl<'a> Pipeline<'a> {
         }
         let t = Instant::now();
         if let Some(encoded) = bytes {
-            let update = self
-                .decoder
-                .decode(&encoded)
-                .context("the client could not decode the server's update")?;
-            self.client
-                .apply(&update)
-                .context("the client could not apply the server's update")?;
+            self.receive(&encoded)?;
         }
         let mut out = None;
         if render {
