@@ -14,6 +14,9 @@ pub(crate) const BLOCK_POINTS: usize = 512;
 pub(crate) const SUB_POINTS: usize = 64;
 /// Sub-blocks per block.
 pub(crate) const SUBS_PER_BLOCK: usize = BLOCK_POINTS / SUB_POINTS;
+/// Blocks per group: culling tests a group against the frusta before its blocks, so that
+/// groups entirely inside or outside cost one test instead of one per block.
+pub(crate) const GROUP_BLOCKS: usize = 16;
 
 /// A run of `order` whose points lie in `(lo, hi)` (local space).
 #[derive(Clone, Copy, Debug)]
@@ -34,6 +37,8 @@ pub(crate) struct CullBlocks {
     /// Local bounds of each run of [`SUB_POINTS`] points of `order` (sub-block `j` of block
     /// `b` is `subs[b * SUBS_PER_BLOCK + j]`; a short last block has fewer).
     pub subs: Vec<(Vec3, Vec3)>,
+    /// Local bounds of each run of [`GROUP_BLOCKS`] blocks (the last may hold fewer).
+    pub groups: Vec<(Vec3, Vec3)>,
 }
 
 /// How a block lies relative to one frustum grown by a slack.
@@ -79,11 +84,13 @@ impl CullBlocks {
             })
             .collect();
         let subs = vec![(Vec3::ZERO, Vec3::ZERO); blocks.len() * SUBS_PER_BLOCK];
+        let groups = vec![(Vec3::ZERO, Vec3::ZERO); blocks.len().div_ceil(GROUP_BLOCKS)];
         let mut out = Self {
             order,
             tie,
             blocks,
             subs,
+            groups,
         };
         out.refresh_bounds(positions);
         out
@@ -104,6 +111,12 @@ impl CullBlocks {
                 .iter()
                 .fold(init, |(lo, hi), s| (lo.min(s.0), hi.max(s.1)));
             (block.lo, block.hi) = (lo, hi);
+        }
+        for (group, blocks) in self.groups.iter_mut().zip(self.blocks.chunks(GROUP_BLOCKS)) {
+            let init = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            *group = blocks
+                .iter()
+                .fold(init, |(lo, hi), b| (lo.min(b.lo), hi.max(b.hi)));
         }
     }
 }
@@ -243,6 +256,13 @@ mod tests {
             let (lo, hi) = b.subs[k / SUB_POINTS];
             assert!(p[i as usize].cmpge(lo).all() && p[i as usize].cmple(hi).all());
         }
+        for (g, blocks) in b.blocks.chunks(GROUP_BLOCKS).enumerate() {
+            let (lo, hi) = b.groups[g];
+            assert!(blocks
+                .iter()
+                .all(|blk| blk.lo.cmpge(lo).all() && blk.hi.cmple(hi).all()));
+        }
+        assert_eq!(b.groups.len(), b.blocks.len().div_ceil(GROUP_BLOCKS));
         assert_eq!(b.tie[0], tie_of(3, b.order[0], 7));
     }
 

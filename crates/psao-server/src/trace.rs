@@ -7,7 +7,7 @@ use psao_trace::ao::{ao_rays_range, medium_stream, sample_value, Medium, MediumS
 use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
 use rayon::prelude::*;
 
-use crate::blocks::{WorldBox, BLOCK_POINTS, SUBS_PER_BLOCK, SUB_POINTS};
+use crate::blocks::{WorldBox, BLOCK_POINTS, GROUP_BLOCKS, SUBS_PER_BLOCK, SUB_POINTS};
 use crate::frustum::Frustum;
 use crate::instance::InstanceState;
 use crate::summary::{bin, bin_of, count_up_to, offset_of, LAST_BIN};
@@ -78,9 +78,10 @@ pub(crate) struct Culled {
 /// reach) and list the unconverged ones that may be among the `max_points` that [`select`]
 /// keeps: every visible unconverged point in the selection bins up to the smallest bin that,
 /// with all below it, holds `max_points` of them (a superset of what `select` keeps, since
-/// bins are monotone in the key; `select` decides). Blocks are tested against the frusta
-/// first: blocks inside take their counts from their summaries, only blocks straddling a
-/// frustum test their points. The cut is searched from `guess` (the previous frame's cut)
+/// bins are monotone in the key; `select` decides). Groups of blocks are tested against the
+/// frusta first, then the blocks of straddling groups against the frusta their group
+/// straddles: blocks inside take their counts from their summaries, only blocks straddling a
+/// frustum test their sub-blocks and points. The cut is searched from `guess` (the previous frame's cut)
 /// on the blocks' sorted summaries; the result does not depend on `guess`.
 pub(crate) fn cull(
     instances: &[InstanceState],
@@ -101,80 +102,97 @@ pub(crate) fn cull(
         .iter()
         .enumerate()
         .filter(|(ii, _)| !near[*ii].is_empty())
-        .flat_map(|(ii, inst)| (0..inst.blocks.blocks.len() as u32).map(move |b| (ii as u32, b)))
+        .flat_map(|(ii, inst)| (0..inst.blocks.groups.len() as u32).map(move |g| (ii as u32, g)))
         .collect();
-    // Fold state: visible count, blocks, bin window, and scratch lists of the frusta a block
-    // and a sub-block straddle (reused from block to block).
+    // Fold state: visible count, blocks, bin window, and scratch lists of the frusta a group,
+    // a block and a sub-block straddle (reused from group to group).
+    type Scratch<'f> = [Vec<&'f Frustum>; 3];
     let fresh = || {
-        let scratch: (Vec<&Frustum>, Vec<&Frustum>) = (Vec::new(), Vec::new());
+        let scratch: Scratch = [Vec::new(), Vec::new(), Vec::new()];
         (0usize, Vec::new(), BinWindow::around(guess), scratch)
     };
     let (visible, blocks, window, _) = work
         .par_iter()
         .fold(
             fresh,
-            |(mut visible, mut out, mut window, mut scratch), &(ii, b)| {
+            |(mut visible, mut out, mut window, mut scratch), &(ii, g)| {
                 let inst = &instances[ii as usize];
-                let block = &inst.blocks.blocks[b as usize];
-                let (straddling, sub_straddling) = &mut scratch;
-                let inside = block.world(&inst.transform).classify(
-                    near[ii as usize].iter().copied(),
-                    inst.slack,
-                    straddling,
-                );
-                let summaries = &inst.summaries;
-                let summary = summaries.entries(b as usize);
-                let entries = if inside {
-                    visible += summaries.stored(b as usize) as usize;
-                    Cow::Borrowed(summary)
-                } else if !straddling.is_empty() {
-                    let mut mask = [0u64; BLOCK_POINTS / 64];
-                    let (positions, order) = (&inst.points.position, &inst.blocks.order);
-                    let start = block.start as usize;
-                    let subs = &inst.blocks.subs[b as usize * SUBS_PER_BLOCK..];
-                    for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
-                        let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
-                        let sub_inside = WorldBox::new(subs[j], &inst.transform).classify(
-                            straddling.iter().copied(),
-                            inst.slack,
-                            sub_straddling,
-                        );
-                        if sub_inside {
-                            // Listed entries are stored points: marking all is enough.
-                            visible += summaries.stored_in(range);
-                            mask[(k0 - start) / 64] = u64::MAX;
-                            continue;
-                        }
-                        if sub_straddling.is_empty() {
-                            continue;
-                        }
-                        for k in range {
-                            if !summaries.is_stored(k) {
+                let [group_straddling, straddling, sub_straddling] = &mut scratch;
+                let group_inside = WorldBox::new(inst.blocks.groups[g as usize], &inst.transform)
+                    .classify(
+                        near[ii as usize].iter().copied(),
+                        inst.slack,
+                        group_straddling,
+                    );
+                if !group_inside && group_straddling.is_empty() {
+                    return (visible, out, window, scratch);
+                }
+                let first = g as usize * GROUP_BLOCKS;
+                let last = (first + GROUP_BLOCKS).min(inst.blocks.blocks.len());
+                for b in first..last {
+                    let block = &inst.blocks.blocks[b];
+                    // Inside the group's frustum, or tested against the frusta it straddles.
+                    let inside = group_inside || {
+                        let frusta = group_straddling.iter().copied();
+                        block
+                            .world(&inst.transform)
+                            .classify(frusta, inst.slack, straddling)
+                    };
+                    let summaries = &inst.summaries;
+                    let summary = summaries.entries(b);
+                    let entries = if inside {
+                        visible += summaries.stored(b) as usize;
+                        Cow::Borrowed(summary)
+                    } else if !straddling.is_empty() {
+                        let mut mask = [0u64; BLOCK_POINTS / 64];
+                        let (positions, order) = (&inst.points.position, &inst.blocks.order);
+                        let start = block.start as usize;
+                        let subs = &inst.blocks.subs[b * SUBS_PER_BLOCK..];
+                        for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
+                            let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
+                            let sub_inside = WorldBox::new(subs[j], &inst.transform).classify(
+                                straddling.iter().copied(),
+                                inst.slack,
+                                sub_straddling,
+                            );
+                            if sub_inside {
+                                // Listed entries are stored points: marking all is enough.
+                                visible += summaries.stored_in(range);
+                                mask[(k0 - start) / 64] = u64::MAX;
                                 continue;
                             }
-                            let w = inst
-                                .transform
-                                .transform_point3(positions[order[k] as usize]);
-                            if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
-                                visible += 1;
-                                let offset = k - start;
-                                mask[offset / 64] |= 1 << (offset % 64);
+                            if sub_straddling.is_empty() {
+                                continue;
+                            }
+                            for k in range {
+                                if !summaries.is_stored(k) {
+                                    continue;
+                                }
+                                let w = inst
+                                    .transform
+                                    .transform_point3(positions[order[k] as usize]);
+                                if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
+                                    visible += 1;
+                                    let offset = k - start;
+                                    mask[offset / 64] |= 1 << (offset % 64);
+                                }
                             }
                         }
+                        let seen = |e: &&u32| {
+                            mask[offset_of(**e) / 64] & (1 << (offset_of(**e) % 64)) != 0
+                        };
+                        Cow::Owned(summary.iter().filter(seen).copied().collect())
+                    } else {
+                        continue;
+                    };
+                    if !entries.is_empty() {
+                        window.add(&entries);
+                        out.push(VisibleBlock {
+                            instance: ii,
+                            start: block.start,
+                            entries,
+                        });
                     }
-                    let seen =
-                        |e: &&u32| mask[offset_of(**e) / 64] & (1 << (offset_of(**e) % 64)) != 0;
-                    Cow::Owned(summary.iter().filter(seen).copied().collect())
-                } else {
-                    return (visible, out, window, scratch);
-                };
-                if !entries.is_empty() {
-                    window.add(&entries);
-                    out.push(VisibleBlock {
-                        instance: ii,
-                        start: block.start,
-                        entries,
-                    });
                 }
                 (visible, out, window, scratch)
             },
