@@ -516,8 +516,6 @@ impl Server {
     }
 }
 
-/// The changed (or, for a snapshot, non-empty) buckets and cells of one instance: from
-/// the change log when it reaches back to `since`, else by scanning the stamps.
 /// The point lists of each instance in (instance, point) pairs that come in runs of one
 /// instance (each instance in one run).
 fn runs_of(pairs: impl Iterator<Item = (u32, u32)>) -> Vec<(u32, Vec<u32>)> {
@@ -552,6 +550,8 @@ fn per_instance<R: Send>(
         .collect()
 }
 
+/// The changed (or, for a snapshot, non-empty) buckets and cells of one instance: from
+/// the change log when it reaches back to `since`, else by scanning the stamps.
 fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> InstanceDelta {
     match (snapshot, inst.changes.since(since)) {
         (false, Some(changed)) => {

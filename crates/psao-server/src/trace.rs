@@ -81,8 +81,8 @@ pub(crate) struct Culled {
 /// bins are monotone in the key; `select` decides). Groups of blocks are tested against the
 /// frusta first, then the blocks of straddling groups against the frusta their group
 /// straddles: blocks inside take their counts from their summaries, only blocks straddling a
-/// frustum test their sub-blocks and points. The cut is searched from `guess` (the previous frame's cut)
-/// on the blocks' sorted summaries; the result does not depend on `guess`.
+/// frustum test their sub-blocks and points. The cut is searched from `guess` (the previous
+/// frame's cut) on the blocks' sorted summaries; the result does not depend on `guess`.
 pub(crate) fn cull(
     instances: &[InstanceState],
     frusta: &[Frustum],
@@ -138,51 +138,12 @@ pub(crate) fn cull(
                             .world(&inst.transform)
                             .classify(frusta, inst.slack, straddling)
                     };
-                    let summaries = &inst.summaries;
-                    let summary = summaries.entries(b);
-                    let entries = if inside {
-                        visible += summaries.stored(b) as usize;
-                        Cow::Borrowed(summary)
-                    } else if !straddling.is_empty() {
-                        let mut mask = [0u64; BLOCK_POINTS / 64];
-                        let (positions, order) = (&inst.points.position, &inst.blocks.order);
-                        let start = block.start as usize;
-                        let subs = &inst.blocks.subs[b * SUBS_PER_BLOCK..];
-                        for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
-                            let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
-                            let sub_inside = WorldBox::new(subs[j], &inst.transform).classify(
-                                straddling.iter().copied(),
-                                inst.slack,
-                                sub_straddling,
-                            );
-                            if sub_inside {
-                                // Listed entries are stored points: marking all is enough.
-                                visible += summaries.stored_in(range);
-                                mask[(k0 - start) / 64] = u64::MAX;
-                                continue;
-                            }
-                            if sub_straddling.is_empty() {
-                                continue;
-                            }
-                            for k in range {
-                                if !summaries.is_stored(k) {
-                                    continue;
-                                }
-                                let w = inst
-                                    .transform
-                                    .transform_point3(positions[order[k] as usize]);
-                                if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
-                                    visible += 1;
-                                    let offset = k - start;
-                                    mask[offset / 64] |= 1 << (offset % 64);
-                                }
-                            }
-                        }
-                        let seen = |e: &&u32| {
-                            mask[offset_of(**e) / 64] & (1 << (offset_of(**e) % 64)) != 0
-                        };
-                        Cow::Owned(summary.iter().filter(seen).copied().collect())
+                    let Some(entries) = (if inside {
+                        visible += inst.summaries.stored(b) as usize;
+                        Some(Cow::Borrowed(inst.summaries.entries(b)))
                     } else {
+                        straddling_entries(inst, b, straddling, sub_straddling, &mut visible)
+                    }) else {
                         continue;
                     };
                     if !entries.is_empty() {
@@ -238,6 +199,61 @@ pub(crate) fn cull(
         candidates,
         cut,
     }
+}
+
+/// For block `b` of `inst`, which straddles the frusta `straddling` (none: outside all):
+/// count its stored points inside some frustum into `visible` (sub-blocks first, then the
+/// points of the sub-blocks that straddle one) and return the summary entries of those
+/// points. `sub_straddling` is scratch.
+fn straddling_entries<'a, 'f>(
+    inst: &'a InstanceState,
+    b: usize,
+    straddling: &[&'f Frustum],
+    sub_straddling: &mut Vec<&'f Frustum>,
+    visible: &mut usize,
+) -> Option<Cow<'a, [u32]>> {
+    if straddling.is_empty() {
+        return None;
+    }
+    let (summaries, block) = (&inst.summaries, &inst.blocks.blocks[b]);
+    let mut mask = [0u64; BLOCK_POINTS / 64];
+    let (positions, order) = (&inst.points.position, &inst.blocks.order);
+    let start = block.start as usize;
+    let subs = &inst.blocks.subs[b * SUBS_PER_BLOCK..];
+    for (j, k0) in (start..block.end as usize).step_by(SUB_POINTS).enumerate() {
+        let range = k0..(k0 + SUB_POINTS).min(block.end as usize);
+        let sub_inside = WorldBox::new(subs[j], &inst.transform).classify(
+            straddling.iter().copied(),
+            inst.slack,
+            sub_straddling,
+        );
+        if sub_inside {
+            // Listed entries are stored points: marking all is enough.
+            *visible += summaries.stored_in(range);
+            mask[(k0 - start) / 64] = u64::MAX;
+            continue;
+        }
+        if sub_straddling.is_empty() {
+            continue;
+        }
+        for k in range {
+            if !summaries.is_stored(k) {
+                continue;
+            }
+            let w = inst
+                .transform
+                .transform_point3(positions[order[k] as usize]);
+            if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
+                *visible += 1;
+                let offset = k - start;
+                mask[offset / 64] |= 1 << (offset % 64);
+            }
+        }
+    }
+    let seen = |e: &&u32| mask[offset_of(**e) / 64] & (1 << (offset_of(**e) % 64)) != 0;
+    Some(Cow::Owned(
+        summaries.entries(b).iter().filter(seen).copied().collect(),
+    ))
 }
 
 /// Selection bins counted around the guessed cut in the culling pass.

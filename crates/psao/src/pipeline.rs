@@ -125,6 +125,24 @@ impl<'a> Pipeline<'a> {
         &self.client
     }
 
+    /// The server clock's tick at client frame `frame`.
+    fn tick_of(&self, frame: u32) -> u64 {
+        frame as u64 * self.server_hz as u64 / CLIENT_HZ as u64
+    }
+
+    /// Scene time (seconds) of server tick `tick`.
+    fn server_time(&self, tick: u64) -> f32 {
+        (tick as f64 / self.server_hz as f64) as f32
+    }
+
+    /// The server's view of `camera` at the client's image aspect.
+    fn view(&self, camera: &Camera) -> View {
+        View {
+            camera: *camera,
+            aspect: self.res.width as f32 / self.res.height as f32,
+        }
+    }
+
     /// The client decodes and applies one encoded update.
     fn receive(&mut self, encoded: &[u8]) -> Result<()> {
         let update = self
@@ -140,12 +158,8 @@ impl<'a> Pipeline<'a> {
     /// from `camera`, and applies their updates to the client without counting their bytes:
     /// the state of a server that has been running for a while before the measured frames.
     pub fn warm_up(&mut self, frame: u32, camera: &Camera, server_frames: u32) -> Result<()> {
-        let tick = frame as u64 * self.server_hz as u64 / CLIENT_HZ as u64;
-        let time = (tick as f64 / self.server_hz as f64) as f32;
-        let view = View {
-            camera: *camera,
-            aspect: self.res.width as f32 / self.res.height as f32,
-        };
+        let time = self.server_time(self.tick_of(frame));
+        let view = self.view(camera);
         for _ in 0..server_frames {
             self.server
                 .step_at(&[view], time)
@@ -169,20 +183,15 @@ impl<'a> Pipeline<'a> {
             frame,
             ..Default::default()
         };
-        let tick = frame as u64 * self.server_hz as u64 / CLIENT_HZ as u64;
+        let tick = self.tick_of(frame);
         let mut bytes = None;
         if self.last_tick != Some(tick) {
             self.last_tick = Some(tick);
             let t = Instant::now();
-            let aspect = self.res.width as f32 / self.res.height as f32;
-            let view = View {
-                camera: *camera,
-                aspect,
-            };
-            let time = tick as f64 / self.server_hz as f64;
+            let (view, time) = (self.view(camera), self.server_time(tick));
             let stats = self
                 .server
-                .step_at(&[view], time as f32)
+                .step_at(&[view], time)
                 .context("the server could not pose the scene")?;
             record.invalidated_points = stats.invalidated_points;
             record.animate_ms = stats.animate_ms;
