@@ -41,6 +41,12 @@ pub struct StepStats {
     /// Milliseconds of the step spent posing the scene, updating the tracer, moving skinned
     /// points and invalidating (included in `ms`).
     pub animate_ms: f64,
+    /// Milliseconds of the step spent culling to the frusta (included in `ms`).
+    pub cull_ms: f64,
+    /// Milliseconds spent selecting, tracing and accumulating (included in `ms`).
+    pub trace_ms: f64,
+    /// Milliseconds spent publishing (included in `ms`).
+    pub publish_ms: f64,
     /// Wall time of the step in milliseconds.
     pub ms: f64,
 }
@@ -293,13 +299,16 @@ impl Server {
         for inst in &mut self.instances {
             inst.changes.forget_through(forget);
         }
+        let cull_ms = (t_cull - start).as_secs_f64() * 1e3 - animate_ms;
+        let trace_ms = (t_trace - t_cull).as_secs_f64() * 1e3;
+        let publish_ms = t_trace.elapsed().as_secs_f64() * 1e3;
         tracing::debug!(
             frame = self.frame,
             visible,
             traced = traced.len(),
-            cull_ms = (t_cull - start).as_secs_f64() * 1e3 - animate_ms,
-            trace_ms = (t_trace - t_cull).as_secs_f64() * 1e3,
-            publish_ms = t_trace.elapsed().as_secs_f64() * 1e3,
+            cull_ms,
+            trace_ms,
+            publish_ms,
             "step"
         );
         Ok(StepStats {
@@ -312,6 +321,9 @@ impl Server {
             retraced_points,
             retrace_rays,
             animate_ms,
+            cull_ms,
+            trace_ms,
+            publish_ms,
             ms: start.elapsed().as_secs_f64() * 1e3,
         })
     }

@@ -1,7 +1,5 @@
 //! Culling, budgeted selection and tracing of AO samples (DESIGN §3 "CPU server").
 
-use std::borrow::Cow;
-
 use glam::Vec3;
 use psao_trace::ao::{ao_rays_range, medium_stream, sample_value, Medium, MediumSampler};
 use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
@@ -54,13 +52,36 @@ pub(crate) fn sample_key(instance: u32, index: u32) -> u64 {
 // A sub-block is one word of a block's visibility mask.
 const _: () = assert!(SUB_POINTS == 64 && BLOCK_POINTS.is_multiple_of(SUB_POINTS));
 
+/// Which points of a block straddling the frusta are visible: bit `o % 64` of word `o / 64`
+/// for the point at offset `o` in the block.
+type VisibleMask = [u64; BLOCK_POINTS / 64];
+
 /// A block with visible points to select from: its instance, the position of its first
-/// point in the instance's block order, and the summary entries of its visible unconverged
-/// points (ascending by bin).
+/// point in the instance's block order, the summary entries of its unconverged points
+/// (ascending by bin) and, for a block straddling the frusta, which of them are visible
+/// (`None`: all). Masking the entries as they are read avoids copying the visible ones.
 struct VisibleBlock<'a> {
     instance: u32,
     start: u32,
-    entries: Cow<'a, [u32]>,
+    entries: &'a [u32],
+    mask: Option<VisibleMask>,
+}
+
+impl VisibleBlock<'_> {
+    /// Whether the point of entry `e` is visible.
+    #[inline]
+    fn sees(&self, e: u32) -> bool {
+        self.mask.as_ref().is_none_or(|m| {
+            let o = offset_of(e);
+            m[o / 64] & (1 << (o % 64)) != 0
+        })
+    }
+
+    /// The visible entries with a bin up to `max_bin`, ascending.
+    fn up_to(&self, max_bin: u16) -> impl Iterator<Item = u32> + '_ {
+        let n = count_up_to(self.entries, max_bin);
+        self.entries[..n].iter().copied().filter(|&e| self.sees(e))
+    }
 }
 
 /// What [`cull`] found.
@@ -138,21 +159,24 @@ pub(crate) fn cull(
                             .world(&inst.transform)
                             .classify(frusta, inst.slack, straddling)
                     };
-                    let Some(entries) = (if inside {
+                    let mask = if inside {
                         visible += inst.summaries.stored(b) as usize;
-                        Some(Cow::Borrowed(inst.summaries.entries(b)))
+                        None
                     } else {
-                        straddling_entries(inst, b, straddling, sub_straddling, &mut visible)
-                    }) else {
-                        continue;
+                        match straddling_mask(inst, b, straddling, sub_straddling, &mut visible) {
+                            Some(mask) => Some(mask),
+                            None => continue,
+                        }
                     };
-                    if !entries.is_empty() {
-                        window.add(&entries);
-                        out.push(VisibleBlock {
-                            instance: ii,
-                            start: block.start,
-                            entries,
-                        });
+                    let vb = VisibleBlock {
+                        instance: ii,
+                        start: block.start,
+                        entries: inst.summaries.entries(b),
+                        mask,
+                    };
+                    if !vb.entries.is_empty() {
+                        window.add(&vb);
+                        out.push(vb);
                     }
                 }
                 (visible, out, window, scratch)
@@ -169,19 +193,14 @@ pub(crate) fn cull(
             cut: 0,
         };
     }
-    let cut = if window.total <= max_points {
-        LAST_BIN
-    } else {
-        window
-            .cut(max_points)
-            .unwrap_or_else(|start| find_cut(&blocks, max_points, start))
-    };
+    let cut = window
+        .cut(max_points)
+        .unwrap_or_else(|start| find_cut(&blocks, max_points, start));
     let candidates = blocks
         .par_iter()
         .flat_map_iter(|vb| {
             let inst = &instances[vb.instance as usize];
-            let entries = &vb.entries[..count_up_to(&vb.entries, cut)];
-            entries.iter().map(move |&e| {
+            vb.up_to(cut).map(move |e| {
                 let k = vb.start as usize + offset_of(e);
                 let i = inst.blocks.order[k];
                 let (count, tie) = (inst.points.count[i as usize], inst.blocks.tie[k]);
@@ -203,20 +222,20 @@ pub(crate) fn cull(
 
 /// For block `b` of `inst`, which straddles the frusta `straddling` (none: outside all):
 /// count its stored points inside some frustum into `visible` (sub-blocks first, then the
-/// points of the sub-blocks that straddle one) and return the summary entries of those
-/// points. `sub_straddling` is scratch.
-fn straddling_entries<'a, 'f>(
-    inst: &'a InstanceState,
+/// points of the sub-blocks that straddle one) and return which points those are (`None`:
+/// none). `sub_straddling` is scratch.
+fn straddling_mask<'f>(
+    inst: &InstanceState,
     b: usize,
     straddling: &[&'f Frustum],
     sub_straddling: &mut Vec<&'f Frustum>,
     visible: &mut usize,
-) -> Option<Cow<'a, [u32]>> {
+) -> Option<VisibleMask> {
     if straddling.is_empty() {
         return None;
     }
     let (summaries, block) = (&inst.summaries, &inst.blocks.blocks[b]);
-    let mut mask = [0u64; BLOCK_POINTS / 64];
+    let mut mask: VisibleMask = [0; BLOCK_POINTS / 64];
     let (positions, order) = (&inst.points.position, &inst.blocks.order);
     let start = block.start as usize;
     let subs = &inst.blocks.subs[b * SUBS_PER_BLOCK..];
@@ -228,7 +247,7 @@ fn straddling_entries<'a, 'f>(
             sub_straddling,
         );
         if sub_inside {
-            // Listed entries are stored points: marking all is enough.
+            // Entries are stored points: marking all is enough.
             *visible += summaries.stored_in(range);
             mask[(k0 - start) / 64] = u64::MAX;
             continue;
@@ -250,10 +269,7 @@ fn straddling_entries<'a, 'f>(
             }
         }
     }
-    let seen = |e: &&u32| mask[offset_of(**e) / 64] & (1 << (offset_of(**e) % 64)) != 0;
-    Some(Cow::Owned(
-        summaries.entries(b).iter().filter(seen).copied().collect(),
-    ))
+    mask.iter().any(|&w| w != 0).then_some(mask)
 }
 
 /// Selection bins counted around the guessed cut in the culling pass.
@@ -261,12 +277,11 @@ const WINDOW_BINS: usize = 32;
 /// Bins of the window below the guess (the cut mostly moves up as points take samples).
 const WINDOW_BELOW: u16 = 4;
 
-/// Entry counts of a window of bins, and of the entries below it and in all.
+/// Visible entry counts of a window of bins, and of the entries below it.
 #[derive(Clone, Copy)]
 struct BinWindow {
     first: u16,
     below: usize,
-    total: usize,
     counts: [u32; WINDOW_BINS],
 }
 
@@ -276,31 +291,32 @@ impl BinWindow {
         Self {
             first: guess.min(LAST_BIN).saturating_sub(WINDOW_BELOW),
             below: 0,
-            total: 0,
             counts: [0; WINDOW_BINS],
         }
     }
 
-    /// Count ascending `entries`.
-    fn add(&mut self, entries: &[u32]) {
-        self.total += entries.len();
-        let below = match self.first {
-            0 => 0,
-            f => count_up_to(entries, f - 1),
-        };
-        self.below += below;
-        for &e in &entries[below..] {
-            let at = usize::from(bin_of(e) - self.first);
-            if at >= WINDOW_BINS {
+    /// Count the visible entries of `block` below and in the window. Entries below the
+    /// window are few when the guess is good: they are read one by one (masked blocks must
+    /// be, and it saves a search of the others).
+    fn add(&mut self, block: &VisibleBlock) {
+        let end = usize::from(self.first) + WINDOW_BINS;
+        for &e in block.entries {
+            let bin = usize::from(bin_of(e));
+            if bin >= end {
                 break;
             }
-            self.counts[at] += 1;
+            if !block.sees(e) {
+                continue;
+            }
+            match bin.checked_sub(usize::from(self.first)) {
+                Some(at) => self.counts[at] += 1,
+                None => self.below += 1,
+            }
         }
     }
 
     fn merge(mut self, other: &BinWindow) -> Self {
         self.below += other.below;
-        self.total += other.total;
         for (a, b) in self.counts.iter_mut().zip(&other.counts) {
             *a += b;
         }
@@ -324,13 +340,17 @@ impl BinWindow {
     }
 }
 
-/// The smallest bin that, with all below it, holds at least `max_points` of the entries of
-/// `blocks` (which hold more than `max_points`): galloping from `guess`, then bisecting.
+/// The smallest bin that, with all below it, holds at least `max_points` of the visible
+/// entries of `blocks` ([`LAST_BIN`] if they hold fewer): galloping from `guess`, then
+/// bisecting.
 fn find_cut(blocks: &[VisibleBlock], max_points: usize, guess: u16) -> u16 {
     let enough = |bin: u16| -> bool {
-        let n: usize = blocks.iter().map(|b| count_up_to(&b.entries, bin)).sum();
+        let n: usize = blocks.par_iter().map(|b| b.up_to(bin).count()).sum();
         n >= max_points
     };
+    if !enough(LAST_BIN) {
+        return LAST_BIN;
+    }
     // Invariant: `lo` (-1: none) has too few entries, `hi` enough.
     let guess = i32::from(guess.min(LAST_BIN));
     let (mut lo, mut hi);

@@ -3,6 +3,7 @@
 mod args;
 mod bench_client;
 mod bench_serve;
+mod bench_step;
 mod bench_trace;
 mod compare;
 mod cpu_time;
@@ -68,6 +69,8 @@ enum BenchCommand {
     Client(bench_client::BenchClientArgs),
     /// One server and N headless clients on loopback: per-client Mbit/s, server ms, coalescing.
     Serve(bench_serve::BenchServeArgs),
+    /// The server alone in this process: N clients' views, per-phase ms and CPU per frame.
+    Step(bench_step::BenchStepArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -98,6 +101,7 @@ fn run(command: Command) -> Result<()> {
         Command::Bench(BenchCommand::Trace(a)) => bench_trace::run(&a),
         Command::Bench(BenchCommand::Client(a)) => bench_client::run(&a),
         Command::Bench(BenchCommand::Serve(a)) => bench_serve::run(&a),
+        Command::Bench(BenchCommand::Step(a)) => bench_step::run(&a),
         Command::Serve(a) => serve::run(&a),
         Command::View(a) => view::run(&a),
         Command::Volume(c) => volume_cmd::run(&c),

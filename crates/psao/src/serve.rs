@@ -848,7 +848,8 @@ fn mean(v: &[f64]) -> f64 {
     }
 }
 
-fn percentile(v: &[f64], q: f64) -> f64 {
+/// The `q` quantile (0..=1) of `v` (nearest rank; 0 when empty).
+pub(crate) fn percentile(v: &[f64], q: f64) -> f64 {
     if v.is_empty() {
         return 0.0;
     }

@@ -252,3 +252,35 @@ fn eval_warm_up_starts_the_range_from_an_accumulated_state() {
     let (cold, warm) = (psnr("0"), psnr("20"));
     assert!(warm > cold + 1.0, "cold {cold} dB, warm {warm} dB");
 }
+
+#[test]
+fn bench_step_reports_the_phases_of_its_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("step.json");
+    let o = psao(&[
+        "bench",
+        "step",
+        "--clients",
+        "3",
+        "--frames",
+        "4",
+        "--points",
+        "64",
+        "--ray-budget",
+        "20000",
+        "--json",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = json(&report);
+    let ms = |k: &str| r[k].as_f64().unwrap();
+    assert_eq!(r["frames"].as_u64(), Some(4));
+    assert!(ms("rays_per_frame") > 0.0 && ms("rays_per_frame") <= 20000.0);
+    let phases = ms("animate_ms") + ms("cull_ms") + ms("trace_ms") + ms("publish_ms");
+    assert!(phases > 0.0 && phases <= ms("step_ms") * 1.01 + 0.01, "{r}");
+    assert!(ms("step_ms") <= ms("frame_ms"), "{r}");
+    assert!(ms("mbit_s") > 0.0, "three clients received their snapshots: {r}");
+    let o = psao(&["bench", "step", "--clients", "0"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--clients"), "{}", stderr(&o));
+}

@@ -1,0 +1,239 @@
+//! `psao bench step`: the server alone, in this process. N clients' cameras follow a path
+//! (client k starts k/N of the way along it), server frames run back to back, and each
+//! frame's updates are encoded for the clients during the next step, as `psao serve` does.
+//! Reports wall ms per frame with the step's phases, and the process's CPU ms per frame.
+//! Without a network or client processes beside it, this is a quieter measure of the
+//! server's part of `psao bench serve`.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use psao_delta::{Codec, Update};
+use psao_server::{ClientId, Server, View};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::args::Resolution;
+use crate::cpu_time::cpu_seconds;
+use crate::pipeline::CLIENT_HZ;
+use crate::run::{write_json, ServerTuning};
+use crate::scene_source::SceneInput;
+
+/// Arguments of `psao bench step`.
+#[derive(clap::Args, Debug)]
+pub struct BenchStepArgs {
+    /// Number of clients (one view and one codec each).
+    #[arg(long, default_value_t = 8)]
+    pub clients: u32,
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = crate::scene_source::BUILTIN_SCENE)]
+    pub scene: String,
+    /// Camera path file (default: the scene's first path).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Server frames to run.
+    #[arg(long, default_value_t = 300)]
+    pub frames: u32,
+    /// Server frames per second of scene time (sets the scene time of each frame and the
+    /// clients' camera positions; frames still run back to back).
+    #[arg(long, default_value_t = 30)]
+    pub hz: u32,
+    /// Points per unit area.
+    #[arg(long, default_value_t = 1024.0)]
+    pub points: f32,
+    /// Clients' image size (their aspect shapes the culling frusta).
+    #[arg(long, default_value = "640x360")]
+    pub res: Resolution,
+    #[command(flatten)]
+    pub tuning: ServerTuning,
+    /// Write the report as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// What `psao bench step` measured (ms are means per server frame).
+#[derive(Debug, Default, Serialize)]
+pub struct BenchStepReport {
+    pub scene: String,
+    pub clients: u32,
+    pub frames: u32,
+    pub ray_budget: u64,
+    pub rays_per_frame: f64,
+    /// Wall time per frame: step, update collection and the previous frame's encoding beside
+    /// the step.
+    pub frame_ms: f64,
+    pub frame_median_ms: f64,
+    pub frame_p95_ms: f64,
+    pub step_ms: f64,
+    pub animate_ms: f64,
+    pub cull_ms: f64,
+    pub trace_ms: f64,
+    pub publish_ms: f64,
+    pub update_ms: f64,
+    /// Encoding all clients' updates (beside the next step).
+    pub encode_ms: f64,
+    /// This process's CPU time per frame (all threads).
+    pub cpu_ms: f64,
+    /// `cpu_ms / frame_ms`: cores kept busy on average.
+    pub cores_busy: f64,
+    /// Payload Mbit per second of scene time, averaged over the clients.
+    pub mbit_s: f64,
+}
+
+/// Run `psao bench step`.
+pub fn run(args: &BenchStepArgs) -> Result<()> {
+    if args.clients == 0 || args.frames == 0 || args.hz == 0 || args.hz > CLIENT_HZ {
+        bail!(
+            "--clients and --frames must be at least 1 and --hz in 1..={CLIENT_HZ} (got {}, {}, {})",
+            args.clients,
+            args.frames,
+            args.hz
+        );
+    }
+    let input = SceneInput::load(&args.scene)?;
+    let path = input.camera_path(args.path.as_ref())?;
+    let config = args.tuning.config(args.points, args.hz, args.res)?;
+    let mut server = Server::with_medium(&input.scene, config.server, input.medium())
+        .context("cannot start the server (point generation or tracer)")?;
+    let ids: Vec<ClientId> = (0..args.clients).map(|_| server.add_client()).collect();
+    let slot: HashMap<ClientId, usize> = ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
+    let mut codecs = ids
+        .iter()
+        .map(|_| psao_delta::codec_by_name(&args.tuning.codec))
+        .collect::<Result<Vec<_>, _>>()?;
+    let total = path.frame_count() as u64;
+    let aspect = args.res.width as f32 / args.res.height as f32;
+    let bar = crate::progress::bar(u64::from(args.frames), "server frames", "frames");
+    let (mut frame_ms, mut sums) = (Vec::new(), BenchStepReport::default());
+    let (mut rays, mut bytes) = (0u64, 0u64);
+    let mut pending: Option<Vec<(Vec<ClientId>, Update)>> = None;
+    let cpu_start = cpu_seconds();
+    for f in 0..u64::from(args.frames) {
+        let t = Instant::now();
+        let client_frame = f * u64::from(CLIENT_HZ) / u64::from(args.hz);
+        let mut views: Vec<View> = Vec::new();
+        for k in 0..u64::from(args.clients) {
+            let at = (client_frame + k * total / u64::from(args.clients)) % total;
+            let view = View {
+                camera: path.camera_at_frame(at as usize),
+                aspect,
+            };
+            if !views.contains(&view) {
+                views.push(view);
+            }
+        }
+        let seconds = (server.frame() + 1) as f32 / args.hz as f32;
+        let previous = pending.take();
+        let (step, encoded) = rayon::join(
+            || server.step_at(&views, seconds),
+            || previous.map(|groups| encode(&mut codecs, &slot, &groups)),
+        );
+        let step = step.context("server frame failed")?;
+        if let Some((n, ms)) = encoded {
+            bytes += n;
+            sums.encode_ms += ms;
+        }
+        rays += step.rays;
+        sums.step_ms += step.ms;
+        sums.animate_ms += step.animate_ms;
+        sums.cull_ms += step.cull_ms;
+        sums.trace_ms += step.trace_ms;
+        sums.publish_ms += step.publish_ms;
+        let tu = Instant::now();
+        pending = Some(server.updates_for(&ids));
+        sums.update_ms += tu.elapsed().as_secs_f64() * 1e3;
+        frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let n = f64::from(args.frames);
+    let mean = frame_ms.iter().sum::<f64>() / n;
+    let cpu_ms = match (cpu_start, cpu_seconds()) {
+        (Some(a), Some(b)) => (b - a) * 1e3 / n,
+        _ => 0.0,
+    };
+    let report = BenchStepReport {
+        scene: args.scene.clone(),
+        clients: args.clients,
+        frames: args.frames,
+        ray_budget: args.tuning.ray_budget,
+        rays_per_frame: rays as f64 / n,
+        frame_ms: mean,
+        frame_median_ms: crate::serve::percentile(&frame_ms, 0.5),
+        frame_p95_ms: crate::serve::percentile(&frame_ms, 0.95),
+        step_ms: sums.step_ms / n,
+        animate_ms: sums.animate_ms / n,
+        cull_ms: sums.cull_ms / n,
+        trace_ms: sums.trace_ms / n,
+        publish_ms: sums.publish_ms / n,
+        update_ms: sums.update_ms / n,
+        encode_ms: sums.encode_ms / n,
+        cpu_ms,
+        cores_busy: cpu_ms / mean,
+        // Encoded frames: all but the last, each 1/hz s of scene time.
+        mbit_s: bytes as f64 * 8e-6 * f64::from(args.hz)
+            / ((n - 1.0).max(1.0) * f64::from(args.clients)),
+    };
+    println!(
+        "{} clients on {}: {} server frames, {:.0} rays per frame; {:.1} ms per frame \
+         (median {:.1}, p95 {:.1}): step {:.1} (animate {:.1}, cull {:.1}, trace {:.1}, \
+         publish {:.1}), updates {:.1}, encoding beside the step {:.1}; CPU {:.1} ms per \
+         frame = {:.2} cores busy; {:.2} Mbit/s per client",
+        report.clients,
+        report.scene,
+        report.frames,
+        report.rays_per_frame,
+        report.frame_ms,
+        report.frame_median_ms,
+        report.frame_p95_ms,
+        report.step_ms,
+        report.animate_ms,
+        report.cull_ms,
+        report.trace_ms,
+        report.publish_ms,
+        report.update_ms,
+        report.encode_ms,
+        report.cpu_ms,
+        report.cores_busy,
+        report.mbit_s
+    );
+    if let Some(json) = &args.json {
+        write_json(json, &report)?;
+    }
+    Ok(())
+}
+
+/// Encode each group's update with its first client's codec and advance the others' (as
+/// `psao serve` does), in parallel over clients; returns the payload bytes of all clients
+/// and the ms taken.
+fn encode(
+    codecs: &mut [Box<dyn Codec>],
+    slot: &HashMap<ClientId, usize>,
+    groups: &[(Vec<ClientId>, Update)],
+) -> (u64, f64) {
+    let t = Instant::now();
+    // Per client: its group and whether it encodes for the group.
+    let mut job = vec![None; codecs.len()];
+    for (g, (members, _)) in groups.iter().enumerate() {
+        for (j, id) in members.iter().enumerate() {
+            job[slot[id]] = Some((g, j == 0));
+        }
+    }
+    let sizes: Vec<u64> = codecs
+        .par_iter_mut()
+        .zip(&job)
+        .filter_map(|(codec, job)| {
+            let (g, first) = (*job)?;
+            let update = &groups[g].1;
+            Some(if first {
+                codec.encode(update).len() as u64 * groups[g].0.len() as u64
+            } else {
+                codec.advance(update);
+                0
+            })
+        })
+        .collect();
+    (sizes.iter().sum(), t.elapsed().as_secs_f64() * 1e3)
+}
