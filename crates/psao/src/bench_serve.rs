@@ -59,6 +59,12 @@ pub struct BenchServeArgs {
     /// Needs the `nice` program.
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=19))]
     pub client_nice: Option<u8>,
+    /// Run the clients under the `SCHED_IDLE` policy (`chrt --idle 0`): they run only when
+    /// the server leaves a core idle, and a waking server thread takes the core from them
+    /// at once (under `nice` it may wait for a client's time slice to end). Closest to
+    /// clients on other machines; the clients fall behind sooner. Needs the `chrt` program.
+    #[arg(long, conflicts_with = "client_nice")]
+    pub client_idle: bool,
     /// Write the report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -186,13 +192,18 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     let total = path.frame_count() as u32;
     let mut views = Vec::new();
     for k in 0..args.clients {
-        let mut c = match args.client_nice {
-            Some(n) => {
+        let (mut c, through) = match (args.client_nice, args.client_idle) {
+            (Some(n), _) => {
                 let mut c = Command::new("nice");
                 c.arg(format!("-n{n}")).arg(&exe);
-                c
+                (c, " through `nice`")
             }
-            None => Command::new(&exe),
+            (None, true) => {
+                let mut c = Command::new("chrt");
+                c.args(["--idle", "0"]).arg(&exe);
+                (c, " through `chrt`")
+            }
+            (None, false) => (Command::new(&exe), ""),
         };
         c.args([
             "--log",
@@ -214,16 +225,10 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         if let Some(p) = &args.path {
             c.arg("--path").arg(p);
         }
-        views.push(Guard(c.spawn().with_context(|| {
-            format!(
-                "cannot start psao view{}",
-                if args.client_nice.is_some() {
-                    " through `nice`"
-                } else {
-                    ""
-                }
-            )
-        })?));
+        views.push(Guard(
+            c.spawn()
+                .with_context(|| format!("cannot start psao view{through}"))?,
+        ));
     }
     for (k, v) in views.iter_mut().enumerate() {
         let status = v.0.wait()?;
