@@ -116,6 +116,10 @@ pub struct BenchServeReport {
     pub server_cpu_share_2_cores: f64,
     /// Mean of the step alone.
     pub server_step_ms: f64,
+    /// Means of the step's culling, tracing and publishing.
+    pub server_cull_ms: f64,
+    pub server_trace_ms: f64,
+    pub server_publish_ms: f64,
     /// Mean of collecting the clients' updates per frame (all clients).
     pub server_update_ms: f64,
     /// Mean of encoding them per frame (all clients).
@@ -225,10 +229,10 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         if let Some(p) = &args.path {
             c.arg("--path").arg(p);
         }
-        views.push(Guard(
-            c.spawn()
-                .with_context(|| format!("cannot start psao view{through}"))?,
-        ));
+        views
+            .push(Guard(c.spawn().with_context(|| {
+                format!("cannot start psao view{through}")
+            })?));
     }
     for (k, v) in views.iter_mut().enumerate() {
         let status = v.0.wait()?;
@@ -278,6 +282,9 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         server_cpu_ms: s["cpu_ms"].as_f64().unwrap_or(0.0),
         server_cpu_share_2_cores: s["cpu_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 2000.0,
         server_step_ms: s["mean_step_ms"].as_f64().unwrap_or(0.0),
+        server_cull_ms: s["mean_cull_ms"].as_f64().unwrap_or(0.0),
+        server_trace_ms: s["mean_trace_ms"].as_f64().unwrap_or(0.0),
+        server_publish_ms: s["mean_publish_ms"].as_f64().unwrap_or(0.0),
         server_update_ms: s["mean_update_ms"].as_f64().unwrap_or(0.0),
         server_encode_ms: s["mean_encode_ms"].as_f64().unwrap_or(0.0),
         late_frames: s["late_frames"].as_u64().unwrap_or(0),
@@ -286,7 +293,8 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     println!(
         "{} clients at {} Hz on {}: {} server frames, {:.0} rays per frame (budget {}), \
          {:.1} ms mean ({:.2} of the {:.1} ms period) / {:.1} ms median / {:.1} ms p95 per frame \
-         ({:.1} ms step, {:.1} ms updates, {:.1} ms encoding), {} late; \
+         ({:.1} ms step: cull {:.1}, trace {:.1}, publish {:.1}; {:.1} ms updates, {:.1} ms \
+         encoding beside the next step), {} late; \
          server CPU {:.1} ms per frame = {:.2} of 2 cores",
         report.clients,
         report.hz,
@@ -300,6 +308,9 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         report.server_median_ms,
         report.server_p95_ms,
         report.server_step_ms,
+        report.server_cull_ms,
+        report.server_trace_ms,
+        report.server_publish_ms,
         report.server_update_ms,
         report.server_encode_ms,
         report.late_frames,

@@ -109,6 +109,11 @@ pub struct ServeStats {
     pub median_ms: f64,
     /// Mean of the step alone, ms.
     pub mean_step_ms: f64,
+    /// Means of the step's culling, tracing (with selection and accumulation) and publishing,
+    /// ms.
+    pub mean_cull_ms: f64,
+    pub mean_trace_ms: f64,
+    pub mean_publish_ms: f64,
     /// Mean rays traced per server frame.
     pub mean_rays: f64,
     /// CPU time of the whole server process (all threads) per server frame, ms: unlike the
@@ -216,6 +221,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         wait_clients: args.wait_clients,
         max_clients: args.max_clients,
         step_ms: Vec::new(),
+        phase_ms: [0.0; 3],
         frame_ms: Vec::new(),
         rays: 0,
         cpu_start: None,
@@ -417,6 +423,8 @@ struct Simulation {
     wait_clients: usize,
     max_clients: usize,
     step_ms: Vec<f64>,
+    /// Sums of the steps' cull, trace and publish ms.
+    phase_ms: [f64; 3],
     frame_ms: Vec<f64>,
     /// Rays traced, summed over frames.
     rays: u64,
@@ -622,6 +630,13 @@ impl Simulation {
             }
         };
         self.step_ms.push(step.ms);
+        for (sum, ms) in
+            self.phase_ms
+                .iter_mut()
+                .zip([step.cull_ms, step.trace_ms, step.publish_ms])
+        {
+            *sum += ms;
+        }
         self.rays += step.rays;
         let th = Instant::now();
         let hash = self
@@ -715,6 +730,12 @@ impl Simulation {
         stats.p95_ms = percentile(&self.frame_ms, 0.95);
         stats.median_ms = percentile(&self.frame_ms, 0.5);
         stats.mean_step_ms = mean(&self.step_ms);
+        let steps = self.step_ms.len().max(1) as f64;
+        [
+            stats.mean_cull_ms,
+            stats.mean_trace_ms,
+            stats.mean_publish_ms,
+        ] = self.phase_ms.map(|sum| sum / steps);
         let frames = self.frame_ms.len().max(1) as f64;
         stats.mean_update_ms = self.update_ms / frames;
         stats.mean_encode_ms = self.encode_ms / frames;

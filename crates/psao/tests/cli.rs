@@ -279,7 +279,10 @@ fn bench_step_reports_the_phases_of_its_frames() {
     let phases = ms("animate_ms") + ms("cull_ms") + ms("trace_ms") + ms("publish_ms");
     assert!(phases > 0.0 && phases <= ms("step_ms") * 1.01 + 0.01, "{r}");
     assert!(ms("step_ms") <= ms("frame_ms"), "{r}");
-    assert!(ms("mbit_s") > 0.0, "three clients received their snapshots: {r}");
+    assert!(
+        ms("mbit_s") > 0.0,
+        "three clients received their snapshots: {r}"
+    );
     let o = psao(&["bench", "step", "--clients", "0"]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--clients"), "{}", stderr(&o));

@@ -623,3 +623,43 @@ fn client_refuses_bombs_and_bad_frames_from_a_server() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("magic"), "{}", stderr(&o));
 }
+
+#[test]
+fn bench_serve_runs_idle_priority_clients_and_reports_the_step_phases() {
+    let fx = Fixture::new();
+    let report = fx.dir.path().join("bench.json");
+    let scene = fx.dir.path().join(fx.scene);
+    let path = fx.dir.path().join("path.toml");
+    let o = Command::new(BIN)
+        .args(["--log", "warn", "bench", "serve", "--clients", "2"])
+        .args([
+            "--frames",
+            "40",
+            "--points",
+            "64",
+            "--client-idle",
+            "--scene",
+        ])
+        .arg(&scene)
+        .arg("--path")
+        .arg(&path)
+        .arg("--json")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = json(&report);
+    assert!(r["server_frames"].as_u64().unwrap() > 0, "{r}");
+    let ms = |k: &str| r[k].as_f64().unwrap();
+    let phases = ms("server_cull_ms") + ms("server_trace_ms") + ms("server_publish_ms");
+    assert!(
+        phases > 0.0 && phases <= ms("server_step_ms") * 1.01 + 0.01,
+        "{r}"
+    );
+    for c in r["per_client"].as_array().unwrap() {
+        assert!(
+            c["updates"].as_u64().unwrap() > 0,
+            "every client got updates: {r}"
+        );
+    }
+}
