@@ -70,10 +70,6 @@ const ENTRY_BYTES: u64 = 12;
 /// Bytes per coded point outside the choice.
 const POINT_BYTES: u64 = 4;
 
-fn key(instance: u32, index: u32) -> u64 {
-    (u64::from(instance) << 32) | u64::from(index)
-}
-
 /// A compacted bucket as the reference keeps it.
 #[derive(Clone, Copy, Default)]
 struct Entries {
@@ -91,22 +87,58 @@ impl Entries {
     }
 }
 
-/// What was last sent, per slot: the decoder's reference.
-#[derive(Default, Clone)]
-struct Reference {
-    transforms: KeyMap<[u32; TRANSFORM_WORDS]>,
-    buckets: KeyMap<Entries>,
-    cells: KeyMap<[u32; CELL_POINTS]>,
-}
-
-/// What the encoder last sent, stored densely by instance, bucket index and cell slot: the
-/// server's indices are dense, so vectors replace the hash maps the decoder needs (its indices
-/// come from the wire and must not size an allocation). Looks up exactly as [`Reference`].
+/// Records stored densely by instance, bucket index and cell slot: the encoder's reference
+/// (what it last sent; the server's indices are dense) and the decoder's ([`Reference`]).
 #[derive(Default, Clone)]
 struct Sent {
     transforms: Vec<[u32; TRANSFORM_WORDS]>,
     buckets: Vec<Vec<Entries>>,
     cells: Vec<Vec<[u32; CELL_POINTS]>>,
+}
+
+/// The decoder's reference: what it last received, dense like the encoder's. Its indices
+/// come from the wire, so every element it grows by is charged to a byte budget, the decode
+/// limit: a legitimate stream's indices stay within its instance table, whose dense records
+/// take fewer bytes than a snapshot of that table (the limit a client sets). Vectors may
+/// hold up to twice their length in capacity.
+#[derive(Default, Clone)]
+struct Reference {
+    records: Sent,
+    /// Bytes of elements the vectors hold.
+    bytes: u64,
+}
+
+impl Reference {
+    /// Forget everything (a snapshot follows), keeping the allocations.
+    fn clear(&mut self) {
+        self.records.clear();
+        self.bytes = 0;
+    }
+}
+
+/// `v[index]`, growing `v` with defaults first and charging the new elements to `bytes`,
+/// which may not pass `limit`.
+fn grown<'v, T: Clone + Default>(
+    v: &'v mut Vec<T>,
+    index: u32,
+    bytes: &mut u64,
+    limit: u64,
+) -> Result<&'v mut T, DeltaError> {
+    let i = index as usize;
+    if i >= v.len() {
+        let needed = *bytes + (i + 1 - v.len()) as u64 * std::mem::size_of::<T>() as u64;
+        if needed > limit {
+            return Err(DeltaError::ReferenceTooLarge { needed, limit });
+        }
+        *bytes = needed;
+        v.resize(i + 1, T::default());
+    }
+    Ok(&mut v[i])
+}
+
+/// `v[index]`, or the default (empty) record past its end.
+fn stored<T: Copy + Default>(v: &[T], index: u32) -> T {
+    v.get(index as usize).copied().unwrap_or_default()
 }
 
 impl Sent {
@@ -370,7 +402,8 @@ impl Streams {
 
 /// The compact codec. Stateful: one instance per sending or receiving end of a session.
 /// The encoder's memory grows with the largest instance, bucket index and cell slot it is
-/// given (the server's dense indices); the decoder's with what it decodes.
+/// given (the server's dense indices); the decoder's likewise with those it decodes, within
+/// the decode limit ([`Codec::set_decode_limit`]).
 #[derive(Clone)]
 pub struct CompactCodec {
     /// The decoder's reference.
@@ -392,7 +425,7 @@ impl std::fmt::Debug for CompactCodec {
         f.debug_struct("CompactCodec")
             .field("level", &self.level)
             .field("decode_limit", &self.decode_limit)
-            .field("reference_cells", &self.reference.cells.len())
+            .field("reference_bytes", &self.reference.bytes)
             .field(
                 "sent_cells",
                 &self.sent.cells.iter().map(Vec::len).sum::<usize>(),
@@ -527,9 +560,15 @@ impl Codec for CompactCodec {
         let sections = Sections::split(&layout, totals, rest)?;
         let snapshot = flags & FLAG_SNAPSHOT != 0;
         if snapshot {
-            self.reference = Reference::default();
+            self.reference.clear();
         }
-        assemble(&layout, &sections, frame, snapshot, &mut self.reference)
+        assemble(
+            &layout,
+            &sections,
+            (frame, snapshot),
+            &mut self.reference,
+            self.decode_limit,
+        )
     }
 
     fn set_decode_limit(&mut self, bytes: u64) {
@@ -644,32 +683,30 @@ impl<'a> Sections<'a> {
     }
 }
 
-/// Rebuild the update from the checked layout and sections, updating the reference state.
+/// Rebuild the update of `(frame, snapshot)` from the checked layout and sections, updating
+/// the reference state (growing it within `limit` bytes).
 fn assemble(
     layout: &IndexLayout,
     s: &Sections,
-    frame: u64,
-    snapshot: bool,
+    (frame, snapshot): (u64, bool),
     r: &mut Reference,
+    limit: u64,
 ) -> Result<Update, DeltaError> {
+    let Reference { records, bytes } = r;
     let transforms = layout
         .transforms
         .iter()
         .zip(s.transforms.chunks_exact(TRANSFORM_WORDS))
         .map(|(&instance, coded)| {
-            let old = r
-                .transforms
-                .get(&u64::from(instance))
-                .copied()
-                .unwrap_or_default();
+            let old = grown(&mut records.transforms, instance, bytes, limit)?;
             let words: [u32; TRANSFORM_WORDS] = std::array::from_fn(|i| coded[i] ^ old[i]);
-            r.transforms.insert(u64::from(instance), words);
-            (
+            *old = words;
+            Ok((
                 instance,
                 Affine3A::from_cols_array(&words.map(f32::from_bits)),
-            )
+            ))
         })
-        .collect();
+        .collect::<Result<_, DeltaError>>()?;
     let mut entry_counts = s.entry_counts.iter();
     let mut cell_lengths = s.cell_lengths.iter();
     let mut entry = 0usize;
@@ -677,9 +714,9 @@ fn assemble(
     let mut instances = Vec::with_capacity(layout.instances.len());
     for (instance, bucket_ids, slot_ids) in &layout.instances {
         let mut buckets = Vec::with_capacity(bucket_ids.len());
+        let received = grown(&mut records.buckets, *instance, bytes, limit)?;
         for (&b, &code) in bucket_ids.iter().zip(entry_counts.by_ref()) {
-            let k = key(*instance, b);
-            let old = r.buckets.get(&k).copied().unwrap_or_default();
+            let old = stored(received, b);
             let n = decode_count(
                 code,
                 used_entries(&old.keys),
@@ -707,14 +744,14 @@ fn assemble(
                     .ok_or(DeltaError::BadRecord("bucket key"))?;
                 bucket.entries[i] = BucketEntry { key, slot };
             }
-            r.buckets.insert(k, Entries::of(&bucket));
+            *grown(received, b, bytes, limit)? = Entries::of(&bucket);
             buckets.push((b, bucket));
         }
         let mut cells = Vec::with_capacity(slot_ids.len());
         let mut previous = [0; CELL_POINTS];
+        let received = grown(&mut records.cells, *instance, bytes, limit)?;
         for (&slot, &code) in slot_ids.iter().zip(cell_lengths.by_ref()) {
-            let k = key(*instance, slot);
-            let old = r.cells.get(&k).copied().unwrap_or_default();
+            let old = stored(received, slot);
             let n = decode_count(
                 code,
                 used_points(&old),
@@ -735,7 +772,7 @@ fn assemble(
                 let reference = point_reference(c, i, &old, &previous);
                 cell.points[i] = apply_point_residual(residual, reference);
             }
-            r.cells.insert(k, cell.points);
+            *grown(received, slot, bytes, limit)? = cell.points;
             previous = cell.points;
             cells.push((slot, cell));
         }
@@ -1352,6 +1389,31 @@ mod tests {
             dec.decode(&bomb),
             Err(DeltaError::TooLarge { .. })
         ));
+    }
+
+    #[test]
+    fn far_indices_are_refused_before_they_grow_the_reference() {
+        // A cell slot 100 000 needs 100 001 dense cells (2.8 MB) in the decoder's reference.
+        let far = update(1, true, 7, 100_000..100_001);
+        let bytes = CompactCodec::new().encode(&far);
+        assert!(bytes.len() < 1024, "a few records");
+        let mut dec = CompactCodec::new();
+        dec.set_decode_limit(1 << 20);
+        assert!(matches!(
+            dec.decode(&bytes),
+            Err(DeltaError::ReferenceTooLarge { limit, .. }) if limit == 1 << 20
+        ));
+        // Within the limit the same update decodes, and the reference keeps what it decoded.
+        let mut dec = CompactCodec::new();
+        dec.set_decode_limit(4 << 20);
+        assert_eq!(dec.decode(&bytes).unwrap(), paper_round_trip(&far));
+        let next = update(2, false, 9, 100_000..100_001);
+        let mut enc = CompactCodec::new();
+        enc.encode(&far);
+        assert_eq!(
+            dec.decode(&enc.encode(&next)).unwrap(),
+            paper_round_trip(&next)
+        );
     }
 
     #[test]

@@ -67,6 +67,14 @@ pub enum DeltaError {
     /// A reference choice out of range (or a cell position past the update's cells).
     #[error("bad reference choice for a {0}")]
     BadChoice(&'static str),
+    /// The update's indices would grow the decoder's reference past the decode limit.
+    #[error("indices would grow the decoder's reference to {needed} bytes, past the limit of {limit} bytes")]
+    ReferenceTooLarge {
+        /// Bytes the reference would hold.
+        needed: u64,
+        /// The limit.
+        limit: u64,
+    },
     /// A residual that decodes to no valid record.
     #[error("bad {0}")]
     BadRecord(&'static str),

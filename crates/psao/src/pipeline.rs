@@ -99,13 +99,17 @@ impl<'a> Pipeline<'a> {
         let mut server = Server::with_medium(scene, config.server, config.medium.clone())
             .context("cannot start the server (point generation or tracer)")?;
         let client_id = server.add_client();
-        let client = ClientState::new(&server.instance_table());
+        let table = server.instance_table();
+        let client = ClientState::new(&table);
+        // The limits a networked client takes from the instance table.
+        let mut decoder = psao_delta::codec_by_name(&config.codec)?;
+        decoder.set_decode_limit(crate::net::convert::decode_limit(&table));
         Ok(Self {
             scene,
             server,
             client_id,
             encoder: psao_delta::codec_by_name(&config.codec)?,
-            decoder: psao_delta::codec_by_name(&config.codec)?,
+            decoder,
             client,
             renderer: ClientRenderer::new(scene)?,
             server_hz: config.server_hz,
