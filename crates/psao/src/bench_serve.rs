@@ -81,6 +81,8 @@ pub struct BenchClient {
     pub coalesced: u64,
     /// Final state equal to the server's at the client's last update (only with `--verify`).
     pub exact: Option<bool>,
+    /// The client process's CPU time over its wall time: cores it kept busy on average.
+    pub cores: f64,
 }
 
 /// What `psao bench serve` reports.
@@ -265,6 +267,8 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
             exact: args
                 .verify
                 .then(|| v["state_hash"] == v["server_state_hash"]),
+            cores: v["cpu_seconds"].as_f64().unwrap_or(0.0)
+                / v["seconds"].as_f64().unwrap_or(0.0).max(1e-9),
         });
     }
     let report = BenchServeReport {
@@ -317,13 +321,18 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         report.server_cpu_ms,
         report.server_cpu_share_2_cores
     );
-    println!("client  Mbit/s  updates  coalesced  exact");
+    println!(
+        "clients: {:.2} cores busy in all",
+        report.per_client.iter().map(|c| c.cores).sum::<f64>()
+    );
+    println!("client  Mbit/s  updates  coalesced  cores  exact");
     for (k, c) in report.per_client.iter().enumerate() {
         println!(
-            "{k:>6}  {:>6.2}  {:>7}  {:>9}  {}",
+            "{k:>6}  {:>6.2}  {:>7}  {:>9}  {:>5.2}  {}",
             c.mbit_s,
             c.updates,
             c.coalesced,
+            c.cores,
             c.exact.map_or("-".to_string(), |e| e.to_string())
         );
     }

@@ -20,6 +20,7 @@ use serde::Serialize;
 use tokio::sync::mpsc;
 
 use crate::args::Resolution;
+use crate::cpu_time::cpu_seconds;
 use crate::net::convert::{camera_msg, decode_limit, table_of};
 use crate::net::transport::{connect, ReadError};
 use crate::pipeline::{ClientRenderer, CLIENT_HZ};
@@ -103,6 +104,8 @@ pub struct ViewStats {
     pub last_server_frame: u64,
     /// Wall-clock seconds.
     pub seconds: f64,
+    /// CPU seconds of this process (all threads) over those (0 where unknown).
+    pub cpu_seconds: f64,
     /// The server's id of every session, in order.
     pub client_ids: Vec<u32>,
 }
@@ -158,6 +161,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let aspect = args.res.width as f32 / args.res.height as f32;
     let mut renderer = ClientRenderer::new(&input.scene)?;
     let mut start = Instant::now();
+    let mut cpu_start = cpu_seconds();
     let mut lockstep = None;
     for frame in 0..frames {
         let camera = path.camera_at_frame(((frame + args.path_offset) % total) as usize);
@@ -170,6 +174,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
             lockstep = client.handle(e, &out_tx)?;
             // The 60 Hz clock starts with the first session.
             start = Instant::now();
+            cpu_start = cpu_seconds();
         }
         let _ = out_tx.send(Outgoing::Send(Message::Camera(camera_msg(
             frame, &camera, aspect,
@@ -226,6 +231,10 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         snapshots: client.snapshots,
         last_server_frame: client.last_frame,
         seconds: start.elapsed().as_secs_f64(),
+        cpu_seconds: match (cpu_start, cpu_seconds()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        },
         client_ids: client.ids.clone(),
     };
     println!(
