@@ -14,9 +14,10 @@ use crate::run::write_json;
 /// Default ray budget per server frame of the load benchmark (see `--ray-budget`).
 const BENCH_RAY_BUDGET: u64 = 48_000;
 
-/// Arguments of `psao bench serve`.
+/// What the load benchmarks (`psao bench serve`, `psao bench step`) serve: N clients on a
+/// scene's camera path.
 #[derive(clap::Args, Debug)]
-pub struct BenchServeArgs {
+pub struct LoadArgs {
     /// Number of clients.
     #[arg(long, default_value_t = 8)]
     pub clients: u32,
@@ -27,15 +28,22 @@ pub struct BenchServeArgs {
     /// along it.
     #[arg(long)]
     pub path: Option<PathBuf>,
-    /// Client frames per client (60 per second of scene time).
-    #[arg(long, default_value_t = 300)]
-    pub frames: u32,
-    /// Server frames per second.
+    /// Server frames per second of scene time.
     #[arg(long, default_value_t = 30)]
     pub hz: u32,
     /// Points per unit area.
     #[arg(long, default_value_t = 1024.0)]
     pub points: f32,
+}
+
+/// Arguments of `psao bench serve`.
+#[derive(clap::Args, Debug)]
+pub struct BenchServeArgs {
+    #[command(flatten)]
+    pub load: LoadArgs,
+    /// Client frames per client (60 per second of scene time).
+    #[arg(long, default_value_t = 300)]
+    pub frames: u32,
     /// Update codec.
     #[arg(long, default_value = "compact")]
     pub codec: String,
@@ -149,7 +157,7 @@ fn read_json(path: &Path) -> Result<serde_json::Value> {
 
 /// Runs `psao bench serve`.
 pub fn run(args: &BenchServeArgs) -> Result<()> {
-    if args.clients == 0 || args.frames == 0 {
+    if args.load.clients == 0 || args.frames == 0 {
         bail!("--clients and --frames must be at least 1");
     }
     let exe = std::env::current_exe().context("cannot find the psao executable")?;
@@ -162,18 +170,18 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
             "warn",
             "serve",
             "--scene",
-            &args.scene,
+            &args.load.scene,
             "--listen",
             "127.0.0.1:0",
         ])
         .args([
             "--hz",
-            &args.hz.to_string(),
+            &args.load.hz.to_string(),
             "--points",
-            &args.points.to_string(),
+            &args.load.points.to_string(),
         ])
         .args(["--codec", &args.codec, "--once"])
-        .args(["--wait-clients", &args.clients.to_string()])
+        .args(["--wait-clients", &args.load.clients.to_string()])
         .arg("--json")
         .arg(&serve_json)
         .stdout(Stdio::piped());
@@ -187,17 +195,17 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         .strip_prefix("listening on ")
         .with_context(|| format!("psao serve did not start: {line:?}"))?
         .to_string();
-    tracing::info!("server at {addr}; starting {} clients", args.clients);
+    tracing::info!("server at {addr}; starting {} clients", args.load.clients);
     let (input, path) = crate::scene_source::SceneArgs {
-        scene: args.scene.clone(),
-        path: args.path.clone(),
+        scene: args.load.scene.clone(),
+        path: args.load.path.clone(),
         frozen: false,
     }
     .load()?;
     drop(input);
     let total = path.frame_count() as u32;
     let mut views = Vec::new();
-    for k in 0..args.clients {
+    for k in 0..args.load.clients {
         let (mut c, through) = match (args.client_nice, args.client_idle) {
             (Some(n), _) => {
                 let mut c = Command::new("nice");
@@ -218,17 +226,20 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
             "--connect",
             &addr,
             "--scene",
-            &args.scene,
+            &args.load.scene,
         ])
         .args(["--frames", &args.frames.to_string(), "--res", &args.res])
-        .args(["--path-offset", &(k * total / args.clients).to_string()])
+        .args([
+            "--path-offset",
+            &(k * total / args.load.clients).to_string(),
+        ])
         .arg("--json")
         .arg(dir.join(format!("view_{k}.json")))
         .stdout(Stdio::null());
         if !args.verify {
             c.arg("--no-verify");
         }
-        if let Some(p) = &args.path {
+        if let Some(p) = &args.load.path {
             c.arg("--path").arg(p);
         }
         views
@@ -256,7 +267,7 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
             .sum::<u64>()
     };
     let mut per_client = Vec::new();
-    for k in 0..args.clients as usize {
+    for k in 0..args.load.clients as usize {
         let v = read_json(&dir.join(format!("view_{k}.json")))?;
         per_client.push(BenchClient {
             mbit_s: v["mbit_s"].as_f64().unwrap_or(0.0),
@@ -272,9 +283,9 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         });
     }
     let report = BenchServeReport {
-        scene: args.scene.clone(),
-        clients: args.clients,
-        hz: args.hz,
+        scene: args.load.scene.clone(),
+        clients: args.load.clients,
+        hz: args.load.hz,
         frames: args.frames,
         ray_budget: args.ray_budget,
         rays_per_frame: s["mean_rays"].as_f64().unwrap_or(0.0),
@@ -282,9 +293,10 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         server_mean_ms: s["mean_ms"].as_f64().unwrap_or(0.0),
         server_p95_ms: s["p95_ms"].as_f64().unwrap_or(0.0),
         server_median_ms: s["median_ms"].as_f64().unwrap_or(0.0),
-        server_load: s["mean_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 1000.0,
+        server_load: s["mean_ms"].as_f64().unwrap_or(0.0) * f64::from(args.load.hz) / 1000.0,
         server_cpu_ms: s["cpu_ms"].as_f64().unwrap_or(0.0),
-        server_cpu_share_2_cores: s["cpu_ms"].as_f64().unwrap_or(0.0) * f64::from(args.hz) / 2000.0,
+        server_cpu_share_2_cores: s["cpu_ms"].as_f64().unwrap_or(0.0) * f64::from(args.load.hz)
+            / 2000.0,
         server_step_ms: s["mean_step_ms"].as_f64().unwrap_or(0.0),
         server_cull_ms: s["mean_cull_ms"].as_f64().unwrap_or(0.0),
         server_trace_ms: s["mean_trace_ms"].as_f64().unwrap_or(0.0),

@@ -16,6 +16,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::args::Resolution;
+use crate::bench_serve::LoadArgs;
 use crate::cpu_time::cpu_seconds;
 use crate::pipeline::CLIENT_HZ;
 use crate::run::{write_json, ServerTuning};
@@ -24,25 +25,13 @@ use crate::scene_source::SceneInput;
 /// Arguments of `psao bench step`.
 #[derive(clap::Args, Debug)]
 pub struct BenchStepArgs {
-    /// Number of clients (one view and one codec each).
-    #[arg(long, default_value_t = 8)]
-    pub clients: u32,
-    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
-    #[arg(long, default_value = crate::scene_source::BUILTIN_SCENE)]
-    pub scene: String,
-    /// Camera path file (default: the scene's first path).
-    #[arg(long)]
-    pub path: Option<PathBuf>,
+    // Clients, scene, path, server rate (which sets each frame's scene time and the
+    // clients' cameras; frames still run back to back) and point density.
+    #[command(flatten)]
+    pub load: LoadArgs,
     /// Server frames to run.
     #[arg(long, default_value_t = 300)]
     pub frames: u32,
-    /// Server frames per second of scene time (sets the scene time of each frame and the
-    /// clients' camera positions; frames still run back to back).
-    #[arg(long, default_value_t = 30)]
-    pub hz: u32,
-    /// Points per unit area.
-    #[arg(long, default_value_t = 1024.0)]
-    pub points: f32,
     /// Clients' image size (their aspect shapes the culling frusta).
     #[arg(long, default_value = "640x360")]
     pub res: Resolution,
@@ -84,20 +73,24 @@ pub struct BenchStepReport {
 
 /// Run `psao bench step`.
 pub fn run(args: &BenchStepArgs) -> Result<()> {
-    if args.clients == 0 || args.frames == 0 || args.hz == 0 || args.hz > CLIENT_HZ {
+    if args.load.clients == 0 || args.frames == 0 || args.load.hz == 0 || args.load.hz > CLIENT_HZ {
         bail!(
             "--clients and --frames must be at least 1 and --hz in 1..={CLIENT_HZ} (got {}, {}, {})",
-            args.clients,
+            args.load.clients,
             args.frames,
-            args.hz
+            args.load.hz
         );
     }
-    let input = SceneInput::load(&args.scene)?;
-    let path = input.camera_path(args.path.as_ref())?;
-    let config = args.tuning.config(args.points, args.hz, args.res)?;
+    let input = SceneInput::load(&args.load.scene)?;
+    let path = input.camera_path(args.load.path.as_ref())?;
+    let config = args
+        .tuning
+        .config(args.load.points, args.load.hz, args.res)?;
     let mut server = Server::with_medium(&input.scene, config.server, input.medium())
         .context("cannot start the server (point generation or tracer)")?;
-    let ids: Vec<ClientId> = (0..args.clients).map(|_| server.add_client()).collect();
+    let ids: Vec<ClientId> = (0..args.load.clients)
+        .map(|_| server.add_client())
+        .collect();
     let slot: HashMap<ClientId, usize> = ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
     let mut codecs = ids
         .iter()
@@ -112,10 +105,10 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     let cpu_start = cpu_seconds();
     for f in 0..u64::from(args.frames) {
         let t = Instant::now();
-        let client_frame = f * u64::from(CLIENT_HZ) / u64::from(args.hz);
+        let client_frame = f * u64::from(CLIENT_HZ) / u64::from(args.load.hz);
         let mut views: Vec<View> = Vec::new();
-        for k in 0..u64::from(args.clients) {
-            let at = (client_frame + k * total / u64::from(args.clients)) % total;
+        for k in 0..u64::from(args.load.clients) {
+            let at = (client_frame + k * total / u64::from(args.load.clients)) % total;
             let view = View {
                 camera: path.camera_at_frame(at as usize),
                 aspect,
@@ -124,7 +117,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
                 views.push(view);
             }
         }
-        let seconds = (server.frame() + 1) as f32 / args.hz as f32;
+        let seconds = (server.frame() + 1) as f32 / args.load.hz as f32;
         let previous = pending.take();
         let (step, encoded) = rayon::join(
             || server.step_at(&views, seconds),
@@ -155,8 +148,8 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         _ => 0.0,
     };
     let report = BenchStepReport {
-        scene: args.scene.clone(),
-        clients: args.clients,
+        scene: args.load.scene.clone(),
+        clients: args.load.clients,
         frames: args.frames,
         ray_budget: args.tuning.ray_budget,
         rays_per_frame: rays as f64 / n,
@@ -173,8 +166,8 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         cpu_ms,
         cores_busy: cpu_ms / mean,
         // Encoded frames: all but the last, each 1/hz s of scene time.
-        mbit_s: bytes as f64 * 8e-6 * f64::from(args.hz)
-            / ((n - 1.0).max(1.0) * f64::from(args.clients)),
+        mbit_s: bytes as f64 * 8e-6 * f64::from(args.load.hz)
+            / ((n - 1.0).max(1.0) * f64::from(args.load.clients)),
     };
     println!(
         "{} clients on {}: {} server frames, {:.0} rays per frame; {:.1} ms per frame \
