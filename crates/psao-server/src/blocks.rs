@@ -61,18 +61,7 @@ pub(crate) fn tie_of(instance: u32, index: u32, seed: u64) -> u32 {
 impl CullBlocks {
     /// Blocks of `positions` (instance `instance`, tie-breaks from `seed`).
     pub fn new(positions: &[Vec3], instance: u32, seed: u64) -> Self {
-        let (lo, hi) = bounds(positions.iter().copied());
-        let scale = 1023.0 / (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
-        let mut keyed: Vec<(u32, u32)> = positions
-            .iter()
-            .enumerate()
-            .map(|(i, &p)| {
-                let q = ((p - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
-                (morton3(q.x as u32, q.y as u32, q.z as u32), i as u32)
-            })
-            .collect();
-        keyed.sort_unstable();
-        let order: Vec<u32> = keyed.into_iter().map(|(_, i)| i).collect();
+        let order = morton_order(positions);
         let tie = order.iter().map(|&i| tie_of(instance, i, seed)).collect();
         let blocks: Vec<Block> = (0..order.len())
             .step_by(BLOCK_POINTS)
@@ -210,6 +199,25 @@ fn bounds(points: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
 }
 
 /// Interleave the low 10 bits of x, y, z.
+/// The indices of `positions` in Morton order of their position in their bounding box
+/// (10 bits per axis; equal codes by index). The server numbers each instance's generated
+/// points in this order of their rest positions (so [`crate::Server::points`] lists them
+/// so), and culls them in blocks of it. Positions already in this order give `0, 1, 2, …`.
+pub fn morton_order(positions: &[Vec3]) -> Vec<u32> {
+    let (lo, hi) = bounds(positions.iter().copied());
+    let scale = 1023.0 / (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
+    let mut keyed: Vec<(u32, u32)> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            let q = ((p - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+            (morton3(q.x as u32, q.y as u32, q.z as u32), i as u32)
+        })
+        .collect();
+    keyed.sort_unstable();
+    keyed.into_iter().map(|(_, i)| i).collect()
+}
+
 fn morton3(x: u32, y: u32, z: u32) -> u32 {
     fn spread(mut v: u32) -> u32 {
         v &= 0x3ff;

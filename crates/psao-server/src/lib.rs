@@ -20,6 +20,7 @@ mod server;
 mod summary;
 mod trace;
 
+pub use blocks::morton_order;
 pub use bury::{BURIAL_MIN_INSIDE, BURIAL_RAYS};
 pub use clients::ClientId;
 pub use config::{ServerConfig, Thresholds};

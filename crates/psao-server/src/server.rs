@@ -145,6 +145,14 @@ impl Server {
         } else {
             0
         };
+        // Number the points in the order culling visits them, so that every per-point array
+        // is read in blocks of neighbours (front and back copies stay adjacent: equal
+        // positions keep their order).
+        points.par_iter_mut().for_each(|p| {
+            let positions: Vec<Vec3> = p.points.iter().map(|s| s.position).collect();
+            let order = crate::blocks::morton_order(&positions);
+            p.points = order.iter().map(|&i| p.points[i as usize]).collect();
+        });
         let dynamics = Dynamics::new(scene, &points, config.invalidation)?;
         let motion = dynamics.motion();
         let instances = points
@@ -694,6 +702,16 @@ mod tests {
             rays_per_point: 4,
             max_samples: 16,
             ..ServerConfig::default()
+        }
+    }
+
+    #[test]
+    fn points_are_numbered_in_the_order_culling_visits_them() {
+        let server = Server::new(&scene(), small_config()).unwrap();
+        for inst in &server.instances {
+            let n = inst.points.position.len() as u32;
+            assert!(n > 0);
+            assert!(inst.blocks.order.iter().copied().eq(0..n));
         }
     }
 
