@@ -198,7 +198,6 @@ fn bounds(points: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
     }
 }
 
-/// Interleave the low 10 bits of x, y, z.
 /// The indices of `positions` in Morton order of their position in their bounding box
 /// (10 bits per axis; equal codes by index). The server numbers each instance's generated
 /// points in this order of their rest positions (so [`crate::Server::points`] lists them
@@ -218,6 +217,7 @@ pub fn morton_order(positions: &[Vec3]) -> Vec<u32> {
     keyed.into_iter().map(|(_, i)| i).collect()
 }
 
+/// Interleave the low 10 bits of x, y, z.
 fn morton3(x: u32, y: u32, z: u32) -> u32 {
     fn spread(mut v: u32) -> u32 {
         v &= 0x3ff;

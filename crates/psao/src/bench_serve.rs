@@ -126,9 +126,11 @@ pub struct BenchServeReport {
     pub server_cpu_share_2_cores: f64,
     /// Mean of the step alone.
     pub server_step_ms: f64,
-    /// Means of the step's culling, tracing and publishing.
+    /// Mean of the step's culling.
     pub server_cull_ms: f64,
+    /// Mean of the step's selection, tracing and accumulation.
     pub server_trace_ms: f64,
+    /// Mean of the step's publishing.
     pub server_publish_ms: f64,
     /// Mean of collecting the clients' updates per frame (all clients).
     pub server_update_ms: f64,

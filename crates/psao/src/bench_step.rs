@@ -45,21 +45,34 @@ pub struct BenchStepArgs {
 /// What `psao bench step` measured (ms are means per server frame).
 #[derive(Debug, Default, Serialize)]
 pub struct BenchStepReport {
+    /// The `--scene` argument.
     pub scene: String,
+    /// Clients (views and codecs).
     pub clients: u32,
+    /// Server frames run.
     pub frames: u32,
+    /// Rays per server frame at most.
     pub ray_budget: u64,
+    /// Rays traced per server frame.
     pub rays_per_frame: f64,
     /// Wall time per frame: step, update collection and the previous frame's encoding beside
     /// the step.
     pub frame_ms: f64,
+    /// Median of it.
     pub frame_median_ms: f64,
+    /// 95th percentile of it.
     pub frame_p95_ms: f64,
+    /// The step alone.
     pub step_ms: f64,
+    /// The step's posing and invalidation.
     pub animate_ms: f64,
+    /// The step's culling.
     pub cull_ms: f64,
+    /// The step's selection, tracing and accumulation.
     pub trace_ms: f64,
+    /// The step's publishing.
     pub publish_ms: f64,
+    /// Collecting the clients' updates after the step.
     pub update_ms: f64,
     /// Encoding all clients' updates (beside the next step).
     pub encode_ms: f64,

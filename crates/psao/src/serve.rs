@@ -109,10 +109,11 @@ pub struct ServeStats {
     pub median_ms: f64,
     /// Mean of the step alone, ms.
     pub mean_step_ms: f64,
-    /// Means of the step's culling, tracing (with selection and accumulation) and publishing,
-    /// ms.
+    /// Mean of the step's culling, ms.
     pub mean_cull_ms: f64,
+    /// Mean of the step's selection, tracing and accumulation, ms.
     pub mean_trace_ms: f64,
+    /// Mean of the step's publishing, ms.
     pub mean_publish_ms: f64,
     /// Mean rays traced per server frame.
     pub mean_rays: f64,
