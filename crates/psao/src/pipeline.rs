@@ -101,9 +101,8 @@ impl<'a> Pipeline<'a> {
         let client_id = server.add_client();
         let table = server.instance_table();
         let client = ClientState::new(&table);
-        // The limits a networked client takes from the instance table.
-        let mut decoder = psao_delta::codec_by_name(&config.codec)?;
-        decoder.set_decode_limit(crate::net::convert::decode_limit(&table));
+        // Limited as a networked client's.
+        let decoder = crate::net::convert::client_decoder(&config.codec, &table)?;
         Ok(Self {
             scene,
             server,

@@ -21,7 +21,7 @@ use tokio::sync::mpsc;
 
 use crate::args::Resolution;
 use crate::cpu_time::cpu_seconds;
-use crate::net::convert::{camera_msg, decode_limit, table_of};
+use crate::net::convert::{camera_msg, client_decoder, table_of};
 use crate::net::transport::{connect, ReadError};
 use crate::pipeline::{ClientRenderer, CLIENT_HZ};
 use crate::run::{write_frame_images, write_json};
@@ -301,8 +301,7 @@ impl Client {
         match event {
             NetEvent::Welcome(w) => {
                 let table = table_of(&w.instances)?;
-                let mut codec = psao_delta::codec_by_name(&w.codec)?;
-                codec.set_decode_limit(decode_limit(&table));
+                let codec = client_decoder(&w.codec, &table)?;
                 self.state = ClientState::new(&table);
                 self.codec = Some(codec);
                 self.sessions += 1;

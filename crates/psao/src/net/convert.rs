@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Result};
 use glam::{UVec3, Vec3};
-use psao_delta::{GridLayout, InstanceInfo};
+use psao_delta::{Codec, GridLayout, InstanceInfo};
 use psao_scene::Camera;
 use psao_server::View;
 use psao_wire::{CameraMsg, InstanceEntry};
@@ -48,9 +48,17 @@ pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>> {
         .collect())
 }
 
+/// A client's decoder for codec `name`, limited to what updates for `table` can take
+/// ([`decode_limit`]).
+pub fn client_decoder(name: &str, table: &[InstanceInfo]) -> Result<Box<dyn Codec>> {
+    let mut codec = psao_delta::codec_by_name(name)?;
+    codec.set_decode_limit(decode_limit(table));
+    Ok(codec)
+}
+
 /// Most bytes one decoded update can legitimately take for this table (a snapshot of every
 /// bucket and every addressable cell, with generous per-record overhead).
-pub fn decode_limit(table: &[InstanceInfo]) -> u64 {
+fn decode_limit(table: &[InstanceInfo]) -> u64 {
     let per_instance: u64 = table
         .iter()
         .map(|i| {
