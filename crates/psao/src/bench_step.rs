@@ -5,7 +5,6 @@
 //! Without a network or client processes beside it, this is a quieter measure of the
 //! server's part of `psao bench serve`.
 
-use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -21,6 +20,7 @@ use crate::cpu_time::cpu_seconds;
 use crate::pipeline::CLIENT_HZ;
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
+use crate::serve::{code, coding_plan, mean, percentile};
 
 /// Arguments of `psao bench step`.
 #[derive(clap::Args, Debug)]
@@ -104,7 +104,6 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     let ids: Vec<ClientId> = (0..args.load.clients)
         .map(|_| server.add_client())
         .collect();
-    let slot: HashMap<ClientId, usize> = ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
     let mut codecs = ids
         .iter()
         .map(|_| psao_delta::codec_by_name(&args.tuning.codec))
@@ -134,7 +133,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         let previous = pending.take();
         let (step, encoded) = rayon::join(
             || server.step_at(&views, seconds),
-            || previous.map(|groups| encode(&mut codecs, &slot, &groups)),
+            || previous.map(|groups| encode(&mut codecs, &ids, &groups)),
         );
         let step = step.context("server frame failed")?;
         if let Some((n, ms)) = encoded {
@@ -155,7 +154,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     let n = f64::from(args.frames);
-    let mean = frame_ms.iter().sum::<f64>() / n;
+    let frame_mean = mean(&frame_ms);
     let cpu_ms = match (cpu_start, cpu_seconds()) {
         (Some(a), Some(b)) => (b - a) * 1e3 / n,
         _ => 0.0,
@@ -166,9 +165,9 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         frames: args.frames,
         ray_budget: args.tuning.ray_budget,
         rays_per_frame: rays as f64 / n,
-        frame_ms: mean,
-        frame_median_ms: crate::serve::percentile(&frame_ms, 0.5),
-        frame_p95_ms: crate::serve::percentile(&frame_ms, 0.95),
+        frame_ms: frame_mean,
+        frame_median_ms: percentile(&frame_ms, 0.5),
+        frame_p95_ms: percentile(&frame_ms, 0.95),
         step_ms: sums.step_ms / n,
         animate_ms: sums.animate_ms / n,
         cull_ms: sums.cull_ms / n,
@@ -177,7 +176,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         update_ms: sums.update_ms / n,
         encode_ms: sums.encode_ms / n,
         cpu_ms,
-        cores_busy: cpu_ms / mean,
+        cores_busy: cpu_ms / frame_mean,
         // Encoded frames: all but the last, each 1/hz s of scene time.
         mbit_s: bytes as f64 * 8e-6 * f64::from(args.load.hz)
             / ((n - 1.0).max(1.0) * f64::from(args.load.clients)),
@@ -211,34 +210,23 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     Ok(())
 }
 
-/// Encode each group's update with its first client's codec and advance the others' (as
-/// `psao serve` does), in parallel over clients; returns the payload bytes of all clients
-/// and the ms taken.
+/// Encode each group's update with one client's codec and advance the others' (as
+/// `psao serve` does: [`coding_plan`]), in parallel over the clients `ids` (whose codecs
+/// `codecs` are); returns the payload bytes of all clients and the ms taken.
 fn encode(
     codecs: &mut [Box<dyn Codec>],
-    slot: &HashMap<ClientId, usize>,
+    ids: &[ClientId],
     groups: &[(Vec<ClientId>, Update)],
 ) -> (u64, f64) {
     let t = Instant::now();
-    // Per client: its group and whether it encodes for the group.
-    let mut job = vec![None; codecs.len()];
-    for (g, (members, _)) in groups.iter().enumerate() {
-        for (j, id) in members.iter().enumerate() {
-            job[slot[id]] = Some((g, j == 0));
-        }
-    }
+    let plan = coding_plan(ids.iter().copied(), groups);
     let sizes: Vec<u64> = codecs
         .par_iter_mut()
-        .zip(&job)
+        .zip(&plan)
         .filter_map(|(codec, job)| {
-            let (g, first) = (*job)?;
-            let update = &groups[g].1;
-            Some(if first {
-                codec.encode(update).len() as u64 * groups[g].0.len() as u64
-            } else {
-                codec.advance(update);
-                0
-            })
+            let (g, encodes) = (*job)?;
+            let payload = code(codec.as_mut(), &groups[g].1, encodes);
+            Some(payload.map_or(0, |p| p.len() as u64 * groups[g].0.len() as u64))
         })
         .collect();
     (sizes.iter().sum(), t.elapsed().as_secs_f64() * 1e3)

@@ -768,6 +768,42 @@ struct FrameUpdates {
     groups: Vec<(Vec<ClientId>, psao_delta::Update)>,
 }
 
+/// Who codes what of `groups` for the clients `ids`, in their order: each client's group and
+/// whether it encodes the group's update (the group's first client among `ids`; the others
+/// only advance their codec, see [`send_updates`]); `None` for a client in no group.
+pub(crate) fn coding_plan(
+    ids: impl IntoIterator<Item = ClientId>,
+    groups: &[(Vec<ClientId>, psao_delta::Update)],
+) -> Vec<Option<(usize, bool)>> {
+    let group_of: HashMap<ClientId, usize> = groups
+        .iter()
+        .enumerate()
+        .flat_map(|(g, (members, _))| members.iter().map(move |m| (*m, g)))
+        .collect();
+    let mut encoders: HashSet<usize> = HashSet::new();
+    ids.into_iter()
+        .map(|id| {
+            let g = *group_of.get(&id)?;
+            Some((g, encoders.insert(g)))
+        })
+        .collect()
+}
+
+/// `update` through `codec`: its payload when the codec `encodes`, else only taken into the
+/// codec's state ([`Codec::advance`]).
+pub(crate) fn code(
+    codec: &mut dyn Codec,
+    update: &psao_delta::Update,
+    encodes: bool,
+) -> Option<Vec<u8>> {
+    if encodes {
+        Some(codec.encode(update))
+    } else {
+        codec.advance(update);
+        None
+    }
+}
+
 /// Encode `updates` and queue them to their sessions (lockstep: waiting for room, with the
 /// camera frame each answers); returns the sessions whose connection is gone and the ms
 /// taken. Each group's update is encoded once, in parallel with the others: the other
@@ -786,33 +822,18 @@ fn send_updates(
         hash,
         groups,
     } = updates;
-    let update_of: HashMap<ClientId, usize> = groups
-        .iter()
-        .enumerate()
-        .flat_map(|(g, (members, _))| members.iter().map(move |m| (*m, g)))
-        .collect();
-    // The first session of each group encodes, the others advance; sessions that left
-    // since the update was collected are skipped.
-    let mut encoders: HashSet<usize> = HashSet::new();
+    // Sessions that left since the updates were collected are in no group: skipped.
+    let plan = coding_plan(sessions.values().map(|s| s.id), &groups);
     let jobs: Vec<(&mut Session, usize, bool)> = sessions
         .values_mut()
-        .filter_map(|s| {
-            let g = *update_of.get(&s.id)?;
-            let first = encoders.insert(g);
-            Some((s, g, first))
-        })
+        .zip(plan)
+        .filter_map(|(s, job)| job.map(|(g, encodes)| (s, g, encodes)))
         .collect();
     let payloads: Vec<(&mut Session, usize, Option<Vec<u8>>)> = jobs
         .into_par_iter()
-        .map(|(s, g, first)| {
-            let update = &groups[g].1;
-            if first {
-                let payload = s.codec.encode(update);
-                (s, g, Some(payload))
-            } else {
-                s.codec.advance(update);
-                (s, g, None)
-            }
+        .map(|(s, g, encodes)| {
+            let payload = code(s.codec.as_mut(), &groups[g].1, encodes);
+            (s, g, payload)
         })
         .collect();
     // Copies of the encoded payloads for the other clients of groups with several.
@@ -862,7 +883,8 @@ fn send_updates(
     (gone, te.elapsed().as_secs_f64() * 1e3)
 }
 
-fn mean(v: &[f64]) -> f64 {
+/// The mean of `v` (0 when empty).
+pub(crate) fn mean(v: &[f64]) -> f64 {
     if v.is_empty() {
         0.0
     } else {
