@@ -9,6 +9,7 @@ mod compare;
 mod cpu_time;
 mod demo;
 mod eval;
+mod lpips_weights;
 mod net;
 mod pipeline;
 mod png_io;
