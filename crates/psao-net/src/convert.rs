@@ -1,11 +1,12 @@
 //! Conversions between wire messages and the algorithm types.
 
-use anyhow::{bail, Result};
 use glam::{UVec3, Vec3};
 use psao_delta::{Codec, GridLayout, InstanceInfo};
 use psao_scene::Camera;
 use psao_server::View;
 use psao_wire::{CameraMsg, InstanceEntry};
+
+use crate::NetError;
 
 /// Most hash buckets over all instances a client accepts from a welcome (128 bytes each:
 /// 1 GiB of grid tables). The decode limit of the largest table accepted stays under the
@@ -29,10 +30,12 @@ pub fn entry_of(info: &InstanceInfo) -> InstanceEntry {
 
 /// The instance table of a welcome, refused when its grids would take more than
 /// [`MAX_TOTAL_BUCKETS`] buckets.
-pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>> {
+pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>, NetError> {
     let buckets: u64 = entries.iter().map(|e| u64::from(e.bucket_count)).sum();
     if buckets > MAX_TOTAL_BUCKETS {
-        bail!("the instance table asks for {buckets} hash buckets (limit {MAX_TOTAL_BUCKETS})");
+        return Err(NetError::Protocol(format!(
+            "the instance table asks for {buckets} hash buckets (limit {MAX_TOTAL_BUCKETS})"
+        )));
     }
     Ok(entries
         .iter()
@@ -52,8 +55,9 @@ pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>> {
 
 /// A client's decoder for codec `name`, limited to what updates for `table` can take
 /// ([`decode_limit`]).
-pub fn client_decoder(name: &str, table: &[InstanceInfo]) -> Result<Box<dyn Codec>> {
-    let mut codec = psao_delta::codec_by_name(name)?;
+pub fn client_decoder(name: &str, table: &[InstanceInfo]) -> Result<Box<dyn Codec>, NetError> {
+    let mut codec =
+        psao_delta::codec_by_name(name).map_err(NetError::codec("the server's codec"))?;
     let limit = decode_limit(table);
     tracing::debug!(
         "decode limit {:.1} MiB for {} instances",
