@@ -16,11 +16,11 @@ use serde::Serialize;
 
 use crate::args::Resolution;
 use crate::bench_serve::LoadArgs;
-use crate::cpu_time::cpu_seconds;
-use crate::pipeline::CLIENT_HZ;
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
-use crate::serve::{code, coding_plan, mean, percentile};
+use psao_net::cpu_time::cpu_seconds;
+use psao_net::pipeline::CLIENT_HZ;
+use psao_net::serve::{code, coding_plan, mean, percentile};
 
 /// Arguments of `psao bench step`.
 #[derive(clap::Args, Debug)]

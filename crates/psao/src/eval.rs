@@ -3,7 +3,6 @@
 
 use crate::args::{FrameRange, Resolution};
 use crate::lpips_weights::{LpipsArgs, LpipsChoice};
-use crate::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
 use crate::png_io::{read_ao_png, write_ao_png};
 use crate::progress;
 use crate::reference::ReferenceRenderer;
@@ -13,6 +12,7 @@ use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{compare, ssao, AoImage, Lpips, Metrics, SsaoSettings};
+use psao_net::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
 use psao_raster::GBuffer;
 use psao_scene::path::CameraPath;
 use psao_scene::{Animator, Scene};

@@ -1,12 +1,12 @@
 //! `psao run`: server and client in one process along a camera path.
 
 use crate::args::{FrameRange, Resolution};
-use crate::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
 use crate::png_io::{write_ao_png, write_rgb_png};
 use crate::progress;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use psao_net::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
 use psao_server::{Invalidation, ServerConfig};
 use psao_trace::Backend;
 use serde::Serialize;
@@ -184,7 +184,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let seconds = records.len() as f64 / crate::pipeline::CLIENT_HZ as f64;
+    let seconds = records.len() as f64 / psao_net::pipeline::CLIENT_HZ as f64;
     let stats = RunStats {
         scene: input.name.clone(),
         path: path.name.clone(),
@@ -219,7 +219,7 @@ pub fn write_frame_images(
     dir: &Path,
     frame: u32,
     scene: &psao_scene::Scene,
-    img: &crate::pipeline::ClientFrame,
+    img: &psao_net::pipeline::ClientFrame,
 ) -> Result<()> {
     write_ao_png(&dir.join(format!("ao_{frame:05}.png")), &img.ao)?;
     let rgb = composite_rgb8(scene, &img.gbuffer, &img.ao);
