@@ -1,0 +1,16 @@
+//! psao-prt: shadowed relighting of skinned characters (DESIGN §7; paper
+//! `shadowed-relighting-1d-brdfs`).
+//!
+//! Order-4 real SH ([`sh`]), projection by quadrature ([`quadrature`]), rotation
+//! ([`rotation`]), zonal lobes ([`zonal`]) and the analytic normalised-Phong convolution
+//! operator ([`phong`]) form the toolkit. On top: per-vertex visibility of a posed character
+//! ([`visibility`]), multi-lobe zonal fits kept in correspondence over frames ([`fit`]), the
+//! linear pose model ([`model`]), environment lighting ([`lighting`]) and run-time shading
+//! ([`shade`]) with its Monte Carlo reference ([`reference`]). Pure code: no file I/O.
+
+pub mod phong;
+pub mod quadrature;
+pub mod rotation;
+pub mod sh;
+mod small;
+pub mod zonal;
