@@ -154,13 +154,12 @@ mod tests {
             let scale = numeric.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
             let op = PhongOperator::new(alpha as f32);
             let norm = (alpha + 1.0) / (2.0 * std::f64::consts::PI);
-            for i in 0..COEFFS {
-                for j in 0..COEFFS {
+            for (i, row) in numeric.iter().enumerate() {
+                for (j, &num) in row.iter().enumerate() {
                     let exact = hemisphere_entry(alpha, i, j);
                     assert!(
-                        (exact - numeric[i][j]).abs() < 1e-9 * scale,
-                        "α={alpha} M[{i}][{j}] = {exact} vs numeric {}",
-                        numeric[i][j]
+                        (exact - num).abs() < 1e-9 * scale,
+                        "α={alpha} M[{i}][{j}] = {exact} vs numeric {num}"
                     );
                     let stored = op.entry(i, j) as f64;
                     assert!((stored - norm * exact).abs() < 1e-6 * (norm * scale).max(1.0));
