@@ -8,9 +8,20 @@
 //! linear pose model ([`model`]), environment lighting ([`lighting`]) and run-time shading
 //! ([`shade`]) with its Monte Carlo reference ([`reference`]). Pure code: no file I/O.
 
+pub mod character;
+mod error;
+pub mod fit;
+pub mod lighting;
+pub mod model;
+pub mod model_file;
 pub mod phong;
 pub mod quadrature;
+pub mod reference;
 pub mod rotation;
 pub mod sh;
+pub mod shade;
 mod small;
+pub mod visibility;
 pub mod zonal;
+
+pub use error::PrtError;
