@@ -112,16 +112,34 @@ impl Shader {
 
     /// Shades every vertex under `lights` (SH radiance in world space, one vector per
     /// channel) seen from `eye` (world; used by Phong). Returns `channels` values per vertex,
-    /// interleaved. Runs on all rayon threads.
+    /// interleaved. Runs on all rayon threads. Errors when the visibility, frames and
+    /// positions do not all have one entry per vertex.
     pub fn shade(
         &self,
         visibility: Visibility<'_>,
         geometry: ShadingGeometry<'_>,
         lights: &[ShVec],
         eye: Vec3,
-    ) -> Vec<f32> {
+    ) -> Result<Vec<f32>, PrtError> {
         let ch = lights.len();
         let n = geometry.positions.len();
+        let vis_len = match visibility {
+            Visibility::Unshadowed => n,
+            Visibility::Projected(v) => v.len(),
+            Visibility::Model(m, raw) if raw.len() == m.output_len() => m.vertices,
+            Visibility::Model(..) => usize::MAX,
+        };
+        if geometry.frames.len() != n || vis_len != n {
+            return Err(PrtError::Parameter(format!(
+                "shading {n} vertices with {} frames and visibility for {}",
+                geometry.frames.len(),
+                if vis_len == usize::MAX {
+                    "a mismatched model output".to_string()
+                } else {
+                    vis_len.to_string()
+                }
+            )));
+        }
         let mut out = vec![0.0f32; n * ch];
         let linear = orthonormalised(Mat3::from(geometry.transform.matrix3));
         let unit = unit_visibility();
@@ -177,7 +195,7 @@ impl Shader {
                     }
                 }
             });
-        out
+        Ok(out)
     }
 }
 
@@ -207,15 +225,19 @@ mod tests {
         };
         let sky = unit_visibility(); // radiance 1 everywhere
         let s = Shader::new(Mode::Diffuse).unwrap();
-        let v = s.shade(Visibility::Unshadowed, geometry, &[sky], Vec3::Z)[0];
+        let v = s
+            .shade(Visibility::Unshadowed, geometry, &[sky], Vec3::Z)
+            .unwrap()[0];
         assert!((v - 1.0).abs() < 1e-4, "{v}");
         let s = Shader::new(Mode::Phong { alpha: 20.0 }).unwrap();
-        let v = s.shade(
-            Visibility::Unshadowed,
-            geometry,
-            &[sky],
-            Vec3::new(0.0, 3.0, 1.0),
-        )[0];
+        let v = s
+            .shade(
+                Visibility::Unshadowed,
+                geometry,
+                &[sky],
+                Vec3::new(0.0, 3.0, 1.0),
+            )
+            .unwrap()[0];
         assert!((v - 1.0).abs() < 1e-3, "{v}");
     }
 
@@ -250,8 +272,12 @@ mod tests {
         ] {
             let s = Shader::new(mode).unwrap();
             let eye = Vec3::new(1.0, 2.0, 3.0);
-            let a = s.shade(Visibility::Model(&model, &raw), geometry, &[light], eye)[0];
-            let b = s.shade(Visibility::Projected(&sh), geometry, &[light], eye)[0];
+            let a = s
+                .shade(Visibility::Model(&model, &raw), geometry, &[light], eye)
+                .unwrap()[0];
+            let b = s
+                .shade(Visibility::Projected(&sh), geometry, &[light], eye)
+                .unwrap()[0];
             assert!(
                 (a - b).abs() < 1e-4 * a.abs().max(1.0),
                 "{mode:?}: {a} vs {b}"

@@ -106,7 +106,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
             },
             &lights,
             camera.position,
-        );
+        )?;
         std::hint::black_box(v);
         if run > 0 {
             total.push(start.elapsed().as_secs_f64() * 1e3);

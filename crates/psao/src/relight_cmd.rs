@@ -318,7 +318,7 @@ fn run_render(args: &RenderArgs) -> Result<()> {
             },
             &light.rgb,
             camera.position,
-        );
+        )?;
         let exposure = *exposure.get_or_insert_with(|| exposure_for(&values));
         image.rasterize(&pose, &camera, w, h)?;
         let pixels = image.shade(&values, 3);

@@ -222,7 +222,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                     geometry,
                     &lighting.rgb,
                     camera.position,
-                ),
+                )?,
             ),
             (
                 "projected".into(),
@@ -231,7 +231,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                     geometry,
                     &lighting.rgb,
                     camera.position,
-                ),
+                )?,
             ),
         ];
         for (lobes, model) in &models {
@@ -243,7 +243,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                     geometry,
                     &lighting.rgb,
                     camera.position,
-                ),
+                )?,
             ));
         }
         let mut pictures = vec![("reference".to_string(), ref_pixels.clone())];
@@ -283,7 +283,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                     },
                     &[lighting.luminance()],
                     camera.position,
-                );
+                )?;
                 std::hint::black_box(v);
                 times.push(start.elapsed().as_secs_f64() * 1e3);
             }
