@@ -14,7 +14,11 @@ use crate::NetError;
 /// The default folder for stored start points: `$PSAO_CACHE_DIR/points`, else
 /// `$XDG_CACHE_HOME/psao/points`, else `$HOME/.cache/psao/points` (`None` when none is set).
 pub fn default_dir() -> Option<PathBuf> {
-    let var = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    let var = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
     var("PSAO_CACHE_DIR")
         .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("psao")))
         .or_else(|| var("HOME").map(|d| d.join(".cache").join("psao")))
@@ -64,7 +68,9 @@ fn store(dir: &Path, file: &Path, bytes: &[u8]) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let tmp = dir.join(format!(
         ".{}.{}.tmp",
-        file.file_name().and_then(|n| n.to_str()).unwrap_or("points"),
+        file.file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("points"),
         std::process::id()
     ));
     std::fs::write(&tmp, bytes)?;

@@ -1,8 +1,8 @@
 //! Spatial blocks of an instance's points with local-space bounds, so culling tests a block
 //! against the frusta before (or instead of) its points.
 
-use psao_points::vec_bytes;
 use glam::{Affine3A, Vec3};
+use psao_points::vec_bytes;
 use psao_trace::ao::hash64;
 
 use crate::frustum::Frustum;

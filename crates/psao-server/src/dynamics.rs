@@ -44,8 +44,8 @@
 //! first): under a tight ray budget every invalidated point is re-traced in turn, none is
 //! starved by the fixed tie-break.
 
-use psao_points::vec_bytes;
 use glam::{Affine3A, UVec3, Vec3};
+use psao_points::vec_bytes;
 use psao_points::InstancePoints;
 use psao_scene::affine::{box_corners, invert_or_identity as inverse, transformed_box};
 use psao_scene::{Animator, Motion, ScenePose, SkinnedGeometry};

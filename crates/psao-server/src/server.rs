@@ -12,12 +12,12 @@ use psao_trace::ao::Medium;
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
-use crate::StartPoints;
 use crate::clients::Clients;
 use crate::dynamics::{Dynamics, Restarted};
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select, trace};
+use crate::StartPoints;
 use crate::{ClientId, Frustum, ServerConfig, ServerError, View};
 
 /// What one [`Server::step`] did.

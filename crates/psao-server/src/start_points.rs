@@ -300,11 +300,15 @@ impl Reader<'_> {
     }
 
     fn u32(&mut self) -> Result<u32, ServerError> {
-        Ok(u32::from_le_bytes(self.take(4)?.try_into().unwrap_or([0; 4])))
+        Ok(u32::from_le_bytes(
+            self.take(4)?.try_into().unwrap_or([0; 4]),
+        ))
     }
 
     fn u64(&mut self) -> Result<u64, ServerError> {
-        Ok(u64::from_le_bytes(self.take(8)?.try_into().unwrap_or([0; 8])))
+        Ok(u64::from_le_bytes(
+            self.take(8)?.try_into().unwrap_or([0; 8]),
+        ))
     }
 
     fn f32(&mut self) -> Result<f32, ServerError> {

@@ -123,7 +123,12 @@ fn resident_bytes() -> Option<(u64, u64)> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let kib = |key: &str| -> Option<u64> {
         let line = status.lines().find(|l| l.starts_with(key))?;
-        line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()
+        line[key.len()..]
+            .trim()
+            .trim_end_matches("kB")
+            .trim()
+            .parse()
+            .ok()
     };
     Some((kib("VmRSS:")? * 1024, kib("VmHWM:")? * 1024))
 }
@@ -291,7 +296,10 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         report.bench_trace_mrays_s
     );
     for m in &report.memory {
-        println!("  {:<30} {:>8.1} bytes per point", m.name, m.bytes_per_point);
+        println!(
+            "  {:<30} {:>8.1} bytes per point",
+            m.name, m.bytes_per_point
+        );
     }
     if let Some(json) = &args.json {
         write_json(json, &report)?;

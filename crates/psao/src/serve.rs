@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use psao_net::serve::{Serve, ServeConfig};
-use psao_net::Resolution;
 use psao_net::start_cache::start_server;
+use psao_net::Resolution;
 
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;

@@ -291,10 +291,19 @@ fn bench_step_reports_the_phases_of_its_frames() {
         .iter()
         .map(|m| m["bytes_per_point"].as_f64().unwrap())
         .sum();
-    assert!(structures >= 24.0 && structures < ms("bytes_per_point"), "{r}");
+    assert!(
+        structures >= 24.0 && structures < ms("bytes_per_point"),
+        "{r}"
+    );
     assert!(ms("bytes_per_point") <= ms("peak_bytes_per_point"), "{r}");
-    assert!(ms("startup_s") > 0.0 && r["points"].as_u64().unwrap() > 0, "{r}");
-    assert!(ms("trace_ratio") > 0.0 && ms("bench_trace_mrays_s") > 0.0, "{r}");
+    assert!(
+        ms("startup_s") > 0.0 && r["points"].as_u64().unwrap() > 0,
+        "{r}"
+    );
+    assert!(
+        ms("trace_ratio") > 0.0 && ms("bench_trace_mrays_s") > 0.0,
+        "{r}"
+    );
     let o = psao(&["bench", "step", "--clients", "0"]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--clients"), "{}", stderr(&o));
