@@ -11,6 +11,7 @@ pub mod gltf;
 mod load;
 pub mod model;
 pub mod obj;
+pub mod orbit;
 pub mod path;
 pub mod scene_file;
 
@@ -20,4 +21,5 @@ pub use camera::Camera;
 pub use error::{SceneError, MAX_ELEMENTS};
 pub use load::{load, load_scene, LoadedScene};
 pub use model::*;
+pub use orbit::orbit_path;
 pub use path::{CameraKey, CameraPath, PATH_HZ};

@@ -9,6 +9,7 @@ mod bench_trace;
 mod compare;
 mod demo;
 mod eval;
+mod lpips_weights;
 mod png_io;
 mod progress;
 mod reference;
