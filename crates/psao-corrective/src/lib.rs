@@ -2,4 +2,6 @@
 //! an Itti-style saliency model with top-down task importance, an aged and reprojected sample
 //! cache, and the scheduling of correction jobs. Pure code: no file or network I/O.
 
+pub mod attention;
+pub mod saliency;
 pub mod sqrt5;
