@@ -3,5 +3,8 @@
 //! cache, and the scheduling of correction jobs. Pure code: no file or network I/O.
 
 pub mod attention;
+pub mod cache;
 pub mod saliency;
+pub mod screen;
+pub mod splat;
 pub mod sqrt5;
