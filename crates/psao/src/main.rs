@@ -6,6 +6,7 @@ mod bench_serve;
 mod bench_step;
 mod bench_trace;
 mod compare;
+mod corrective;
 mod cpu_time;
 mod demo;
 mod eval;
@@ -56,6 +57,9 @@ enum Command {
     /// Sparse volumes: inspect, convert and render OpenVDB and `.psv` files.
     #[command(subcommand)]
     Volume(volume_cmd::VolumeCommand),
+    /// Perceptually guided corrective splatting: evaluation and benchmarks.
+    #[command(subcommand)]
+    Corrective(corrective::CorrectiveCommand),
     /// Benchmarks.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -105,5 +109,6 @@ fn run(command: Command) -> Result<()> {
         Command::Serve(a) => serve::run(&a),
         Command::View(a) => view::run(&a),
         Command::Volume(c) => volume_cmd::run(&c),
+        Command::Corrective(c) => corrective::run(&c),
     }
 }
