@@ -3,8 +3,10 @@
 //! cache, and the scheduling of correction jobs. Pure code: no file or network I/O.
 
 pub mod attention;
+pub mod base;
 pub mod cache;
 pub mod saliency;
 pub mod screen;
 pub mod splat;
 pub mod sqrt5;
+pub mod trace;
