@@ -7,6 +7,7 @@ mod bench_serve;
 mod bench_step;
 mod bench_trace;
 mod compare;
+mod corrective;
 mod demo;
 mod eval;
 mod lpips_weights;
@@ -61,6 +62,9 @@ enum Command {
     /// Shadowed relighting of skinned characters: train, render and evaluate.
     #[command(subcommand)]
     Relight(relight_cmd::RelightCommand),
+    /// Perceptually guided corrective splatting: evaluation and benchmarks.
+    #[command(subcommand)]
+    Corrective(corrective::CorrectiveCommand),
     /// Benchmarks.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -114,5 +118,6 @@ fn run(command: Command) -> Result<()> {
         Command::View(a) => view::run(&a),
         Command::Volume(c) => volume_cmd::run(&c),
         Command::Relight(c) => relight_cmd::run(&c),
+        Command::Corrective(c) => corrective::run(&c),
     }
 }
