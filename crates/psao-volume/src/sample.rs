@@ -6,7 +6,7 @@
 use crate::codec::BrickFormat;
 use crate::grid::{floor_ivec, voxel_index, BRICK_VOXELS};
 use crate::tree::Locate;
-use crate::volume::Volume;
+use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
 
 /// Bricks kept per sampler (direct-mapped by hashed brick index); their 4³ blocks are decoded
@@ -97,7 +97,7 @@ impl<'a> Sampler<'a> {
     }
 
     /// Value of voxel (x, y, z) (each 0..8) of L3 node `leaf`.
-    #[inline]
+    #[inline(always)]
     pub fn leaf_value(&mut self, leaf: u32, x: usize, y: usize, z: usize) -> f32 {
         let brick = self.vol.tree.l3[leaf as usize].brick();
         if self.slots.is_empty() {
@@ -160,6 +160,67 @@ impl<'a> Sampler<'a> {
         }
     }
 
+    /// Trilinear value at index-space point `p` whose floor lies in L3 node `leaf` with origin
+    /// `origin` (as on a [`crate::trace::Segment`]): the same value as
+    /// [`Sampler::trilinear`] without searching the tree; corners past the node's +faces are
+    /// read through its neighbour table.
+    #[inline]
+    pub fn trilinear_in(&mut self, leaf: u32, origin: IVec3, p: Vec3) -> f32 {
+        let b = floor_ivec(p);
+        let l = b - origin;
+        if (l.x as u32) >= 8 || (l.y as u32) >= 8 || (l.z as u32) >= 8 {
+            // Rounding put the point just outside the node.
+            return self.trilinear(p);
+        }
+        let f = p - b.as_vec3();
+        let mut c = [0.0f32; 8];
+        if l.x < 7 && l.y < 7 && l.z < 7 {
+            let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
+            self.corners_in_brick(leaf, l, i0, &mut c);
+        } else {
+            for (k, v) in c.iter_mut().enumerate() {
+                let q = l + IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
+                let d = ((q.x >> 3) | ((q.y >> 3) << 1) | ((q.z >> 3) << 2)) as usize;
+                let n = if d == 0 {
+                    leaf
+                } else {
+                    self.vol.next_leaf(leaf, d)
+                };
+                let q: IVec3 = q & 7i32;
+                *v = if n == NO_LEAF {
+                    self.vol.background
+                } else {
+                    self.leaf_value(n, q.x as usize, q.y as usize, q.z as usize)
+                };
+            }
+        }
+        lerp8(&c, f)
+    }
+
+    /// The eight corners `i0 + OFF` of a trilinear sample whose cell lies inside the brick of
+    /// `leaf` (`l`: its local base voxel).
+    #[inline(always)]
+    fn corners_in_brick(&mut self, leaf: u32, l: IVec3, i0: usize, c: &mut [f32; 8]) {
+        const OFF: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
+        let brick = self.vol.tree.l3[leaf as usize].brick();
+        if self.slots.is_empty() {
+            let data = &self.vol.pool.data[brick as usize * 2048..brick as usize * 2048 + 2048];
+            for (k, o) in OFF.iter().enumerate() {
+                let at = (i0 + o) * 4;
+                c[k] = f32::from_le_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
+            }
+        } else {
+            // Halves (4-voxel blocks) touched along each axis, as 2-bit sets.
+            let half = |v: i32| (1u8 << (v >> 2)) | (1u8 << ((v + 1) >> 2));
+            let need = spread(half(l.x), half(l.y), half(l.z));
+            let s = self.slot(brick, need);
+            let d = &self.slots[s];
+            for (k, o) in OFF.iter().enumerate() {
+                c[k] = d[i0 + o];
+            }
+        }
+    }
+
     /// Trilinear value at index-space point `p` (voxel centres at integer coordinates).
     #[inline]
     pub fn trilinear(&mut self, p: Vec3) -> f32 {
@@ -173,30 +234,7 @@ impl<'a> Sampler<'a> {
                 None => return self.vol.background,
                 Some(leaf) => {
                     let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
-                    const OFF: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
-                    if self.slots.is_empty() {
-                        let brick = self.vol.tree.l3[leaf as usize].brick() as usize;
-                        let data = &self.vol.pool.data[brick * 2048..brick * 2048 + 2048];
-                        for (k, o) in OFF.iter().enumerate() {
-                            let at = (i0 + o) * 4;
-                            c[k] = f32::from_le_bytes([
-                                data[at],
-                                data[at + 1],
-                                data[at + 2],
-                                data[at + 3],
-                            ]);
-                        }
-                    } else {
-                        let brick = self.vol.tree.l3[leaf as usize].brick();
-                        // Halves (4-voxel blocks) touched along each axis, as 2-bit sets.
-                        let half = |v: i32| (1u8 << (v >> 2)) | (1u8 << ((v + 1) >> 2));
-                        let need = spread(half(l.x), half(l.y), half(l.z));
-                        let s = self.slot(brick, need);
-                        let d = &self.slots[s];
-                        for (k, o) in OFF.iter().enumerate() {
-                            c[k] = d[i0 + o];
-                        }
-                    }
+                    self.corners_in_brick(leaf, l, i0, &mut c);
                 }
             }
         } else {
@@ -226,12 +264,18 @@ impl<'a> Sampler<'a> {
                 };
             }
         }
-        let x0 = c[0] + (c[1] - c[0]) * f.x;
-        let x1 = c[2] + (c[3] - c[2]) * f.x;
-        let x2 = c[4] + (c[5] - c[4]) * f.x;
-        let x3 = c[6] + (c[7] - c[6]) * f.x;
-        let y0 = x0 + (x1 - x0) * f.y;
-        let y1 = x2 + (x3 - x2) * f.y;
-        y0 + (y1 - y0) * f.z
+        lerp8(&c, f)
     }
+}
+
+/// Trilinear interpolation of corners `c` (bit 0: +x, 1: +y, 2: +z) at fractions `f`.
+#[inline(always)]
+fn lerp8(c: &[f32; 8], f: Vec3) -> f32 {
+    let x0 = c[0] + (c[1] - c[0]) * f.x;
+    let x1 = c[2] + (c[3] - c[2]) * f.x;
+    let x2 = c[4] + (c[5] - c[4]) * f.x;
+    let x3 = c[6] + (c[7] - c[6]) * f.x;
+    let y0 = x0 + (x1 - x0) * f.y;
+    let y1 = x2 + (x3 - x2) * f.y;
+    y0 + (y1 - y0) * f.z
 }
