@@ -2,7 +2,6 @@
 //! all measured against a cached per-pixel reference (DESIGN §5).
 
 use crate::args::{FrameRange, Resolution};
-use crate::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
 use crate::png_io::{read_ao_png, write_ao_png};
 use crate::progress;
 use crate::reference::ReferenceRenderer;
@@ -12,6 +11,7 @@ use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{compare, ssao, AoImage, Metrics, SsaoSettings};
+use psao_net::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
 use psao_raster::GBuffer;
 use psao_scene::path::CameraPath;
 use psao_scene::{Animator, Scene};

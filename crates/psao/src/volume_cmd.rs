@@ -1,10 +1,10 @@
 //! `psao volume …`: inspect, convert, render and benchmark sparse volumes (DESIGN §6).
 
-use crate::cpu_time::cpu_seconds;
 use crate::png_io::write_rgb_png;
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
+use psao_net::cpu_time::cpu_seconds;
 use psao_volume::render::{self, DenseGrid};
 use psao_volume::{
     psv, vdb, BrickFormat, Camera, ClusterParams, GridClass, RenderMode, RenderSettings,

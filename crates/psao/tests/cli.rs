@@ -283,6 +283,18 @@ fn bench_step_reports_the_phases_of_its_frames() {
         ms("mbit_s") > 0.0,
         "three clients received their snapshots: {r}"
     );
+    // Memory: the structures add up to less than the process holds, and every stored point
+    // has at least its position and normal (24 bytes).
+    let structures: f64 = r["memory"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["bytes_per_point"].as_f64().unwrap())
+        .sum();
+    assert!(structures >= 24.0 && structures < ms("bytes_per_point"), "{r}");
+    assert!(ms("bytes_per_point") <= ms("peak_bytes_per_point"), "{r}");
+    assert!(ms("startup_s") > 0.0 && r["points"].as_u64().unwrap() > 0, "{r}");
+    assert!(ms("trace_ratio") > 0.0 && ms("bench_trace_mrays_s") > 0.0, "{r}");
     let o = psao(&["bench", "step", "--clients", "0"]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--clients"), "{}", stderr(&o));
