@@ -48,6 +48,35 @@ fn train_render_eval_and_bench_on_the_fox() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).contains("MB"));
+    // Same seed, one thread instead of all: the same model, byte for byte.
+    let again = dir.path().join("again.prt");
+    let out = std::process::Command::new(common::BIN)
+        .env("RAYON_NUM_THREADS", "1")
+        .args([
+            "--log",
+            "warn",
+            "relight",
+            "train",
+            "--character",
+            s(&fox),
+            "--clip",
+            "Walk",
+            "--frames",
+            "0..8",
+            "--lobes",
+            "2",
+            "--rays",
+            "24",
+            "--out",
+            s(&again),
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(
+        std::fs::read(&model).unwrap(),
+        std::fs::read(&again).unwrap()
+    );
 
     let frames = dir.path().join("frames");
     let out = psao(&[
