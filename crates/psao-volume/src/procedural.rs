@@ -59,12 +59,12 @@ impl Procedural {
         }
     }
 
-    /// Generates the grid in a cube of `size`³ voxels (16..=1024) of edge 1/`size` world
-    /// units, from `seed`.
+    /// Generates the grid in a cube of `size`³ voxels of edge 1/`size` world units, from
+    /// `seed`. `size` is 16..=512: every voxel of the cube is evaluated (512³ takes seconds).
     pub fn generate(self, size: u32, seed: u64) -> Result<SparseGrid> {
-        if !(16..=1024).contains(&size) {
+        if !(16..=512).contains(&size) {
             return Err(VolumeError::InvalidParameter(format!(
-                "procedural volume size {size} (16..=1024 voxels)"
+                "procedural volume size {size} (16..=512 voxels)"
             )));
         }
         let n = size as f32;

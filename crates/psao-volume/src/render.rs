@@ -215,7 +215,7 @@ pub fn render(vol: &Volume, cam: &Camera, st: &RenderSettings) -> Result<Image> 
     // Runs of consecutive tiles, each rendered by one sampler taken from a shared stack and
     // put back after, so decoded bricks stay warm across runs (rayon may split work into
     // many more jobs than threads; a fresh cache per job would decode everything again).
-    let runs = (4 * rayon::current_num_threads() as u32).clamp(1, tiles);
+    let runs = (16 * rayon::current_num_threads() as u32).clamp(1, tiles);
     let free: Mutex<Vec<Sampler>> = Mutex::new(Vec::new());
     let tile_pixels: Vec<Vec<(u32, f32)>> = (0..runs)
         .into_par_iter()

@@ -73,7 +73,8 @@ pub struct Segment {
 }
 
 /// Steps through the L3 nodes of `frame` hit by `ray` between `t_min` and `t_max`, skipping
-/// empty 128³ and 8³ cells in one step each (HDDA). `visit` returns `false` to stop.
+/// empty 128³ cells in one step each and walking the 8³ cells of non-empty ones with an
+/// incremental 3D DDA (HDDA). `visit` returns `false` to stop.
 pub fn march(
     vol: &Volume,
     frame: usize,
@@ -88,46 +89,61 @@ pub fn march(
     };
     let (mut t, end) = (a.max(t_min), b.min(t_max));
     let eps = 1e-4 * (1.0 + end.abs());
-    // The L2 node the previous point was in (origin, index), to skip the L1 level.
-    let mut current: Option<(IVec3, usize)> = None;
     let top = vol.tree.l1[frame].origin;
+    let forward = ray.dir.cmpgt(Vec3::ZERO);
+    let step = IVec3::select(forward, IVec3::ONE, IVec3::NEG_ONE);
+    let still = ray.dir.cmpeq(Vec3::ZERO);
+    let delta = Vec3::select(still, Vec3::INFINITY, (ray.inv * BRICK as f32).abs());
     while t < end {
         let p = floor_ivec(ray.at(t + eps));
+        let Some(n2) = vol.tree.l2_index(frame, p) else {
+            // Outside the frame, or an empty 128³ cell: jump to its exit.
+            let Locate::EmptyL2(cell) = vol.tree.locate(frame, p) else {
+                return;
+            };
+            let size = Vec3::splat(L2_SPAN as f32);
+            t = ray
+                .exit(cell.as_vec3(), cell.as_vec3() + size)
+                .min(end)
+                .max(t + eps);
+            continue;
+        };
+        // DDA over the 16³ cells of L2 node `n2`: `far` holds the parameter where the ray
+        // leaves the current cell along each axis.
         let l2_origin = top + (((p - top) >> 7i32) << 7i32);
-        let located = match current {
-            Some((o, n2)) if o == l2_origin => vol.tree.locate_in_l2(n2, o, p),
-            _ => match vol.tree.l2_index(frame, p) {
-                Some(n2) => {
-                    current = Some((l2_origin, n2));
-                    vol.tree.locate_in_l2(n2, l2_origin, p)
+        let mut c2: IVec3 = (p - l2_origin) >> 3i32;
+        let cell_lo = (l2_origin + c2 * BRICK as i32).as_vec3();
+        let plane = cell_lo + Vec3::select(forward, Vec3::splat(BRICK as f32), Vec3::ZERO);
+        let mut far = Vec3::select(still, Vec3::INFINITY, (plane - ray.origin) * ray.inv);
+        loop {
+            let next = far.min_element().min(end).max(t + eps);
+            if let Some(leaf) = vol.tree.leaf_in_l2(n2, c2) {
+                if !visit(Segment {
+                    t0: t,
+                    t1: next,
+                    leaf,
+                    origin: l2_origin + c2 * BRICK as i32,
+                }) {
+                    return;
                 }
-                None => {
-                    current = None;
-                    vol.tree.locate(frame, p)
-                }
-            },
-        };
-        let (cell, size, leaf) = match located {
-            Locate::Outside => return,
-            Locate::EmptyL2(c) => (c, L2_SPAN, None),
-            Locate::EmptyL3(c) => (c, BRICK as i32, None),
-            Locate::Leaf(i, c) => (c, BRICK as i32, Some(i)),
-        };
-        let next = ray
-            .exit(cell.as_vec3(), (cell + IVec3::splat(size)).as_vec3())
-            .min(end)
-            .max(t + eps);
-        if let Some(leaf) = leaf {
-            if !visit(Segment {
-                t0: t,
-                t1: next,
-                leaf,
-                origin: cell,
-            }) {
+            }
+            t = next;
+            if t >= end {
                 return;
             }
+            let axis = if far.x <= far.y && far.x <= far.z {
+                0
+            } else if far.y <= far.z {
+                1
+            } else {
+                2
+            };
+            c2[axis] += step[axis];
+            far[axis] += delta[axis];
+            if !(0..16).contains(&c2[axis]) {
+                break;
+            }
         }
-        t = next;
     }
 }
 

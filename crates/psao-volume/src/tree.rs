@@ -292,6 +292,14 @@ impl FlatTree {
         )
     }
 
+    /// The L3 node of cell `c2` (each coordinate 0..16) of L2 node `n2`, if any.
+    #[inline]
+    pub fn leaf_in_l2(&self, n2: usize, c2: IVec3) -> Option<u32> {
+        let node = &self.l2[n2];
+        let b2 = (c2.x + 16 * (c2.y + 16 * c2.z)) as usize;
+        test(&node.mask, b2).then(|| node.first + rank(&node.mask, node.prefix[b2 / 64] as u32, b2))
+    }
+
     /// Index of the L2 node containing `p` in `frame`, if any.
     pub fn l2_index(&self, frame: usize, p: IVec3) -> Option<usize> {
         let top = &self.l1[frame];

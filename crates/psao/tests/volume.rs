@@ -308,3 +308,55 @@ fn bad_scene_volumes_fail_with_clear_errors() {
         "{e}"
     );
 }
+
+#[test]
+fn bench_prints_one_row_per_volume_and_mode_with_the_worst_ratios_last() {
+    let out = psao(&[
+        "volume",
+        "bench",
+        "--generated",
+        "box,cloud",
+        "--size",
+        "32",
+        "--res",
+        "24x16",
+        "--reps",
+        "1",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let rows: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("| box") || l.starts_with("| cloud"))
+        .collect();
+    assert_eq!(rows.len(), 3, "{text}");
+    assert!(rows[0].contains("fog bc7/f32") && rows[1].contains("level set HDDA/dense"));
+    assert!(rows[2].starts_with("| cloud") && rows[2].contains("fog bc7/f32"));
+    let last: Vec<&str> = text.lines().rev().take(2).collect();
+    assert!(last[1].starts_with("worst fog bc7/f32:"), "{text}");
+    assert!(last[0].starts_with("worst level set HDDA/dense:"), "{text}");
+
+    let out = psao(&["volume", "bench", "--generated", "cube"]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("unknown generated volume `cube`"),
+        "{}",
+        stderr(&out)
+    );
+    let out = psao(&["volume", "bench"]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("no volume to measure"),
+        "{}",
+        stderr(&out)
+    );
+    let out = psao(&["volume", "bench", "--generated", "torus", "--size", "5000"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("16..=512"), "{}", stderr(&out));
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.vdb");
+    std::fs::write(&bad, b"not a vdb file at all").unwrap();
+    let out = psao(&["volume", "bench", bad.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("bad.vdb"), "{}", stderr(&out));
+}
