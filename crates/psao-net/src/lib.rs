@@ -8,6 +8,9 @@
 pub mod convert;
 pub mod cpu_time;
 mod error;
+pub mod glb;
+pub mod http;
+pub mod io;
 pub mod pipeline;
 mod resolution;
 pub mod serve;

@@ -78,6 +78,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         max_clients: args.max_clients,
         once: args.once,
         stop_on_ctrl_c: true,
+        scene_glb: psao_net::glb::scene_glb(&input.scene)?,
     };
     let serve = Serve::bind(server, config)?;
     println!("listening on {}", serve.local_addr());
