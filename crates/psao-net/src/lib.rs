@@ -14,6 +14,7 @@ pub mod io;
 pub mod pipeline;
 mod resolution;
 pub mod serve;
+pub mod tls;
 pub mod transport;
 pub mod view;
 

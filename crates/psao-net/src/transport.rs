@@ -4,6 +4,7 @@
 //! frame reader then judges); WebSockets arrive as HTTP upgrades at `/ws` (see
 //! [`crate::http`]).
 
+use std::path::Path;
 use std::time::Duration;
 
 use futures_util::stream::{SplitSink, SplitStream};
@@ -113,10 +114,20 @@ pub async fn websocket_server(io: BoxIo, limit: u32) -> (FrameReader, FrameWrite
     split_ws(ws)
 }
 
-/// Client side: connect to `addr`, either `HOST:PORT` (raw frames over TCP) or
-/// `ws://HOST:PORT[/PATH]` (WebSocket; the path defaults to `/ws`).
-pub async fn connect(addr: &str, limit: u32) -> Result<(FrameReader, FrameWriter), NetError> {
-    if let Some(rest) = addr.strip_prefix("ws://") {
+/// Client side: connect to `addr`: `HOST:PORT` (raw frames over TCP), `ws://HOST:PORT[/PATH]`
+/// (WebSocket; the path defaults to `/ws`) or `wss://…` (WebSocket over TLS, trusting the
+/// PEM certificates in `tls_ca`, else the Mozilla roots).
+pub async fn connect(
+    addr: &str,
+    limit: u32,
+    tls_ca: Option<&Path>,
+) -> Result<(FrameReader, FrameWriter), NetError> {
+    let (secure, rest) = match (addr.strip_prefix("ws://"), addr.strip_prefix("wss://")) {
+        (Some(rest), _) => (false, Some(rest)),
+        (_, Some(rest)) => (true, Some(rest)),
+        _ => (false, None),
+    };
+    if let Some(rest) = rest {
         let (host, path) = match rest.find('/') {
             Some(i) => (&rest[..i], &rest[i..]),
             None => (rest, "/ws"),
@@ -125,8 +136,14 @@ pub async fn connect(addr: &str, limit: u32) -> Result<(FrameReader, FrameWriter
             .await
             .map_err(NetError::io(format!("cannot connect to {host}")))?;
         let _ = tcp.set_nodelay(true);
-        let url = format!("ws://{host}{path}");
-        let io: BoxIo = Box::new(tcp);
+        let (io, url): (BoxIo, String) = if secure {
+            let connector = crate::tls::connector(tls_ca)?;
+            let name = host_name(host);
+            let io = crate::tls::connect(&connector, name, tcp).await?;
+            (io, format!("wss://{host}{path}"))
+        } else {
+            (Box::new(tcp), format!("ws://{host}{path}"))
+        };
         let (ws, _) =
             tokio_tungstenite::client_async_with_config(url, io, Some(ws_config(limit))).await?;
         Ok(split_ws(ws))
@@ -137,6 +154,15 @@ pub async fn connect(addr: &str, limit: u32) -> Result<(FrameReader, FrameWriter
         let _ = tcp.set_nodelay(true);
         Ok(split_raw(Box::new(tcp)))
     }
+}
+
+/// The host part of `HOST:PORT` (brackets of an IPv6 address removed).
+fn host_name(host_port: &str) -> &str {
+    let host = match host_port.rfind(':') {
+        Some(i) if !host_port[i..].contains(']') => &host_port[..i],
+        _ => host_port,
+    };
+    host.trim_start_matches('[').trim_end_matches(']')
 }
 
 impl FrameReader {

@@ -148,3 +148,71 @@ fn http_endpoints_answer_and_bad_requests_get_4xx() {
     let h: serde_json::Value = serde_json::from_slice(&health).unwrap();
     assert!(h["server_frame"].as_u64().unwrap() > 0, "{h}");
 }
+
+#[test]
+fn tls_serves_https_and_wss_with_a_certificate_made_here() {
+    let dir = tempfile::tempdir().unwrap();
+    let made = rcgen::generate_simple_self_signed(vec!["localhost".to_string()]).unwrap();
+    let (cert, key) = (dir.path().join("cert.pem"), dir.path().join("key.pem"));
+    std::fs::write(&cert, made.cert.pem()).unwrap();
+    std::fs::write(&key, made.signing_key.serialize_pem()).unwrap();
+    let server = Serve::start(&[
+        "--tls-cert",
+        cert.to_str().unwrap(),
+        "--tls-key",
+        key.to_str().unwrap(),
+    ]);
+    let port = server.addr.rsplit(':').next().unwrap();
+    let wss = format!("wss://localhost:{port}");
+    let view = |extra: &[&str]| {
+        Command::new(BIN)
+            .args(["--log", "warn", "view", "--connect", &wss])
+            .args(["--frames", "20", "--res", "32x18", "--retry-secs", "3"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    // Trusting the certificate: a full session over wss.
+    let o = view(&["--tls-ca", cert.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("20 frames"));
+    // Not trusting it (Mozilla roots only): refused with a certificate error.
+    let o = view(&[]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).to_lowercase().contains("certificate"),
+        "{}",
+        stderr(&o)
+    );
+    // Plain HTTP and raw frames on the TLS port get no answer, and the server goes on.
+    let answer = raw(
+        &server.addr,
+        b"GET /health HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+    );
+    assert!(!answer.starts_with(b"HTTP/1.1 200"));
+    let o = view(&["--tls-ca", cert.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn tls_refuses_files_that_are_no_certificate_or_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let junk = dir.path().join("junk.pem");
+    std::fs::write(&junk, "not a certificate\n").unwrap();
+    let o = common::psao(&[
+        "serve",
+        "--listen",
+        "127.0.0.1:0",
+        "--tls-cert",
+        junk.to_str().unwrap(),
+        "--tls-key",
+        junk.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("TLS") && err.contains("junk.pem"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let o = common::psao(&["serve", "--tls-cert", junk.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--tls-key"), "{}", stderr(&o));
+}

@@ -27,6 +27,7 @@ use tokio::sync::{mpsc, oneshot, Semaphore};
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
 use crate::http::{serve_http, Health, HttpContext};
+use crate::io::BoxIo;
 use crate::pipeline::CLIENT_HZ;
 use crate::transport::{accept, Accepted, FrameReader, FrameWriter, ReadError};
 use crate::NetError;
@@ -39,7 +40,7 @@ const ACK_WINDOW: usize = 3;
 const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// How a [`Serve`] listens and runs (the [`Server`] itself is built by the caller).
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ServeConfig {
     /// Address to listen on (TCP and WebSocket on the same port); port 0 picks a free one.
     pub listen: SocketAddr,
@@ -63,6 +64,9 @@ pub struct ServeConfig {
     pub stop_on_ctrl_c: bool,
     /// What `/scene.glb` serves (see [`crate::glb::scene_glb`]).
     pub scene_glb: Vec<u8>,
+    /// Serve every connection over TLS (https, wss, and raw frames inside TLS); see
+    /// [`crate::tls::acceptor`].
+    pub tls: Option<tokio_rustls::TlsAcceptor>,
 }
 
 /// Per-client statistics.
@@ -211,11 +215,17 @@ impl Serve {
             local,
             stop,
         } = self;
-        tracing::info!("listening on {local} (TCP and WebSocket)");
+        let scheme = if config.tls.is_some() {
+            "TLS: https, wss and raw frames"
+        } else {
+            "raw frames, HTTP and WebSocket"
+        };
+        tracing::info!("listening on {local} ({scheme})");
         let (events_tx, events_rx) = mpsc::channel::<Event>(1024);
         let health = Arc::new(Health::default());
         let http = HttpShared {
             token: config.token.clone(),
+            tls: config.tls.clone(),
             scene_glb: bytes::Bytes::from(config.scene_glb),
             scene_name: config.scene_name.clone(),
             health: health.clone(),
@@ -292,9 +302,26 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: H
                 };
                 let _ = stream.set_nodelay(true);
                 let (events, token, ctx) = (events.clone(), http.token.clone(), ctx.clone());
+                let tls = http.tls.clone();
                 tokio::spawn(async move {
                     let _permit = permit;
-                    match accept(Box::new(stream), HELLO_TIMEOUT).await {
+                    let io: BoxIo = match tls {
+                        None => Box::new(stream),
+                        Some(tls) => {
+                            match tokio::time::timeout(HELLO_TIMEOUT, tls.accept(stream)).await {
+                                Ok(Ok(s)) => Box::new(s),
+                                Ok(Err(e)) => {
+                                    tracing::info!("TLS handshake with {peer} failed: {e}");
+                                    return;
+                                }
+                                Err(_) => {
+                                    tracing::info!("TLS handshake with {peer} timed out");
+                                    return;
+                                }
+                            }
+                        }
+                    };
+                    match accept(io, HELLO_TIMEOUT).await {
                         Ok(Accepted::Frames(reader, writer)) => {
                             if let Err(e) = session(reader, writer, "tcp", events, token).await {
                                 tracing::info!("session with {peer} ended: {e}");
@@ -320,6 +347,7 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: H
 /// What the HTTP side needs from the configuration.
 struct HttpShared {
     token: Option<String>,
+    tls: Option<tokio_rustls::TlsAcceptor>,
     scene_glb: bytes::Bytes,
     scene_name: String,
     health: Arc<Health>,
