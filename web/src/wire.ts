@@ -344,7 +344,7 @@ export function decodeFrame(frame: Uint8Array, limit = MAX_SERVER_FRAME): Messag
   return decodePayload(payload);
 }
 
-function frameOf(payload: number[]): Uint8Array {
+function frameOf(payload: number[]): Uint8Array<ArrayBuffer> {
   const p = new Uint8Array(payload);
   const out = new Uint8Array(HEADER_LEN + p.length);
   out.set(MAGIC, 0);
@@ -356,7 +356,7 @@ function frameOf(payload: number[]): Uint8Array {
 }
 
 /// The frame of a hello.
-export function helloFrame(h: Hello): Uint8Array {
+export function helloFrame(h: Hello): Uint8Array<ArrayBuffer> {
   const w = new Writer();
   w.varint(0);
   w.varint(h.version);
@@ -368,7 +368,7 @@ export function helloFrame(h: Hello): Uint8Array {
 }
 
 /// The frame of a camera message.
-export function cameraFrame(c: Camera): Uint8Array {
+export function cameraFrame(c: Camera): Uint8Array<ArrayBuffer> {
   const w = new Writer();
   w.varint(2);
   w.varint(c.frame);
@@ -377,7 +377,7 @@ export function cameraFrame(c: Camera): Uint8Array {
 }
 
 /// The frame of an ack of server frame `frame`.
-export function ackFrame(frame: number): Uint8Array {
+export function ackFrame(frame: number): Uint8Array<ArrayBuffer> {
   const w = new Writer();
   w.varint(4);
   w.varint(frame);
@@ -385,7 +385,7 @@ export function ackFrame(frame: number): Uint8Array {
 }
 
 /// The frame of a bye.
-export function byeFrame(reason: string): Uint8Array {
+export function byeFrame(reason: string): Uint8Array<ArrayBuffer> {
   const w = new Writer();
   w.varint(8);
   w.string(reason);
