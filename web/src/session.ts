@@ -55,6 +55,8 @@ export class Session {
   updates = 0;
   mismatches = 0;
   lastHash: bigint | null = null;
+  /// Milliseconds spent decoding and applying updates (hash checks excluded).
+  decodeMs = 0;
   private decoder: CompactDecoder | null = null;
   private ws: WebSocket;
   private done = false;
@@ -101,11 +103,13 @@ export class Session {
       case "delta":
       case "snapshot": {
         if (!this.decoder || !this.state) return this.fail("update before the welcome", true);
+        const t0 = performance.now();
         const u = this.decoder.decode(m.delta.payload);
         if (u.snapshot !== (m.kind === "snapshot")) {
           return this.fail("the update's snapshot flag does not match its message", true);
         }
         this.state.apply(u);
+        this.decodeMs += performance.now() - t0;
         this.updates++;
         let verified = false;
         if (m.delta.stateHash !== null) {

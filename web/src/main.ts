@@ -1,0 +1,157 @@
+// The page served at `/`: connects to the server's WebSocket (`/ws`, token from `?token=`),
+// keeps the client state current, orbits a camera around the scene (bounds from
+// `/scene.glb`) so the server traces what it would show, reconnects with backoff, and shows
+// an overlay: fps, Mbit/s, server frame, updates, points, state-hash checks (`?verify=1`
+// asks the server for its hash with every update), and a clear message for a wrong token or
+// protocol version. `window.psao` exposes the same numbers to tests.
+
+import { Session } from "./session";
+import { sceneBounds } from "./bounds";
+import type { Camera } from "./wire";
+
+interface Status {
+  connected: boolean;
+  sessions: number;
+  updates: number;
+  verified: number;
+  mismatches: number;
+  serverFrame: number;
+  points: number;
+  hash: string | null;
+  message: string | null;
+  fatal: boolean;
+  mbitS: number;
+  fps: number;
+}
+
+const status: Status = {
+  connected: false,
+  sessions: 0,
+  updates: 0,
+  verified: 0,
+  mismatches: 0,
+  serverFrame: 0,
+  points: 0,
+  hash: null,
+  message: null,
+  fatal: false,
+  mbitS: 0,
+  fps: 0,
+};
+(window as unknown as { psao: Status }).psao = status;
+
+const params = new URLSearchParams(location.search);
+const token = params.get("token");
+const verify = params.get("verify") === "1";
+const wsUrl = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`;
+
+let session: Session | null = null;
+let backoff = 200;
+let received: { t: number; bytes: number }[] = [];
+
+function connect() {
+  session = new Session(
+    { url: wsUrl, token, verify, name: "psao browser viewer" },
+    {
+      welcome: () => {
+        status.connected = true;
+        status.sessions++;
+        status.message = null;
+        backoff = 200;
+      },
+      update: (u, bytes, verified) => {
+        status.updates++;
+        if (verified) status.verified++;
+        status.mismatches = session?.mismatches ?? status.mismatches;
+        status.serverFrame = Number(u.frame);
+        received.push({ t: performance.now(), bytes });
+        if (session?.lastHash != null) status.hash = session.lastHash.toString(16).padStart(16, "0");
+      },
+      closed: (reason, fatal) => {
+        status.connected = false;
+        status.message = reason;
+        status.fatal = fatal;
+        if (!fatal) {
+          setTimeout(connect, backoff);
+          backoff = Math.min(backoff * 2, 5000);
+        }
+      },
+    },
+  );
+}
+
+const overlay = document.getElementById("overlay")!;
+const message = document.getElementById("message")!;
+let frames: number[] = [];
+let cameraFrame = 0;
+let orbit: { centre: [number, number, number]; radius: number } | null = null;
+
+function countPoints(): number {
+  let n = 0;
+  for (const g of session?.state?.grids ?? []) {
+    if (!g) continue;
+    const p = g.points;
+    for (let i = 0; i < g.slotCount * 7; i++) if (p[i] >>> 31) n++;
+  }
+  return n;
+}
+
+function orbitCamera(now: number): Camera | null {
+  if (!orbit) return null;
+  const angle = (now / 20000) * 2 * Math.PI;
+  const [cx, cy, cz] = orbit.centre;
+  const d = orbit.radius * 1.5;
+  return {
+    frame: cameraFrame++,
+    position: [cx + d * Math.cos(angle), cy + orbit.radius * 0.5, cz + d * Math.sin(angle)],
+    target: orbit.centre,
+    up: [0, 1, 0],
+    fovY: Math.PI / 3,
+    near: Math.max(orbit.radius * 1e-3, 1e-3),
+    far: orbit.radius * 10,
+    aspect: window.innerWidth / Math.max(window.innerHeight, 1),
+  };
+}
+
+let lastCamera = 0;
+let lastPointCount = 0;
+function tick(now: number) {
+  frames.push(now);
+  frames = frames.filter((t) => now - t < 1000);
+  received = received.filter((r) => now - r.t < 1000);
+  status.fps = frames.length;
+  status.mbitS = (received.reduce((a, r) => a + r.bytes, 0) * 8) / 1e6;
+  if (now - lastCamera > 1000 / 30) {
+    lastCamera = now;
+    const cam = orbitCamera(now);
+    if (cam) session?.sendCamera(cam);
+  }
+  if (now - lastPointCount > 500) {
+    lastPointCount = now;
+    status.points = countPoints();
+  }
+  const w = session?.welcomeMsg;
+  overlay.textContent = [
+    `psao viewer — ${status.connected ? `connected, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}`,
+    `${status.fps} fps · ${status.mbitS.toFixed(2)} Mbit/s · server frame ${status.serverFrame}`,
+    `${status.updates} updates · ${status.points} points received · ${
+      session && session.updates > 0 ? (session.decodeMs / session.updates).toFixed(2) : "-"
+    } ms decode per update`,
+    verify
+      ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ`
+      : "state hash not checked (add ?verify=1)",
+  ].join("\n");
+  message.textContent = status.message ? (status.fatal ? `error: ${status.message}` : `${status.message}; reconnecting`) : "";
+  requestAnimationFrame(tick);
+}
+
+fetch("/scene.glb")
+  .then((r) => r.arrayBuffer())
+  .then((b) => {
+    orbit = sceneBounds(new Uint8Array(b));
+  })
+  .catch((e) => {
+    status.message = `cannot load /scene.glb: ${e}`;
+  });
+connect();
+requestAnimationFrame(tick);
