@@ -9,7 +9,9 @@ use psao_wire::{CameraMsg, InstanceEntry};
 use crate::NetError;
 
 /// Most hash buckets over all instances a client accepts from a welcome (128 bytes each:
-/// 1 GiB of grid tables).
+/// 1 GiB of grid tables). The decode limit of the largest table accepted stays under the
+/// codecs' ceiling ([`psao_delta::MAX_DECODE_LIMIT`]; tested), so every accepted table gets
+/// the whole limit it needs.
 pub const MAX_TOTAL_BUCKETS: u64 = 1 << 23;
 
 /// The wire form of an instance-table entry.
@@ -56,7 +58,13 @@ pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>, NetError
 pub fn client_decoder(name: &str, table: &[InstanceInfo]) -> Result<Box<dyn Codec>, NetError> {
     let mut codec =
         psao_delta::codec_by_name(name).map_err(NetError::codec("the server's codec"))?;
-    codec.set_decode_limit(decode_limit(table));
+    let limit = decode_limit(table);
+    tracing::debug!(
+        "decode limit {:.1} MiB for {} instances",
+        limit as f64 / f64::from(1 << 20),
+        table.len()
+    );
+    codec.set_decode_limit(limit);
     Ok(codec)
 }
 
@@ -99,5 +107,28 @@ pub fn view_of(msg: &CameraMsg) -> View {
             far: msg.far,
         },
         aspect: msg.aspect,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_largest_accepted_table_gets_its_whole_decode_limit() {
+        let entry = |bucket_count: u32| InstanceEntry {
+            origin: [0.0; 3],
+            cell_size: 0.1,
+            dims: [64; 3],
+            layout_poisson_radius: 0.025,
+            bucket_count,
+            poisson_radius: 0.025,
+            point_count: 0,
+        };
+        let largest = table_of(&[entry(1 << 22), entry(1 << 22)]).unwrap();
+        let limit = decode_limit(&largest);
+        assert!(limit > psao_delta::MAX_DECODED_BYTES, "{limit}");
+        assert!(limit <= psao_delta::MAX_DECODE_LIMIT, "{limit}");
+        assert!(table_of(&[entry(1 << 22), entry((1 << 22) + 1)]).is_err());
     }
 }
