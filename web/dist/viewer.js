@@ -641,7 +641,8 @@
     [8, 4],
     [0, 8]
   ];
-  var MAX_DECODED_BYTES = 1 << 30;
+  var MAX_DECODED_BYTES = 256 << 20;
+  var MAX_DECODE_LIMIT = 4 * 2 ** 30;
   var DeltaError = class extends Error {
   };
   function zstdContentSize(bytes) {
@@ -769,6 +770,7 @@
       this.transforms = /* @__PURE__ */ new Map();
       this.buckets = /* @__PURE__ */ new Map();
       this.cells = /* @__PURE__ */ new Map();
+      this.limit = Math.min(limit, MAX_DECODE_LIMIT);
     }
     clear() {
       this.transforms.clear();

@@ -29,8 +29,10 @@ const FIELDS: [number, number][] = [
   [8, 4],
   [0, 8],
 ];
-/// Most decompressed bytes of one update (psao-delta's MAX_DECODED_BYTES).
-export const MAX_DECODED_BYTES = 1 << 30;
+/// Most decompressed bytes of one update by default (psao-delta's MAX_DECODED_BYTES).
+export const MAX_DECODED_BYTES = 256 << 20;
+/// The ceiling of any decode limit (psao-delta's MAX_DECODE_LIMIT, 4 GiB).
+export const MAX_DECODE_LIMIT = 4 * 2 ** 30;
 
 /// A payload that does not decode.
 export class DeltaError extends Error {}
@@ -197,7 +199,9 @@ export class CompactDecoder {
   private cells = new Map<number, Map<number, Uint32Array>>();
 
   /// Most decompressed bytes accepted per update (a client sets it from its instance table).
-  constructor(private limit = MAX_DECODED_BYTES) {}
+  constructor(private limit = MAX_DECODED_BYTES) {
+    this.limit = Math.min(limit, MAX_DECODE_LIMIT);
+  }
 
   private clear() {
     this.transforms.clear();
