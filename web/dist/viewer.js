@@ -645,6 +645,13 @@
   var MAX_DECODE_LIMIT = 4 * 2 ** 30;
   var DeltaError = class extends Error {
   };
+  function emptyBucket() {
+    return {
+      lo: new Uint32Array(BUCKET_ENTRIES),
+      hi: new Uint32Array(BUCKET_ENTRIES),
+      slots: new Uint32Array(BUCKET_ENTRIES)
+    };
+  }
   function zstdContentSize(bytes) {
     if (bytes.length < 5) throw new DeltaError("corrupt compressed data: too short");
     const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
@@ -694,6 +701,20 @@
     left() {
       return this.bytes.length - this.at;
     }
+    /// A varint as a number: exact up to 7 bytes (49 bits); longer ones (which no count or
+    /// u32 delta can be) go through [`VarReader.varint`] for its checks and come back large.
+    num(what) {
+      const start = this.at;
+      let v = 0;
+      for (let k = 0; k < 7; k++) {
+        if (this.at >= this.bytes.length) throw new DeltaError(`truncated ${what}`);
+        const b = this.bytes[this.at++];
+        v += (b & 127) * 2 ** (7 * k);
+        if ((b & 128) === 0) return v;
+      }
+      this.at = start;
+      return Number(this.varint(what));
+    }
     varint(what) {
       let v = 0n;
       for (let shift = 0n; shift < 64n; shift += 7n) {
@@ -708,18 +729,18 @@
     }
     /// A count of entries that each take at least one more byte.
     count(what) {
-      const n = this.varint(what);
-      if (n > BigInt(this.left())) throw new DeltaError(`truncated ${what}`);
-      return Number(n);
+      const n = this.num(what);
+      if (n > this.left()) throw new DeltaError(`truncated ${what}`);
+      return n;
     }
     /// A zigzag delta against `prev.v`; the result must be a u32.
     delta(prev, what) {
-      const z = this.varint(what);
-      const d = z >> 1n ^ -(z & 1n);
-      const v = BigInt(prev.v) + d;
-      if (v < 0n || v > 0xffffffffn) throw new DeltaError(`bad varint in ${what}`);
-      prev.v = Number(v);
-      return prev.v;
+      const z = this.num(what);
+      const d = z % 2 === 0 ? z / 2 : -(z + 1) / 2;
+      const v = prev.v + d;
+      if (!(v >= 0 && v <= 4294967295)) throw new DeltaError(`bad varint in ${what}`);
+      prev.v = v;
+      return v;
     }
   };
   function unshuffle(planes) {
@@ -732,9 +753,6 @@
     }
     return words;
   }
-  function hashedKey(key, index) {
-    return key === 0n ? 0n : key - 1n ^ BigInt(index);
-  }
   function applyPointResidual(residual, reference) {
     let acc = VALID_BIT;
     for (const [shift, bits] of FIELDS) {
@@ -745,9 +763,9 @@
     }
     return acc >>> 0;
   }
-  function usedEntries(keys) {
+  function usedEntries(b) {
     let n = 0;
-    while (n < BUCKET_ENTRIES && keys[n] !== 0n) n++;
+    while (n < BUCKET_ENTRIES && (b.lo[n] !== 0 || b.hi[n] !== 0)) n++;
     return n;
   }
   function usedPoints(points) {
@@ -761,7 +779,7 @@
     if (at + n > plane) throw new DeltaError(`byte planes hold ${plane} records, the index stream implies ${at + n}`);
     return n;
   }
-  var EMPTY_BUCKET = { keys: new Array(BUCKET_ENTRIES).fill(0n), slots: new Array(BUCKET_ENTRIES).fill(0) };
+  var EMPTY_BUCKET = emptyBucket();
   var EMPTY_CELL = new Uint32Array(CELL_POINTS);
   var CompactDecoder = class {
     /// Most decompressed bytes accepted per update (a client sets it from its instance table).
@@ -818,29 +836,36 @@
         for (const b of bucketIds) {
           const code = s.entryCounts[entryCount++];
           const old = received2.get(b) ?? EMPTY_BUCKET;
-          const n = decodeCount(code, usedEntries(old.keys), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
-          const bucket = { keys: new Array(BUCKET_ENTRIES).fill(0n), slots: new Array(BUCKET_ENTRIES).fill(0) };
+          const n = decodeCount(code, usedEntries(old), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
+          const bucket = emptyBucket();
           for (let i = 0; i < n; i++) {
             const c = s.entryChoices[entry];
-            const kr = s.keys[entry];
+            let tLo = s.keyLo[entry];
+            let tHi = s.keyHi[entry];
             const sr = s.slots[entry];
             entry++;
-            let t;
             let slot;
             if (c === RANK_CHOICE) {
               if (sr >= slotIds.length) throw new DeltaError("bad reference choice for a bucket entry");
-              t = kr;
               slot = slotIds[sr];
             } else if (c < RANK_CHOICE) {
               const o = (i + c) % BUCKET_ENTRIES;
-              t = kr ^ hashedKey(old.keys[o], b);
+              const rLo = old.lo[o];
+              const rHi = old.hi[o];
+              if (rLo !== 0 || rHi !== 0) {
+                const mLo = rLo === 0 ? 4294967295 : rLo - 1;
+                const mHi = rLo === 0 ? rHi - 1 : rHi;
+                tLo = (tLo ^ mLo ^ b) >>> 0;
+                tHi = (tHi ^ mHi) >>> 0;
+              }
               slot = (sr ^ old.slots[o]) >>> 0;
             } else {
               throw new DeltaError("bad reference choice for a bucket entry");
             }
-            const key = (t ^ BigInt(b)) + 1n;
-            if (key > 0xffffffffffffffffn) throw new DeltaError("bad bucket key");
-            bucket.keys[i] = key;
+            const xLo = (tLo ^ b) >>> 0;
+            if (xLo === 4294967295 && tHi === 4294967295) throw new DeltaError("bad bucket key");
+            bucket.lo[i] = xLo === 4294967295 ? 0 : xLo + 1;
+            bucket.hi[i] = xLo === 4294967295 ? tHi + 1 : tHi;
             bucket.slots[i] = slot;
           }
           received2.set(b, bucket);
@@ -922,15 +947,15 @@
     const slots = unshuffle(take(entries * 4));
     const pts = unshuffle(take(points * 4));
     const transforms = unshuffle(take(transformBytes));
-    const keys = new Array(entries);
-    for (let i = 0; i < entries; i++) {
-      let lo = 0;
-      let hi = 0;
-      for (let p = 0; p < 4; p++) lo |= keyPlanes[p * entries + i] << 8 * p;
-      for (let p = 0; p < 4; p++) hi |= keyPlanes[(p + 4) * entries + i] << 8 * p;
-      keys[i] = BigInt(hi >>> 0) << 32n | BigInt(lo >>> 0);
+    const keyLo = new Uint32Array(entries);
+    const keyHi = new Uint32Array(entries);
+    for (let p = 0; p < 4; p++) {
+      for (let i = 0; i < entries; i++) {
+        keyLo[i] |= keyPlanes[p * entries + i] << 8 * p;
+        keyHi[i] |= keyPlanes[(p + 4) * entries + i] << 8 * p;
+      }
     }
-    return { entryCounts, cellLengths, entryChoices, pointChoices, keys, slots, points: pts, transforms };
+    return { entryCounts, cellLengths, entryChoices, pointChoices, keyLo, keyHi, slots, points: pts, transforms };
   }
 
   // src/state.ts
@@ -960,8 +985,25 @@
         this.points = grown;
       }
     }
-    /// Whether cell id `id` lies in the grid (psao-points' `coord_of_id`).
-    idIsValid(id) {
+    /// Whether cell id `hi · 2^32 + lo` lies in the grid (psao-points' `coord_of_id`): in
+    /// doubles below 2^53 (exact), else in BigInt.
+    idIsValid(hi, lo) {
+      const [dx, dy, dz] = this.entry.dims;
+      const slice = dx * dy * 31;
+      const row = dx * 17;
+      if (hi < 1 << 21 && slice < 2 ** 52) {
+        const id = hi * 2 ** 32 + lo;
+        let z = Math.floor(id / slice);
+        if (z * slice > id) z--;
+        const rem = id - z * slice;
+        let y = Math.floor(rem / row);
+        if (y * row > rem) y--;
+        const x = rem - y * row;
+        return x < dx && y < dy && z < dz;
+      }
+      return this.idIsValidBig(BigInt(hi) << 32n | BigInt(lo));
+    }
+    idIsValidBig(id) {
       const [dx, dy, dz] = this.entry.dims.map(BigInt);
       const slice = dx * dy * 31n;
       const row = dx * 17n;
@@ -996,10 +1038,10 @@
         for (const [b, bucket] of d.buckets) {
           const base = b * BUCKET_ENTRIES;
           for (let i = 0; i < BUCKET_ENTRIES; i++) {
-            g.keyLo[base + i] = Number(bucket.keys[i] & 0xffffffffn);
-            g.keyHi[base + i] = Number(bucket.keys[i] >> 32n);
+            g.keyLo[base + i] = bucket.lo[i];
+            g.keyHi[base + i] = bucket.hi[i];
             g.slots[base + i] = bucket.slots[i];
-            if (bucket.keys[i] !== 0n) g.ensureSlot(bucket.slots[i]);
+            if (bucket.lo[i] !== 0 || bucket.hi[i] !== 0) g.ensureSlot(bucket.slots[i]);
           }
         }
         for (const [slot, cell] of d.cells) {
@@ -1023,16 +1065,18 @@
         const g = this.grids[d.instance];
         if (!g) throw new ApplyError(`instance ${d.instance} has no grid`);
         const max = g.maxCells();
-        const mask = BigInt(g.entry.bucketCount - 1);
+        const mask = g.entry.bucketCount - 1;
         for (const [b, bucket] of d.buckets) {
           if (b >= g.entry.bucketCount) throw new ApplyError(`instance ${d.instance}: bucket ${b} out of range`);
           for (let i = 0; i < BUCKET_ENTRIES; i++) {
-            const key = bucket.keys[i];
-            if (key === 0n) continue;
+            const lo = bucket.lo[i];
+            const hi = bucket.hi[i];
+            if (lo === 0 && hi === 0) continue;
             if (bucket.slots[i] >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${bucket.slots[i]} out of range`);
-            const id = key - 1n;
-            if (!g.idIsValid(id) || (id & mask) !== BigInt(b)) {
-              throw new ApplyError(`instance ${d.instance}: bucket ${b} has an invalid cell key ${key}`);
+            const idLo = lo === 0 ? 4294967295 : lo - 1;
+            const idHi = lo === 0 ? hi - 1 : hi;
+            if (!g.idIsValid(idHi, idLo) || (idLo & mask) >>> 0 !== b) {
+              throw new ApplyError(`instance ${d.instance}: bucket ${b} has an invalid cell key`);
             }
           }
         }

@@ -37,10 +37,20 @@ export const MAX_DECODE_LIMIT = 4 * 2 ** 30;
 /// A payload that does not decode.
 export class DeltaError extends Error {}
 
-/// A bucket: 8 keys (cell id + 1, 0 = empty) and their cell slots, used entries first.
+/// A bucket: 8 keys (cell id + 1, 0 = empty; as low and high 32-bit halves) and their cell
+/// slots, used entries first. (Keys are 64-bit; BigInt per entry made decoding ~10× slower.)
 export interface Bucket {
-  keys: bigint[];
-  slots: number[];
+  lo: Uint32Array;
+  hi: Uint32Array;
+  slots: Uint32Array;
+}
+
+function emptyBucket(): Bucket {
+  return {
+    lo: new Uint32Array(BUCKET_ENTRIES),
+    hi: new Uint32Array(BUCKET_ENTRIES),
+    slots: new Uint32Array(BUCKET_ENTRIES),
+  };
 }
 
 /// One instance's changed buckets and cells.
@@ -112,6 +122,20 @@ class VarReader {
   left(): number {
     return this.bytes.length - this.at;
   }
+  /// A varint as a number: exact up to 7 bytes (49 bits); longer ones (which no count or
+  /// u32 delta can be) go through [`VarReader.varint`] for its checks and come back large.
+  num(what: string): number {
+    const start = this.at;
+    let v = 0;
+    for (let k = 0; k < 7; k++) {
+      if (this.at >= this.bytes.length) throw new DeltaError(`truncated ${what}`);
+      const b = this.bytes[this.at++];
+      v += (b & 0x7f) * 2 ** (7 * k);
+      if ((b & 0x80) === 0) return v;
+    }
+    this.at = start;
+    return Number(this.varint(what));
+  }
   varint(what: string): bigint {
     let v = 0n;
     for (let shift = 0n; shift < 64n; shift += 7n) {
@@ -126,18 +150,19 @@ class VarReader {
   }
   /// A count of entries that each take at least one more byte.
   count(what: string): number {
-    const n = this.varint(what);
-    if (n > BigInt(this.left())) throw new DeltaError(`truncated ${what}`);
-    return Number(n);
+    const n = this.num(what);
+    if (n > this.left()) throw new DeltaError(`truncated ${what}`);
+    return n;
   }
   /// A zigzag delta against `prev.v`; the result must be a u32.
   delta(prev: { v: number }, what: string): number {
-    const z = this.varint(what);
-    const d = (z >> 1n) ^ -(z & 1n);
-    const v = BigInt(prev.v) + d;
-    if (v < 0n || v > 0xffffffffn) throw new DeltaError(`bad varint in ${what}`);
-    prev.v = Number(v);
-    return prev.v;
+    const z = this.num(what);
+    // Zigzag: even z = 2d, odd z = 2|d| − 1 for negative d (exact in doubles below 2^53).
+    const d = z % 2 === 0 ? z / 2 : -(z + 1) / 2;
+    const v = prev.v + d;
+    if (!(v >= 0 && v <= 0xffffffff)) throw new DeltaError(`bad varint in ${what}`);
+    prev.v = v;
+    return v;
   }
 }
 
@@ -152,10 +177,6 @@ function unshuffle(planes: Uint8Array): Uint32Array {
   return words;
 }
 
-/// `(key − 1) XOR index` for a used entry, 0 for an empty one.
-function hashedKey(key: bigint, index: number): bigint {
-  return key === 0n ? 0n : (key - 1n) ^ BigInt(index);
-}
 
 /// Inverse of the encoder's point residual: the valid point `residual` codes against
 /// `reference`.
@@ -170,9 +191,9 @@ export function applyPointResidual(residual: number, reference: number): number 
   return acc >>> 0;
 }
 
-function usedEntries(keys: bigint[]): number {
+function usedEntries(b: Bucket): number {
   let n = 0;
-  while (n < BUCKET_ENTRIES && keys[n] !== 0n) n++;
+  while (n < BUCKET_ENTRIES && (b.lo[n] !== 0 || b.hi[n] !== 0)) n++;
   return n;
 }
 
@@ -189,7 +210,7 @@ function decodeCount(code: number, old: number, capacity: number, at: number, pl
   return n;
 }
 
-const EMPTY_BUCKET: Bucket = { keys: new Array(BUCKET_ENTRIES).fill(0n), slots: new Array(BUCKET_ENTRIES).fill(0) };
+const EMPTY_BUCKET: Bucket = emptyBucket();
 const EMPTY_CELL = new Uint32Array(CELL_POINTS);
 
 /// The decoder: its reference state lives between updates of one session.
@@ -251,29 +272,38 @@ export class CompactDecoder {
       for (const b of bucketIds) {
         const code = s.entryCounts[entryCount++];
         const old = received.get(b) ?? EMPTY_BUCKET;
-        const n = decodeCount(code, usedEntries(old.keys), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
-        const bucket: Bucket = { keys: new Array(BUCKET_ENTRIES).fill(0n), slots: new Array(BUCKET_ENTRIES).fill(0) };
+        const n = decodeCount(code, usedEntries(old), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
+        const bucket = emptyBucket();
         for (let i = 0; i < n; i++) {
           const c = s.entryChoices[entry];
-          const kr = s.keys[entry];
+          let tLo = s.keyLo[entry];
+          let tHi = s.keyHi[entry];
           const sr = s.slots[entry];
           entry++;
-          let t: bigint;
           let slot: number;
           if (c === RANK_CHOICE) {
             if (sr >= slotIds.length) throw new DeltaError("bad reference choice for a bucket entry");
-            t = kr;
             slot = slotIds[sr];
           } else if (c < RANK_CHOICE) {
+            // XOR with the reference's `(key − 1) XOR b` (0 for an empty entry).
             const o = (i + c) % BUCKET_ENTRIES;
-            t = kr ^ hashedKey(old.keys[o], b);
+            const rLo = old.lo[o];
+            const rHi = old.hi[o];
+            if (rLo !== 0 || rHi !== 0) {
+              const mLo = rLo === 0 ? 0xffffffff : rLo - 1;
+              const mHi = rLo === 0 ? rHi - 1 : rHi;
+              tLo = (tLo ^ mLo ^ b) >>> 0;
+              tHi = (tHi ^ mHi) >>> 0;
+            }
             slot = (sr ^ old.slots[o]) >>> 0;
           } else {
             throw new DeltaError("bad reference choice for a bucket entry");
           }
-          const key = (t ^ BigInt(b)) + 1n;
-          if (key > 0xffffffffffffffffn) throw new DeltaError("bad bucket key");
-          bucket.keys[i] = key;
+          // key = (t XOR b) + 1, refused when it overflows 64 bits.
+          const xLo = (tLo ^ b) >>> 0;
+          if (xLo === 0xffffffff && tHi === 0xffffffff) throw new DeltaError("bad bucket key");
+          bucket.lo[i] = xLo === 0xffffffff ? 0 : xLo + 1;
+          bucket.hi[i] = xLo === 0xffffffff ? tHi + 1 : tHi;
           bucket.slots[i] = slot;
         }
         received.set(b, bucket);
@@ -345,7 +375,8 @@ interface Sections {
   cellLengths: Uint8Array;
   entryChoices: Uint8Array;
   pointChoices: Uint8Array;
-  keys: bigint[];
+  keyLo: Uint32Array;
+  keyHi: Uint32Array;
   slots: Uint32Array;
   points: Uint32Array;
   transforms: Uint32Array;
@@ -373,13 +404,13 @@ function split(layout: IndexLayout, entries: number, points: number, bytes: Uint
   const slots = unshuffle(take(entries * 4));
   const pts = unshuffle(take(points * 4));
   const transforms = unshuffle(take(transformBytes));
-  const keys: bigint[] = new Array(entries);
-  for (let i = 0; i < entries; i++) {
-    let lo = 0;
-    let hi = 0;
-    for (let p = 0; p < 4; p++) lo |= keyPlanes[p * entries + i] << (8 * p);
-    for (let p = 0; p < 4; p++) hi |= keyPlanes[(p + 4) * entries + i] << (8 * p);
-    keys[i] = (BigInt(hi >>> 0) << 32n) | BigInt(lo >>> 0);
+  const keyLo = new Uint32Array(entries);
+  const keyHi = new Uint32Array(entries);
+  for (let p = 0; p < 4; p++) {
+    for (let i = 0; i < entries; i++) {
+      keyLo[i] |= keyPlanes[p * entries + i] << (8 * p);
+      keyHi[i] |= keyPlanes[(p + 4) * entries + i] << (8 * p);
+    }
   }
-  return { entryCounts, cellLengths, entryChoices, pointChoices, keys, slots, points: pts, transforms };
+  return { entryCounts, cellLengths, entryChoices, pointChoices, keyLo, keyHi, slots, points: pts, transforms };
 }

@@ -44,8 +44,26 @@ export class Grid {
     }
   }
 
-  /// Whether cell id `id` lies in the grid (psao-points' `coord_of_id`).
-  idIsValid(id: bigint): boolean {
+  /// Whether cell id `hi · 2^32 + lo` lies in the grid (psao-points' `coord_of_id`): in
+  /// doubles below 2^53 (exact), else in BigInt.
+  idIsValid(hi: number, lo: number): boolean {
+    const [dx, dy, dz] = this.entry.dims;
+    const slice = dx * dy * 31;
+    const row = dx * 17;
+    if (hi < 1 << 21 && slice < 2 ** 52) {
+      const id = hi * 2 ** 32 + lo;
+      let z = Math.floor(id / slice);
+      if (z * slice > id) z--;
+      const rem = id - z * slice;
+      let y = Math.floor(rem / row);
+      if (y * row > rem) y--;
+      const x = rem - y * row;
+      return x < dx && y < dy && z < dz;
+    }
+    return this.idIsValidBig((BigInt(hi) << 32n) | BigInt(lo));
+  }
+
+  private idIsValidBig(id: bigint): boolean {
     const [dx, dy, dz] = this.entry.dims.map(BigInt);
     const slice = dx * dy * 31n;
     const row = dx * 17n;
@@ -99,10 +117,10 @@ export class ClientState {
         const base = b * BUCKET_ENTRIES;
         // Entries this bucket held stop naming their slots (as InstanceGrid::set_bucket).
         for (let i = 0; i < BUCKET_ENTRIES; i++) {
-          g.keyLo[base + i] = Number(bucket.keys[i] & 0xffffffffn);
-          g.keyHi[base + i] = Number(bucket.keys[i] >> 32n);
+          g.keyLo[base + i] = bucket.lo[i];
+          g.keyHi[base + i] = bucket.hi[i];
           g.slots[base + i] = bucket.slots[i];
-          if (bucket.keys[i] !== 0n) g.ensureSlot(bucket.slots[i]);
+          if (bucket.lo[i] !== 0 || bucket.hi[i] !== 0) g.ensureSlot(bucket.slots[i]);
         }
       }
       for (const [slot, cell] of d.cells) {
@@ -127,16 +145,19 @@ export class ClientState {
       const g = this.grids[d.instance];
       if (!g) throw new ApplyError(`instance ${d.instance} has no grid`);
       const max = g.maxCells();
-      const mask = BigInt(g.entry.bucketCount - 1);
+      const mask = g.entry.bucketCount - 1;
       for (const [b, bucket] of d.buckets) {
         if (b >= g.entry.bucketCount) throw new ApplyError(`instance ${d.instance}: bucket ${b} out of range`);
         for (let i = 0; i < BUCKET_ENTRIES; i++) {
-          const key = bucket.keys[i];
-          if (key === 0n) continue;
+          const lo = bucket.lo[i];
+          const hi = bucket.hi[i];
+          if (lo === 0 && hi === 0) continue;
           if (bucket.slots[i] >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${bucket.slots[i]} out of range`);
-          const id = key - 1n;
-          if (!g.idIsValid(id) || (id & mask) !== BigInt(b)) {
-            throw new ApplyError(`instance ${d.instance}: bucket ${b} has an invalid cell key ${key}`);
+          // id = key − 1
+          const idLo = lo === 0 ? 0xffffffff : lo - 1;
+          const idHi = lo === 0 ? hi - 1 : hi;
+          if (!g.idIsValid(idHi, idLo) || ((idLo & mask) >>> 0) !== b) {
+            throw new ApplyError(`instance ${d.instance}: bucket ${b} has an invalid cell key`);
           }
         }
       }
