@@ -1611,6 +1611,179 @@
     return { centre, radius };
   }
 
+  // src/render.ts
+  var VERTEX = `#version 300 es
+layout(location = 0) in vec3 position;
+layout(location = 1) in vec3 normal;
+uniform mat4 view_proj;
+uniform mat4 model;
+out vec3 world_normal;
+void main() {
+  world_normal = mat3(model) * normal;
+  gl_Position = view_proj * model * vec4(position, 1.0);
+}`;
+  var FRAGMENT = `#version 300 es
+precision highp float;
+in vec3 world_normal;
+uniform vec3 colour;
+uniform vec3 light;
+out vec4 out_colour;
+void main() {
+  float d = abs(dot(normalize(world_normal), light));
+  out_colour = vec4(pow(colour * (0.25 + 0.75 * d), vec3(1.0 / 2.2)), 1.0);
+}`;
+  function compile(gl2, type, source) {
+    const s = gl2.createShader(type);
+    gl2.shaderSource(s, source);
+    gl2.compileShader(s);
+    if (!gl2.getShaderParameter(s, gl2.COMPILE_STATUS)) throw new Error(`shader: ${gl2.getShaderInfoLog(s)}`);
+    return s;
+  }
+  var SceneRenderer = class {
+    constructor(gl2, glb) {
+      this.gl = gl2;
+      this.meshes = [];
+      this.instances = [];
+      const p = gl2.createProgram();
+      gl2.attachShader(p, compile(gl2, gl2.VERTEX_SHADER, VERTEX));
+      gl2.attachShader(p, compile(gl2, gl2.FRAGMENT_SHADER, FRAGMENT));
+      gl2.linkProgram(p);
+      if (!gl2.getProgramParameter(p, gl2.LINK_STATUS)) throw new Error(`program: ${gl2.getProgramInfoLog(p)}`);
+      this.program = p;
+      this.uViewProj = gl2.getUniformLocation(p, "view_proj");
+      this.uModel = gl2.getUniformLocation(p, "model");
+      this.uColour = gl2.getUniformLocation(p, "colour");
+      this.uLight = gl2.getUniformLocation(p, "light");
+      this.load(glb);
+    }
+    load(glb) {
+      const gl2 = this.gl;
+      const view = new DataView(glb.buffer, glb.byteOffset, glb.byteLength);
+      const jsonLen = view.getUint32(12, true);
+      const doc = JSON.parse(new TextDecoder().decode(glb.subarray(20, 20 + jsonLen)));
+      const binAt = 20 + jsonLen + 8;
+      const bin = glb.subarray(binAt, binAt + view.getUint32(20 + jsonLen, true));
+      const data = (index) => {
+        const a = doc.accessors[index];
+        const bv = doc.bufferViews[a.bufferView];
+        const width = { SCALAR: 1, VEC3: 3, VEC4: 4 }[a.type] ?? 1;
+        const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
+        return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
+      };
+      for (const mesh of doc.meshes ?? []) {
+        const prims = [];
+        for (const prim of mesh.primitives) {
+          if (prim.attributes.POSITION === void 0 || prim.attributes.NORMAL === void 0 || prim.indices === void 0) continue;
+          const vao = gl2.createVertexArray();
+          gl2.bindVertexArray(vao);
+          for (const [loc, acc] of [
+            [0, prim.attributes.POSITION],
+            [1, prim.attributes.NORMAL]
+          ]) {
+            const buf = gl2.createBuffer();
+            gl2.bindBuffer(gl2.ARRAY_BUFFER, buf);
+            gl2.bufferData(gl2.ARRAY_BUFFER, data(acc).bytes, gl2.STATIC_DRAW);
+            gl2.enableVertexAttribArray(loc);
+            gl2.vertexAttribPointer(loc, 3, gl2.FLOAT, false, 0, 0);
+          }
+          const idx = data(prim.indices);
+          const ibo = gl2.createBuffer();
+          gl2.bindBuffer(gl2.ELEMENT_ARRAY_BUFFER, ibo);
+          gl2.bufferData(gl2.ELEMENT_ARRAY_BUFFER, idx.bytes, gl2.STATIC_DRAW);
+          gl2.bindVertexArray(null);
+          const c = doc.materials?.[prim.material ?? 0]?.pbrMetallicRoughness?.baseColorFactor ?? [0.8, 0.8, 0.8, 1];
+          prims.push({ vao, count: idx.count, colour: [c[0], c[1], c[2]] });
+        }
+        this.meshes.push(prims);
+      }
+      for (const node of doc.nodes ?? []) {
+        if (node.mesh === void 0 || !node.matrix) break;
+        this.instances.push({ mesh: node.mesh, matrix: new Float32Array(node.matrix) });
+      }
+    }
+    /// Draws the scene from `camera`; `transforms[i]`, when set, is instance i's Affine3A from
+    /// the last update (12 floats: matrix columns, then translation).
+    draw(camera, transforms) {
+      const gl2 = this.gl;
+      gl2.viewport(0, 0, gl2.drawingBufferWidth, gl2.drawingBufferHeight);
+      gl2.clearColor(0.07, 0.07, 0.07, 1);
+      gl2.clear(gl2.COLOR_BUFFER_BIT | gl2.DEPTH_BUFFER_BIT);
+      gl2.enable(gl2.DEPTH_TEST);
+      gl2.useProgram(this.program);
+      gl2.uniformMatrix4fv(this.uViewProj, false, viewProj(camera));
+      const [px, py, pz] = camera.position;
+      const [tx, ty, tz] = camera.target;
+      const l = Math.hypot(tx - px, ty - py, tz - pz) || 1;
+      gl2.uniform3f(this.uLight, (tx - px) / l, (ty - py) / l, (tz - pz) / l);
+      const model = new Float32Array(16);
+      for (const [i, inst] of this.instances.entries()) {
+        const t = transforms[i];
+        if (t) {
+          model.set([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
+        } else {
+          model.set(inst.matrix);
+        }
+        gl2.uniformMatrix4fv(this.uModel, false, model);
+        for (const p of this.meshes[inst.mesh] ?? []) {
+          gl2.uniform3f(this.uColour, p.colour[0], p.colour[1], p.colour[2]);
+          gl2.bindVertexArray(p.vao);
+          gl2.drawElements(gl2.TRIANGLES, p.count, gl2.UNSIGNED_INT, 0);
+        }
+      }
+      gl2.bindVertexArray(null);
+    }
+  };
+  function viewProj(c) {
+    const [px, py, pz] = c.position;
+    let fx = c.target[0] - px;
+    let fy = c.target[1] - py;
+    let fz = c.target[2] - pz;
+    const fl = Math.hypot(fx, fy, fz) || 1;
+    fx /= fl;
+    fy /= fl;
+    fz /= fl;
+    let sx = fy * c.up[2] - fz * c.up[1];
+    let sy = fz * c.up[0] - fx * c.up[2];
+    let sz = fx * c.up[1] - fy * c.up[0];
+    const sl = Math.hypot(sx, sy, sz) || 1;
+    sx /= sl;
+    sy /= sl;
+    sz /= sl;
+    const ux = sy * fz - sz * fy;
+    const uy = sz * fx - sx * fz;
+    const uz = sx * fy - sy * fx;
+    const view = [
+      sx,
+      ux,
+      -fx,
+      0,
+      sy,
+      uy,
+      -fy,
+      0,
+      sz,
+      uz,
+      -fz,
+      0,
+      -(sx * px + sy * py + sz * pz),
+      -(ux * px + uy * py + uz * pz),
+      fx * px + fy * py + fz * pz,
+      1
+    ];
+    const f = 1 / Math.tan(c.fovY / 2);
+    const { near: n, far: fr } = c;
+    const proj = [f / c.aspect, 0, 0, 0, 0, f, 0, 0, 0, 0, (fr + n) / (n - fr), -1, 0, 0, 2 * fr * n / (n - fr), 0];
+    const out = new Float32Array(16);
+    for (let col = 0; col < 4; col++) {
+      for (let row = 0; row < 4; row++) {
+        let s = 0;
+        for (let k = 0; k < 4; k++) s += proj[k * 4 + row] * view[col * 4 + k];
+        out[col * 4 + row] = s;
+      }
+    }
+    return out;
+  }
+
   // src/main.ts
   var status = {
     connected: false,
@@ -1624,7 +1797,8 @@
     message: null,
     fatal: false,
     mbitS: 0,
-    fps: 0
+    fps: 0,
+    drawn: 0
   };
   window.psao = status;
   var params = new URLSearchParams(location.search);
@@ -1678,20 +1852,23 @@
     }
     return n;
   }
+  var canvas = document.getElementById("view");
+  var gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true });
+  var renderer = null;
   function orbitCamera(now) {
     if (!orbit) return null;
     const angle = now / 2e4 * 2 * Math.PI;
     const [cx, cy, cz] = orbit.centre;
     const d = orbit.radius * 1.5;
     return {
-      frame: cameraFrame2++,
+      frame: cameraFrame2,
       position: [cx + d * Math.cos(angle), cy + orbit.radius * 0.5, cz + d * Math.sin(angle)],
       target: orbit.centre,
       up: [0, 1, 0],
       fovY: Math.PI / 3,
       near: Math.max(orbit.radius * 1e-3, 1e-3),
       far: orbit.radius * 10,
-      aspect: window.innerWidth / Math.max(window.innerHeight, 1)
+      aspect: canvas.width / Math.max(canvas.height, 1)
     };
   }
   var lastCamera = 0;
@@ -1702,10 +1879,21 @@
     received = received.filter((r) => now - r.t < 1e3);
     status.fps = frames.length;
     status.mbitS = received.reduce((a, r) => a + r.bytes, 0) * 8 / 1e6;
-    if (now - lastCamera > 1e3 / 30) {
+    const w0 = Math.round(window.innerWidth * devicePixelRatio);
+    const h0 = Math.round(window.innerHeight * devicePixelRatio);
+    if (canvas.width !== w0 || canvas.height !== h0) {
+      canvas.width = w0;
+      canvas.height = h0;
+    }
+    const cam = orbitCamera(now);
+    if (cam && now - lastCamera > 1e3 / 30) {
       lastCamera = now;
-      const cam = orbitCamera(now);
-      if (cam) session?.sendCamera(cam);
+      session?.sendCamera(cam);
+      cameraFrame2++;
+    }
+    if (cam && renderer) {
+      renderer.draw(cam, session?.state?.transforms ?? []);
+      status.drawn++;
     }
     if (now - lastPointCount > 500) {
       lastPointCount = now;
@@ -1716,13 +1904,16 @@
       `psao viewer \u2014 ${status.connected ? `connected, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}`,
       `${status.fps} fps \xB7 ${status.mbitS.toFixed(2)} Mbit/s \xB7 server frame ${status.serverFrame}`,
       `${status.updates} updates \xB7 ${status.points} points received \xB7 ${session && session.updates > 0 ? (session.decodeMs / session.updates).toFixed(2) : "-"} ms decode per update`,
+      renderer ? "WebGL2: the scene without AO (the AO shader is not here yet)" : "WebGL2 unavailable: nothing drawn",
       verify ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ` : "state hash not checked (add ?verify=1)"
     ].join("\n");
     message.textContent = status.message ? status.fatal ? `error: ${status.message}` : `${status.message}; reconnecting` : "";
     requestAnimationFrame(tick);
   }
   fetch("/scene.glb").then((r) => r.arrayBuffer()).then((b) => {
-    orbit = sceneBounds(new Uint8Array(b));
+    const glb = new Uint8Array(b);
+    orbit = sceneBounds(glb);
+    if (gl) renderer = new SceneRenderer(gl, glb);
   }).catch((e) => {
     status.message = `cannot load /scene.glb: ${e}`;
   });

@@ -7,6 +7,7 @@
 
 import { Session } from "./session";
 import { sceneBounds } from "./bounds";
+import { SceneRenderer } from "./render";
 import type { Camera } from "./wire";
 
 interface Status {
@@ -22,6 +23,8 @@ interface Status {
   fatal: boolean;
   mbitS: number;
   fps: number;
+  /// Frames drawn with WebGL2 (0 when it is unavailable).
+  drawn: number;
 }
 
 const status: Status = {
@@ -37,6 +40,7 @@ const status: Status = {
   fatal: false,
   mbitS: 0,
   fps: 0,
+  drawn: 0,
 };
 (window as unknown as { psao: Status }).psao = status;
 
@@ -96,20 +100,25 @@ function countPoints(): number {
   return n;
 }
 
+const canvas = document.getElementById("view") as HTMLCanvasElement;
+// Kept after compositing so that tests (and screenshots) can read the frame back.
+const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true });
+let renderer: SceneRenderer | null = null;
+
 function orbitCamera(now: number): Camera | null {
   if (!orbit) return null;
   const angle = (now / 20000) * 2 * Math.PI;
   const [cx, cy, cz] = orbit.centre;
   const d = orbit.radius * 1.5;
   return {
-    frame: cameraFrame++,
+    frame: cameraFrame,
     position: [cx + d * Math.cos(angle), cy + orbit.radius * 0.5, cz + d * Math.sin(angle)],
     target: orbit.centre,
     up: [0, 1, 0],
     fovY: Math.PI / 3,
     near: Math.max(orbit.radius * 1e-3, 1e-3),
     far: orbit.radius * 10,
-    aspect: window.innerWidth / Math.max(window.innerHeight, 1),
+    aspect: canvas.width / Math.max(canvas.height, 1),
   };
 }
 
@@ -121,10 +130,21 @@ function tick(now: number) {
   received = received.filter((r) => now - r.t < 1000);
   status.fps = frames.length;
   status.mbitS = (received.reduce((a, r) => a + r.bytes, 0) * 8) / 1e6;
-  if (now - lastCamera > 1000 / 30) {
+  const w0 = Math.round(window.innerWidth * devicePixelRatio);
+  const h0 = Math.round(window.innerHeight * devicePixelRatio);
+  if (canvas.width !== w0 || canvas.height !== h0) {
+    canvas.width = w0;
+    canvas.height = h0;
+  }
+  const cam = orbitCamera(now);
+  if (cam && now - lastCamera > 1000 / 30) {
     lastCamera = now;
-    const cam = orbitCamera(now);
-    if (cam) session?.sendCamera(cam);
+    session?.sendCamera(cam);
+    cameraFrame++;
+  }
+  if (cam && renderer) {
+    renderer.draw(cam, session?.state?.transforms ?? []);
+    status.drawn++;
   }
   if (now - lastPointCount > 500) {
     lastPointCount = now;
@@ -137,6 +157,7 @@ function tick(now: number) {
     `${status.updates} updates · ${status.points} points received · ${
       session && session.updates > 0 ? (session.decodeMs / session.updates).toFixed(2) : "-"
     } ms decode per update`,
+    renderer ? "WebGL2: the scene without AO (the AO shader is not here yet)" : "WebGL2 unavailable: nothing drawn",
     verify
       ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ`
       : "state hash not checked (add ?verify=1)",
@@ -148,7 +169,9 @@ function tick(now: number) {
 fetch("/scene.glb")
   .then((r) => r.arrayBuffer())
   .then((b) => {
-    orbit = sceneBounds(new Uint8Array(b));
+    const glb = new Uint8Array(b);
+    orbit = sceneBounds(glb);
+    if (gl) renderer = new SceneRenderer(gl, glb);
   })
   .catch((e) => {
     status.message = `cannot load /scene.glb: ${e}`;

@@ -1,7 +1,7 @@
 // The bundled viewer in Debian's headless chromium (puppeteer-core; CHROMIUM overrides
 // /usr/bin/chromium) against a real `psao serve`: it reaches the server's state hash on every
 // update, shows a clear message for a wrong token, and reconnects to a restarted server and
-// converges again. WebGL is not used yet, so no GPU flags are needed.
+// converges again; WebGL2 (SwiftShader) draws the scene.
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { spawn, type ChildProcess } from "node:child_process";
@@ -33,6 +33,8 @@ before(async () => {
       "--disable-background-networking",
       "--disable-component-update",
       "--disable-sync",
+      "--use-angle=swiftshader",
+      "--enable-unsafe-swiftshader",
       `--user-data-dir=${profile}`,
     ],
   });
@@ -63,7 +65,7 @@ function drive(addr: string, frames: number): Promise<number> {
   });
 }
 
-type Status = { sessions: number; updates: number; verified: number; mismatches: number; message: string | null; fatal: boolean };
+type Status = { drawn: number; sessions: number; updates: number; verified: number; mismatches: number; message: string | null; fatal: boolean };
 
 async function statusOf(page: Page): Promise<Status> {
   return page.evaluate(() => (window as unknown as { psao: Status }).psao);
@@ -98,6 +100,21 @@ test("in chromium the viewer's state hash equals the server's", { timeout: 120_0
     assert.equal(await drive(addr, 120), 0);
     const s = await until(page, "verified updates", (s) => s.verified >= 3);
     assert.equal(s.mismatches, 0);
+    await until(page, "a WebGL2 frame", (s) => s.drawn > 0);
+    // Share of the canvas the scene covers (pixels far from the clear colour).
+    const covered = await page.evaluate(() => {
+      const view = document.getElementById("view") as HTMLCanvasElement;
+      const c = document.createElement("canvas");
+      c.width = view.width;
+      c.height = view.height;
+      const ctx = c.getContext("2d")!;
+      ctx.drawImage(view, 0, 0);
+      const px = ctx.getImageData(0, 0, c.width, c.height).data;
+      let n = 0;
+      for (let i = 0; i < px.length; i += 4) if (Math.max(px[i], px[i + 1], px[i + 2]) > 40) n++;
+      return n / (c.width * c.height);
+    });
+    assert.ok(covered > 0.05, `the scene covers ${covered} of the canvas`);
     await page.screenshot({ path: join(fileURLToPath(new URL(".", import.meta.url)), "viewer.png") });
   } finally {
     await page.close();
