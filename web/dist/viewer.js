@@ -1798,7 +1798,9 @@ void main() {
     fatal: false,
     mbitS: 0,
     fps: 0,
-    drawn: 0
+    drawn: 0,
+    camera: null,
+    autoOrbit: true
   };
   window.psao = status;
   var params = new URLSearchParams(location.search);
@@ -1855,19 +1857,66 @@ void main() {
   var canvas = document.getElementById("view");
   var gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true });
   var renderer = null;
+  var control = { auto: true, yaw: 0, pitch: 0.3, distance: 0, keys: /* @__PURE__ */ new Set(), last: 0 };
+  canvas.addEventListener("mousedown", (e) => {
+    control.auto = false;
+    const move = (m) => {
+      control.yaw += m.movementX * 5e-3;
+      control.pitch = Math.max(-1.5, Math.min(1.5, control.pitch + m.movementY * 5e-3));
+    };
+    const up = () => {
+      window.removeEventListener("mousemove", move);
+      window.removeEventListener("mouseup", up);
+    };
+    window.addEventListener("mousemove", move);
+    window.addEventListener("mouseup", up);
+    e.preventDefault();
+  });
+  canvas.addEventListener(
+    "wheel",
+    (e) => {
+      control.auto = false;
+      const r = orbit?.radius ?? 1;
+      control.distance = Math.max(r * 0.01, Math.min(r * 20, control.distance * Math.exp(e.deltaY * 1e-3)));
+      e.preventDefault();
+    },
+    { passive: false }
+  );
+  window.addEventListener("keydown", (e) => {
+    if (e.key === " ") control.auto = true;
+    else control.keys.add(e.key.toLowerCase());
+  });
+  window.addEventListener("keyup", (e) => control.keys.delete(e.key.toLowerCase()));
   function orbitCamera(now) {
     if (!orbit) return null;
-    const angle = now / 2e4 * 2 * Math.PI;
-    const [cx, cy, cz] = orbit.centre;
-    const d = orbit.radius * 1.5;
+    const dt = control.last ? Math.min((now - control.last) / 1e3, 0.1) : 0;
+    control.last = now;
+    if (control.distance === 0) control.distance = orbit.radius * 1.5;
+    if (control.auto) control.yaw += dt * (2 * Math.PI / 20);
+    const dir = [
+      -Math.cos(control.pitch) * Math.cos(control.yaw),
+      -Math.sin(control.pitch),
+      -Math.cos(control.pitch) * Math.sin(control.yaw)
+    ];
+    const speed = orbit.radius * 0.5 * dt;
+    const k = control.keys;
+    const fwd = (k.has("w") ? 1 : 0) - (k.has("s") ? 1 : 0);
+    const side = (k.has("d") ? 1 : 0) - (k.has("a") ? 1 : 0);
+    const lift = (k.has("e") ? 1 : 0) - (k.has("q") ? 1 : 0);
+    if (fwd || side || lift) control.auto = false;
+    const c = orbit.centre;
+    const right = [-dir[2], 0, dir[0]];
+    const rl = Math.hypot(right[0], right[2]) || 1;
+    for (let i = 0; i < 3; i++) c[i] += speed * (fwd * dir[i] + side * right[i] / rl + (i === 1 ? lift : 0));
+    const d = control.distance;
     return {
       frame: cameraFrame2,
-      position: [cx + d * Math.cos(angle), cy + orbit.radius * 0.5, cz + d * Math.sin(angle)],
-      target: orbit.centre,
+      position: [c[0] - d * dir[0], c[1] - d * dir[1], c[2] - d * dir[2]],
+      target: [c[0], c[1], c[2]],
       up: [0, 1, 0],
       fovY: Math.PI / 3,
-      near: Math.max(orbit.radius * 1e-3, 1e-3),
-      far: orbit.radius * 10,
+      near: Math.max(d * 1e-3, 1e-3),
+      far: (d + orbit.radius) * 4,
       aspect: canvas.width / Math.max(canvas.height, 1)
     };
   }
@@ -1886,6 +1935,8 @@ void main() {
       canvas.height = h0;
     }
     const cam = orbitCamera(now);
+    status.camera = cam;
+    status.autoOrbit = control.auto;
     if (cam && now - lastCamera > 1e3 / 30) {
       lastCamera = now;
       session?.sendCamera(cam);

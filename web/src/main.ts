@@ -25,6 +25,10 @@ interface Status {
   fps: number;
   /// Frames drawn with WebGL2 (0 when it is unavailable).
   drawn: number;
+  /// The camera drawn and sent last.
+  camera: Camera | null;
+  /// Whether the camera orbits by itself (until the user moves it).
+  autoOrbit: boolean;
 }
 
 const status: Status = {
@@ -41,6 +45,8 @@ const status: Status = {
   mbitS: 0,
   fps: 0,
   drawn: 0,
+  camera: null,
+  autoOrbit: true,
 };
 (window as unknown as { psao: Status }).psao = status;
 
@@ -105,19 +111,70 @@ const canvas = document.getElementById("view") as HTMLCanvasElement;
 const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true });
 let renderer: SceneRenderer | null = null;
 
+/// The camera: it orbits the scene by itself until the user drags (orbit), scrolls (zoom)
+/// or flies (W/A/S/D forward/left/back/right, Q/E down/up); Space resumes the auto-orbit.
+const control = { auto: true, yaw: 0, pitch: 0.3, distance: 0, keys: new Set<string>(), last: 0 };
+
+canvas.addEventListener("mousedown", (e) => {
+  control.auto = false;
+  const move = (m: MouseEvent) => {
+    control.yaw += m.movementX * 0.005;
+    control.pitch = Math.max(-1.5, Math.min(1.5, control.pitch + m.movementY * 0.005));
+  };
+  const up = () => {
+    window.removeEventListener("mousemove", move);
+    window.removeEventListener("mouseup", up);
+  };
+  window.addEventListener("mousemove", move);
+  window.addEventListener("mouseup", up);
+  e.preventDefault();
+});
+canvas.addEventListener(
+  "wheel",
+  (e) => {
+    control.auto = false;
+    const r = orbit?.radius ?? 1;
+    control.distance = Math.max(r * 0.01, Math.min(r * 20, control.distance * Math.exp(e.deltaY * 0.001)));
+    e.preventDefault();
+  },
+  { passive: false },
+);
+window.addEventListener("keydown", (e) => {
+  if (e.key === " ") control.auto = true;
+  else control.keys.add(e.key.toLowerCase());
+});
+window.addEventListener("keyup", (e) => control.keys.delete(e.key.toLowerCase()));
+
 function orbitCamera(now: number): Camera | null {
   if (!orbit) return null;
-  const angle = (now / 20000) * 2 * Math.PI;
-  const [cx, cy, cz] = orbit.centre;
-  const d = orbit.radius * 1.5;
+  const dt = control.last ? Math.min((now - control.last) / 1000, 0.1) : 0;
+  control.last = now;
+  if (control.distance === 0) control.distance = orbit.radius * 1.5;
+  if (control.auto) control.yaw += dt * ((2 * Math.PI) / 20);
+  const dir = [
+    -Math.cos(control.pitch) * Math.cos(control.yaw),
+    -Math.sin(control.pitch),
+    -Math.cos(control.pitch) * Math.sin(control.yaw),
+  ];
+  const speed = orbit.radius * 0.5 * dt;
+  const k = control.keys;
+  const fwd = (k.has("w") ? 1 : 0) - (k.has("s") ? 1 : 0);
+  const side = (k.has("d") ? 1 : 0) - (k.has("a") ? 1 : 0);
+  const lift = (k.has("e") ? 1 : 0) - (k.has("q") ? 1 : 0);
+  if (fwd || side || lift) control.auto = false;
+  const c = orbit.centre;
+  const right = [-dir[2], 0, dir[0]];
+  const rl = Math.hypot(right[0], right[2]) || 1;
+  for (let i = 0; i < 3; i++) c[i] += speed * (fwd * dir[i] + (side * right[i]) / rl + (i === 1 ? lift : 0));
+  const d = control.distance;
   return {
     frame: cameraFrame,
-    position: [cx + d * Math.cos(angle), cy + orbit.radius * 0.5, cz + d * Math.sin(angle)],
-    target: orbit.centre,
+    position: [c[0] - d * dir[0], c[1] - d * dir[1], c[2] - d * dir[2]],
+    target: [c[0], c[1], c[2]],
     up: [0, 1, 0],
     fovY: Math.PI / 3,
-    near: Math.max(orbit.radius * 1e-3, 1e-3),
-    far: orbit.radius * 10,
+    near: Math.max(d * 1e-3, 1e-3),
+    far: (d + orbit.radius) * 4,
     aspect: canvas.width / Math.max(canvas.height, 1),
   };
 }
@@ -137,6 +194,8 @@ function tick(now: number) {
     canvas.height = h0;
   }
   const cam = orbitCamera(now);
+  status.camera = cam;
+  status.autoOrbit = control.auto;
   if (cam && now - lastCamera > 1000 / 30) {
     lastCamera = now;
     session?.sendCamera(cam);

@@ -65,7 +65,8 @@ function drive(addr: string, frames: number): Promise<number> {
   });
 }
 
-type Status = { drawn: number; sessions: number; updates: number; verified: number; mismatches: number; message: string | null; fatal: boolean };
+type Cam = { position: number[]; target: number[] };
+type Status = { autoOrbit: boolean; camera: Cam | null; drawn: number; sessions: number; updates: number; verified: number; mismatches: number; message: string | null; fatal: boolean };
 
 async function statusOf(page: Page): Promise<Status> {
   return page.evaluate(() => (window as unknown as { psao: Status }).psao);
@@ -115,6 +116,20 @@ test("in chromium the viewer's state hash equals the server's", { timeout: 120_0
       return n / (c.width * c.height);
     });
     assert.ok(covered > 0.05, `the scene covers ${covered} of the canvas`);
+    // Dragging takes the camera over from the auto-orbit; W flies it forward.
+    assert.equal((await statusOf(page)).autoOrbit, true);
+    await page.mouse.move(400, 300);
+    await page.mouse.down();
+    await page.mouse.move(500, 320, { steps: 5 });
+    await page.mouse.up();
+    const held = await until(page, "the drag", (s) => !s.autoOrbit);
+    await page.keyboard.down("w");
+    await new Promise((r) => setTimeout(r, 500));
+    await page.keyboard.up("w");
+    const flown = await statusOf(page);
+    const moved = Math.hypot(...[0, 1, 2].map((i) => flown.camera!.target[i] - held.camera!.target[i]));
+    assert.ok(moved > 0, "W did not move the camera");
+    assert.equal(flown.autoOrbit, false);
     await page.screenshot({ path: join(fileURLToPath(new URL(".", import.meta.url)), "viewer.png") });
   } finally {
     await page.close();
