@@ -1,6 +1,8 @@
-//! psao networking: a server streaming AO updates to many clients over TCP and WebSocket
-//! ([`serve`]), a headless client following a camera path ([`view`]), the frame transports
-//! and wire conversions they share, and the in-process split pipeline ([`pipeline`]).
+//! psao networking: a server streaming AO updates to many clients over TCP, HTTP/WebSocket
+//! and TLS ([`serve`], [`http`], [`tls`]), a headless client following a camera path
+//! ([`view`]), the frame transports and wire conversions they share, the in-process split
+//! pipeline ([`pipeline`]), the served scene as binary glTF ([`glb`]), and the start points
+//! kept on disk between runs ([`start_cache`]).
 //!
 //! Everything here is a library: the `psao` binary only parses arguments, loads scenes and
 //! prints; another program can embed a server or a client the same way.
@@ -14,6 +16,7 @@ pub mod io;
 pub mod pipeline;
 mod resolution;
 pub mod serve;
+pub mod start_cache;
 pub mod tls;
 pub mod transport;
 pub mod view;

@@ -30,6 +30,8 @@ pub struct PipelineConfig {
     pub res: Resolution,
     /// The participating medium the server's AO rays pass through (the scene's volume).
     pub medium: Option<Arc<dyn Medium>>,
+    /// Folder of stored start points ([`crate::start_cache`]); `None` generates them afresh.
+    pub points_cache: Option<std::path::PathBuf>,
 }
 
 /// What happened in one client frame.
@@ -95,7 +97,12 @@ impl<'a> Pipeline<'a> {
                 config.server_hz
             )));
         }
-        let mut server = Server::with_medium(scene, config.server, config.medium.clone())?;
+        let mut server = crate::start_cache::start_server(
+            scene,
+            config.server,
+            config.medium.clone(),
+            config.points_cache.as_deref(),
+        )?;
         let client_id = server.add_client();
         let table = server.instance_table();
         let client = ClientState::new(&table);

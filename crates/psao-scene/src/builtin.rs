@@ -14,9 +14,17 @@ mod tests;
 
 use glam::{Affine3A, Quat, Vec3, Vec4};
 
+use crate::light::{Light, LightShape};
 use crate::model::{Instance, Material, Mesh, Node, Scene, DEFAULT_AO_RADIUS};
 
 /// The default scene (about 140k instanced triangles, four animated objects looping over 10 s).
+///
+/// Non-diffuse objects for corrections: chrome balls on the dais pedestals, glazed amphorae,
+/// a glass vase on the table, the polished dais railing, the iron grille and the brass
+/// pendulum; their base colours are those of the diffuse materials they had, so the base image
+/// and the AO are as without them. One sun light, from the direction of the client's default
+/// shading, with the irradiance `0.5·π` that makes a white Lambertian surface as bright as the
+/// client's direct term.
 pub fn default_scene() -> Scene {
     let mut b = SceneBuilder::default();
     let palette = Palette::new(&mut b);
@@ -24,6 +32,13 @@ pub fn default_scene() -> Scene {
     props::build(&mut b, &palette);
     movers::build(&mut b, &palette);
     let mut scene = b.scene;
+    scene.lights.push(Light {
+        shape: LightShape::Sun {
+            direction: Vec3::new(0.35, 1.0, 0.6).normalize(),
+        },
+        color: Vec3::ONE,
+        power: 0.5 * std::f32::consts::PI,
+    });
     scene.playing = (0..scene.animations.len()).collect();
     scene.ao_radius = DEFAULT_AO_RADIUS;
     scene
@@ -61,6 +76,14 @@ struct Palette {
     brass: usize,
     terracotta: usize,
     paint: usize,
+    /// Chrome with the stone's base colour (the base frame looks the same; corrections mirror).
+    chrome: usize,
+    /// Glazed terracotta: glossy.
+    glaze: usize,
+    /// Terracotta-tinted glass.
+    glass: usize,
+    /// Polished iron.
+    polished_iron: usize,
 }
 
 impl Palette {
@@ -76,6 +99,14 @@ impl Palette {
             brass: b.material("brass", [0.75, 0.60, 0.30], 1.0, 0.25),
             terracotta: b.material("terracotta", [0.62, 0.34, 0.22], 0.0, 0.9),
             paint: b.material("painted_red", [0.60, 0.12, 0.10], 0.0, 0.6),
+            chrome: b.material("chrome", [0.62, 0.60, 0.56], 1.0, 0.02),
+            glaze: b.material("glaze", [0.62, 0.34, 0.22], 0.0, 0.12),
+            glass: {
+                let m = b.material("glass", [0.62, 0.34, 0.22], 0.0, 0.0);
+                b.scene.materials[m].transmission = 1.0;
+                m
+            },
+            polished_iron: b.material("polished_iron", [0.20, 0.20, 0.21], 1.0, 0.1),
         }
     }
 }

@@ -228,15 +228,23 @@ fn material(m: &::gltf::Material, masks: &MaskImages, path: &Path) -> Result<Mat
         }
         _ => None,
     };
-    Ok(Material {
+    let transmission = m.transmission().map_or(0.0, |t| t.transmission_factor());
+    let ior = m.ior().unwrap_or(crate::model::DEFAULT_IOR);
+    let material = Material {
         name,
         base_color,
         double_sided: m.double_sided(),
         alpha_mode,
         metallic,
         roughness,
+        transmission,
+        ior,
         alpha_texture,
-    })
+    };
+    material.check().map_err(|e| {
+        SceneError::parse(path, "glTF", format!("material '{}': {e}", material.name))
+    })?;
+    Ok(material)
 }
 
 fn wrap(mode: ::gltf::texture::WrappingMode) -> Wrap {

@@ -55,8 +55,13 @@ pub struct Material {
     pub alpha_mode: AlphaMode,
     /// glTF metallic factor (0 for OBJ).
     pub metallic: f32,
-    /// glTF roughness factor (1 for OBJ).
+    /// glTF roughness factor (OBJ: `√(2 / (Ns + 2))` when `Ks` is non-black, else 1).
     pub roughness: f32,
+    /// Fraction of light transmitted through the surface, in [0, 1] (glTF
+    /// `KHR_materials_transmission`; OBJ: `1 − d`).
+    pub transmission: f32,
+    /// Index of refraction (glTF `KHR_materials_ior`, OBJ `Ni`; default 1.5), in [1, 5].
+    pub ior: f32,
     /// Alpha channel of the base-colour texture, loaded only for [`AlphaMode::Mask`]
     /// materials whose texture has one (`None`: the alpha is `base_color.w` everywhere).
     pub alpha_texture: Option<AlphaTexture>,
@@ -71,15 +76,50 @@ impl Default for Material {
             alpha_mode: AlphaMode::Opaque,
             metallic: 0.0,
             roughness: 1.0,
+            transmission: 0.0,
+            ior: DEFAULT_IOR,
             alpha_texture: None,
         }
     }
 }
 
+/// Default index of refraction (glass-like dielectrics; glTF's default).
+pub const DEFAULT_IOR: f32 = 1.5;
+
+/// Roughness below which a dielectric counts as glossy (see [`Material::is_non_diffuse`]).
+pub const GLOSSY_ROUGHNESS: f32 = 0.3;
+
 impl Material {
-    /// True for glossy or metallic surfaces that a purely diffuse solution cannot shade.
+    /// The non-diffuse rule: a surface whose look a view-independent (diffuse + AO) solution
+    /// cannot show — metallic (`metallic > 0.5`), glossy (`roughness < 0.3`) or transmissive
+    /// (`transmission > 0`). Such surfaces get ray-traced corrections.
     pub fn is_non_diffuse(&self) -> bool {
-        self.metallic > 0.5 || self.roughness < 0.3
+        self.metallic > 0.5 || self.roughness < GLOSSY_ROUGHNESS || self.transmission > 0.0
+    }
+
+    /// Checks the shading parameters: base colour components, metallic, roughness and
+    /// transmission in [0, 1], `ior` in [1, 5], all finite; the message names the value.
+    pub fn check(&self) -> Result<(), String> {
+        let unit = |what: &str, v: f32| {
+            if (0.0..=1.0).contains(&v) {
+                Ok(())
+            } else {
+                Err(format!("{what} must be in [0, 1], got {v}"))
+            }
+        };
+        for (c, v) in ["red", "green", "blue", "alpha"]
+            .iter()
+            .zip(self.base_color.to_array())
+        {
+            unit(&format!("base colour {c}"), v)?;
+        }
+        unit("metallic", self.metallic)?;
+        unit("roughness", self.roughness)?;
+        unit("transmission", self.transmission)?;
+        if !(1.0..=5.0).contains(&self.ior) {
+            return Err(format!("ior must be in [1, 5], got {}", self.ior));
+        }
+        Ok(())
     }
     /// True when AO rays pass through this material's geometry.
     pub fn skipped_by_rays(&self) -> bool {
@@ -269,6 +309,8 @@ pub struct Scene {
     pub walkers: Vec<Walker>,
     /// AO ray length in scene units (DESIGN §2 default 0.6).
     pub ao_radius: f32,
+    /// Light sources for ray-traced corrections.
+    pub lights: Vec<crate::light::Light>,
 }
 
 /// Default AO radius in metres (DESIGN §2).

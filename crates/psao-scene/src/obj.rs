@@ -63,6 +63,9 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
                 material.base_color = c;
             }
         }
+        if let Some(m) = mtl {
+            apply_mtl_specular(&mut material, m, path)?;
+        }
         scene.materials.push(material);
         mesh.material = scene.materials.len() - 1;
         scene.meshes.push(mesh);
@@ -77,6 +80,44 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
         return Err(SceneError::parse(path, "OBJ", "no triangles found"));
     }
     Ok(scene)
+}
+
+/// Reads the non-diffuse part of an MTL material: `Ks` and `Ns` give the roughness
+/// `√(2 / (Ns + 2))` (the Blinn–Phong exponent's usual microfacet match) when `Ks` is not black,
+/// `d` (dissolve) gives `transmission = 1 − d` and `Ni` the index of refraction. Values outside
+/// their ranges (Ks or d outside [0, 1], negative Ns, Ni outside [1, 5]) are errors.
+fn apply_mtl_specular(
+    material: &mut Material,
+    m: &tobj::Material,
+    path: &Path,
+) -> Result<(), SceneError> {
+    let bad =
+        |what: String| SceneError::parse(path, "OBJ", format!("material '{}': {what}", m.name));
+    let ks = m.specular.unwrap_or([0.0; 3]);
+    if ks.iter().any(|k| !(0.0..=1.0).contains(k)) {
+        return Err(bad(format!("Ks must be in [0, 1], got {ks:?}")));
+    }
+    if let Some(ns) = m.shininess {
+        if !(ns.is_finite() && ns >= 0.0) {
+            return Err(bad(format!("Ns must be a non-negative number, got {ns}")));
+        }
+        if ks.iter().any(|&k| k > 0.0) {
+            material.roughness = (2.0 / (ns + 2.0)).sqrt();
+        }
+    }
+    if let Some(d) = m.dissolve {
+        if !(0.0..=1.0).contains(&d) {
+            return Err(bad(format!("d must be in [0, 1], got {d}")));
+        }
+        material.transmission = 1.0 - d;
+    }
+    if let Some(ni) = m.optical_density {
+        if !(1.0..=5.0).contains(&ni) {
+            return Err(bad(format!("Ni must be in [1, 5], got {ni}")));
+        }
+        material.ior = ni;
+    }
+    Ok(())
 }
 
 /// One `tobj` mesh to a [`Mesh`] (material assigned by the caller); `None` when empty.

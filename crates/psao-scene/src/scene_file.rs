@@ -21,7 +21,24 @@
 //! density_scale = 2.0                   # optional (1): extinction per metre at the densest voxel
 //! format = "f16"                        # optional: in-memory bricks for .vdb (f32|f16|unorm8|bc4|bc7)
 //! frame = 0                             # optional: the flip-book frame used (no playback)
+//!
+//! [[light]]                             # optional, any number: lights for ray-traced corrections
+//! kind = "sun"                          # sun | point | rect
+//! direction = [0.35, 1.0, 0.6]          # sun: towards the light
+//! position = [0.0, 3.0, 0.0]            # point; rect: its centre
+//! size = [1.0, 0.5]                     # rect: edge lengths
+//! normal = [0.0, -1.0, 0.0]             # rect: the side it emits to (default down)
+//! color = [1.0, 1.0, 1.0]               # optional, components in [0, 1]
+//! power = 2.0                           # ≥ 0: sun irradiance, point intensity, rect radiance
+//!
+//! [[material]]                          # optional, any number: override materials by name
+//! name = "stone"                        # every material of this name, in every asset
+//! preset = "chrome"                     # optional: chrome | mirror | glossy | glass
+//! base_color = [0.9, 0.9, 0.9]          # optional, and any of metallic, roughness,
+//! roughness = 0.05                      #   transmission (all in [0, 1]) and ior (in [1, 5])
 //! ```
+//!
+//! Lights of the built-in default scene come along with it (moved by the asset transform).
 //!
 //! `file` may also be `builtin:sphere` (radius 0.5), `builtin:box` (1 m cube) or
 //! `builtin:cylinder` (radius 0.5, 1 m high, standing on y = 0), each centred on the origin
@@ -49,6 +66,7 @@ use crate::load::{load_asset, LoadedScene};
 use crate::model::{Node, Scene, DEFAULT_AO_RADIUS};
 
 mod motion;
+mod shading;
 mod volume;
 
 use motion::{KeysEntry, WalkEntry};
@@ -68,6 +86,10 @@ struct SceneFile {
     asset: Vec<AssetEntry>,
     #[serde(default)]
     volume: Vec<VolumeEntry>,
+    #[serde(default)]
+    light: Vec<shading::LightEntry>,
+    #[serde(default)]
+    material: Vec<shading::MaterialEntry>,
 }
 
 #[derive(Deserialize)]
@@ -181,6 +203,12 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
         }
     }
 
+    shading::apply_overrides(&mut scene, &file.material).map_err(bad)?;
+    for (i, entry) in file.light.iter().enumerate() {
+        let light = shading::light(entry).map_err(|m| bad(format!("light {i}: {m}")))?;
+        scene.lights.push(light);
+    }
+
     if file.volume.len() > 1 {
         return Err(bad(format!(
             "{} [[volume]] entries: at most one volume is supported",
@@ -280,6 +308,8 @@ fn append(dst: &mut Scene, src: Scene, wrapper: Node, playing: Vec<usize>) -> Op
         m
     }));
     dst.materials.extend(src.materials);
+    dst.lights
+        .extend(src.lights.iter().map(|l| l.transformed(&asset)));
     dst.instances.extend(src.instances.into_iter().map(|mut i| {
         i.mesh += mesh_base;
         i.node = i.node.map(|n| n + node_base);
@@ -353,6 +383,7 @@ mod tests {
             playing: vec![0],
             walkers: Vec::new(),
             ao_radius: DEFAULT_AO_RADIUS,
+            lights: Vec::new(),
         }
     }
 

@@ -38,6 +38,14 @@ pub struct ServerTuning {
     /// `everything` (every visible point each server frame, the published system's approach).
     #[arg(long, value_enum, default_value = "proximity")]
     pub invalidation: InvalidationArg,
+    /// Folder where generated, burial-tested points are kept between runs, so a restart with
+    /// the same scene and settings skips making them (default: `$PSAO_CACHE_DIR/points`,
+    /// `$XDG_CACHE_HOME/psao/points` or `~/.cache/psao/points`).
+    #[arg(long)]
+    pub points_cache: Option<PathBuf>,
+    /// Generate the points afresh and keep none on disk.
+    #[arg(long, conflicts_with = "points_cache")]
+    pub no_points_cache: bool,
 }
 
 /// `--invalidation` values.
@@ -80,7 +88,18 @@ impl ServerTuning {
             codec: self.codec.clone(),
             res,
             medium: None,
+            points_cache: self.points_cache_dir(),
         })
+    }
+
+    /// The folder of stored start points, if any.
+    pub fn points_cache_dir(&self) -> Option<PathBuf> {
+        if self.no_points_cache {
+            return None;
+        }
+        self.points_cache
+            .clone()
+            .or_else(psao_net::start_cache::default_dir)
     }
 }
 

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use psao_net::serve::{Serve, ServeConfig};
+use psao_net::start_cache::start_server;
 use psao_net::Resolution;
-use psao_server::Server;
 
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
@@ -69,8 +69,13 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             height: 1,
         },
     )?;
-    let server = Server::with_medium(&input.scene, tuning.server, input.medium())
-        .context("cannot start the server (point generation or tracer)")?;
+    let server = start_server(
+        &input.scene,
+        tuning.server,
+        input.medium(),
+        tuning.points_cache.as_deref(),
+    )
+    .context("cannot start the server (point generation or tracer)")?;
     tracing::info!(
         "{} points on {} instances; codec {}",
         server.point_count(),

@@ -278,7 +278,7 @@ fn dais(b: &mut SceneBuilder, p: &Palette) {
     );
     let x0 = DAIS_X + (STEPS - 1) as f32 * STEP_RUN + 0.12;
     let rail = railing_mesh(HALF_X - 0.1 - x0, 0.9);
-    let rail = b.mesh(rail, "dais_railing", p.iron);
+    let rail = b.mesh(rail, "dais_railing", p.polished_iron);
     for z in [-DAIS_HALF_Z + 0.06, DAIS_HALF_Z - 0.06] {
         b.place(rail, at(x0, DAIS_TOP, z));
     }

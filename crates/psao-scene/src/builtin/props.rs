@@ -144,7 +144,7 @@ pub(super) fn vase_mesh(height: f32, belly: f32) -> Mesh {
 }
 
 fn vases(b: &mut SceneBuilder, p: &Palette) {
-    let tall = b.mesh(vase_mesh(0.9, 0.22), "amphora", p.terracotta);
+    let tall = b.mesh(vase_mesh(0.9, 0.22), "amphora", p.glaze);
     let squat = b.mesh(vase_mesh(0.45, 0.18), "urn", p.terracotta);
     // Along the south wall between the pilasters.
     for x in [-5.0, -1.0, 3.0] {
@@ -212,7 +212,7 @@ fn table(b: &mut SceneBuilder, p: &Palette) {
     b.place(stool, at(TABLE_X + 0.35, 0.0, 0.74));
 
     // On the table top (the sliding box uses the strip z ∈ [0, 0.25], x < TABLE_X + 0.4).
-    let small_vase = b.mesh(vase_mesh(0.28, 0.08), "small_vase", p.terracotta);
+    let small_vase = b.mesh(vase_mesh(0.28, 0.08), "small_vase", p.glass);
     b.place(small_vase, at(TABLE_X - 0.5, TABLE_TOP, -0.22));
     let v = Vec2::new;
     let bowl_profile = [
@@ -273,7 +273,7 @@ fn dais_ornaments(b: &mut SceneBuilder, p: &Palette) {
         at(0.0, 0.86, 0.0),
     );
     let pedestal = b.mesh(pedestal, "pedestal", p.stone);
-    let ball = b.mesh(sphere(0.18, 40), "stone_ball", p.stone);
+    let ball = b.mesh(sphere(0.18, 40), "chrome_ball", p.chrome);
     for z in [-1.7, 1.7] {
         b.place(pedestal, at(9.4, DAIS_TOP, z));
         b.place(ball, at(9.4, DAIS_TOP + 0.9 + 0.18, z));

@@ -1,0 +1,81 @@
+//! The base (uncorrected) image's shading and the object ids of a frame.
+//!
+//! The base image is what the client shows: `base colour × (ambient × AO + light × n·l)`
+//! (`psao_client::composite`). [`TracedAoShade`] evaluates that shading at any surface point
+//! with AO traced by the one estimator of DESIGN §2 (the one the server's points carry), so
+//! rays of the correction tracer that reach diffuse surfaces return what the client shows there.
+
+use crate::trace::DiffuseShade;
+use glam::Vec3;
+use psao_client::Shading;
+use psao_raster::GBuffer;
+use psao_scene::{Material, Scene};
+use psao_trace::ao::{ambient_occlusion, hash64};
+use psao_trace::Tracer;
+
+/// Client shading with AO traced at the shaded point.
+pub struct TracedAoShade<'a> {
+    /// Tracer in [`psao_trace::GeometryMode::Occlusion`] (alpha-masked geometry left out).
+    pub tracer: &'a Tracer,
+    /// The client's lighting.
+    pub shading: Shading,
+    /// AO ray length.
+    pub radius: f32,
+    /// AO rays per point.
+    pub spp: u32,
+    /// Seed of the AO rays.
+    pub seed: u64,
+}
+
+impl TracedAoShade<'_> {
+    /// AO at `point` with `normal`; the sampling key is hashed from the position, so the same
+    /// point always gets the same value.
+    pub fn ao(&self, point: Vec3, normal: Vec3) -> f32 {
+        let [x, y, z] = point.to_array().map(f32::to_bits);
+        let key = hash64(x as u64 ^ hash64((y as u64) << 32 | z as u64));
+        ambient_occlusion(
+            self.tracer,
+            point,
+            normal,
+            self.radius,
+            self.spp,
+            self.seed,
+            key,
+        )
+    }
+
+    /// The client's shading for a known AO value.
+    pub fn shade_with_ao(&self, normal: Vec3, material: &Material, ao: f32) -> Vec3 {
+        let base = material.base_color.truncate();
+        let direct = self.shading.light
+            * normal
+                .dot(self.shading.light_dir.normalize_or_zero())
+                .max(0.0);
+        base * (self.shading.ambient * ao + direct)
+    }
+}
+
+impl DiffuseShade for TracedAoShade<'_> {
+    fn shade(&self, point: Vec3, normal: Vec3, _instance: u32, material: &Material) -> Vec3 {
+        self.shade_with_ao(normal, material, self.ao(point, normal))
+    }
+}
+
+/// Object id per pixel: `instance + 1` where the pixel shows a non-diffuse material (each
+/// instance has one mesh with one material, so this is instance × non-diffuse material), 0
+/// elsewhere.
+pub fn object_ids(scene: &Scene, g: &GBuffer) -> Vec<u32> {
+    (0..g.len())
+        .map(|i| {
+            let non_diffuse = g
+                .material(scene, i)
+                .and_then(|m| scene.materials.get(m))
+                .is_some_and(Material::is_non_diffuse);
+            if non_diffuse {
+                g.instance[i] + 1
+            } else {
+                0
+            }
+        })
+        .collect()
+}

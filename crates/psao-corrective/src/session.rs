@@ -1,0 +1,176 @@
+//! One viewer's correction state across frames: the region queue, the sample cache and the
+//! bookkeeping that ties them to camera changes. The frame loop is: on a camera change
+//! [`Corrector::camera_changed`] (aging); every analysis period [`Corrector::analyze`];
+//! [`Corrector::plan`] the frame's positions within its sample budget; trace them (the caller,
+//! e.g. in parallel); [`Corrector::add`] the samples; [`Corrector::splat`] onto the base frame.
+
+use crate::attention::ObjectRegion;
+use crate::cache::{AgingStats, CacheConfig, CacheError, SampleCache};
+use crate::schedule::RegionQueue;
+use crate::screen::ScreenView;
+use crate::splat::{Sample, SplatTarget};
+use crate::sqrt5::Hierarchy;
+
+/// A pixel to trace: position, object and level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Planned {
+    /// Pixel column.
+    pub x: i32,
+    /// Pixel row.
+    pub y: i32,
+    /// Object id at the pixel.
+    pub object: u32,
+    /// √5 level of the position.
+    pub level: u8,
+}
+
+/// Correction state of one viewer.
+#[derive(Clone, Debug)]
+pub struct Corrector {
+    hierarchy: Hierarchy,
+    cache: SampleCache,
+    queue: RegionQueue,
+    /// Camera age at the last analysis.
+    analyzed_age: Option<u32>,
+    /// Objects whose every level was planned since the last camera change.
+    finished: Vec<u32>,
+}
+
+impl Corrector {
+    /// A fresh state.
+    pub fn new(
+        hierarchy: Hierarchy,
+        cache: CacheConfig,
+        job_size: u64,
+        decay: f32,
+    ) -> Result<Self, CacheError> {
+        Ok(Self {
+            hierarchy,
+            cache: SampleCache::new(cache, hierarchy)?,
+            queue: RegionQueue::new(hierarchy, job_size, decay),
+            analyzed_age: None,
+            finished: Vec::new(),
+        })
+    }
+
+    /// The sample cache.
+    pub fn cache(&self) -> &SampleCache {
+        &self.cache
+    }
+
+    /// The √5 hierarchy.
+    pub fn hierarchy(&self) -> &Hierarchy {
+        &self.hierarchy
+    }
+
+    /// The camera changed: age the cache (the camera age goes up by one).
+    pub fn camera_changed(&mut self, view: &ScreenView) -> AgingStats {
+        self.cache.camera_changed(view)
+    }
+
+    /// Drop the cached samples of moving objects.
+    pub fn drop_objects(&mut self, moving: impl Fn(u32) -> bool) -> usize {
+        self.cache.drop_objects(moving)
+    }
+
+    /// A new analysis of the current frame (regions with their priorities).
+    pub fn analyze(&mut self, regions: &[ObjectRegion]) {
+        let age = self.cache.camera_age();
+        let changed = self.analyzed_age != Some(age);
+        if changed {
+            self.finished.clear();
+        }
+        self.queue.submit(regions, changed, &self.finished);
+        self.analyzed_age = Some(age);
+    }
+
+    /// Positions to trace this frame: jobs in priority order until `budget` positions lie on
+    /// their objects (`ids`, row-major with `width` columns) or the queue runs dry.
+    pub fn plan(&mut self, ids: &[u32], width: usize, budget: usize) -> Vec<Planned> {
+        let mut out = Vec::with_capacity(budget);
+        let height = ids.len().checked_div(width).unwrap_or(0);
+        while out.len() < budget {
+            let Some((job, done)) = self.queue.take((budget - out.len()) as u64) else {
+                break;
+            };
+            if done {
+                self.finished.push(job.object);
+            }
+            let Ok(samples) = self.hierarchy.level_samples(job.level, job.rect) else {
+                continue;
+            };
+            for (x, y) in samples.iter_from(job.start).take(job.len as usize) {
+                let on_screen = x >= 0 && y >= 0 && (x as usize) < width && (y as usize) < height;
+                if on_screen && ids[y as usize * width + x as usize] == job.object {
+                    out.push(Planned {
+                        x,
+                        y,
+                        object: job.object,
+                        level: job.level,
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// Store traced samples.
+    pub fn add(&mut self, samples: &[Sample]) -> Result<(), CacheError> {
+        self.cache.insert(samples)
+    }
+
+    /// Splat the cache onto `target` (coarse levels first); returns the samples drawn.
+    pub fn splat(&self, view: &ScreenView, target: &mut SplatTarget<'_>) -> usize {
+        self.cache.splat(view, target)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plans_cover_each_object_pixel_once_within_the_budget() {
+        let (w, h) = (64usize, 40usize);
+        let mut ids = vec![0u32; w * h];
+        for y in 5..30 {
+            for x in 3..20 {
+                ids[y * w + x] = 1;
+            }
+            for x in (30 + y / 3)..(50 + y / 4) {
+                ids[y * w + x] = 2;
+            }
+        }
+        let regions = crate::attention::analyze(
+            &ids,
+            w,
+            h,
+            &crate::saliency::Map {
+                width: w,
+                height: h,
+                values: vec![0.0; w * h],
+            },
+            0.0,
+        );
+        let hierarchy = Hierarchy::new(5).unwrap();
+        let mut c = Corrector::new(hierarchy, CacheConfig::default(), 16, 0.15).unwrap();
+        c.analyze(&regions);
+        let mut seen = std::collections::HashSet::new();
+        for frame in 0.. {
+            // Re-analysis without a camera change keeps the progress.
+            if frame % 3 == 0 {
+                c.analyze(&regions);
+            }
+            let plan = c.plan(&ids, w, 37);
+            assert!(plan.len() <= 37);
+            if plan.is_empty() {
+                break;
+            }
+            for p in plan {
+                assert_eq!(ids[p.y as usize * w + p.x as usize], p.object);
+                assert!(seen.insert((p.x, p.y)));
+            }
+        }
+        assert_eq!(seen.len(), ids.iter().filter(|&&i| i != 0).count());
+    }
+}

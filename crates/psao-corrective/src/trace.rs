@@ -1,0 +1,406 @@
+//! The correction ray tracer (paper §4.3) through the `psao-trace` facade (either backend).
+//!
+//! At a non-diffuse hit the radiance is
+//! - the diffuse part, `(1 − metallic)·(1 − transmission)·(1 − F)` times what the client shows
+//!   there ([`DiffuseShade`]: base shading × AO), so corrected pixels agree with their
+//!   surroundings;
+//! - specular reflection with Schlick's Fresnel: one mirror ray below a roughness of
+//!   [`MIRROR_ROUGHNESS`], otherwise distributed rays sampling the GGX (Cook–Torrance)
+//!   distribution of half vectors, weighted by `F·G·(v·h) / ((n·h)(n·v))`;
+//! - glossy highlights of the scene's lights with shadow rays (rectangles sampled uniformly
+//!   over their area, converted to solid angle), Cook–Torrance GGX;
+//! - refraction for transmissive dielectrics with the exact dielectric Fresnel term and total
+//!   internal reflection, tinted by the base colour (the surface's roughness is ignored for
+//!   the refracted ray).
+//!
+//! Rays that reach a diffuse surface, or exceed the depth limit, return the [`DiffuseShade`];
+//! misses return the sky colour. Random numbers are hashed from (seed, frame, pixel, path),
+//! so a sample is deterministic per (pixel, frame).
+
+use glam::{Affine3A, Mat3A, Vec3};
+use psao_scene::{LightShape, Material, Scene};
+use psao_trace::ao::{hash64, orthonormal_basis, ray_offset, sample_2d};
+use psao_trace::{Hit, Ray, Tracer};
+
+/// Roughness below which reflection is a single mirror ray and lights give no highlight.
+pub const MIRROR_ROUGHNESS: f32 = 0.05;
+
+/// What the client shows at a diffuse surface point.
+pub trait DiffuseShade: Sync {
+    /// Linear RGB of the client's shading at `point` (unit `normal` facing the viewer) of an
+    /// instance with `material`.
+    fn shade(&self, point: Vec3, normal: Vec3, instance: u32, material: &Material) -> Vec3;
+}
+
+/// Settings of the correction tracer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TraceSettings {
+    /// Bounces after the primary hit (depth limit).
+    pub max_depth: u32,
+    /// Distributed reflection rays at the first glossy hit of a path (one at later hits).
+    pub glossy_rays: u32,
+    /// Shadow rays per rectangular light.
+    pub area_samples: u32,
+    /// Linear RGB returned by rays that hit nothing.
+    pub sky: Vec3,
+    /// Seed of every random choice.
+    pub seed: u64,
+}
+
+impl Default for TraceSettings {
+    /// Depth 4, 8 glossy rays, 4 area-light samples, a grey sky, seed 1.
+    fn default() -> Self {
+        Self {
+            max_depth: 4,
+            glossy_rays: 8,
+            area_samples: 4,
+            sky: Vec3::new(0.62, 0.66, 0.72),
+            seed: 1,
+        }
+    }
+}
+
+/// A surface point found by a ray.
+struct Surface {
+    point: Vec3,
+    /// Interpolated unit normal, turned to face the incoming ray.
+    normal: Vec3,
+    /// Unit face normal, turned to face the incoming ray.
+    face: Vec3,
+    /// Whether the ray came from the front side of the triangle.
+    front: bool,
+    instance: u32,
+    material: usize,
+}
+
+/// Traces correction samples of a static scene (every instance at its stored transform).
+pub struct CorrectionTracer<'a> {
+    scene: &'a Scene,
+    tracer: &'a Tracer,
+    shade: &'a dyn DiffuseShade,
+    settings: TraceSettings,
+    normal_matrices: Vec<Mat3A>,
+}
+
+/// Schlick's Fresnel approximation.
+fn schlick(f0: Vec3, cos: f32) -> Vec3 {
+    f0 + (Vec3::ONE - f0) * (1.0 - cos.clamp(0.0, 1.0)).powi(5)
+}
+
+/// Exact Fresnel reflectance of an unpolarised dielectric interface (`eta` = n_in / n_out).
+fn fresnel_dielectric(cos_in: f32, eta: f32) -> f32 {
+    let sin2_t = eta * eta * (1.0 - cos_in * cos_in);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let rs = (eta * cos_in - cos_t) / (eta * cos_in + cos_t);
+    let rp = (cos_in - eta * cos_t) / (cos_in + eta * cos_t);
+    0.5 * (rs * rs + rp * rp)
+}
+
+/// GGX normal distribution for `alpha` = roughness².
+fn ggx_d(n_h: f32, alpha: f32) -> f32 {
+    let a2 = alpha * alpha;
+    let d = n_h * n_h * (a2 - 1.0) + 1.0;
+    a2 / (std::f32::consts::PI * d * d)
+}
+
+/// Smith–Schlick shadowing-masking for GGX.
+fn smith_g(n_v: f32, n_l: f32, alpha: f32) -> f32 {
+    let k = alpha * 0.5;
+    (n_v / (n_v * (1.0 - k) + k)) * (n_l / (n_l * (1.0 - k) + k))
+}
+
+impl<'a> CorrectionTracer<'a> {
+    /// A tracer over `scene`; `tracer` must hold its triangles in [`psao_trace::GeometryMode::Primary`].
+    pub fn new(
+        scene: &'a Scene,
+        tracer: &'a Tracer,
+        shade: &'a dyn DiffuseShade,
+        settings: TraceSettings,
+    ) -> Self {
+        let normal_matrices = scene
+            .instances
+            .iter()
+            .map(|i| normal_matrix(&i.transform))
+            .collect();
+        Self {
+            scene,
+            tracer,
+            shade,
+            settings,
+            normal_matrices,
+        }
+    }
+
+    fn hit(&self, ray: &Ray) -> Option<Hit> {
+        let mut out = [None];
+        self.tracer.intersect(std::slice::from_ref(ray), &mut out);
+        out[0]
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        let mut out = [false];
+        self.tracer.occluded(std::slice::from_ref(ray), &mut out);
+        out[0]
+    }
+
+    fn surface(&self, ray: &Ray, hit: &Hit) -> Option<Surface> {
+        let inst = self.scene.instances.get(hit.instance as usize)?;
+        let mesh = self.scene.meshes.get(inst.mesh)?;
+        let [a, b, c] = *mesh.indices.get(hit.triangle as usize)?;
+        let p = |i: u32| mesh.positions.get(i as usize).copied();
+        let (p0, p1, p2) = (p(a)?, p(b)?, p(c)?);
+        let (u, v) = (hit.u, hit.v);
+        let w = 1.0 - u - v;
+        let nm = self.normal_matrices[hit.instance as usize];
+        let face = (nm * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
+        let interp = match (
+            mesh.normals.get(a as usize),
+            mesh.normals.get(b as usize),
+            mesh.normals.get(c as usize),
+        ) {
+            (Some(na), Some(nb), Some(nc)) => {
+                (nm * (*na * w + *nb * u + *nc * v)).normalize_or_zero()
+            }
+            _ => face,
+        };
+        let front = face.dot(ray.dir) < 0.0;
+        let face = if front { face } else { -face };
+        let mut normal = if interp == Vec3::ZERO { face } else { interp };
+        if normal.dot(face) < 0.0 {
+            normal = -normal;
+        }
+        Some(Surface {
+            point: ray.origin + ray.dir * hit.t,
+            normal,
+            face,
+            front,
+            instance: hit.instance,
+            material: mesh.material,
+        })
+    }
+
+    /// The radiance arriving along the primary ray from `eye` through direction `dir`, with
+    /// the hit it found (`None` on a miss). `frame` and `pixel` pick the random numbers.
+    pub fn primary(
+        &self,
+        eye: Vec3,
+        dir: Vec3,
+        frame: u64,
+        pixel: u64,
+    ) -> (Vec3, Option<(Vec3, Vec3)>) {
+        let key =
+            hash64(self.settings.seed ^ hash64(frame.wrapping_mul(0x9e37_79b9) ^ hash64(pixel)));
+        let ray = Ray::new(eye, dir.normalize(), f32::INFINITY);
+        let Some(hit) = self.hit(&ray) else {
+            return (self.settings.sky, None);
+        };
+        let Some(s) = self.surface(&ray, &hit) else {
+            return (self.settings.sky, None);
+        };
+        let l = self.shade_surface(&ray, &s, 0, key, true);
+        (l, Some((s.point, s.normal)))
+    }
+
+    fn radiance(&self, ray: &Ray, depth: u32, key: u64) -> Vec3 {
+        let Some(hit) = self.hit(ray) else {
+            return self.settings.sky;
+        };
+        match self.surface(ray, &hit) {
+            Some(s) => self.shade_surface(ray, &s, depth, key, false),
+            None => self.settings.sky,
+        }
+    }
+
+    fn shade_surface(&self, ray: &Ray, s: &Surface, depth: u32, key: u64, branch: bool) -> Vec3 {
+        let fallback = Material::default();
+        let m = self.scene.materials.get(s.material).unwrap_or(&fallback);
+        if !m.is_non_diffuse() || depth >= self.settings.max_depth {
+            return self.shade.shade(s.point, s.normal, s.instance, m);
+        }
+        let v = -ray.dir;
+        let n = s.normal;
+        let n_v = n.dot(v).max(1e-4);
+        let base = m.base_color.truncate();
+        let dielectric_f0 = ((m.ior - 1.0) / (m.ior + 1.0)).powi(2);
+        let f0 = Vec3::splat(dielectric_f0).lerp(base, m.metallic);
+        let fv = schlick(f0, n_v);
+        let opaque = 1.0 - m.transmission;
+        let dielectric = 1.0 - m.metallic;
+        let mut out = Vec3::ZERO;
+        // The diffuse part, as the client shows it.
+        let kd = dielectric * opaque * (1.0 - fv.max_element());
+        if kd > 0.0 {
+            out += kd * self.shade.shade(s.point, n, s.instance, m);
+        }
+        let alpha = (m.roughness * m.roughness).max(1e-3);
+        let next = |salt: u64| hash64(key ^ salt.wrapping_mul(0xd6e8_feb8_6659_fd93));
+        // Specular reflection (metals fully, dielectrics by Fresnel).
+        let spec_weight = if m.transmission > 0.0 {
+            dielectric * opaque
+        } else {
+            1.0
+        };
+        if spec_weight > 0.0 {
+            let origin = ray_offset(s.point, s.face);
+            if m.roughness < MIRROR_ROUGHNESS {
+                let r = ray.dir - 2.0 * ray.dir.dot(n) * n;
+                if r.dot(s.face) > 0.0 {
+                    let l = self.radiance(&Ray::new(origin, r, f32::INFINITY), depth + 1, next(1));
+                    out += spec_weight * fv * l;
+                }
+            } else {
+                let count = if branch {
+                    self.settings.glossy_rays.max(1)
+                } else {
+                    1
+                };
+                let (t, b) = orthonormal_basis(n);
+                let mut sum = Vec3::ZERO;
+                for i in 0..count {
+                    let (u1, u2) = sample_2d(self.settings.seed, key, i);
+                    let tan2 = alpha * alpha * u1 / (1.0 - u1).max(1e-6);
+                    let cos_t = 1.0 / (1.0 + tan2).sqrt();
+                    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                    let phi = std::f32::consts::TAU * u2;
+                    let h =
+                        (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + n * cos_t).normalize();
+                    let v_h = v.dot(h);
+                    if v_h <= 0.0 {
+                        continue;
+                    }
+                    let l = 2.0 * v_h * h - v;
+                    let n_l = n.dot(l);
+                    if n_l <= 0.0 || l.dot(s.face) <= 0.0 {
+                        continue;
+                    }
+                    let weight = schlick(f0, v_h) * smith_g(n_v, n_l, alpha) * v_h
+                        / (h.dot(n).max(1e-4) * n_v);
+                    let li = self.radiance(
+                        &Ray::new(origin, l, f32::INFINITY),
+                        depth + 1,
+                        next(2 + i as u64),
+                    );
+                    sum += weight * li;
+                }
+                out += spec_weight * sum / count as f32;
+                out += spec_weight * self.highlights(s, v, n_v, f0, alpha, key);
+            }
+        }
+        // Refraction through transmissive dielectrics.
+        if m.transmission > 0.0 && dielectric > 0.0 {
+            let eta = if s.front { 1.0 / m.ior } else { m.ior };
+            let cos_in = n_v;
+            let f = fresnel_dielectric(cos_in, eta);
+            let reflected = ray.dir - 2.0 * ray.dir.dot(n) * n;
+            let weight = dielectric * m.transmission;
+            if f > 0.0 && reflected.dot(s.face) > 0.0 {
+                let origin = ray_offset(s.point, s.face);
+                let l = self.radiance(
+                    &Ray::new(origin, reflected, f32::INFINITY),
+                    depth + 1,
+                    next(101),
+                );
+                out += weight * f * l;
+            }
+            if f < 1.0 {
+                let sin2_t = eta * eta * (1.0 - cos_in * cos_in);
+                let refracted =
+                    (eta * ray.dir + (eta * cos_in - (1.0 - sin2_t).sqrt()) * n).normalize();
+                if refracted.dot(s.face) < 0.0 {
+                    let origin = ray_offset(s.point, -s.face);
+                    let l = self.radiance(
+                        &Ray::new(origin, refracted, f32::INFINITY),
+                        depth + 1,
+                        next(102),
+                    );
+                    out += weight * (1.0 - f) * base * l;
+                }
+            }
+        }
+        out
+    }
+
+    /// Glossy highlights of the scene's lights at `s`, with shadow rays.
+    fn highlights(&self, s: &Surface, v: Vec3, n_v: f32, f0: Vec3, alpha: f32, key: u64) -> Vec3 {
+        let n = s.normal;
+        let origin = ray_offset(s.point, s.face);
+        let brdf = |l: Vec3| -> Option<(Vec3, f32)> {
+            let n_l = n.dot(l);
+            if n_l <= 0.0 || l.dot(s.face) <= 0.0 {
+                return None;
+            }
+            let h = (l + v).normalize();
+            let spec =
+                schlick(f0, v.dot(h)) * ggx_d(n.dot(h).max(0.0), alpha) * smith_g(n_v, n_l, alpha)
+                    / (4.0 * n_v * n_l);
+            Some((spec, n_l))
+        };
+        let mut out = Vec3::ZERO;
+        for (li, light) in self.scene.lights.iter().enumerate() {
+            let e = light.color * light.power;
+            match light.shape {
+                LightShape::Sun { direction } => {
+                    let l = direction.normalize();
+                    if let Some((f, n_l)) = brdf(l) {
+                        if !self.occluded(&Ray::new(origin, l, f32::INFINITY)) {
+                            out += f * e * n_l;
+                        }
+                    }
+                }
+                LightShape::Point { position } => {
+                    let d = position - origin;
+                    let dist = d.length();
+                    let l = d / dist;
+                    if let Some((f, n_l)) = brdf(l) {
+                        if !self.occluded(&Ray::new(origin, l, dist * (1.0 - 1e-4))) {
+                            out += f * e * n_l / (dist * dist);
+                        }
+                    }
+                }
+                LightShape::Rect {
+                    centre,
+                    half_u,
+                    half_v,
+                } => {
+                    let area = 4.0 * half_u.cross(half_v).length();
+                    let light_n = half_u.cross(half_v).normalize();
+                    let count = self.settings.area_samples.max(1);
+                    let mut sum = Vec3::ZERO;
+                    for i in 0..count {
+                        let (a, b) =
+                            sample_2d(self.settings.seed, hash64(key ^ (li as u64 + 1)), i);
+                        let q = centre + (2.0 * a - 1.0) * half_u + (2.0 * b - 1.0) * half_v;
+                        let d = q - origin;
+                        let dist2 = d.length_squared();
+                        let dist = dist2.sqrt();
+                        let l = d / dist;
+                        let cos_light = (-l).dot(light_n);
+                        if cos_light <= 0.0 {
+                            continue;
+                        }
+                        if let Some((f, n_l)) = brdf(l) {
+                            if !self.occluded(&Ray::new(origin, l, dist * (1.0 - 1e-4))) {
+                                sum += f * e * n_l * cos_light * area / dist2;
+                            }
+                        }
+                    }
+                    out += sum / count as f32;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The inverse transpose of a transform's linear part (for normals).
+fn normal_matrix(t: &Affine3A) -> Mat3A {
+    let m = t.matrix3;
+    if m.determinant().abs() > 1e-20 {
+        m.inverse().transpose()
+    } else {
+        m
+    }
+}

@@ -1,0 +1,117 @@
+//! The images of one evaluated frame that every ordering and budget shares: the G-buffer,
+//! object ids, the base frame (the client's shading with traced AO), the reference (the base
+//! frame on diffuse pixels, the correction tracer on every non-diffuse pixel) and the
+//! reference's saliency map.
+
+use glam::Vec3;
+use psao_corrective::base::{object_ids, TracedAoShade};
+use psao_corrective::saliency::{saliency, Map, RgbImage};
+use psao_corrective::screen::ScreenView;
+use psao_corrective::session::Planned;
+use psao_corrective::splat::Sample;
+use psao_corrective::trace::CorrectionTracer;
+use psao_raster::{rasterize, GBuffer, RasterOptions};
+use psao_scene::{Camera, Material, Scene};
+use rayon::prelude::*;
+
+/// Shared images of one frame.
+pub struct FrameImages {
+    pub camera: Camera,
+    pub view: ScreenView,
+    pub gbuffer: GBuffer,
+    pub ids: Vec<u32>,
+    pub base: Vec<[f32; 3]>,
+    pub reference: Vec<[f32; 3]>,
+    pub reference_srgb: Vec<u8>,
+    /// Saliency of the reference, normalised (metric weights).
+    pub reference_saliency: Map,
+    /// Camera age (number of camera changes so far): the key of this frame's samples.
+    pub camera_age: u32,
+}
+
+/// The linear image as the saliency model's input.
+pub fn rgb_image(pixels: &[[f32; 3]], width: u32, height: u32) -> RgbImage {
+    RgbImage {
+        width: width as usize,
+        height: height as usize,
+        pixels: pixels.to_vec(),
+    }
+}
+
+/// One correction sample at pixel (x, y): the tracer's colour, the G-buffer's surface.
+pub fn trace_sample(tracer: &CorrectionTracer<'_>, f: &FrameImages, p: &Planned) -> Sample {
+    let (w, h) = (f.gbuffer.width, f.gbuffer.height);
+    let i = f.gbuffer.index(p.x as u32, p.y as u32);
+    let dir = f
+        .camera
+        .ray_direction(p.x as f32 + 0.5, p.y as f32 + 0.5, w, h);
+    let (color, _) = tracer.primary(f.camera.position, dir, f.camera_age as u64, i as u64);
+    let position = f.gbuffer.position[i];
+    let normal = f.gbuffer.normal[i];
+    let v = (f.camera.position - position).normalize_or_zero();
+    Sample {
+        position,
+        normal,
+        ndotv: normal.dot(v),
+        color: color.to_array(),
+        object: p.object,
+        level: p.level,
+        age: f.camera_age,
+    }
+}
+
+/// Renders the shared images of a frame.
+pub fn frame_images(
+    scene: &Scene,
+    camera: Camera,
+    camera_age: u32,
+    width: u32,
+    height: u32,
+    shade: &TracedAoShade<'_>,
+    tracer: &CorrectionTracer<'_>,
+) -> FrameImages {
+    let gbuffer = rasterize(scene, &camera, &RasterOptions::new(width, height));
+    let ids = object_ids(scene, &gbuffer);
+    let fallback = Material::default();
+    let sky = psao_client::SKY_GREY;
+    let base: Vec<[f32; 3]> = (0..gbuffer.len())
+        .into_par_iter()
+        .map(|i| {
+            if !gbuffer.covered(i) {
+                return sky;
+            }
+            let m = gbuffer
+                .material(scene, i)
+                .and_then(|m| scene.materials.get(m))
+                .unwrap_or(&fallback);
+            let (p, n) = (gbuffer.position[i], gbuffer.normal[i]);
+            shade.shade_with_ao(n, m, shade.ao(p, n)).to_array()
+        })
+        .collect();
+    let reference: Vec<[f32; 3]> = (0..gbuffer.len())
+        .into_par_iter()
+        .map(|i| {
+            if ids[i] == 0 {
+                return base[i];
+            }
+            let (x, y) = (i as u32 % width, i as u32 / width);
+            let dir = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, width, height);
+            let (c, _): (Vec3, _) =
+                tracer.primary(camera.position, dir, camera_age as u64, i as u64);
+            c.to_array()
+        })
+        .collect();
+    let reference_srgb = psao_client::composite_srgb8(&reference);
+    let reference_saliency = saliency(&rgb_image(&reference, width, height));
+    FrameImages {
+        view: ScreenView::new(&camera, width, height),
+        camera,
+        gbuffer,
+        ids,
+        base,
+        reference,
+        reference_srgb,
+        reference_saliency,
+        camera_age,
+    }
+}
