@@ -1,8 +1,8 @@
 //! `psao volume bench`: speed ratios of the fast paths on several volumes (files and generated
 //! ones), one row per volume and mode, the worst ratio of each mode last.
 
-use psao_net::cpu_time::cpu_seconds;
 use anyhow::{Context, Result};
+use psao_net::cpu_time::cpu_seconds;
 use psao_volume::render::{self, DenseGrid};
 use psao_volume::{
     BrickFormat, Camera, GridClass, Image, Procedural, RenderMode, RenderSettings, SparseGrid,
