@@ -68,6 +68,9 @@ pub enum NetError {
         /// The last connection failure.
         last: String,
     },
+    /// TLS could not be set up (certificate, key) or its handshake failed.
+    #[error("TLS: {0}")]
+    Tls(String),
     /// The caller's frame sink failed (e.g. writing images).
     #[error(transparent)]
     Sink(Box<dyn std::error::Error + Send + Sync>),

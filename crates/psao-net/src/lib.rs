@@ -1,7 +1,8 @@
-//! psao networking: a server streaming AO updates to many clients over TCP and WebSocket
-//! ([`serve`]), a headless client following a camera path ([`view`]), the frame transports
-//! and wire conversions they share, the in-process split pipeline ([`pipeline`]), and the
-//! start points kept on disk between runs ([`start_cache`]).
+//! psao networking: a server streaming AO updates to many clients over TCP, HTTP/WebSocket
+//! and TLS ([`serve`], [`http`], [`tls`]), a headless client following a camera path
+//! ([`view`]), the frame transports and wire conversions they share, the in-process split
+//! pipeline ([`pipeline`]), the served scene as binary glTF ([`glb`]), and the start points
+//! kept on disk between runs ([`start_cache`]).
 //!
 //! Everything here is a library: the `psao` binary only parses arguments, loads scenes and
 //! prints; another program can embed a server or a client the same way.
@@ -9,10 +10,14 @@
 pub mod convert;
 pub mod cpu_time;
 mod error;
+pub mod glb;
+pub mod http;
+pub mod io;
 pub mod pipeline;
 mod resolution;
 pub mod serve;
 pub mod start_cache;
+pub mod tls;
 pub mod transport;
 pub mod view;
 

@@ -1,22 +1,30 @@
-//! Frame transports: raw TCP (frames back to back) and WebSocket (one binary message per
-//! frame), behind one reader and one writer type. A server tells them apart by the first
-//! bytes of a connection (`GET ` starts a WebSocket handshake, `PSW1` a TCP frame).
+//! Frame transports: raw frames back to back on a byte stream ("tcp") and WebSocket (one
+//! binary message per frame), behind one reader and one writer type. A server tells a raw
+//! connection from HTTP by its first bytes (an HTTP method, or anything else, which the
+//! frame reader then judges); WebSockets arrive as HTTP upgrades at `/ws` (see
+//! [`crate::http`]).
 
+use std::path::Path;
 use std::time::Duration;
 
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use psao_wire::{decode_frame, decode_payload, FrameHeader, Message, WireError, HEADER_LEN};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::io::{AsyncReadExt, AsyncWriteExt, ReadHalf, WriteHalf};
 use tokio::net::TcpStream;
-use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
+use tokio_tungstenite::tungstenite::protocol::{Role, WebSocketConfig};
 use tokio_tungstenite::tungstenite::Message as WsMessage;
 use tokio_tungstenite::WebSocketStream;
 
+use crate::io::{BoxIo, Prefixed};
 use crate::NetError;
 
-type Ws = WebSocketStream<TcpStream>;
+type Ws = WebSocketStream<BoxIo>;
+
+/// First bytes of the HTTP requests the server answers (anything else is read as frames).
+const HTTP_METHODS: [&[u8; 4]; 7] = [
+    b"GET ", b"HEAD", b"POST", b"PUT ", b"DELE", b"OPTI", b"PATC",
+];
 
 /// Why reading a frame failed.
 #[derive(Debug, thiserror::Error)]
@@ -31,16 +39,16 @@ pub enum ReadError {
 
 /// Receives frames.
 pub enum FrameReader {
-    /// TCP: header, then payload.
-    Tcp(OwnedReadHalf),
+    /// Raw frames: header, then payload.
+    Tcp(ReadHalf<BoxIo>),
     /// WebSocket: one binary message per frame.
     Ws(SplitStream<Ws>),
 }
 
 /// Sends frames.
 pub enum FrameWriter {
-    /// TCP.
-    Tcp(OwnedWriteHalf),
+    /// Raw frames.
+    Tcp(WriteHalf<BoxIo>),
     /// WebSocket.
     Ws(SplitSink<Ws, WsMessage>),
 }
@@ -52,9 +60,8 @@ fn ws_config(limit: u32) -> WebSocketConfig {
         .max_frame_size(Some(max))
 }
 
-fn split_tcp(stream: TcpStream) -> (FrameReader, FrameWriter) {
-    let _ = stream.set_nodelay(true);
-    let (r, w) = stream.into_split();
+fn split_raw(io: BoxIo) -> (FrameReader, FrameWriter) {
+    let (r, w) = tokio::io::split(io);
     (FrameReader::Tcp(r), FrameWriter::Tcp(w))
 }
 
@@ -63,59 +70,99 @@ fn split_ws(ws: Ws) -> (FrameReader, FrameWriter) {
     (FrameReader::Ws(r), FrameWriter::Ws(w))
 }
 
-/// Server side: detect the transport from the first bytes (within `timeout`) and complete a
-/// WebSocket handshake when needed. `limit` bounds incoming frames.
-pub async fn accept(
-    stream: TcpStream,
-    limit: u32,
-    timeout: Duration,
-) -> Result<(FrameReader, FrameWriter, &'static str), NetError> {
+/// What a new server-side connection turned out to be.
+pub enum Accepted {
+    /// Raw frames.
+    Frames(FrameReader, FrameWriter),
+    /// An HTTP request (maybe a WebSocket upgrade): the stream, first bytes put back.
+    Http(BoxIo),
+}
+
+/// Server side: read the first bytes (within `timeout`) and tell raw frames from HTTP.
+pub async fn accept(mut io: BoxIo, timeout: Duration) -> Result<Accepted, NetError> {
     let mut first = [0u8; 4];
-    let peeked = tokio::time::timeout(timeout, async {
-        loop {
-            let n = stream.peek(&mut first).await?;
-            if n == 0 || n == first.len() {
-                return Ok::<_, std::io::Error>(n);
+    let mut got = 0;
+    tokio::time::timeout(timeout, async {
+        while got < first.len() {
+            match io.read(&mut first[got..]).await? {
+                0 => break,
+                n => got += n,
             }
-            tokio::time::sleep(Duration::from_millis(5)).await;
         }
+        Ok::<_, std::io::Error>(())
     })
     .await
     .map_err(|_| NetError::Protocol("no data from the peer in time".into()))?
     .map_err(NetError::io("reading the first bytes"))?;
-    if peeked < first.len() {
+    if got < first.len() {
         return Err(NetError::Protocol(
             "the peer closed before sending anything".into(),
         ));
     }
-    if &first == b"GET " {
-        let ws =
-            tokio_tungstenite::accept_async_with_config(stream, Some(ws_config(limit))).await?;
-        let (r, w) = split_ws(ws);
-        Ok((r, w, "websocket"))
+    let io: BoxIo = Box::new(Prefixed::new(first.to_vec(), io));
+    if HTTP_METHODS.contains(&&first) {
+        Ok(Accepted::Http(io))
     } else {
-        let (r, w) = split_tcp(stream);
-        Ok((r, w, "tcp"))
+        let (r, w) = split_raw(io);
+        Ok(Accepted::Frames(r, w))
     }
 }
 
-/// Client side: connect to `addr`, either `HOST:PORT` (TCP) or `ws://HOST:PORT[/…]`.
-pub async fn connect(addr: &str, limit: u32) -> Result<(FrameReader, FrameWriter), NetError> {
-    if let Some(rest) = addr.strip_prefix("ws://") {
-        let host = rest.split('/').next().unwrap_or(rest);
+/// Server side of a WebSocket whose HTTP upgrade is done; `limit` bounds incoming frames.
+pub async fn websocket_server(io: BoxIo, limit: u32) -> (FrameReader, FrameWriter) {
+    let ws = WebSocketStream::from_raw_socket(io, Role::Server, Some(ws_config(limit))).await;
+    split_ws(ws)
+}
+
+/// Client side: connect to `addr`: `HOST:PORT` (raw frames over TCP), `ws://HOST:PORT[/PATH]`
+/// (WebSocket; the path defaults to `/ws`) or `wss://…` (WebSocket over TLS, trusting the
+/// PEM certificates in `tls_ca`, else the Mozilla roots).
+pub async fn connect(
+    addr: &str,
+    limit: u32,
+    tls_ca: Option<&Path>,
+) -> Result<(FrameReader, FrameWriter), NetError> {
+    let (secure, rest) = match (addr.strip_prefix("ws://"), addr.strip_prefix("wss://")) {
+        (Some(rest), _) => (false, Some(rest)),
+        (_, Some(rest)) => (true, Some(rest)),
+        _ => (false, None),
+    };
+    if let Some(rest) = rest {
+        let (host, path) = match rest.find('/') {
+            Some(i) => (&rest[..i], &rest[i..]),
+            None => (rest, "/ws"),
+        };
         let tcp = TcpStream::connect(host)
             .await
             .map_err(NetError::io(format!("cannot connect to {host}")))?;
         let _ = tcp.set_nodelay(true);
+        let (io, url): (BoxIo, String) = if secure {
+            let connector = crate::tls::connector(tls_ca)?;
+            let name = host_name(host);
+            let io = crate::tls::connect(&connector, name, tcp).await?;
+            (io, format!("wss://{host}{path}"))
+        } else {
+            (Box::new(tcp), format!("ws://{host}{path}"))
+        };
         let (ws, _) =
-            tokio_tungstenite::client_async_with_config(addr, tcp, Some(ws_config(limit))).await?;
+            tokio_tungstenite::client_async_with_config(url, io, Some(ws_config(limit))).await?;
         Ok(split_ws(ws))
     } else {
         let tcp = TcpStream::connect(addr)
             .await
             .map_err(NetError::io(format!("cannot connect to {addr}")))?;
-        Ok(split_tcp(tcp))
+        let _ = tcp.set_nodelay(true);
+        Ok(split_raw(Box::new(tcp)))
     }
+}
+
+/// The host part of `HOST:PORT` (brackets of an IPv6 address removed).
+fn host_name(host_port: &str) -> &str {
+    let host = match host_port.rfind(':') {
+        Some(i) if !host_port[i..].contains(']') => &host_port[..i],
+        _ => host_port,
+    };
+    host.trim_start_matches('[').trim_end_matches(']')
 }
 
 impl FrameReader {

@@ -29,8 +29,11 @@ use crate::{NetError, Resolution};
 /// How a client connects and what it runs.
 #[derive(Debug, Clone)]
 pub struct ViewConfig {
-    /// Server address: `HOST:PORT` (TCP) or `ws://HOST:PORT` (WebSocket).
+    /// Server address: `HOST:PORT` (TCP), `ws://HOST:PORT` or `wss://HOST:PORT` (WebSocket,
+    /// over TLS).
     pub connect: String,
+    /// PEM certificates to trust for `wss://` (default: the Mozilla roots).
+    pub tls_ca: Option<PathBuf>,
     /// Access token.
     pub token: Option<String>,
     /// Client frames to run (default: the whole camera path).
@@ -451,7 +454,7 @@ async fn session(
     outgoing: &mut mpsc::UnboundedReceiver<Outgoing>,
 ) -> Result<SessionEnd, SessionError> {
     let retry = |e: NetError| SessionError::Retry(e.to_string());
-    let (mut reader, mut writer) = connect(&args.connect, MAX_SERVER_FRAME)
+    let (mut reader, mut writer) = connect(&args.connect, MAX_SERVER_FRAME, args.tls_ca.as_deref())
         .await
         .map_err(retry)?;
     let hello = Message::Hello(Hello {

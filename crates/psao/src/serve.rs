@@ -43,6 +43,12 @@ pub struct ServeArgs {
     /// Exit once every client has left (after at least one joined).
     #[arg(long)]
     pub once: bool,
+    /// Serve over TLS with this PEM certificate chain (https, wss; needs --tls-key).
+    #[arg(long, requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The PEM private key of --tls-cert.
+    #[arg(long, requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
     /// Write server statistics as JSON to this file on exit.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -50,6 +56,10 @@ pub struct ServeArgs {
 
 /// Runs `psao serve`.
 pub fn run(args: &ServeArgs) -> Result<()> {
+    let tls = match (&args.tls_cert, &args.tls_key) {
+        (Some(cert), Some(key)) => Some(psao_net::tls::acceptor(cert, key)?),
+        _ => None,
+    };
     let input = SceneInput::load(&args.scene)?;
     let tuning = args.tuning.config(
         args.points,
@@ -83,6 +93,8 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         max_clients: args.max_clients,
         once: args.once,
         stop_on_ctrl_c: true,
+        scene_glb: psao_net::glb::scene_glb(&input.scene)?,
+        tls,
     };
     let serve = Serve::bind(server, config)?;
     println!("listening on {}", serve.local_addr());

@@ -13,9 +13,13 @@ use crate::scene_source::SceneArgs;
 /// Arguments of `psao view`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ViewArgs {
-    /// Server address: `HOST:PORT` (TCP) or `ws://HOST:PORT` (WebSocket).
+    /// Server address: `HOST:PORT` (TCP), `ws://HOST:PORT[/PATH]` (WebSocket, path `/ws` by
+    /// default) or `wss://HOST:PORT[/PATH]` (WebSocket over TLS).
     #[arg(long, default_value = "127.0.0.1:7878")]
     pub connect: String,
+    /// PEM file of the certificates to trust for `wss://` (default: the Mozilla roots).
+    #[arg(long)]
+    pub tls_ca: Option<PathBuf>,
     /// Access token.
     #[arg(long)]
     pub token: Option<String>,
@@ -67,6 +71,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     }
     let config = ViewConfig {
         connect: args.connect.clone(),
+        tls_ca: args.tls_ca.clone(),
         token: args.token.clone(),
         frames: args.frames,
         res: args.res,

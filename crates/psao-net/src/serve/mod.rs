@@ -22,12 +22,14 @@ use psao_wire::{
 use rayon::prelude::*;
 use serde::Serialize;
 use tokio::net::TcpListener;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, Semaphore};
 
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
+use crate::http::{serve_http, Health, HttpContext};
+use crate::io::BoxIo;
 use crate::pipeline::CLIENT_HZ;
-use crate::transport::{accept, FrameReader, FrameWriter, ReadError};
+use crate::transport::{accept, Accepted, FrameReader, FrameWriter, ReadError};
 use crate::NetError;
 
 /// Frames queued per client before its updates are coalesced.
@@ -38,7 +40,7 @@ const ACK_WINDOW: usize = 3;
 const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// How a [`Serve`] listens and runs (the [`Server`] itself is built by the caller).
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ServeConfig {
     /// Address to listen on (TCP and WebSocket on the same port); port 0 picks a free one.
     pub listen: SocketAddr,
@@ -60,6 +62,11 @@ pub struct ServeConfig {
     pub once: bool,
     /// Stop on Ctrl-C (SIGINT).
     pub stop_on_ctrl_c: bool,
+    /// What `/scene.glb` serves (see [`crate::glb::scene_glb`]).
+    pub scene_glb: Vec<u8>,
+    /// Serve every connection over TLS (https, wss, and raw frames inside TLS); see
+    /// [`crate::tls::acceptor`].
+    pub tls: Option<tokio_rustls::TlsAcceptor>,
 }
 
 /// Per-client statistics.
@@ -208,9 +215,22 @@ impl Serve {
             local,
             stop,
         } = self;
-        tracing::info!("listening on {local} (TCP and WebSocket)");
+        let scheme = if config.tls.is_some() {
+            "TLS: https, wss and raw frames"
+        } else {
+            "raw frames, HTTP and WebSocket"
+        };
+        tracing::info!("listening on {local} ({scheme})");
         let (events_tx, events_rx) = mpsc::channel::<Event>(1024);
-        rt.spawn(accept_loop(listener, events_tx, config.token.clone()));
+        let health = Arc::new(Health::default());
+        let http = HttpShared {
+            token: config.token.clone(),
+            tls: config.tls.clone(),
+            scene_glb: bytes::Bytes::from(config.scene_glb),
+            scene_name: config.scene_name.clone(),
+            health: health.clone(),
+        };
+        rt.spawn(accept_loop(listener, events_tx, http));
         if config.stop_on_ctrl_c {
             let stop_signal = stop.clone();
             rt.spawn(async move {
@@ -244,6 +264,7 @@ impl Serve {
             encode_ms: 0.0,
             unsent: None,
             hash_ms: 0.0,
+            health,
         };
         let stats = sim.run();
         rt.shutdown_timeout(Duration::from_millis(500));
@@ -251,15 +272,67 @@ impl Serve {
     }
 }
 
-async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, token: Option<String>) {
+/// Connections (raw, HTTP and WebSocket) open at once; later ones are closed at once.
+const MAX_CONNECTIONS: usize = 1024;
+
+async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: HttpShared) {
+    let permits = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+    let ctx = Arc::new(HttpContext {
+        scene_glb: http.scene_glb,
+        scene_name: http.scene_name,
+        health: http.health,
+        on_websocket: {
+            let (events, token) = (events.clone(), http.token.clone());
+            Box::new(move |reader, writer| {
+                let (events, token) = (events.clone(), token.clone());
+                tokio::spawn(async move {
+                    if let Err(e) = session(reader, writer, "websocket", events, token).await {
+                        tracing::info!("WebSocket session ended: {e}");
+                    }
+                });
+            })
+        },
+    });
     loop {
         match listener.accept().await {
             Ok((stream, peer)) => {
-                let events = events.clone();
-                let token = token.clone();
+                let Ok(permit) = permits.clone().try_acquire_owned() else {
+                    tracing::warn!("{MAX_CONNECTIONS} connections open: closing {peer}'s");
+                    continue;
+                };
+                let _ = stream.set_nodelay(true);
+                let (events, token, ctx) = (events.clone(), http.token.clone(), ctx.clone());
+                let tls = http.tls.clone();
                 tokio::spawn(async move {
-                    if let Err(e) = connection(stream, events, token).await {
-                        tracing::info!("session with {peer} ended: {e}");
+                    let _permit = permit;
+                    let io: BoxIo = match tls {
+                        None => Box::new(stream),
+                        Some(tls) => {
+                            match tokio::time::timeout(HELLO_TIMEOUT, tls.accept(stream)).await {
+                                Ok(Ok(s)) => Box::new(s),
+                                Ok(Err(e)) => {
+                                    tracing::info!("TLS handshake with {peer} failed: {e}");
+                                    return;
+                                }
+                                Err(_) => {
+                                    tracing::info!("TLS handshake with {peer} timed out");
+                                    return;
+                                }
+                            }
+                        }
+                    };
+                    match accept(io, HELLO_TIMEOUT).await {
+                        Ok(Accepted::Frames(reader, writer)) => {
+                            if let Err(e) = session(reader, writer, "tcp", events, token).await {
+                                tracing::info!("session with {peer} ended: {e}");
+                            }
+                        }
+                        Ok(Accepted::Http(io)) => {
+                            if let Err(e) = serve_http(io, ctx).await {
+                                tracing::debug!("HTTP connection from {peer}: {e}");
+                            }
+                        }
+                        Err(e) => tracing::info!("connection from {peer}: {e}"),
                     }
                 });
             }
@@ -269,6 +342,15 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, token: 
             }
         }
     }
+}
+
+/// What the HTTP side needs from the configuration.
+struct HttpShared {
+    token: Option<String>,
+    tls: Option<tokio_rustls::TlsAcceptor>,
+    scene_glb: bytes::Bytes,
+    scene_name: String,
+    health: Arc<Health>,
 }
 
 /// Sends `error`, lets the peer read it, and closes.
@@ -287,13 +369,15 @@ async fn refuse(
     NetError::Protocol(format!("refused ({code:?}): {text}"))
 }
 
-/// One client connection: handshake, then cameras/acks in, queued frames out.
-async fn connection(
-    stream: tokio::net::TcpStream,
+/// One client session on a frame transport: handshake, then cameras/acks in, queued frames
+/// out.
+async fn session(
+    mut reader: FrameReader,
+    mut writer: FrameWriter,
+    kind: &'static str,
     events: mpsc::Sender<Event>,
     token: Option<String>,
 ) -> Result<(), NetError> {
-    let (mut reader, mut writer, kind) = accept(stream, MAX_CLIENT_FRAME, HELLO_TIMEOUT).await?;
     let first = tokio::time::timeout(HELLO_TIMEOUT, reader.next(MAX_CLIENT_FRAME)).await;
     let hello = match first {
         Err(_) => {
@@ -456,6 +540,8 @@ struct Simulation {
     hash_ms: f64,
     /// The last frame's updates, sent during the next frame (not in lockstep).
     unsent: Option<FrameUpdates>,
+    /// What `/health` reports.
+    health: Arc<Health>,
 }
 
 impl Simulation {
@@ -552,6 +638,9 @@ impl Simulation {
             }
             Event::Leave(id) => {
                 if let Some(s) = self.sessions.remove(&id) {
+                    self.health
+                        .clients
+                        .store(self.sessions.len(), Ordering::Relaxed);
                     self.server.remove_client(s.id);
                     tracing::info!("client {id} left");
                     self.stats.clients.push(s.stats);
@@ -619,6 +708,9 @@ impl Simulation {
                 },
             },
         );
+        self.health
+            .clients
+            .store(self.sessions.len(), Ordering::Relaxed);
     }
 
     /// Step once for the union of the clients' views and collect the update of each client
@@ -650,6 +742,9 @@ impl Simulation {
             }
         };
         self.step_ms.push(step.ms);
+        self.health
+            .server_frame
+            .store(self.server.frame(), Ordering::Relaxed);
         for (sum, ms) in
             self.phase_ms
                 .iter_mut()

@@ -1,0 +1,167 @@
+// One session with `psao serve` over a WebSocket: hello, welcome, then updates decoded into
+// the client state and acknowledged; every update that carries the server's state hash is
+// checked against the client's (as `psao view` does). Runs in the browser and in Node (whose
+// global WebSocket has the same interface).
+
+import { CompactDecoder, type Update } from "./compact";
+import { ClientState } from "./state";
+import {
+  ackFrame,
+  byeFrame,
+  CAP_CODEC_COMPACT,
+  CAP_STATE_HASH,
+  cameraFrame,
+  decodeFrame,
+  helloFrame,
+  PROTOCOL_VERSION,
+  type Camera,
+  type InstanceEntry,
+  type Message,
+  type Welcome,
+} from "./wire";
+
+/// Most bytes one decoded update can legitimately take for this table (psao-net's
+/// `decode_limit`: a snapshot of every bucket and addressable cell, generous per record).
+export function decodeLimit(table: InstanceEntry[]): number {
+  let total = 4096;
+  for (const e of table) total += 64 + e.bucketCount * 110 + e.bucketCount * 8 * 40;
+  return total;
+}
+
+/// What a session reports to its owner.
+export interface SessionHandler {
+  welcome(w: Welcome): void;
+  /// An update was applied; `verified` is whether it carried the server's hash (it matched).
+  update(u: Update, frameBytes: number, verified: boolean): void;
+  sceneTime?(frame: number, clientFrame: number | null): void;
+  /// The session ended: `fatal` when reconnecting cannot help (wrong token or version).
+  closed(reason: string, fatal: boolean): void;
+}
+
+/// Settings of a session.
+export interface SessionOptions {
+  url: string;
+  token: string | null;
+  /// Ask for the server's state hash with every update and check it.
+  verify: boolean;
+  name: string;
+}
+
+/// A live session.
+export class Session {
+  state: ClientState | null = null;
+  welcomeMsg: Welcome | null = null;
+  bytes = 0;
+  updates = 0;
+  mismatches = 0;
+  lastHash: bigint | null = null;
+  /// Milliseconds spent decoding and applying updates (hash checks excluded).
+  decodeMs = 0;
+  private decoder: CompactDecoder | null = null;
+  private ws: WebSocket;
+  private done = false;
+
+  constructor(
+    private opts: SessionOptions,
+    private handler: SessionHandler,
+  ) {
+    this.ws = new WebSocket(opts.url);
+    this.ws.binaryType = "arraybuffer";
+    this.ws.onopen = () => {
+      const caps = CAP_CODEC_COMPACT | (opts.verify ? CAP_STATE_HASH : 0);
+      this.ws.send(helloFrame({ version: PROTOCOL_VERSION, capabilities: caps, token: opts.token, name: opts.name }));
+    };
+    this.ws.onmessage = (ev) => {
+      if (this.done) return;
+      if (!(ev.data instanceof ArrayBuffer)) return this.fail("text WebSocket message (frames are binary)", true);
+      const bytes = new Uint8Array(ev.data);
+      this.bytes += bytes.length;
+      try {
+        this.handle(decodeFrame(bytes), bytes.length);
+      } catch (e) {
+        this.fail(`bad frame from the server: ${(e as Error).message}`, true);
+      }
+    };
+    this.ws.onclose = () => this.end("the connection closed", false);
+    this.ws.onerror = () => this.end("the connection failed", false);
+  }
+
+  private handle(m: Message, size: number) {
+    switch (m.kind) {
+      case "welcome": {
+        const w = m.welcome;
+        if (w.version !== PROTOCOL_VERSION) {
+          return this.fail(`the server speaks protocol version ${w.version}, this viewer ${PROTOCOL_VERSION}`, true);
+        }
+        if (w.codec !== "compact") return this.fail(`the server's codec \`${w.codec}\` is not supported`, true);
+        this.welcomeMsg = w;
+        this.state = new ClientState(w.instances);
+        this.decoder = new CompactDecoder(decodeLimit(w.instances));
+        this.handler.welcome(w);
+        return;
+      }
+      case "delta":
+      case "snapshot": {
+        if (!this.decoder || !this.state) return this.fail("update before the welcome", true);
+        const t0 = performance.now();
+        const u = this.decoder.decode(m.delta.payload);
+        if (u.snapshot !== (m.kind === "snapshot")) {
+          return this.fail("the update's snapshot flag does not match its message", true);
+        }
+        this.state.apply(u);
+        this.decodeMs += performance.now() - t0;
+        this.updates++;
+        let verified = false;
+        if (m.delta.stateHash !== null) {
+          this.lastHash = this.state.stateHash();
+          verified = this.lastHash === m.delta.stateHash;
+          if (!verified) this.mismatches++;
+        }
+        this.ws.send(ackFrame(m.delta.frame));
+        this.handler.update(u, size, verified);
+        if (m.delta.clientFrame !== null) this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame);
+        return;
+      }
+      case "scene_time":
+        this.handler.sceneTime?.(m.frame, m.clientFrame);
+        return;
+      case "error": {
+        const fatal = m.code === "Token" || m.code === "Version";
+        const text =
+          m.code === "Token"
+            ? `wrong or missing token: ${m.message}`
+            : m.code === "Version"
+              ? `protocol version mismatch: ${m.message}`
+              : `server error (${m.code}): ${m.message}`;
+        return this.fail(text, fatal);
+      }
+      case "bye":
+        return this.end(`the server said bye: ${m.reason}`, false);
+      default:
+        return this.fail(`unexpected ${m.kind} from the server`, true);
+    }
+  }
+
+  /// Sends the client's camera.
+  sendCamera(c: Camera) {
+    if (!this.done && this.ws.readyState === WebSocket.OPEN) this.ws.send(cameraFrame(c));
+  }
+
+  /// Ends the session with a bye.
+  close() {
+    if (!this.done && this.ws.readyState === WebSocket.OPEN) this.ws.send(byeFrame("done"));
+    this.end("closed by the viewer", true);
+    this.ws.close();
+  }
+
+  private fail(reason: string, fatal: boolean) {
+    this.end(reason, fatal);
+    this.ws.close();
+  }
+
+  private end(reason: string, fatal: boolean) {
+    if (this.done) return;
+    this.done = true;
+    this.handler.closed(reason, fatal);
+  }
+}
