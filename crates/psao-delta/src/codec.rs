@@ -20,16 +20,16 @@ pub trait Codec: Send {
     /// Decode one update; malformed input gives an error, never a panic or an unbounded
     /// allocation.
     fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError>;
-    /// Lower the most bytes one update may decompress to (e.g. to what the instance table
-    /// allows); never above [`crate::MAX_DECODED_BYTES`]. Codecs without a configurable
-    /// limit keep [`crate::MAX_DECODED_BYTES`].
+    /// Set the most bytes one update may decompress to (and the compact decoder's reference
+    /// may hold) to what the instance table allows, at most [`crate::MAX_DECODE_LIMIT`].
+    /// Codecs without a configurable limit keep [`crate::MAX_DECODED_BYTES`].
     fn set_decode_limit(&mut self, _bytes: u64) {}
 }
 
 /// A fresh codec by name (`"compact"` or `"paper"`).
 pub fn codec_by_name(name: &str) -> Result<Box<dyn Codec>, DeltaError> {
     match name {
-        "paper" => Ok(Box::new(PaperCodec)),
+        "paper" => Ok(Box::new(PaperCodec::new())),
         "compact" => Ok(Box::new(CompactCodec::new())),
         _ => Err(DeltaError::UnknownCodec(name.to_string())),
     }

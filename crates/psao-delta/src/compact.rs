@@ -49,7 +49,7 @@ use psao_points::pack::VALID_BIT;
 use psao_points::{Bucket, BucketEntry, Cell, KeyMap, BUCKET_ENTRIES, CELL_POINTS};
 
 use crate::model::{compact_bucket, compact_cell, InstanceDelta, Update};
-use crate::{Codec, DeltaError, MAX_DECODED_BYTES};
+use crate::{Codec, DeltaError, MAX_DECODED_BYTES, MAX_DECODE_LIMIT};
 
 /// zstd level of the compact codec.
 pub const COMPACT_LEVEL: i32 = 3;
@@ -598,7 +598,7 @@ impl Codec for CompactCodec {
     }
 
     fn set_decode_limit(&mut self, bytes: u64) {
-        self.decode_limit = bytes.min(MAX_DECODED_BYTES);
+        self.decode_limit = bytes.min(MAX_DECODE_LIMIT);
     }
 }
 
@@ -965,7 +965,7 @@ mod tests {
 
     /// What the paper codec decodes (compacted records): the compact codec must agree.
     fn paper_round_trip(u: &Update) -> Update {
-        let mut p = PaperCodec;
+        let mut p = PaperCodec::new();
         let bytes = p.encode(u);
         p.decode(&bytes).unwrap()
     }

@@ -19,6 +19,6 @@ pub use codec::{codec_by_name, Codec, CODEC_NAMES};
 pub use compact::{CompactCodec, COMPACT_LEVEL};
 pub use error::DeltaError;
 pub use model::{compact_bucket, compact_cell, InstanceDelta, InstanceInfo, Update};
-pub use paper::{PaperCodec, MAX_DECODED_BYTES, PAPER_LEVEL};
+pub use paper::{PaperCodec, MAX_DECODED_BYTES, MAX_DECODE_LIMIT, PAPER_LEVEL};
 /// The grid layout type of [`InstanceInfo`], re-exported for building instance tables.
 pub use psao_points::GridLayout;

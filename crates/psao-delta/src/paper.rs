@@ -22,9 +22,15 @@ use crate::{Codec, DeltaError};
 
 /// zstd compression level of the paper codec.
 pub const PAPER_LEVEL: i32 = 15;
-/// Largest decompressed payload any decoder here accepts (256 MiB): far above a snapshot of
-/// the largest scene we stream, far below what would hurt the client.
+/// The decode limit of a decoder that was not told what its stream may need (256 MiB): the
+/// largest decompressed payload it accepts, and for the compact codec also the most its
+/// reference may hold. A client raises or lowers it to what its instance table allows
+/// ([`crate::Codec::set_decode_limit`]), never past [`MAX_DECODE_LIMIT`].
 pub const MAX_DECODED_BYTES: u64 = 256 << 20;
+
+/// The absolute ceiling of a decode limit (4 GiB), whatever an instance table asks for; the
+/// densest Sponza we evaluate streams within it (docs/PROTOCOL.md, crates/psao/tests/dense.rs).
+pub const MAX_DECODE_LIMIT: u64 = 4 << 30;
 
 const TAG: u32 = u32::from_le_bytes(*b"PSD1");
 const FLAG_SNAPSHOT: u32 = 1;
@@ -34,9 +40,26 @@ const INSTANCE_HEADER_WORDS: usize = 3;
 const CELL_WORDS: usize = 1 + CELL_POINTS;
 
 /// The paper's codec: raw records + zstd level 15 with the "lazy" strategy. Stateless: every
-/// update decodes on its own.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PaperCodec;
+/// update decodes on its own, within the decode limit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PaperCodec {
+    decode_limit: u64,
+}
+
+impl PaperCodec {
+    /// A codec with the [`MAX_DECODED_BYTES`] decoding limit.
+    pub const fn new() -> Self {
+        Self {
+            decode_limit: MAX_DECODED_BYTES,
+        }
+    }
+}
+
+impl Default for PaperCodec {
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 impl Codec for PaperCodec {
     fn name(&self) -> &'static str {
@@ -50,7 +73,11 @@ impl Codec for PaperCodec {
     fn advance(&mut self, _update: &Update) {}
 
     fn decode(&mut self, bytes: &[u8]) -> Result<Update, DeltaError> {
-        deserialize(&decompress(bytes)?)
+        deserialize(&crate::zstd_io::decompress(bytes, self.decode_limit)?)
+    }
+
+    fn set_decode_limit(&mut self, bytes: u64) {
+        self.decode_limit = bytes.min(MAX_DECODE_LIMIT);
     }
 }
 
@@ -203,9 +230,4 @@ fn compress(payload: &[u8]) -> Vec<u8> {
         PAPER_LEVEL,
         &[CParameter::Strategy(Strategy::ZSTD_lazy)],
     )
-}
-
-/// Decompress at most [`MAX_DECODED_BYTES`].
-fn decompress(bytes: &[u8]) -> Result<Vec<u8>, DeltaError> {
-    crate::zstd_io::decompress(bytes, MAX_DECODED_BYTES)
 }

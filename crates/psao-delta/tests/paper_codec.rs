@@ -2,7 +2,8 @@
 
 use glam::{Affine3A, Quat, Vec3};
 use psao_delta::{
-    codec_by_name, Codec, DeltaError, InstanceDelta, PaperCodec, Update, MAX_DECODED_BYTES,
+    codec_by_name, Codec, DeltaError, InstanceDelta, PaperCodec, Update, CODEC_NAMES,
+    MAX_DECODED_BYTES, MAX_DECODE_LIMIT,
 };
 use psao_points::pack::VALID_BIT;
 use psao_points::{Bucket, BucketEntry, Cell};
@@ -101,7 +102,7 @@ fn random_updates_round_trip_bit_identically() {
 
 #[test]
 fn empty_update_round_trips_and_is_small() {
-    let mut codec = PaperCodec;
+    let mut codec = PaperCodec::new();
     let update = Update::default();
     let bytes = codec.encode(&update);
     assert!(bytes.len() < 64, "{} bytes", bytes.len());
@@ -122,7 +123,7 @@ fn encoding_compacts_buckets_and_cells() {
         }],
         ..Default::default()
     };
-    let mut codec = PaperCodec;
+    let mut codec = PaperCodec::new();
     let bytes = codec.encode(&update);
     let back = codec.decode(&bytes).unwrap();
     let d = &back.instances[0];
@@ -143,7 +144,7 @@ fn unknown_codec_is_an_error() {
 #[test]
 fn truncated_garbage_and_bit_flipped_input_is_rejected() {
     let mut rng = Rng(7);
-    let mut codec = PaperCodec;
+    let mut codec = PaperCodec::new();
     let update = random_update(&mut rng, false);
     let bytes = codec.encode(&update);
     for len in 0..bytes.len() {
@@ -185,7 +186,7 @@ fn valid_zstd_with_malformed_payload_is_rejected() {
         zstd::bulk::compress(&bytes, 3).unwrap()
     };
     let tag = u32::from_le_bytes(*b"PSD1");
-    let mut codec = PaperCodec;
+    let mut codec = PaperCodec::new();
     type Check = fn(&DeltaError) -> bool;
     let cases: [(Vec<u32>, Check); 5] = [
         (vec![0xdead_beef], |e| {
@@ -242,7 +243,7 @@ fn rle_frame(claimed: Option<u64>, actual: u64) -> Vec<u8> {
 
 #[test]
 fn decompression_bombs_are_refused() {
-    let mut codec = PaperCodec;
+    let mut codec = PaperCodec::new();
     // The hand-made frame is valid zstd: a small one expands and fails on its (zero) tag.
     let small = rle_frame(Some(4096), 4096);
     assert!(matches!(
@@ -268,4 +269,28 @@ fn decompression_bombs_are_refused() {
     // A frame without a recorded size is refused rather than decoded into a guessed buffer.
     let unsized_frame = rle_frame(None, 1 << 20);
     assert_eq!(codec.decode(&unsized_frame), Err(DeltaError::UnknownSize));
+}
+
+#[test]
+fn decode_limits_follow_the_table_up_to_the_ceiling() {
+    // A frame claiming 8 GiB is refused from its header; the error names the limit in force.
+    let huge = rle_frame(Some(8 << 30), 4096);
+    for name in CODEC_NAMES {
+        let limit_after = |set: Option<u64>| {
+            let mut codec = codec_by_name(name).unwrap();
+            if let Some(bytes) = set {
+                codec.set_decode_limit(bytes);
+            }
+            match codec.decode(&huge) {
+                Err(DeltaError::TooLarge { limit, .. }) => limit,
+                other => panic!("{name}: {other:?}"),
+            }
+        };
+        assert_eq!(limit_after(None), MAX_DECODED_BYTES, "{name}");
+        assert_eq!(limit_after(Some(1 << 20)), 1 << 20, "{name}");
+        // Above the default: what a dense instance table needs is granted…
+        assert_eq!(limit_after(Some(3 << 30)), 3 << 30, "{name}");
+        // …up to the absolute ceiling.
+        assert_eq!(limit_after(Some(u64::MAX)), MAX_DECODE_LIMIT, "{name}");
+    }
 }

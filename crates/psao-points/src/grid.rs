@@ -100,6 +100,14 @@ pub struct InstanceGrid {
 }
 
 impl InstanceGrid {
+    /// Heap bytes the grid's tables hold (allocated capacity).
+    pub fn heap_bytes(&self) -> u64 {
+        crate::vec_bytes(&self.buckets)
+            + crate::vec_bytes(&self.cells)
+            + crate::vec_bytes(&self.slot_keys)
+            + crate::vec_bytes(&self.free)
+    }
+
     /// An empty grid: all buckets empty, no cells.
     pub fn new(layout: GridLayout) -> Self {
         Self {

@@ -35,3 +35,8 @@ pub use reconstruct::{
     reconstruct_ao, ReconstructParams, DEFAULT_DIRECTION_THRESHOLD, DEFAULT_INTERPOLATION_FACTOR,
     DEFAULT_NORMAL_EXPONENT, DEFAULT_NORMAL_THRESHOLD, DEFAULT_PLANE_TOLERANCE,
 };
+
+/// Heap bytes a vector holds: its allocated capacity times the element size.
+pub fn vec_bytes<T>(v: &Vec<T>) -> u64 {
+    (v.capacity() * std::mem::size_of::<T>()) as u64
+}

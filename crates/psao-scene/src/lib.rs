@@ -12,6 +12,7 @@ pub mod light;
 mod load;
 pub mod model;
 pub mod obj;
+pub mod orbit;
 pub mod path;
 pub mod scene_file;
 
@@ -22,4 +23,5 @@ pub use error::{SceneError, MAX_ELEMENTS};
 pub use light::{Light, LightShape};
 pub use load::{load, load_scene, LoadedScene};
 pub use model::*;
+pub use orbit::orbit_path;
 pub use path::{CameraKey, CameraPath, PATH_HZ};

@@ -66,7 +66,7 @@ struct KeyFile {
 }
 
 /// Vertical FOV used when neither the file nor the key gives one.
-const DEFAULT_FOV_Y_DEG: f32 = 60.0;
+pub(crate) const DEFAULT_FOV_Y_DEG: f32 = 60.0;
 
 impl CameraPath {
     /// Loads and validates a camera path file.

@@ -2,6 +2,7 @@
 //! against the frusta before (or instead of) its points.
 
 use glam::{Affine3A, Vec3};
+use psao_points::vec_bytes;
 use psao_trace::ao::hash64;
 
 use crate::frustum::Frustum;
@@ -59,6 +60,15 @@ pub(crate) fn tie_of(instance: u32, index: u32, seed: u64) -> u32 {
 }
 
 impl CullBlocks {
+    /// Heap bytes of the order, tie-breaks and bounds.
+    pub fn heap_bytes(&self) -> u64 {
+        vec_bytes(&self.order)
+            + vec_bytes(&self.tie)
+            + vec_bytes(&self.blocks)
+            + vec_bytes(&self.subs)
+            + vec_bytes(&self.groups)
+    }
+
     /// Blocks of `positions` (instance `instance`, tie-breaks from `seed`).
     pub fn new(positions: &[Vec3], instance: u32, seed: u64) -> Self {
         let order = morton_order(positions);

@@ -1,6 +1,7 @@
 //! Which published buckets and cells changed in recent server frames, so a client's delta
 //! costs O(changed) instead of a scan of the whole grid.
 
+use psao_points::vec_bytes;
 use std::collections::VecDeque;
 
 /// The buckets and cells stamped in one server frame.
@@ -29,6 +30,16 @@ pub(crate) struct Changed {
 }
 
 impl ChangeLog {
+    /// Heap bytes of the listed changes.
+    pub fn heap_bytes(&self) -> u64 {
+        let lists: u64 = self
+            .frames
+            .iter()
+            .map(|f| vec_bytes(&f.buckets) + vec_bytes(&f.cells))
+            .sum();
+        lists + (self.frames.capacity() * std::mem::size_of::<FrameChanges>()) as u64
+    }
+
     /// The entry of `frame`, created when it is newer than the last one.
     fn entry(&mut self, frame: u64) -> &mut FrameChanges {
         if self.frames.back().is_none_or(|f| f.frame < frame) {

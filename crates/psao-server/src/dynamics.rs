@@ -45,6 +45,7 @@
 //! starved by the fixed tie-break.
 
 use glam::{Affine3A, UVec3, Vec3};
+use psao_points::vec_bytes;
 use psao_points::InstancePoints;
 use psao_scene::affine::{box_corners, invert_or_identity as inverse, transformed_box};
 use psao_scene::{Animator, Motion, ScenePose, SkinnedGeometry};
@@ -139,6 +140,22 @@ pub(crate) struct Dynamics {
 }
 
 impl Dynamics {
+    /// Heap bytes of the skin bindings (per skinned point: its triangle and barycentrics;
+    /// per vertex: its reference position). The animator's pose is not counted.
+    pub fn heap_bytes(&self) -> u64 {
+        self.skins
+            .iter()
+            .flatten()
+            .map(|s| {
+                vec_bytes(&s.indices)
+                    + vec_bytes(&s.triangle)
+                    + vec_bytes(&s.bary)
+                    + vec_bytes(&s.back_face)
+                    + vec_bytes(&s.reference)
+            })
+            .sum()
+    }
+
     /// The animation state of `scene` (points as generated, in the stored pose).
     pub fn new(
         scene: &psao_scene::Scene,

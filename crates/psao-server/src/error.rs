@@ -18,4 +18,7 @@ pub enum ServerError {
     /// The ray tracer could not be built or updated.
     #[error(transparent)]
     Trace(#[from] psao_trace::TraceError),
+    /// Stored start points cannot be used.
+    #[error("stored start points: {0}")]
+    StartPoints(String),
 }

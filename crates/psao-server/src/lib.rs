@@ -15,8 +15,10 @@ mod dynamics;
 mod error;
 mod frustum;
 mod instance;
+mod memory;
 mod publish;
 mod server;
+mod start_points;
 mod summary;
 mod trace;
 
@@ -27,4 +29,6 @@ pub use config::{ServerConfig, Thresholds};
 pub use dynamics::{Invalidation, MotionStats};
 pub use error::ServerError;
 pub use frustum::{Frustum, View};
+pub use memory::MemoryPart;
 pub use server::{PointInfo, Server, StepStats};
+pub use start_points::StartPoints;

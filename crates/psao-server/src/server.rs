@@ -6,18 +6,18 @@ use std::time::Instant;
 use glam::{Affine3A, Vec3};
 use psao_delta::{InstanceDelta, InstanceInfo, Update};
 use psao_points::pack::unpack_ao;
-use psao_points::{generate_scene_points, GenerateParams, InstanceGrid};
+use psao_points::InstanceGrid;
 use psao_scene::{Motion, Scene};
 use psao_trace::ao::Medium;
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
-use crate::bury::buried;
 use crate::clients::Clients;
 use crate::dynamics::{Dynamics, Restarted};
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select, trace};
+use crate::StartPoints;
 use crate::{ClientId, Frustum, ServerConfig, ServerError, View};
 
 /// What one [`Server::step`] did.
@@ -116,6 +116,36 @@ impl Server {
         config: ServerConfig,
         medium: Option<Arc<dyn Medium>>,
     ) -> Result<Server, ServerError> {
+        let radius = Self::checked_radius(scene, &config)?;
+        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
+        let start = StartPoints::generate_with(scene, &config, &tracer)?;
+        Self::assemble(scene, config, medium, tracer, radius, start)
+    }
+
+    /// [`Server::with_medium`] from points generated earlier for the same scene and settings
+    /// ([`StartPoints::generate`], e.g. stored as bytes between runs): the same server,
+    /// without generating and burial-testing the points again. Points made for another
+    /// scene or settings ([`StartPoints::key`]) are refused.
+    pub fn with_start_points(
+        scene: &Scene,
+        config: ServerConfig,
+        medium: Option<Arc<dyn Medium>>,
+        start: StartPoints,
+    ) -> Result<Server, ServerError> {
+        let radius = Self::checked_radius(scene, &config)?;
+        let expected = StartPoints::key(scene, &config);
+        if start.key != expected {
+            return Err(ServerError::StartPoints(format!(
+                "made for key {:016x}, not {expected:016x} (another scene or settings)",
+                start.key
+            )));
+        }
+        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
+        Self::assemble(scene, config, medium, tracer, radius, start)
+    }
+
+    /// The AO radius of a server for `scene` with `config`, after checking both.
+    pub(crate) fn checked_radius(scene: &Scene, config: &ServerConfig) -> Result<f32, ServerError> {
         config.validate()?;
         let radius = config.ao_radius.unwrap_or(scene.ao_radius);
         if !(radius.is_finite() && radius > 0.0) {
@@ -126,33 +156,19 @@ impl Server {
         if u32::try_from(scene.instances.len()).is_err() {
             return Err(ServerError::TooManyInstances(scene.instances.len()));
         }
-        let params = GenerateParams {
-            density: config.density,
-            seed: config.seed,
-        };
-        let opaque = |mesh: usize, tri: u32, bary: Vec3| scene.opaque_at(mesh, tri, bary);
-        let mut points = generate_scene_points(scene, &params, Some(&opaque))?;
-        let tracer = Tracer::new(config.backend, scene, GeometryMode::Occlusion)?;
-        let buried_points = if config.cull_buried {
-            let buried = buried(&tracer, scene, &points, config.seed);
-            let mut dropped = 0;
-            for (p, b) in points.iter_mut().zip(&buried) {
-                let mut flags = b.iter();
-                p.points.retain(|_| !flags.next().copied().unwrap_or(false));
-                dropped += b.iter().filter(|&&x| x).count();
-            }
-            dropped
-        } else {
-            0
-        };
-        // Number the points in the order culling visits them, so that every per-point array
-        // is read in blocks of neighbours (front and back copies stay adjacent: equal
-        // positions keep their order).
-        points.par_iter_mut().for_each(|p| {
-            let positions: Vec<Vec3> = p.points.iter().map(|s| s.position).collect();
-            let order = crate::blocks::morton_order(&positions);
-            p.points = order.iter().map(|&i| p.points[i as usize]).collect();
-        });
+        Ok(radius)
+    }
+
+    /// The server over `start`'s points.
+    fn assemble(
+        scene: &Scene,
+        config: ServerConfig,
+        medium: Option<Arc<dyn Medium>>,
+        tracer: Tracer,
+        radius: f32,
+        start: StartPoints,
+    ) -> Result<Server, ServerError> {
+        let (points, buried_points) = (start.instances, start.buried);
         let dynamics = Dynamics::new(scene, &points, config.invalidation)?;
         let motion = dynamics.motion();
         let instances = points
@@ -474,6 +490,12 @@ impl Server {
     /// Generated points dropped by the burial test ([`ServerConfig::cull_buried`]).
     pub fn buried_points(&self) -> usize {
         self.buried_points
+    }
+
+    /// Heap bytes of the server's per-instance structures and skin bindings, by kind (the
+    /// tracer's acceleration structures and the scene are not included).
+    pub fn memory_use(&self) -> Vec<crate::MemoryPart> {
+        crate::memory::memory_parts(&self.instances, self.dynamics.heap_bytes())
     }
 
     /// Server frames stepped so far (the frame number of the latest update).

@@ -4,6 +4,7 @@
 //! by selection [`bin`]. The server refreshes the summary of every point whose sample count
 //! or storage changed ([`BlockSummaries::refresh`]).
 
+use psao_points::vec_bytes;
 use rayon::prelude::*;
 
 use crate::blocks::{CullBlocks, BLOCK_POINTS};
@@ -76,6 +77,15 @@ pub(crate) struct BlockSummaries {
 }
 
 impl BlockSummaries {
+    /// Heap bytes of the per-block counts and lists.
+    pub fn heap_bytes(&self) -> u64 {
+        vec_bytes(&self.stored)
+            + vec_bytes(&self.len)
+            + vec_bytes(&self.entries)
+            + vec_bytes(&self.listed)
+            + vec_bytes(&self.rank)
+    }
+
     /// Summaries of `blocks` for the current state of `points`.
     pub fn new(blocks: &CullBlocks, points: &Points, max_samples: u32) -> Self {
         let n = blocks.order.len();

@@ -365,7 +365,7 @@ fn animated_runs_are_deterministic() {
             (0..8)
                 .map(|k| {
                     server.step_at(&[wide_view()], k as f32 / 15.0).unwrap();
-                    PaperCodec.encode(&server.update_for(client))
+                    PaperCodec::new().encode(&server.update_for(client))
                 })
                 .collect::<Vec<_>>()
         })

@@ -213,7 +213,7 @@ fn encoded_run(cfg: ServerConfig, threads: usize) -> Vec<Vec<u8>> {
             .iter()
             .map(|v| {
                 server.step(&[*v]);
-                PaperCodec.encode(&server.update_for(c))
+                PaperCodec::new().encode(&server.update_for(c))
             })
             .collect()
     })

@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{instance, mesh, scene};
+use common::{assert_hit_t, instance, mesh, scene};
 use glam::{Affine3A, Vec3};
 use psao_trace::{Backend, GeometryMode, Ray, TraceError, Tracer};
 
@@ -66,12 +66,12 @@ fn refit_cost_grows_and_rebuild_restores_it() {
     t.commit();
     let bad = t.mesh_cost_ratio(0).unwrap();
     assert!(bad > 5.0, "{bad}");
-    assert_eq!(hit_t(&t, 100.5), Some(3.0), "refit is still correct");
+    assert_hit_t(hit_t(&t, 100.5), Some(3.0), "refit is still correct");
     t.rebuild_mesh_positions(0, &mixed).unwrap();
     t.commit();
     assert!((t.mesh_cost_ratio(0).unwrap() - 1.0).abs() < 1e-6);
-    assert_eq!(hit_t(&t, 100.5), Some(3.0));
-    assert_eq!(hit_t(&t, 600.0), None);
+    assert_hit_t(hit_t(&t, 100.5), Some(3.0), "rebuilt");
+    assert_hit_t(hit_t(&t, 600.0), None, "beyond the strip");
 }
 
 #[test]
@@ -89,7 +89,7 @@ fn deforming_update_rebuilds_past_the_threshold() {
         assert!(!first.rebuilt, "{backend}: nothing to compare yet: refit");
         let second = t.update_deforming_mesh(0, &m.positions, 1.3).unwrap();
         t.commit();
-        assert_eq!(hit_t(&t, 10.5), Some(3.0), "{backend}");
+        assert_hit_t(hit_t(&t, 10.5), Some(3.0), &format!("{backend}"));
         if backend == Backend::Obvhs {
             assert!(first.cost_ratio.unwrap() > 1.3);
             assert!(second.rebuilt);
@@ -103,7 +103,7 @@ fn deforming_update_rebuilds_past_the_threshold() {
         // A rebuild checks its input like an update.
         t.rebuild_mesh_positions(0, &mixed).unwrap();
         t.commit();
-        assert_eq!(hit_t(&t, 37.5), Some(3.0), "{backend}");
+        assert_hit_t(hit_t(&t, 37.5), Some(3.0), &format!("{backend}"));
         assert!(matches!(
             t.rebuild_mesh_positions(0, &[Vec3::ZERO]),
             Err(TraceError::PositionCount { .. })

@@ -11,6 +11,7 @@ use crate::volume::Volume;
 use crate::{Result, VolumeError};
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
+use std::sync::Mutex;
 
 /// A pinhole camera in world space.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,13 +44,46 @@ impl Camera {
 
     /// Unit world direction through pixel (x, y) of a `w`×`h` image (pixel centres).
     pub fn ray_dir(&self, x: u32, y: u32, w: u32, h: u32) -> Vec3 {
+        self.pixel_rays(w, h).dir(x, y)
+    }
+
+    /// The camera's frame for a `w`×`h` image, computed once for all its pixels.
+    pub fn pixel_rays(&self, w: u32, h: u32) -> PixelRays {
         let f = (self.target - self.eye).normalize();
         let r = f.cross(self.up).normalize();
         let u = r.cross(f);
         let th = (0.5 * self.fov_y_deg.to_radians()).tan();
-        let sx = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * th * w as f32 / h as f32;
-        let sy = (1.0 - (y as f32 + 0.5) / h as f32 * 2.0) * th;
-        (f + r * sx + u * sy).normalize()
+        PixelRays {
+            f,
+            r,
+            u,
+            th,
+            aspect: w as f32 / h as f32,
+            w: w as f32,
+            h: h as f32,
+        }
+    }
+}
+
+/// Pixel ray directions of one camera and image size ([`Camera::pixel_rays`]).
+#[derive(Clone, Copy, Debug)]
+pub struct PixelRays {
+    f: Vec3,
+    r: Vec3,
+    u: Vec3,
+    th: f32,
+    aspect: f32,
+    w: f32,
+    h: f32,
+}
+
+impl PixelRays {
+    /// Unit world direction through the centre of pixel (x, y).
+    #[inline]
+    pub fn dir(&self, x: u32, y: u32) -> Vec3 {
+        let sx = ((x as f32 + 0.5) / self.w * 2.0 - 1.0) * self.th * self.aspect;
+        let sy = (1.0 - (y as f32 + 0.5) / self.h * 2.0) * self.th;
+        (self.f + self.r * sx + self.u * sy).normalize()
     }
 }
 
@@ -125,7 +159,7 @@ impl Image {
     }
 }
 
-/// Edge of the pixel tiles rendered by one sampler (so decoded bricks are reused).
+/// Edge of the pixel tiles (neighbouring rays reuse decoded bricks).
 const TILE: u32 = 16;
 
 fn check(vol: &Volume, cam: &Camera, st: &RenderSettings) -> Result<()> {
@@ -175,40 +209,53 @@ pub fn render(vol: &Volume, cam: &Camera, st: &RenderSettings) -> Result<Image> 
     check(vol, cam, st)?;
     let (w, h) = (st.width, st.height);
     let range = depth_range(vol, st.frame, cam.eye);
+    let rays = cam.pixel_rays(w, h);
     let tiles_x = w.div_ceil(TILE);
     let tiles = tiles_x * h.div_ceil(TILE);
-    let tile_pixels: Vec<Vec<(u32, f32)>> = (0..tiles)
+    // Runs of consecutive tiles, each rendered by one sampler taken from a shared stack and
+    // put back after, so decoded bricks stay warm across runs (rayon may split work into
+    // many more jobs than threads; a fresh cache per job would decode everything again).
+    let runs = (4 * rayon::current_num_threads() as u32).clamp(1, tiles);
+    let free: Mutex<Vec<Sampler>> = Mutex::new(Vec::new());
+    let tile_pixels: Vec<Vec<(u32, f32)>> = (0..runs)
         .into_par_iter()
-        // One sampler (and its decoded-brick cache) per worker, reused across tiles.
-        .map_init(
-            || Sampler::new(vol, st.frame),
-            |s, tile| {
+        .map(|run| {
+            let mut s = free
+                .lock()
+                .map(|mut f| f.pop())
+                .unwrap_or(None)
+                .unwrap_or_else(|| Sampler::new(vol, st.frame));
+            let mut out = Vec::new();
+            for tile in tiles * run / runs..tiles * (run + 1) / runs {
                 let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
-                let mut out = Vec::with_capacity((TILE * TILE) as usize);
                 for y in y0..(y0 + TILE).min(h) {
                     for x in x0..(x0 + TILE).min(w) {
-                        let dir = cam.ray_dir(x, y, w, h);
+                        let dir = rays.dir(x, y);
                         let ray = IndexRay::from_world(vol, cam.eye, dir);
                         let v = match st.mode {
                             RenderMode::LevelSet => {
-                                shade_depth(level_set_hit(s, &ray, f32::INFINITY), range)
+                                shade_depth(level_set_hit(&mut s, &ray, f32::INFINITY), range)
                             }
                             RenderMode::Fog => {
-                                1.0 - (-st.density_scale * optical_depth(s, &ray, f32::INFINITY))
-                                    .exp()
+                                1.0 - (-st.density_scale
+                                    * optical_depth(&mut s, &ray, f32::INFINITY))
+                                .exp()
                             }
                             RenderMode::DeltaTrack => {
                                 let pixel = (y as u64) * w as u64 + x as u64;
                                 let mut rng = Rng::new(st.seed, pixel);
-                                single_scatter(s, &ray, st, &mut rng)
+                                single_scatter(&mut s, &ray, st, &mut rng)
                             }
                         };
                         out.push((y * w + x, v));
                     }
                 }
-                out
-            },
-        )
+            }
+            if let Ok(mut f) = free.lock() {
+                f.push(s);
+            }
+            out
+        })
         .collect();
     let mut pixels = vec![0.0f32; (w * h) as usize];
     for (i, v) in tile_pixels.into_iter().flatten() {
@@ -308,10 +355,11 @@ pub fn render_dense_level_set(
     let range = depth_range(vol, st.frame, cam.eye);
     let dt = step_length(vol);
     let (lo, hi) = vol.index_bounds(st.frame);
+    let rays = cam.pixel_rays(w, h);
     let mut pixels = vec![0.0f32; (w * h) as usize];
     pixels.par_iter_mut().enumerate().for_each(|(k, px)| {
         let (x, y) = ((k % w as usize) as u32, (k / w as usize) as u32);
-        let ray = IndexRay::from_world(vol, cam.eye, cam.ray_dir(x, y, w, h));
+        let ray = IndexRay::from_world(vol, cam.eye, rays.dir(x, y));
         let mut hit = None;
         if let Some((a, b)) = ray.clip(lo.as_vec3(), hi.as_vec3()) {
             let mut t = a.max(0.0) + 0.5 * dt;

@@ -6,12 +6,13 @@
 use crate::codec::BrickFormat;
 use crate::grid::{floor_ivec, voxel_index, BRICK_VOXELS};
 use crate::tree::Locate;
-use crate::volume::Volume;
+use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
 
 /// Bricks kept per sampler (direct-mapped by hashed brick index); their 4³ blocks are decoded
 /// when first needed.
-const SLOTS: usize = 256;
+const SLOT_BITS: u32 = 10;
+const SLOTS: usize = 1 << SLOT_BITS;
 /// Located cells remembered per sampler.
 const CELLS: usize = 4;
 
@@ -41,6 +42,9 @@ pub struct Sampler<'a> {
     /// Recently located 8³ cells and their L3 nodes (round robin).
     cells: [(IVec3, Option<u32>); CELLS],
     next_cell: usize,
+    /// The brick whose slot holds all its blocks and was used last, and that slot (compressed
+    /// formats; runs of samples in one brick skip the cache lookup).
+    current: (u32, usize),
     /// Blocks decoded so far (for statistics).
     pub decodes: u64,
 }
@@ -65,6 +69,7 @@ impl<'a> Sampler<'a> {
             },
             cells: [(IVec3::MAX, None); CELLS],
             next_cell: 0,
+            current: (u32::MAX, 0),
             decodes: 0,
         }
     }
@@ -97,7 +102,7 @@ impl<'a> Sampler<'a> {
     }
 
     /// Value of voxel (x, y, z) (each 0..8) of L3 node `leaf`.
-    #[inline]
+    #[inline(always)]
     pub fn leaf_value(&mut self, leaf: u32, x: usize, y: usize, z: usize) -> f32 {
         let brick = self.vol.tree.l3[leaf as usize].brick();
         if self.slots.is_empty() {
@@ -113,7 +118,7 @@ impl<'a> Sampler<'a> {
     /// (compressed formats only).
     #[inline(always)]
     fn slot(&mut self, brick: u32, need: u8) -> usize {
-        let s = (brick.wrapping_mul(0x9E37_79B9) >> 24) as usize % SLOTS;
+        let s = (brick.wrapping_mul(0x9E37_79B9) >> (32 - SLOT_BITS)) as usize;
         if self.keys[s] == brick && need & !self.valid[s] == 0 {
             return s;
         }
@@ -126,6 +131,9 @@ impl<'a> Sampler<'a> {
         if self.keys[s] != brick {
             self.keys[s] = brick;
             self.valid[s] = 0;
+            if self.current.1 == s {
+                self.current.0 = u32::MAX;
+            }
         }
         let mut missing = need & !self.valid[s];
         let mut block = [0.0f32; 64];
@@ -160,6 +168,123 @@ impl<'a> Sampler<'a> {
         }
     }
 
+    /// Trilinear value at index-space point `p` whose floor lies in L3 node `leaf` with origin
+    /// `origin` (as on a [`crate::trace::Segment`]): the same value as
+    /// [`Sampler::trilinear`] without searching the tree; corners past the node's +faces are
+    /// read through its neighbour table.
+    #[inline]
+    pub fn trilinear_in(&mut self, leaf: u32, origin: IVec3, p: Vec3) -> f32 {
+        let b = floor_ivec(p);
+        let l = b - origin;
+        if (l.x as u32) >= 8 || (l.y as u32) >= 8 || (l.z as u32) >= 8 {
+            // Rounding put the point just outside the node.
+            return self.trilinear(p);
+        }
+        let f = p - b.as_vec3();
+        let mut c = [0.0f32; 8];
+        if l.x < 7 && l.y < 7 && l.z < 7 {
+            let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
+            self.corners_in_brick(leaf, i0, &mut c);
+        } else {
+            self.corners_across(leaf, l, &mut c);
+        }
+        lerp8(&c, f)
+    }
+
+    /// The eight corners of a trilinear sample with base voxel `l` (local to `leaf`) on its
+    /// +x, +y or +z border layer: each neighbour brick is found once from the neighbour table
+    /// (and, compressed, its cache slot once with all the blocks its corners need).
+    fn corners_across(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
+        let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
+        let compressed = !self.slots.is_empty();
+        // Per neighbour offset d (a subset of `cross`): its brick and, compressed, its slot.
+        let mut brick = [NO_LEAF; 8];
+        let mut slot = [0usize; 8];
+        let mut d = 0;
+        loop {
+            let n = if d == 0 {
+                leaf
+            } else {
+                self.vol.next_leaf(leaf, d)
+            };
+            if n != NO_LEAF {
+                brick[d] = self.vol.tree.l3[n as usize].brick();
+                if compressed {
+                    // 4-voxel halves read along each axis: across the border only the
+                    // neighbour's first layer (half 0) or the node's last one (half 1).
+                    let halves = |axis: usize, v: i32| {
+                        if cross >> axis & 1 == 0 {
+                            (1u8 << (v >> 2)) | (1u8 << ((v + 1) >> 2))
+                        } else if d >> axis & 1 == 1 {
+                            0b01
+                        } else {
+                            0b10
+                        }
+                    };
+                    let need = spread(halves(0, l.x), halves(1, l.y), halves(2, l.z));
+                    slot[d] = self.slot(brick[d], need);
+                }
+            }
+            // Next subset of `cross` (all of them, then back to 0).
+            d = d.wrapping_sub(cross) & cross;
+            if d == 0 {
+                break;
+            }
+        }
+        // Two of these bricks may share a cache slot: then read each corner on its own.
+        let collided =
+            compressed && (0..8).any(|d| brick[d] != NO_LEAF && self.keys[slot[d]] != brick[d]);
+        for (k, v) in c.iter_mut().enumerate() {
+            let d = k & cross;
+            let q: IVec3 =
+                (l + IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32)) & 7i32;
+            let i = voxel_index(q.x as usize, q.y as usize, q.z as usize);
+            *v = if brick[d] == NO_LEAF {
+                self.vol.background
+            } else if collided {
+                let s = self.slot(
+                    brick[d],
+                    1 << block_of(q.x as usize, q.y as usize, q.z as usize),
+                );
+                self.slots[s][i]
+            } else if compressed {
+                self.slots[slot[d]][i]
+            } else {
+                let at = brick[d] as usize * 2048 + i * 4;
+                let b = &self.vol.pool.data[at..at + 4];
+                f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+            };
+        }
+    }
+
+    /// The eight corners `i0 + OFF` of a trilinear sample whose cell lies inside the brick of
+    /// `leaf` (`l`: its local base voxel).
+    #[inline(always)]
+    fn corners_in_brick(&mut self, leaf: u32, i0: usize, c: &mut [f32; 8]) {
+        const OFF: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
+        let brick = self.vol.tree.l3[leaf as usize].brick();
+        if self.slots.is_empty() {
+            let data = &self.vol.pool.data[brick as usize * 2048..brick as usize * 2048 + 2048];
+            for (k, o) in OFF.iter().enumerate() {
+                let at = (i0 + o) * 4;
+                c[k] = f32::from_le_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
+            }
+        } else {
+            let s = if self.current.0 == brick {
+                self.current.1
+            } else {
+                // The whole brick: the next samples along the ray mostly fall in it too.
+                let s = self.slot(brick, 0xff);
+                self.current = (brick, s);
+                s
+            };
+            let d = &self.slots[s];
+            for (k, o) in OFF.iter().enumerate() {
+                c[k] = d[i0 + o];
+            }
+        }
+    }
+
     /// Trilinear value at index-space point `p` (voxel centres at integer coordinates).
     #[inline]
     pub fn trilinear(&mut self, p: Vec3) -> f32 {
@@ -173,30 +298,7 @@ impl<'a> Sampler<'a> {
                 None => return self.vol.background,
                 Some(leaf) => {
                     let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
-                    const OFF: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
-                    if self.slots.is_empty() {
-                        let brick = self.vol.tree.l3[leaf as usize].brick() as usize;
-                        let data = &self.vol.pool.data[brick * 2048..brick * 2048 + 2048];
-                        for (k, o) in OFF.iter().enumerate() {
-                            let at = (i0 + o) * 4;
-                            c[k] = f32::from_le_bytes([
-                                data[at],
-                                data[at + 1],
-                                data[at + 2],
-                                data[at + 3],
-                            ]);
-                        }
-                    } else {
-                        let brick = self.vol.tree.l3[leaf as usize].brick();
-                        // Halves (4-voxel blocks) touched along each axis, as 2-bit sets.
-                        let half = |v: i32| (1u8 << (v >> 2)) | (1u8 << ((v + 1) >> 2));
-                        let need = spread(half(l.x), half(l.y), half(l.z));
-                        let s = self.slot(brick, need);
-                        let d = &self.slots[s];
-                        for (k, o) in OFF.iter().enumerate() {
-                            c[k] = d[i0 + o];
-                        }
-                    }
+                    self.corners_in_brick(leaf, i0, &mut c);
                 }
             }
         } else {
@@ -204,34 +306,33 @@ impl<'a> Sampler<'a> {
             let cross =
                 (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
             let mut leaves = [None; 8];
-            // Compressed: the cache slot of each distinct brick, with all its blocks decoded.
-            let mut slots = [0usize; 8];
-            let compressed = !self.slots.is_empty();
             for (k, v) in c.iter_mut().enumerate() {
                 let d = IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
                 let p = b + d;
                 let key = k & cross;
                 if key == k {
                     leaves[k] = self.leaf_at(p);
-                    if let (true, Some(leaf)) = (compressed, leaves[k]) {
-                        slots[k] = self.slot(self.vol.tree.l3[leaf as usize].brick(), 0xff);
-                    }
                 }
                 let q: IVec3 = p & 7i32;
-                let (x, y, z) = (q.x as usize, q.y as usize, q.z as usize);
+                // Read at once: a later corner's brick may take this one's cache slot.
                 *v = match leaves[key] {
-                    Some(_) if compressed => self.slots[slots[key]][voxel_index(x, y, z)],
-                    Some(leaf) => self.leaf_value(leaf, x, y, z),
+                    Some(leaf) => self.leaf_value(leaf, q.x as usize, q.y as usize, q.z as usize),
                     None => self.vol.background,
                 };
             }
         }
-        let x0 = c[0] + (c[1] - c[0]) * f.x;
-        let x1 = c[2] + (c[3] - c[2]) * f.x;
-        let x2 = c[4] + (c[5] - c[4]) * f.x;
-        let x3 = c[6] + (c[7] - c[6]) * f.x;
-        let y0 = x0 + (x1 - x0) * f.y;
-        let y1 = x2 + (x3 - x2) * f.y;
-        y0 + (y1 - y0) * f.z
+        lerp8(&c, f)
     }
+}
+
+/// Trilinear interpolation of corners `c` (bit 0: +x, 1: +y, 2: +z) at fractions `f`.
+#[inline(always)]
+fn lerp8(c: &[f32; 8], f: Vec3) -> f32 {
+    let x0 = c[0] + (c[1] - c[0]) * f.x;
+    let x1 = c[2] + (c[3] - c[2]) * f.x;
+    let x2 = c[4] + (c[5] - c[4]) * f.x;
+    let x3 = c[6] + (c[7] - c[6]) * f.x;
+    let y0 = x0 + (x1 - x0) * f.y;
+    let y1 = x2 + (x3 - x2) * f.y;
+    y0 + (y1 - y0) * f.z
 }

@@ -27,9 +27,29 @@ pub struct Volume {
     pub(crate) l3_max: Vec<f32>,
     /// Per L3 node: minimum over the same voxels (level sets skip nodes with a positive minimum).
     pub(crate) l3_min: Vec<f32>,
+    /// Per L3 node: the L3 nodes at offsets `d` = 1..8 (bit 0: +x, 1: +y, 2: +z; entry
+    /// `d − 1`) that trilinear samples near its +faces read, [`NO_LEAF`] where there is none.
+    pub(crate) l3_next: Vec<[u32; 7]>,
+    /// Level sets only (else empty): per L3 node, bounds of the interpolated field in it.
+    pub(crate) l3_bounds: Vec<LevelSetBounds>,
     /// Per frame: index-space bounds of the leaves (min, max exclusive).
     pub(crate) bounds: Vec<(IVec3, IVec3)>,
 }
+
+/// Bounds of a level set's trilinear field inside one L3 node, from the 9³ voxels samples in
+/// it read (its brick and the touching layers of its +neighbours, or the background).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelSetBounds {
+    /// Per axis, the smallest forward difference (a lower bound on that partial derivative).
+    pub slope_min: Vec3,
+    /// Per axis, the largest forward difference (an upper bound on that partial derivative).
+    pub slope_max: Vec3,
+    /// Smallest value on each face of the node's cell: −x, +x, −y, +y, −z, +z.
+    pub face_min: [f32; 6],
+}
+
+/// Marks a missing neighbour in [`Volume`]'s neighbour table.
+pub(crate) const NO_LEAF: u32 = u32::MAX;
 
 /// How a volume was built.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -194,6 +214,7 @@ impl Volume {
         let mut bounds = Vec::new();
         let mut l3_max = vec![0.0f32; tree.l3.len()];
         let mut l3_min = vec![0.0f32; tree.l3.len()];
+        let mut l3_next = vec![[NO_LEAF; 7]; tree.l3.len()];
         for frame in 0..tree.frames() {
             let mut lo = IVec3::MAX;
             let mut hi = IVec3::MIN;
@@ -206,7 +227,10 @@ impl Volume {
                 for d in 1..8usize {
                     let off = IVec3::new((d & 1) as i32, ((d >> 1) & 1) as i32, (d >> 2) as i32);
                     let (a, b) = match tree.locate(frame, o + off * BRICK as i32) {
-                        Locate::Leaf(j, _) => brick_range[tree.l3[j as usize].brick() as usize][d],
+                        Locate::Leaf(j, _) => {
+                            l3_next[i as usize][d - 1] = j;
+                            brick_range[tree.l3[j as usize].brick() as usize][d]
+                        }
                         _ => (background, background),
                     };
                     mn = mn.min(a);
@@ -220,6 +244,11 @@ impl Volume {
             }
             bounds.push((lo, hi));
         }
+        let l3_bounds = if class == GridClass::LevelSet {
+            level_set_bounds(&tree, &pool, &l3_next, background)
+        } else {
+            Vec::new()
+        };
         Ok(Volume {
             class,
             transform,
@@ -228,6 +257,8 @@ impl Volume {
             pool,
             l3_max,
             l3_min,
+            l3_next,
+            l3_bounds,
             bounds,
         })
     }
@@ -268,6 +299,19 @@ impl Volume {
     /// Minimum reachable value inside L3 node `i`.
     pub fn minorant(&self, i: u32) -> f32 {
         self.l3_min[i as usize]
+    }
+
+    /// The L3 node at offset `d` (1..8, bit 0: +x, 1: +y, 2: +z) from L3 node `i`, or
+    /// [`NO_LEAF`].
+    #[inline]
+    pub(crate) fn next_leaf(&self, i: u32, d: usize) -> u32 {
+        self.l3_next[i as usize][d - 1]
+    }
+
+    /// Level sets: bounds of the trilinear field inside L3 node `i` (`None` for fog).
+    #[inline]
+    pub fn level_set_bounds(&self, i: u32) -> Option<&LevelSetBounds> {
+        self.l3_bounds.get(i as usize)
     }
 
     /// RMSE and maximum error of the decoded volume against the source frames over their
@@ -314,4 +358,66 @@ impl Volume {
             active_voxels: n,
         })
     }
+}
+
+/// Per L3 node of a level set, its [`LevelSetBounds`] from its 9³ voxel window.
+fn level_set_bounds(
+    tree: &FlatTree,
+    pool: &BrickPool,
+    next: &[[u32; 7]],
+    background: f32,
+) -> Vec<LevelSetBounds> {
+    (0..tree.l3.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut v = [background; 9 * 9 * 9];
+            let mut b = [0.0; BRICK_VOXELS];
+            for d in 0..8usize {
+                let leaf = if d == 0 { i as u32 } else { next[i][d - 1] };
+                if leaf == NO_LEAF {
+                    continue;
+                }
+                pool.decode(tree.l3[leaf as usize].brick(), &mut b);
+                let bit = [d & 1, (d >> 1) & 1, d >> 2];
+                // Only the part of the neighbour that lies in the 9³ window.
+                let span = bit.map(|o| if o == 1 { 1 } else { BRICK });
+                for z in 0..span[2] {
+                    for y in 0..span[1] {
+                        for x in 0..span[0] {
+                            let at = (bit[0] * BRICK + x)
+                                + 9 * ((bit[1] * BRICK + y) + 9 * (bit[2] * BRICK + z));
+                            v[at] = b[crate::grid::voxel_index(x, y, z)];
+                        }
+                    }
+                }
+            }
+            let mut out = LevelSetBounds {
+                slope_min: Vec3::INFINITY,
+                slope_max: Vec3::NEG_INFINITY,
+                face_min: [f32::INFINITY; 6],
+            };
+            for z in 0..9 {
+                for y in 0..9 {
+                    for x in 0..9 {
+                        let at = x + 9 * (y + 9 * z);
+                        let c = [x, y, z];
+                        for (axis, step) in [1, 9, 81].into_iter().enumerate() {
+                            if c[axis] < 8 {
+                                let diff = v[at + step] - v[at];
+                                out.slope_min[axis] = out.slope_min[axis].min(diff);
+                                out.slope_max[axis] = out.slope_max[axis].max(diff);
+                            }
+                            let face = match c[axis] {
+                                0 => 2 * axis,
+                                8 => 2 * axis + 1,
+                                _ => continue,
+                            };
+                            out.face_min[face] = out.face_min[face].min(v[at]);
+                        }
+                    }
+                }
+            }
+            out
+        })
+        .collect()
 }

@@ -3,44 +3,7 @@
 use anyhow::{bail, Context, Result};
 use std::str::FromStr;
 
-/// Largest image side accepted on the command line.
-pub const MAX_IMAGE_SIDE: u32 = 16_384;
-
-/// An image resolution given as `WxH`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Resolution {
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-}
-
-impl FromStr for Resolution {
-    type Err = anyhow::Error;
-    fn from_str(s: &str) -> Result<Self> {
-        let (w, h) = s
-            .split_once(['x', 'X'])
-            .with_context(|| format!("resolution '{s}' is not of the form WIDTHxHEIGHT"))?;
-        let width: u32 = w
-            .trim()
-            .parse()
-            .with_context(|| format!("bad width in '{s}'"))?;
-        let height: u32 = h
-            .trim()
-            .parse()
-            .with_context(|| format!("bad height in '{s}'"))?;
-        if width == 0 || height == 0 || width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
-            bail!("resolution '{s}' out of range: each side must be 1..={MAX_IMAGE_SIDE}");
-        }
-        Ok(Self { width, height })
-    }
-}
-
-impl std::fmt::Display for Resolution {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}x{}", self.width, self.height)
-    }
-}
+pub use psao_net::Resolution;
 
 /// A half-open range of frame numbers given as `A..B`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -93,16 +56,6 @@ impl FrameRange {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn parses_resolutions() {
-        let r: Resolution = "640x360".parse().unwrap();
-        assert_eq!((r.width, r.height), (640, 360));
-        assert!("640".parse::<Resolution>().is_err());
-        assert!("0x10".parse::<Resolution>().is_err());
-        assert!("100000x10".parse::<Resolution>().is_err());
-        assert!("axb".parse::<Resolution>().is_err());
-    }
 
     #[test]
     fn parses_frame_ranges() {

@@ -1,13 +1,13 @@
 //! `psao bench client`: cost of the client's AO reconstruction against SSAO on one G-buffer.
 
 use crate::args::Resolution;
-use crate::pipeline::Pipeline;
 use crate::run::ServerTuning;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Result};
 use clap::Args;
 use psao_client::{reconstruct, ReconstructSettings};
 use psao_eval::{ssao, SsaoSettings};
+use psao_net::pipeline::Pipeline;
 use serde::Serialize;
 use std::time::Instant;
 

@@ -10,17 +10,20 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use psao_delta::{Codec, Update};
-use psao_server::{ClientId, Server, View};
+use psao_server::{ClientId, View};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::args::Resolution;
 use crate::bench_serve::LoadArgs;
-use crate::cpu_time::cpu_seconds;
-use crate::pipeline::CLIENT_HZ;
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
-use crate::serve::{code, coding_plan, mean, percentile};
+use psao_net::cpu_time::cpu_seconds;
+use psao_net::pipeline::CLIENT_HZ;
+use psao_net::serve::{code, coding_plan, mean, percentile};
+
+/// Rays in the set `bench trace`'s reference rate is measured on.
+const TRACE_RATE_RAYS: usize = 1_000_000;
 
 /// Arguments of `psao bench step`.
 #[derive(clap::Args, Debug)]
@@ -82,6 +85,52 @@ pub struct BenchStepReport {
     pub cores_busy: f64,
     /// Payload Mbit per second of scene time, averaged over the clients.
     pub mbit_s: f64,
+    /// Seconds from loading the scene to a server ready to step (point generation, burial
+    /// test, grids, tracer).
+    pub startup_s: f64,
+    /// Points the server stores.
+    pub points: usize,
+    /// The process's resident memory after the last frame, per stored point (everything:
+    /// server structures, tracer, scene, the clients' codec references, allocator slack).
+    pub bytes_per_point: f64,
+    /// The process's peak resident memory per stored point.
+    pub peak_bytes_per_point: f64,
+    /// Heap bytes per stored point of each server structure after the last frame.
+    pub memory: Vec<MemoryRow>,
+    /// Rays per second of the step's tracing phase (selection, tracing, accumulation), Mrays/s.
+    pub step_trace_mrays_s: f64,
+    /// `psao bench trace`'s sorted closest-hit rate on this scene and backend, measured in this
+    /// run on the same threads, Mrays/s.
+    pub bench_trace_mrays_s: f64,
+    /// `step_trace_mrays_s / bench_trace_mrays_s`.
+    pub trace_ratio: f64,
+}
+
+/// One server structure's memory in the report.
+#[derive(Debug, Default, Serialize)]
+pub struct MemoryRow {
+    /// What it holds.
+    pub name: &'static str,
+    /// Heap bytes.
+    pub bytes: u64,
+    /// Heap bytes per stored point.
+    pub bytes_per_point: f64,
+}
+
+/// Resident and peak resident bytes of this process, from `/proc/self/status` (Linux;
+/// `None` elsewhere).
+fn resident_bytes() -> Option<(u64, u64)> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kib = |key: &str| -> Option<u64> {
+        let line = status.lines().find(|l| l.starts_with(key))?;
+        line[key.len()..]
+            .trim()
+            .trim_end_matches("kB")
+            .trim()
+            .parse()
+            .ok()
+    };
+    Some((kib("VmRSS:")? * 1024, kib("VmHWM:")? * 1024))
 }
 
 /// Run `psao bench step`.
@@ -99,8 +148,16 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     let config = args
         .tuning
         .config(args.load.points, args.load.hz, args.res)?;
-    let mut server = Server::with_medium(&input.scene, config.server, input.medium())
-        .context("cannot start the server (point generation or tracer)")?;
+    let started = Instant::now();
+    let backend = config.server.backend;
+    let mut server = psao_net::start_cache::start_server(
+        &input.scene,
+        config.server,
+        input.medium(),
+        config.points_cache.as_deref(),
+    )
+    .context("cannot start the server (point generation or tracer)")?;
+    let startup_s = started.elapsed().as_secs_f64();
     let ids: Vec<ClientId> = (0..args.load.clients)
         .map(|_| server.add_client())
         .collect();
@@ -159,6 +216,21 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         (Some(a), Some(b)) => (b - a) * 1e3 / n,
         _ => 0.0,
     };
+    let (rss, peak) = resident_bytes().unwrap_or((0, 0));
+    let points = server.point_count();
+    let per_point = |bytes: u64| bytes as f64 / points.max(1) as f64;
+    let memory = server
+        .memory_use()
+        .into_iter()
+        .map(|p| MemoryRow {
+            name: p.name,
+            bytes: p.bytes,
+            bytes_per_point: per_point(p.bytes),
+        })
+        .collect();
+    let step_trace_mrays_s = rays as f64 / (sums.trace_ms * 1e-3).max(1e-9) / 1e6;
+    let bench_trace_mrays_s =
+        crate::bench_trace::sorted_closest_rate(&input, &path, backend, TRACE_RATE_RAYS)?;
     let report = BenchStepReport {
         scene: args.load.scene.clone(),
         clients: args.load.clients,
@@ -180,6 +252,14 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         // Encoded frames: all but the last, each 1/hz s of scene time.
         mbit_s: bytes as f64 * 8e-6 * f64::from(args.load.hz)
             / ((n - 1.0).max(1.0) * f64::from(args.load.clients)),
+        startup_s,
+        points,
+        bytes_per_point: per_point(rss),
+        peak_bytes_per_point: per_point(peak),
+        memory,
+        step_trace_mrays_s,
+        bench_trace_mrays_s,
+        trace_ratio: step_trace_mrays_s / bench_trace_mrays_s,
     };
     println!(
         "{} clients on {}: {} server frames, {:.0} rays per frame; {:.1} ms per frame \
@@ -204,6 +284,23 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         report.cores_busy,
         report.mbit_s
     );
+    println!(
+        "start-up {:.1} s; {} points, {:.0} bytes per point resident (peak {:.0}); tracing \
+         in the step {:.2} Mrays/s = {:.2} of bench trace's sorted closest-hit {:.2}",
+        report.startup_s,
+        report.points,
+        report.bytes_per_point,
+        report.peak_bytes_per_point,
+        report.step_trace_mrays_s,
+        report.trace_ratio,
+        report.bench_trace_mrays_s
+    );
+    for m in &report.memory {
+        println!(
+            "  {:<30} {:>8.1} bytes per point",
+            m.name, m.bytes_per_point
+        );
+    }
     if let Some(json) = &args.json {
         write_json(json, &report)?;
     }

@@ -69,7 +69,7 @@ pub fn run(args: &BenchTraceArgs) -> Result<()> {
     if args.dynamic {
         return dynamic::run(args, &input, &path);
     }
-    let unsorted = ao_ray_set(&input, &path, args)?;
+    let unsorted = ao_ray_set(&input, &path, args.res, args.rays)?;
     let order = sort_rays_spatially(&unsorted);
     let sorted: Vec<Ray> = order.iter().map(|&i| unsorted[i as usize]).collect();
     tracing::info!(
@@ -115,13 +115,37 @@ pub fn run(args: &BenchTraceArgs) -> Result<()> {
     Ok(())
 }
 
-/// AO rays from the surfaces visible along the path, in a seeded random order.
+/// Mrays/s of `backend` on `count` sorted AO rays from the surfaces visible along `path`
+/// (closest-hit queries, the rayon pool's threads, best of three): the rate `psao bench step`
+/// compares the tracing inside a server step against.
+pub fn sorted_closest_rate(
+    input: &SceneInput,
+    path: &psao_scene::path::CameraPath,
+    backend: Backend,
+    count: usize,
+) -> Result<f64> {
+    let views = Resolution {
+        width: 320,
+        height: 180,
+    };
+    let rays = ao_ray_set(input, path, views, count)?;
+    let order = sort_rays_spatially(&rays);
+    let sorted: Vec<Ray> = order.iter().map(|&i| rays[i as usize]).collect();
+    let tracer = Tracer::new(backend, &input.scene, GeometryMode::Occlusion)
+        .with_context(|| format!("cannot build the {} backend", backend.name()))?;
+    let secs = time_case(&tracer, &sorted, rayon::current_num_threads(), "closest", 3)?;
+    Ok(sorted.len() as f64 / secs / 1e6)
+}
+
+/// `count` AO rays from the surfaces visible along the path in views of size `res`, in a
+/// seeded random order.
 fn ao_ray_set(
     input: &SceneInput,
     path: &psao_scene::path::CameraPath,
-    args: &BenchTraceArgs,
+    res: Resolution,
+    count: usize,
 ) -> Result<Vec<Ray>> {
-    let opts = RasterOptions::new(args.res.width, args.res.height);
+    let opts = RasterOptions::new(res.width, res.height);
     let frames = path.frame_count();
     let mut points = Vec::new();
     for k in 0..SEED_FRAMES {
@@ -136,12 +160,12 @@ fn ao_ray_set(
     if points.is_empty() {
         bail!("the camera path sees no geometry: cannot place AO rays");
     }
-    let spp = args.rays.div_ceil(points.len()) as u32;
+    let spp = count.div_ceil(points.len()) as u32;
     let mut rays = Vec::with_capacity(points.len() * spp as usize);
     for (i, &(x, n)) in points.iter().enumerate() {
         ao::ao_rays(x, n, input.scene.ao_radius, spp, 7, i as u64, &mut rays);
     }
-    rays.truncate(args.rays);
+    rays.truncate(count);
     // A seeded shuffle: sort by a hash of the index, so "unsorted" means incoherent.
     let mut keyed: Vec<(u64, Ray)> = rays
         .into_iter()

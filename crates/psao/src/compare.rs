@@ -1,5 +1,6 @@
 //! `psao compare`: image metrics between two AO images.
 
+use crate::lpips_weights::{LpipsArgs, LpipsChoice};
 use crate::png_io::read_ao_png;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -12,9 +13,11 @@ pub struct CompareArgs {
     pub reference: PathBuf,
     /// The image to evaluate (PNG).
     pub test: PathBuf,
-    /// Print JSON (`psnr`, `ssim`, `flip`) instead of text.
+    /// Print JSON (`lpips` when weights are found, `psnr`, `ssim`, `flip`) instead of text.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub lpips: LpipsArgs,
     /// Also print both images' mean AO over the pixel rectangle `X0,Y0,X1,Y1` (half-open).
     #[arg(long, value_delimiter = ',')]
     pub region: Option<Vec<u32>>,
@@ -61,11 +64,29 @@ pub fn run(args: &CompareArgs) -> Result<()> {
             region_mean(&b, r)
         );
     }
+    let lpips = match args.lpips.load()? {
+        LpipsChoice::Ready(net) => Some(net.distance(&a, &b).with_context(|| {
+            format!(
+                "cannot compute LPIPS of {} against {}",
+                args.test.display(),
+                args.reference.display()
+            )
+        })?),
+        LpipsChoice::Missing(_) => None,
+    };
     if args.json {
-        println!("{}", serde_json::to_string(&m)?);
+        let mut out = serde_json::Map::new();
+        if let Some(d) = lpips {
+            out.insert("lpips".into(), d.into());
+        }
+        if let serde_json::Value::Object(fields) = serde_json::to_value(m)? {
+            out.extend(fields);
+        }
+        println!("{}", serde_json::Value::Object(out));
     } else {
+        let lpips = lpips.map_or_else(String::new, |d| format!("LPIPS {d:.4}  "));
         println!(
-            "PSNR {:.2} dB  SSIM {:.4}  FLIP {:.4}",
+            "{lpips}PSNR {:.2} dB  SSIM {:.4}  FLIP {:.4}",
             m.psnr, m.ssim, m.flip
         );
     }

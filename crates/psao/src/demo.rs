@@ -5,7 +5,6 @@
 //! frames are compared with the per-pixel reference and with SSAO in `report.md`.
 
 use crate::args::Resolution;
-use crate::pipeline::{Pipeline, CLIENT_HZ};
 use crate::progress;
 use crate::reference::ReferenceRenderer;
 use crate::run::{write_frame_images, write_json, ServerTuning};
@@ -13,6 +12,7 @@ use crate::scene_source::{SceneInput, BUILTIN_SCENE};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{compare, ssao, Metrics, SsaoSettings};
+use psao_net::pipeline::{Pipeline, CLIENT_HZ};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -2,7 +2,7 @@
 //! all measured against a cached per-pixel reference (DESIGN §5).
 
 use crate::args::{FrameRange, Resolution};
-use crate::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
+use crate::lpips_weights::{LpipsArgs, LpipsChoice};
 use crate::png_io::{read_ao_png, write_ao_png};
 use crate::progress;
 use crate::reference::ReferenceRenderer;
@@ -11,7 +11,8 @@ use crate::run::ServerTuning;
 use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use psao_eval::{compare, ssao, AoImage, Metrics, SsaoSettings};
+use psao_eval::{compare, ssao, AoImage, Lpips, Metrics, SsaoSettings};
+use psao_net::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
 use psao_raster::GBuffer;
 use psao_scene::path::CameraPath;
 use psao_scene::{Animator, Scene};
@@ -52,6 +53,8 @@ pub struct EvalArgs {
     pub warm_up: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
+    #[command(flatten)]
+    pub lpips: LpipsArgs,
     /// Folder of cached reference images.
     #[arg(long, default_value = "out/cache")]
     pub cache: PathBuf,
@@ -87,7 +90,21 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let eval_frames: Vec<u32> = (range.start..range.end)
         .step_by(args.every as usize)
         .collect();
+    let (lpips, lpips_note) = match args.lpips.load()? {
+        LpipsChoice::Ready(net) => {
+            match psao_eval::lpips::check_size(args.res.width, args.res.height) {
+                Ok(()) => (Some(*net), None),
+                Err(e) => {
+                    let note = format!("LPIPS left out: {e}");
+                    tracing::warn!("{note}");
+                    (None, Some(note))
+                }
+            }
+        }
+        LpipsChoice::Missing(note) => (None, Some(note)),
+    };
     let frames = prepare_frames(&input, &path, &eval_frames, args)?;
+    let lpips = lpips.as_ref();
 
     let mut rows = Vec::new();
     let mut bandwidth = Vec::new();
@@ -97,7 +114,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     )];
     for &hz in &args.server_hz {
         for &points in &args.points {
-            let (row, series, middle) = eval_psao(&input, &path, range, &frames, points, hz, args)?;
+            let (row, series, middle) =
+                eval_psao(&input, &path, range, &frames, points, hz, args, lpips)?;
             if hz == args.server_hz[0] && (crops.len() == 1) {
                 crops.push((format!("PSAO-{points}"), middle));
             }
@@ -105,10 +123,10 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             rows.push(row);
         }
     }
-    let (ssao_row, ssao_middle) = eval_ssao(&input.scene, &path, &frames)?;
+    let (ssao_row, ssao_middle) = eval_ssao(&input.scene, &path, &frames, lpips)?;
     crops.push(("SSAO".into(), ssao_middle));
     rows.push(ssao_row);
-    rows.push(eval_rtao(&input, &path, &frames, args)?);
+    rows.push(eval_rtao(&input, &path, &frames, args, lpips)?);
 
     let report = Report {
         scene: input.name.clone(),
@@ -119,6 +137,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         spp: args.spp,
         command: std::env::args().collect::<Vec<_>>().join(" "),
         rows,
+        lpips_note,
     };
     report::write(&args.out, &report, &bandwidth, &crops)?;
     println!("{}", report::table(&report.rows));
@@ -227,18 +246,35 @@ fn composite_luma(scene: &Scene, gbuffer: &GBuffer, ao: &AoImage) -> AoImage {
     )
 }
 
-/// Mean metrics over frames for AO-only and composited images.
-#[derive(Default)]
-struct MetricSums {
+/// Mean metrics over frames for AO-only and composited images (LPIPS with a network).
+struct MetricSums<'a> {
+    lpips: Option<&'a Lpips>,
     ao: Vec<Metrics>,
     comp: Vec<Metrics>,
+    lpips_ao: Vec<f64>,
+    lpips_comp: Vec<f64>,
 }
 
-impl MetricSums {
+impl<'a> MetricSums<'a> {
+    fn new(lpips: Option<&'a Lpips>) -> Self {
+        Self {
+            lpips,
+            ao: Vec::new(),
+            comp: Vec::new(),
+            lpips_ao: Vec::new(),
+            lpips_comp: Vec::new(),
+        }
+    }
+
     fn add(&mut self, scene: &Scene, f: &EvalFrame, ao: &AoImage) -> Result<()> {
         self.ao.push(compare(&f.reference, ao)?);
         let comp = composite_luma(scene, &f.gbuffer, ao);
         self.comp.push(compare(&f.reference_comp, &comp)?);
+        if let Some(net) = self.lpips {
+            self.lpips_ao.push(net.distance(&f.reference, ao)?);
+            self.lpips_comp
+                .push(net.distance(&f.reference_comp, &comp)?);
+        }
         Ok(())
     }
 
@@ -246,11 +282,17 @@ impl MetricSums {
         let mean = |v: &[Metrics], g: fn(&Metrics) -> f64| {
             v.iter().map(g).sum::<f64>() / v.len().max(1) as f64
         };
+        let mean_of = |v: &[f64]| {
+            self.lpips
+                .map(|_| v.iter().sum::<f64>() / v.len().max(1) as f64)
+        };
         Row {
             method: method.into(),
             points: None,
             server_hz: None,
             codec: None,
+            lpips_ao: mean_of(&self.lpips_ao),
+            lpips_comp: mean_of(&self.lpips_comp),
             psnr_ao: mean(&self.ao, |m| m.psnr),
             ssim_ao: mean(&self.ao, |m| m.ssim),
             flip_ao: mean(&self.ao, |m| m.flip),
@@ -266,6 +308,7 @@ impl MetricSums {
 }
 
 /// Runs the split pipeline over the whole range and measures the evaluated frames.
+#[allow(clippy::too_many_arguments)]
 fn eval_psao(
     input: &SceneInput,
     path: &CameraPath,
@@ -274,6 +317,7 @@ fn eval_psao(
     points: f32,
     hz: u32,
     args: &EvalArgs,
+    lpips: Option<&Lpips>,
 ) -> Result<(Row, Series, AoImage)> {
     let scene = &input.scene;
     let mut config = args.tuning.config(points, hz, args.res)?;
@@ -288,7 +332,7 @@ fn eval_psao(
         &format!("PSAO-{points} @ {hz} Hz"),
         "frames",
     );
-    let mut sums = MetricSums::default();
+    let mut sums = MetricSums::new(lpips);
     let (mut server_ms, mut server_frames, mut client_ms) = (0.0, 0u32, 0.0);
     let mut work = ServerWork {
         invalidation: format!("{:?}", args.tuning.invalidation).to_lowercase(),
@@ -350,8 +394,13 @@ fn eval_psao(
 }
 
 /// SSAO on the same G-buffers.
-fn eval_ssao(scene: &Scene, path: &CameraPath, frames: &[EvalFrame]) -> Result<(Row, AoImage)> {
-    let mut sums = MetricSums::default();
+fn eval_ssao(
+    scene: &Scene,
+    path: &CameraPath,
+    frames: &[EvalFrame],
+    lpips: Option<&Lpips>,
+) -> Result<(Row, AoImage)> {
+    let mut sums = MetricSums::new(lpips);
     let mut ms = 0.0;
     let mut middle = None;
     for (i, f) in frames.iter().enumerate() {
@@ -376,6 +425,7 @@ fn eval_rtao(
     path: &CameraPath,
     frames: &[EvalFrame],
     args: &EvalArgs,
+    lpips: Option<&Lpips>,
 ) -> Result<Row> {
     let scene = &input.scene;
     let mut renderer = ReferenceRenderer::new(
@@ -385,7 +435,7 @@ fn eval_rtao(
         0,
     )?
     .with_medium(input.medium());
-    let mut sums = MetricSums::default();
+    let mut sums = MetricSums::new(lpips);
     let mut ms = 0.0;
     for f in frames {
         renderer.gbuffer(path, f.frame, args.res)?;

@@ -2,19 +2,21 @@
 
 mod args;
 mod bench_client;
+mod bench_relight;
 mod bench_serve;
 mod bench_step;
 mod bench_trace;
 mod compare;
 mod corrective;
-mod cpu_time;
 mod demo;
 mod eval;
-mod net;
-mod pipeline;
+mod lpips_weights;
 mod png_io;
 mod progress;
 mod reference;
+mod relight_cmd;
+mod relight_eval;
+mod relight_io;
 mod report;
 mod run;
 mod scene_source;
@@ -57,6 +59,9 @@ enum Command {
     /// Sparse volumes: inspect, convert and render OpenVDB and `.psv` files.
     #[command(subcommand)]
     Volume(volume_cmd::VolumeCommand),
+    /// Shadowed relighting of skinned characters: train, render and evaluate.
+    #[command(subcommand)]
+    Relight(relight_cmd::RelightCommand),
     /// Perceptually guided corrective splatting: evaluation and benchmarks.
     #[command(subcommand)]
     Corrective(corrective::CorrectiveCommand),
@@ -75,6 +80,8 @@ enum BenchCommand {
     Serve(bench_serve::BenchServeArgs),
     /// The server alone in this process: N clients' views, per-phase ms and CPU per frame.
     Step(bench_step::BenchStepArgs),
+    /// Synthesis + shading time per frame of a relighting model.
+    Relight(bench_relight::BenchRelightArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -106,9 +113,11 @@ fn run(command: Command) -> Result<()> {
         Command::Bench(BenchCommand::Client(a)) => bench_client::run(&a),
         Command::Bench(BenchCommand::Serve(a)) => bench_serve::run(&a),
         Command::Bench(BenchCommand::Step(a)) => bench_step::run(&a),
+        Command::Bench(BenchCommand::Relight(a)) => bench_relight::run(&a),
         Command::Serve(a) => serve::run(&a),
         Command::View(a) => view::run(&a),
         Command::Volume(c) => volume_cmd::run(&c),
+        Command::Relight(c) => relight_cmd::run(&c),
         Command::Corrective(c) => corrective::run(&c),
     }
 }

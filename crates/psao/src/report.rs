@@ -18,6 +18,12 @@ pub struct Row {
     pub server_hz: Option<u32>,
     /// Update codec (PSAO only).
     pub codec: Option<String>,
+    /// LPIPS (AlexNet, v0.1) of AO-only images; left out without weights.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips_ao: Option<f64>,
+    /// LPIPS of composited images (luma); left out without weights.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lpips_comp: Option<f64>,
     /// PSNR of AO-only images (dB).
     pub psnr_ao: f64,
     /// SSIM of AO-only images.
@@ -84,19 +90,34 @@ pub struct Report {
     pub command: String,
     /// Result rows.
     pub rows: Vec<Row>,
+    /// Why the rows have no LPIPS, when they have none.
+    pub lpips_note: Option<String>,
 }
 
-/// The results as a Markdown table.
+/// The results as a Markdown table; LPIPS columns come first (like the paper's Table 1)
+/// when any row has LPIPS.
 pub fn table(rows: &[Row]) -> String {
-    let mut s = String::from(
-        "| method | points | server Hz | codec | PSNR AO | SSIM AO | FLIP AO | PSNR comp | SSIM comp | FLIP comp | Mbit/s | server ms | client ms |\n\
-         |---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    let with_lpips = rows.iter().any(|r| r.lpips_ao.is_some());
+    let (lpips_head, lpips_rule) = if with_lpips {
+        ("LPIPS AO | LPIPS comp | ", "---:|---:|")
+    } else {
+        ("", "")
+    };
+    let mut s = format!(
+        "| method | points | server Hz | codec | {lpips_head}PSNR AO | SSIM AO | FLIP AO | PSNR comp | SSIM comp | FLIP comp | Mbit/s | server ms | client ms |\n\
+         |---|---:|---:|---|{lpips_rule}---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         let opt = |v: Option<String>| v.unwrap_or_else(|| "–".into());
+        let lpips = if with_lpips {
+            let cell = |v: Option<f64>| opt(v.map(|d| format!("{d:.4}")));
+            format!("{} | {} | ", cell(r.lpips_ao), cell(r.lpips_comp))
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.2} | {:.4} | {:.4} | {:.2} | {:.4} | {:.4} | {:.2} | {:.1} | {:.1} |",
+            "| {} | {} | {} | {} | {lpips}{:.2} | {:.4} | {:.4} | {:.2} | {:.4} | {:.4} | {:.2} | {:.1} | {:.1} |",
             r.method,
             opt(r.points.map(|p| format!("{p}"))),
             opt(r.server_hz.map(|h| h.to_string())),
@@ -166,7 +187,7 @@ pub fn write(
         "# psao evaluation: {} / {}\n\n\
          {} px, frames {} (metrics on every {}th frame), reference {} spp. \
          AO-only and composited (base shading × AO, compared on luma) images against the reference.\n\n\
-         Command: `{}`\n\n{}\n## Server work per server frame (means)\n\n{}\n",
+         Command: `{}`\n\n{}{}\n## Server work per server frame (means)\n\n{}\n",
         report.scene,
         report.path,
         report.res,
@@ -175,6 +196,10 @@ pub fn write(
         report.spp,
         report.command,
         table(&report.rows),
+        report
+            .lpips_note
+            .as_ref()
+            .map_or_else(String::new, |n| format!("\n{n}.\n")),
         work_table(&report.rows)
     );
     md.push_str("## Quality vs points\n\n![quality vs points](quality_vs_points.svg)\n\n");

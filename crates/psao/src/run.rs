@@ -1,12 +1,12 @@
 //! `psao run`: server and client in one process along a camera path.
 
 use crate::args::{FrameRange, Resolution};
-use crate::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
 use crate::png_io::{write_ao_png, write_rgb_png};
 use crate::progress;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use psao_net::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
 use psao_server::{Invalidation, ServerConfig};
 use psao_trace::Backend;
 use serde::Serialize;
@@ -38,6 +38,14 @@ pub struct ServerTuning {
     /// `everything` (every visible point each server frame, the published system's approach).
     #[arg(long, value_enum, default_value = "proximity")]
     pub invalidation: InvalidationArg,
+    /// Folder where generated, burial-tested points are kept between runs, so a restart with
+    /// the same scene and settings skips making them (default: `$PSAO_CACHE_DIR/points`,
+    /// `$XDG_CACHE_HOME/psao/points` or `~/.cache/psao/points`).
+    #[arg(long)]
+    pub points_cache: Option<PathBuf>,
+    /// Generate the points afresh and keep none on disk.
+    #[arg(long, conflicts_with = "points_cache")]
+    pub no_points_cache: bool,
 }
 
 /// `--invalidation` values.
@@ -80,7 +88,18 @@ impl ServerTuning {
             codec: self.codec.clone(),
             res,
             medium: None,
+            points_cache: self.points_cache_dir(),
         })
+    }
+
+    /// The folder of stored start points, if any.
+    pub fn points_cache_dir(&self) -> Option<PathBuf> {
+        if self.no_points_cache {
+            return None;
+        }
+        self.points_cache
+            .clone()
+            .or_else(psao_net::start_cache::default_dir)
     }
 }
 
@@ -184,7 +203,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let seconds = records.len() as f64 / crate::pipeline::CLIENT_HZ as f64;
+    let seconds = records.len() as f64 / psao_net::pipeline::CLIENT_HZ as f64;
     let stats = RunStats {
         scene: input.name.clone(),
         path: path.name.clone(),
@@ -219,7 +238,7 @@ pub fn write_frame_images(
     dir: &Path,
     frame: u32,
     scene: &psao_scene::Scene,
-    img: &crate::pipeline::ClientFrame,
+    img: &psao_net::pipeline::ClientFrame,
 ) -> Result<()> {
     write_ao_png(&dir.join(format!("ao_{frame:05}.png")), &img.ao)?;
     let rgb = composite_rgb8(scene, &img.gbuffer, &img.ao);

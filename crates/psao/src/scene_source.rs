@@ -23,7 +23,8 @@ pub struct SceneArgs {
     /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
     #[arg(long, default_value = BUILTIN_SCENE)]
     pub scene: String,
-    /// Camera path file (default: the scene's first path).
+    /// Camera path file (default: the scene's first path, else a 20 s orbit that frames
+    /// the scene's bounds, looking at their lower half).
     #[arg(long)]
     pub path: Option<PathBuf>,
     /// Play none of the scene's animations: the geometry stays in its rest pose.
@@ -106,18 +107,30 @@ impl SceneInput {
             .map(|v| v.volume.clone() as Arc<dyn Medium>)
     }
 
-    /// The camera path named by `--path` (a file), else the scene's first path.
+    /// The camera path named by `--path` (a file), else the scene's first path, else the
+    /// default orbit around the scene's bounds ([`psao_scene::orbit_path`]).
     pub fn camera_path(&self, path_arg: Option<&PathBuf>) -> Result<CameraPath> {
         if let Some(p) = path_arg {
             return CameraPath::load(p)
                 .with_context(|| format!("cannot load camera path {}", p.display()));
         }
-        match self.paths.first() {
-            Some(p) => Ok(p.clone()),
-            None => bail!(
-                "scene '{}' names no camera path: give one with --path FILE",
-                self.name
-            ),
+        if let Some(p) = self.paths.first() {
+            return Ok(p.clone());
         }
+        let (lo, hi) = self.scene.bounds();
+        let Some(orbit) = psao_scene::orbit_path(lo, hi) else {
+            bail!(
+                "scene '{}' names no camera path and has no geometry to orbit: give one with --path FILE",
+                self.name
+            );
+        };
+        tracing::info!(
+            "scene '{}' names no camera path: orbiting its bounds {lo}..{hi} once in {} s \
+             ({} frames), looking at their lower half (give one with --path FILE)",
+            self.name,
+            orbit.duration(),
+            orbit.frame_count()
+        );
+        Ok(orbit)
     }
 }

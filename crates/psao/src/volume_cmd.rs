@@ -1,17 +1,18 @@
 //! `psao volume …`: inspect, convert, render and benchmark sparse volumes (DESIGN §6).
 
-use crate::cpu_time::cpu_seconds;
 use crate::png_io::write_rgb_png;
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
-use psao_volume::render::{self, DenseGrid};
+use psao_volume::render;
 use psao_volume::{
-    psv, vdb, BrickFormat, Camera, ClusterParams, GridClass, RenderMode, RenderSettings,
-    SparseGrid, Volume,
+    psv, vdb, BrickFormat, Camera, ClusterParams, GridClass, Procedural, RenderMode,
+    RenderSettings, SparseGrid, Volume,
 };
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+mod bench;
 
 /// Volume subcommands.
 #[derive(clap::Subcommand, Debug)]
@@ -99,15 +100,25 @@ pub enum VolumeCommand {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
-    /// Speed ratios: fog through BC7 vs f32 bricks, HDDA level set vs dense fixed-step march.
+    /// Speed ratios on several volumes, one row per volume and mode, worst ratios last: fog
+    /// through BC7 vs f32 bricks (target ≥ 0.8×), HDDA level set vs dense fixed-step march
+    /// (target ≥ 3×).
     Bench {
-        /// Input .vdb file(s), each measured on its own.
-        #[arg(required = true)]
+        /// Input .vdb files, each measured on its own.
         files: Vec<PathBuf>,
+        /// Generated volumes to add, comma-separated: cloud, box, torus, smoke, or `all`.
+        #[arg(long)]
+        generated: Option<String>,
+        /// Domain edge in voxels of the generated volumes (default: per kind).
+        #[arg(long)]
+        size: Option<u32>,
+        /// Seed of the generated volumes.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
         /// Image size WxH.
         #[arg(long, default_value = "384x384")]
         res: String,
-        /// Repetitions (the best time counts).
+        /// Repetitions per renderer, alternating (the best time counts).
         #[arg(long, default_value_t = 3)]
         reps: u32,
     },
@@ -186,13 +197,42 @@ pub fn run(command: &VolumeCommand) -> Result<()> {
             cluster,
             seed,
         } => table(files, cluster, *seed),
-        VolumeCommand::Bench { files, res, reps } => {
+        VolumeCommand::Bench {
+            files,
+            generated,
+            size,
+            seed,
+            res,
+            reps,
+        } => {
             let (w, h) = parse_res(res)?;
-            for f in files {
-                bench(f, w, h, (*reps).max(1))?;
+            let mut inputs: Vec<bench::Input> =
+                files.iter().cloned().map(bench::Input::File).collect();
+            for kind in parse_generated(generated.as_deref())? {
+                let n = size.unwrap_or_else(|| kind.default_size());
+                inputs.push(bench::Input::Generated(kind, n, *seed));
             }
-            Ok(())
+            if inputs.is_empty() {
+                bail!("no volume to measure: give .vdb files and/or --generated KINDS");
+            }
+            bench::run(&inputs, w, h, (*reps).max(1))
         }
+    }
+}
+
+/// Kinds named by `--generated` (comma-separated, or `all`).
+fn parse_generated(s: Option<&str>) -> Result<Vec<Procedural>> {
+    match s {
+        None => Ok(Vec::new()),
+        Some("all") => Ok(Procedural::ALL.to_vec()),
+        Some(list) => list
+            .split(',')
+            .map(|k| {
+                Procedural::parse(k.trim()).with_context(|| {
+                    format!("unknown generated volume `{k}` (cloud, box, torus, smoke, all)")
+                })
+            })
+            .collect(),
     }
 }
 
@@ -473,95 +513,6 @@ fn table(files: &[PathBuf], cluster: &[String], seed: u64) -> Result<()> {
                 e.rmse - base_rmse
             );
         }
-    }
-    Ok(())
-}
-
-/// Best wall and CPU time of two renderers, run alternately `reps` times each.
-struct Pair {
-    wall: [f64; 2],
-    cpu: [f64; 2],
-    images: Vec<psao_volume::Image>,
-}
-
-impl Pair {
-    /// "A t ms (c CPU s), B t ms (c CPU s): SPEED r× wall, r× CPU (image mean abs diff d)",
-    /// with the speed of the first renderer over the second when `first_faster`, else of
-    /// the second over the first.
-    fn summary(&self, names: [&str; 2], speed: &str, first_faster: bool) -> String {
-        let (fast, slow) = if first_faster { (0, 1) } else { (1, 0) };
-        format!(
-            "{} {:.1} ms ({:.2} CPU s), {} {:.1} ms ({:.2} CPU s): {speed} = {:.2}x wall, {:.2}x CPU (image mean abs diff {:.4})",
-            names[0],
-            self.wall[0] * 1e3,
-            self.cpu[0],
-            names[1],
-            self.wall[1] * 1e3,
-            self.cpu[1],
-            self.wall[slow] / self.wall[fast],
-            self.cpu[slow] / self.cpu[fast],
-            self.images[0].mean_abs_diff(&self.images[1])
-        )
-    }
-}
-
-type Job<'a> = Box<dyn Fn() -> Result<psao_volume::Image> + 'a>;
-
-fn race(reps: u32, jobs: [Job; 2]) -> Result<Pair> {
-    let mut p = Pair {
-        wall: [f64::INFINITY; 2],
-        cpu: [f64::INFINITY; 2],
-        images: Vec::new(),
-    };
-    for _ in 0..reps {
-        for (k, job) in jobs.iter().enumerate() {
-            let (t, c) = (Instant::now(), cpu_seconds());
-            let img = job()?;
-            p.wall[k] = p.wall[k].min(t.elapsed().as_secs_f64());
-            if let (Some(a), Some(b)) = (c, cpu_seconds()) {
-                p.cpu[k] = p.cpu[k].min(b - a);
-            }
-            if p.images.len() < 2 {
-                p.images.push(img);
-            }
-        }
-    }
-    Ok(p)
-}
-
-fn bench(file: &Path, w: u32, h: u32, reps: u32) -> Result<()> {
-    let frames = read_frames(&[file.to_path_buf()], None)?;
-    let (f32v, _) = Volume::build(&frames, BrickFormat::F32, None)?;
-    let (bc7v, _) = Volume::build(&frames, BrickFormat::Bc7, None)?;
-    let cam = Camera::framing(f32v.world_bounds(0), 40.0);
-    let fog = RenderSettings::new(&f32v, w, h, RenderMode::Fog);
-    let p = race(
-        reps,
-        [
-            Box::new(|| Ok(render::render(&f32v, &cam, &fog)?)),
-            Box::new(|| Ok(render::render(&bc7v, &cam, &fog)?)),
-        ],
-    )?;
-    println!(
-        "{}: fog {w}x{h}: {}",
-        file.display(),
-        p.summary(["f32 pool", "bc7 pool"], "speed bc7/f32", false)
-    );
-    if f32v.class == GridClass::LevelSet {
-        let ls = RenderSettings::new(&f32v, w, h, RenderMode::LevelSet);
-        let dense = DenseGrid::from_volume(&f32v, 0);
-        let p = race(
-            reps,
-            [
-                Box::new(|| Ok(render::render(&f32v, &cam, &ls)?)),
-                Box::new(|| Ok(render::render_dense_level_set(&f32v, &dense, &cam, &ls)?)),
-            ],
-        )?;
-        println!(
-            "{}: level set {w}x{h}: {}",
-            file.display(),
-            p.summary(["HDDA", "dense fixed-step march"], "speed-up", true)
-        );
     }
     Ok(())
 }

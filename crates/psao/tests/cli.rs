@@ -202,6 +202,9 @@ fn eval_writes_the_report_rows() {
     assert!(rows[2]["codec"].is_null(), "no codec for SSAO");
     let table = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(table.contains("| codec |") && table.contains("| compact |"));
+    // 48x27 is below LPIPS's smallest input (or no weights are installed): left out, noted.
+    assert!(rows[0].get("lpips_ao").is_none(), "{}", rows[0]);
+    assert!(table.contains("LPIPS left out") && !table.contains("LPIPS AO"));
     for f in [
         "report.md",
         "quality_vs_points.svg",
@@ -282,6 +285,27 @@ fn bench_step_reports_the_phases_of_its_frames() {
     assert!(
         ms("mbit_s") > 0.0,
         "three clients received their snapshots: {r}"
+    );
+    // Memory: the structures add up to less than the process holds, and every stored point
+    // has at least its position and normal (24 bytes).
+    let structures: f64 = r["memory"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["bytes_per_point"].as_f64().unwrap())
+        .sum();
+    assert!(
+        structures >= 24.0 && structures < ms("bytes_per_point"),
+        "{r}"
+    );
+    assert!(ms("bytes_per_point") <= ms("peak_bytes_per_point"), "{r}");
+    assert!(
+        ms("startup_s") > 0.0 && r["points"].as_u64().unwrap() > 0,
+        "{r}"
+    );
+    assert!(
+        ms("trace_ratio") > 0.0 && ms("bench_trace_mrays_s") > 0.0,
+        "{r}"
     );
     let o = psao(&["bench", "step", "--clients", "0"]);
     assert!(!o.status.success());

@@ -135,14 +135,14 @@ impl Mirror {
         Self {
             table,
             grids,
-            codec: PaperCodec,
+            codec: PaperCodec::new(),
             bytes: 0,
         }
     }
 
     /// Encode on the "server" side, decode here, apply; returns the decoded update.
     pub fn receive(&mut self, update: &Update) -> Update {
-        let bytes = PaperCodec.encode(update);
+        let bytes = PaperCodec::new().encode(update);
         self.bytes += bytes.len();
         let u = self.codec.decode(&bytes).expect("decodes");
         if u.snapshot {

@@ -8,6 +8,31 @@ use glam::{Affine3A, Vec3};
 use psao_scene::{AlphaMode, Instance, Material, Mesh, Scene};
 use psao_trace::ao::hash64;
 
+/// Relative tolerance for hit distances (and values computed from them) that a tracing
+/// backend returns. Embree picks its kernels by the CPU's instruction set (SSE4, AVX2,
+/// AVX-512), and their reciprocals and fused multiply-adds round differently, so `t` may
+/// differ in its last bits from one CPU to the next (2.9999998 instead of 3.0 on an AVX2
+/// machine). 1e-5 of the distance is about 80 ulps of an f32: far above such rounding, far
+/// below the unit-sized geometry these tests tell apart.
+pub const HIT_T_REL_TOL: f32 = 1e-5;
+
+/// Whether two hit distances agree within [`HIT_T_REL_TOL`] of the larger.
+pub fn same_t(a: f32, b: f32) -> bool {
+    (a - b).abs() <= HIT_T_REL_TOL * a.abs().max(b.abs())
+}
+
+/// Asserts that a hit distance is `expected` within [`HIT_T_REL_TOL`], and that both are
+/// misses or both hits.
+#[track_caller]
+pub fn assert_hit_t(actual: Option<f32>, expected: Option<f32>, what: &str) {
+    let ok = match (actual, expected) {
+        (Some(a), Some(e)) => same_t(a, e),
+        (None, None) => true,
+        _ => false,
+    };
+    assert!(ok, "{what}: hit distance {actual:?}, expected {expected:?}");
+}
+
 /// A mesh from positions and triangles, with the given material.
 pub fn mesh(positions: Vec<Vec3>, indices: Vec<[u32; 3]>, material: usize) -> Mesh {
     Mesh {

@@ -1,14 +1,17 @@
 //! Conversions between wire messages and the algorithm types.
 
-use anyhow::{bail, Result};
 use glam::{UVec3, Vec3};
 use psao_delta::{Codec, GridLayout, InstanceInfo};
 use psao_scene::Camera;
 use psao_server::View;
 use psao_wire::{CameraMsg, InstanceEntry};
 
+use crate::NetError;
+
 /// Most hash buckets over all instances a client accepts from a welcome (128 bytes each:
-/// 1 GiB of grid tables).
+/// 1 GiB of grid tables). The decode limit of the largest table accepted stays under the
+/// codecs' ceiling ([`psao_delta::MAX_DECODE_LIMIT`]; tested), so every accepted table gets
+/// the whole limit it needs.
 pub const MAX_TOTAL_BUCKETS: u64 = 1 << 23;
 
 /// The wire form of an instance-table entry.
@@ -27,10 +30,12 @@ pub fn entry_of(info: &InstanceInfo) -> InstanceEntry {
 
 /// The instance table of a welcome, refused when its grids would take more than
 /// [`MAX_TOTAL_BUCKETS`] buckets.
-pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>> {
+pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>, NetError> {
     let buckets: u64 = entries.iter().map(|e| u64::from(e.bucket_count)).sum();
     if buckets > MAX_TOTAL_BUCKETS {
-        bail!("the instance table asks for {buckets} hash buckets (limit {MAX_TOTAL_BUCKETS})");
+        return Err(NetError::Protocol(format!(
+            "the instance table asks for {buckets} hash buckets (limit {MAX_TOTAL_BUCKETS})"
+        )));
     }
     Ok(entries
         .iter()
@@ -50,9 +55,16 @@ pub fn table_of(entries: &[InstanceEntry]) -> Result<Vec<InstanceInfo>> {
 
 /// A client's decoder for codec `name`, limited to what updates for `table` can take
 /// ([`decode_limit`]).
-pub fn client_decoder(name: &str, table: &[InstanceInfo]) -> Result<Box<dyn Codec>> {
-    let mut codec = psao_delta::codec_by_name(name)?;
-    codec.set_decode_limit(decode_limit(table));
+pub fn client_decoder(name: &str, table: &[InstanceInfo]) -> Result<Box<dyn Codec>, NetError> {
+    let mut codec =
+        psao_delta::codec_by_name(name).map_err(NetError::codec("the server's codec"))?;
+    let limit = decode_limit(table);
+    tracing::debug!(
+        "decode limit {:.1} MiB for {} instances",
+        limit as f64 / f64::from(1 << 20),
+        table.len()
+    );
+    codec.set_decode_limit(limit);
     Ok(codec)
 }
 
@@ -95,5 +107,28 @@ pub fn view_of(msg: &CameraMsg) -> View {
             far: msg.far,
         },
         aspect: msg.aspect,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_largest_accepted_table_gets_its_whole_decode_limit() {
+        let entry = |bucket_count: u32| InstanceEntry {
+            origin: [0.0; 3],
+            cell_size: 0.1,
+            dims: [64; 3],
+            layout_poisson_radius: 0.025,
+            bucket_count,
+            poisson_radius: 0.025,
+            point_count: 0,
+        };
+        let largest = table_of(&[entry(1 << 22), entry(1 << 22)]).unwrap();
+        let limit = decode_limit(&largest);
+        assert!(limit > psao_delta::MAX_DECODED_BYTES, "{limit}");
+        assert!(limit <= psao_delta::MAX_DECODE_LIMIT, "{limit}");
+        assert!(table_of(&[entry(1 << 22), entry((1 << 22) + 1)]).is_err());
     }
 }

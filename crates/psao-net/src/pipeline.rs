@@ -2,8 +2,7 @@
 //!
 //! Nothing goes around the codec: the client's state is built only from decoded updates.
 
-use crate::args::Resolution;
-use anyhow::{bail, Context, Result};
+use crate::{NetError, Resolution};
 use psao_client::{ClientState, ReconstructSettings, Shading};
 use psao_delta::Codec;
 use psao_eval::AoImage;
@@ -31,6 +30,8 @@ pub struct PipelineConfig {
     pub res: Resolution,
     /// The participating medium the server's AO rays pass through (the scene's volume).
     pub medium: Option<Arc<dyn Medium>>,
+    /// Folder of stored start points ([`crate::start_cache`]); `None` generates them afresh.
+    pub points_cache: Option<std::path::PathBuf>,
 }
 
 /// What happened in one client frame.
@@ -89,25 +90,30 @@ pub struct Pipeline<'a> {
 
 impl<'a> Pipeline<'a> {
     /// Generates the points, builds the server and connects the client.
-    pub fn new(scene: &'a Scene, config: &PipelineConfig) -> Result<Self> {
+    pub fn new(scene: &'a Scene, config: &PipelineConfig) -> Result<Self, NetError> {
         if config.server_hz == 0 || config.server_hz > CLIENT_HZ {
-            bail!(
+            return Err(NetError::Config(format!(
                 "--server-hz must be in 1..={CLIENT_HZ}, got {}",
                 config.server_hz
-            );
+            )));
         }
-        let mut server = Server::with_medium(scene, config.server, config.medium.clone())
-            .context("cannot start the server (point generation or tracer)")?;
+        let mut server = crate::start_cache::start_server(
+            scene,
+            config.server,
+            config.medium.clone(),
+            config.points_cache.as_deref(),
+        )?;
         let client_id = server.add_client();
         let table = server.instance_table();
         let client = ClientState::new(&table);
         // Limited as a networked client's.
-        let decoder = crate::net::convert::client_decoder(&config.codec, &table)?;
+        let decoder = crate::convert::client_decoder(&config.codec, &table)?;
         Ok(Self {
             scene,
             server,
             client_id,
-            encoder: psao_delta::codec_by_name(&config.codec)?,
+            encoder: psao_delta::codec_by_name(&config.codec)
+                .map_err(NetError::codec("the server's codec"))?,
             decoder,
             client,
             renderer: ClientRenderer::new(scene)?,
@@ -147,26 +153,26 @@ impl<'a> Pipeline<'a> {
     }
 
     /// The client decodes and applies one encoded update.
-    fn receive(&mut self, encoded: &[u8]) -> Result<()> {
-        let update = self
-            .decoder
-            .decode(encoded)
-            .context("the client could not decode the server's update")?;
-        self.client
-            .apply(&update)
-            .context("the client could not apply the server's update")
+    fn receive(&mut self, encoded: &[u8]) -> Result<(), NetError> {
+        let update = self.decoder.decode(encoded).map_err(NetError::codec(
+            "the client could not decode the server's update",
+        ))?;
+        Ok(self.client.apply(&update)?)
     }
 
     /// Runs `server_frames` server frames at the scene time of client frame `frame`, seen
     /// from `camera`, and applies their updates to the client without counting their bytes:
     /// the state of a server that has been running for a while before the measured frames.
-    pub fn warm_up(&mut self, frame: u32, camera: &Camera, server_frames: u32) -> Result<()> {
+    pub fn warm_up(
+        &mut self,
+        frame: u32,
+        camera: &Camera,
+        server_frames: u32,
+    ) -> Result<(), NetError> {
         let time = self.server_time(self.tick_of(frame));
         let view = self.view(camera);
         for _ in 0..server_frames {
-            self.server
-                .step_at(&[view], time)
-                .context("the server could not pose the scene")?;
+            self.server.step_at(&[view], time)?;
             let encoded = self.encoder.encode(&self.server.update_for(self.client_id));
             self.receive(&encoded)?;
         }
@@ -181,7 +187,7 @@ impl<'a> Pipeline<'a> {
         frame: u32,
         camera: &Camera,
         render: bool,
-    ) -> Result<(FrameRecord, Option<ClientFrame>)> {
+    ) -> Result<(FrameRecord, Option<ClientFrame>), NetError> {
         let mut record = FrameRecord {
             frame,
             ..Default::default()
@@ -192,10 +198,7 @@ impl<'a> Pipeline<'a> {
             self.last_tick = Some(tick);
             let t = Instant::now();
             let (view, time) = (self.view(camera), self.server_time(tick));
-            let stats = self
-                .server
-                .step_at(&[view], time)
-                .context("the server could not pose the scene")?;
+            let stats = self.server.step_at(&[view], time)?;
             record.invalidated_points = stats.invalidated_points;
             record.animate_ms = stats.animate_ms;
             record.retraced_points = stats.retraced_points;
@@ -239,8 +242,8 @@ pub struct ClientRenderer {
 
 impl ClientRenderer {
     /// A renderer for `scene` (errors when its animation data cannot be played).
-    pub fn new(scene: &Scene) -> Result<Self> {
-        let animator = Animator::new(scene).context("the scene's animation cannot be played")?;
+    pub fn new(scene: &Scene) -> Result<Self, NetError> {
+        let animator = Animator::new(scene)?;
         Ok(Self {
             rasterizer: Rasterizer::new(),
             animation: animator
@@ -260,7 +263,7 @@ impl ClientRenderer {
         camera: &Camera,
         res: Resolution,
         time: f32,
-    ) -> Result<ClientFrame> {
+    ) -> Result<ClientFrame, NetError> {
         let mut gbuffer = GBuffer::empty(res.width, res.height);
         let opts = RasterOptions::new(res.width, res.height);
         match &mut self.animation {
@@ -271,8 +274,7 @@ impl ClientRenderer {
                 animator.pose_into(time, pose);
                 let poses = client_poses(scene, animator, pose, state);
                 self.rasterizer
-                    .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)
-                    .context("cannot rasterize the posed scene")?;
+                    .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)?;
             }
         }
         let ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());

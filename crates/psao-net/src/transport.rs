@@ -4,7 +4,6 @@
 
 use std::time::Duration;
 
-use anyhow::{bail, Context, Result};
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use psao_wire::{decode_frame, decode_payload, FrameHeader, Message, WireError, HEADER_LEN};
@@ -15,33 +14,20 @@ use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::tungstenite::Message as WsMessage;
 use tokio_tungstenite::WebSocketStream;
 
+use crate::NetError;
+
 type Ws = WebSocketStream<TcpStream>;
 
 /// Why reading a frame failed.
-#[derive(Debug)]
+#[derive(Debug, thiserror::Error)]
 pub enum ReadError {
     /// The bytes were not a valid frame or message.
-    Wire(WireError),
+    #[error(transparent)]
+    Wire(#[from] WireError),
     /// The connection failed (or closed in the middle of a frame).
+    #[error("connection: {0}")]
     Io(String),
 }
-
-impl From<WireError> for ReadError {
-    fn from(e: WireError) -> Self {
-        ReadError::Wire(e)
-    }
-}
-
-impl std::fmt::Display for ReadError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            ReadError::Wire(e) => write!(f, "{e}"),
-            ReadError::Io(e) => write!(f, "connection: {e}"),
-        }
-    }
-}
-
-impl std::error::Error for ReadError {}
 
 /// Receives frames.
 pub enum FrameReader {
@@ -83,7 +69,7 @@ pub async fn accept(
     stream: TcpStream,
     limit: u32,
     timeout: Duration,
-) -> Result<(FrameReader, FrameWriter, &'static str)> {
+) -> Result<(FrameReader, FrameWriter, &'static str), NetError> {
     let mut first = [0u8; 4];
     let peeked = tokio::time::timeout(timeout, async {
         loop {
@@ -95,14 +81,16 @@ pub async fn accept(
         }
     })
     .await
-    .context("no data from the peer in time")??;
+    .map_err(|_| NetError::Protocol("no data from the peer in time".into()))?
+    .map_err(NetError::io("reading the first bytes"))?;
     if peeked < first.len() {
-        bail!("the peer closed before sending anything");
+        return Err(NetError::Protocol(
+            "the peer closed before sending anything".into(),
+        ));
     }
     if &first == b"GET " {
-        let ws = tokio_tungstenite::accept_async_with_config(stream, Some(ws_config(limit)))
-            .await
-            .context("WebSocket handshake failed")?;
+        let ws =
+            tokio_tungstenite::accept_async_with_config(stream, Some(ws_config(limit))).await?;
         let (r, w) = split_ws(ws);
         Ok((r, w, "websocket"))
     } else {
@@ -112,22 +100,20 @@ pub async fn accept(
 }
 
 /// Client side: connect to `addr`, either `HOST:PORT` (TCP) or `ws://HOST:PORT[/…]`.
-pub async fn connect(addr: &str, limit: u32) -> Result<(FrameReader, FrameWriter)> {
+pub async fn connect(addr: &str, limit: u32) -> Result<(FrameReader, FrameWriter), NetError> {
     if let Some(rest) = addr.strip_prefix("ws://") {
         let host = rest.split('/').next().unwrap_or(rest);
         let tcp = TcpStream::connect(host)
             .await
-            .with_context(|| format!("cannot connect to {host}"))?;
+            .map_err(NetError::io(format!("cannot connect to {host}")))?;
         let _ = tcp.set_nodelay(true);
         let (ws, _) =
-            tokio_tungstenite::client_async_with_config(addr, tcp, Some(ws_config(limit)))
-                .await
-                .context("WebSocket handshake failed")?;
+            tokio_tungstenite::client_async_with_config(addr, tcp, Some(ws_config(limit))).await?;
         Ok(split_ws(ws))
     } else {
         let tcp = TcpStream::connect(addr)
             .await
-            .with_context(|| format!("cannot connect to {addr}"))?;
+            .map_err(NetError::io(format!("cannot connect to {addr}")))?;
         Ok(split_tcp(tcp))
     }
 }
@@ -213,9 +199,12 @@ fn truncated(e: std::io::Error, needed: usize) -> ReadError {
 
 impl FrameWriter {
     /// Send one encoded frame.
-    pub async fn send(&mut self, frame: Vec<u8>) -> Result<()> {
+    pub async fn send(&mut self, frame: Vec<u8>) -> Result<(), NetError> {
         match self {
-            FrameWriter::Tcp(w) => w.write_all(&frame).await?,
+            FrameWriter::Tcp(w) => w
+                .write_all(&frame)
+                .await
+                .map_err(NetError::io("sending a frame"))?,
             FrameWriter::Ws(w) => w.send(WsMessage::binary(frame)).await?,
         }
         Ok(())
@@ -223,9 +212,13 @@ impl FrameWriter {
 
     /// Flush and close the sending side.
     pub async fn close(&mut self) {
-        let _ = match self {
-            FrameWriter::Tcp(w) => w.shutdown().await.map_err(anyhow::Error::from),
-            FrameWriter::Ws(w) => w.close().await.map_err(anyhow::Error::from),
-        };
+        match self {
+            FrameWriter::Tcp(w) => {
+                let _ = w.shutdown().await;
+            }
+            FrameWriter::Ws(w) => {
+                let _ = w.close().await;
+            }
+        }
     }
 }

@@ -1,0 +1,918 @@
+//! Serving: one shared point set streamed to many clients over TCP and WebSocket.
+//!
+//! A simulation thread owns the [`Server`]: each server frame it steps once for the union of
+//! the clients' latest views, then hands every client whose queue has room the update since
+//! what *it* last received (a client that falls behind gets one coalesced update later).
+//! Connection tasks (tokio) do the handshake, read cameras and acks, and write the queued
+//! frames. With `--lockstep` the server steps once per round of camera messages instead of
+//! on a clock, which makes a session reproduce `psao run` exactly.
+
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use psao_delta::Codec;
+use psao_server::{ClientId, Server, View};
+use psao_wire::{
+    capabilities, encode_frame, Bye, Delta, ErrorCode, ErrorMsg, Message, SceneTime, Welcome,
+    MAX_CLIENT_FRAME, PROTOCOL_VERSION,
+};
+use rayon::prelude::*;
+use serde::Serialize;
+use tokio::net::TcpListener;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::convert::{entry_of, view_of};
+use crate::cpu_time::cpu_seconds;
+use crate::pipeline::CLIENT_HZ;
+use crate::transport::{accept, FrameReader, FrameWriter, ReadError};
+use crate::NetError;
+
+/// Frames queued per client before its updates are coalesced.
+const QUEUE_FRAMES: usize = 4;
+/// Updates sent but not yet acknowledged before a client's updates are coalesced.
+const ACK_WINDOW: usize = 3;
+/// Time a new connection has to send its hello.
+const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// How a [`Serve`] listens and runs (the [`Server`] itself is built by the caller).
+#[derive(Debug, Clone)]
+pub struct ServeConfig {
+    /// Address to listen on (TCP and WebSocket on the same port); port 0 picks a free one.
+    pub listen: SocketAddr,
+    /// Access token clients must present.
+    pub token: Option<String>,
+    /// Name of the scene, told to clients in the welcome.
+    pub scene_name: String,
+    /// Update codec name.
+    pub codec: String,
+    /// Server frames per second of scene time (1..=[`CLIENT_HZ`]).
+    pub hz: u32,
+    /// Step once per round of client camera messages (deterministic; see docs/STREAMING.md).
+    pub lockstep: bool,
+    /// Wait for this many clients before the first server frame.
+    pub wait_clients: usize,
+    /// Most clients at once; later ones are refused with a `Server` error.
+    pub max_clients: usize,
+    /// Return once every client has left (after at least one joined).
+    pub once: bool,
+    /// Stop on Ctrl-C (SIGINT).
+    pub stop_on_ctrl_c: bool,
+}
+
+/// Per-client statistics.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ClientStats {
+    /// Session id.
+    pub id: u32,
+    /// Bytes of frames queued for the client (headers included).
+    pub bytes: u64,
+    /// Deltas and snapshots sent.
+    pub updates: u64,
+    /// Snapshots among them.
+    pub snapshots: u64,
+    /// Server frames at which the client had no room, so its changes were coalesced into a
+    /// later update.
+    pub coalesced: u64,
+    /// Server frames stepped while the client was connected.
+    pub frames: u64,
+}
+
+/// What `psao serve --json` writes.
+#[derive(Debug, Default, Serialize)]
+pub struct ServeStats {
+    /// Server frames stepped.
+    pub frames: u64,
+    /// Mean step + encode time per server frame, ms.
+    pub mean_ms: f64,
+    /// 95th percentile of it, ms.
+    pub p95_ms: f64,
+    /// Median of it, ms.
+    pub median_ms: f64,
+    /// Mean of the step alone, ms.
+    pub mean_step_ms: f64,
+    /// Mean of the step's culling, ms.
+    pub mean_cull_ms: f64,
+    /// Mean of the step's selection, tracing and accumulation, ms.
+    pub mean_trace_ms: f64,
+    /// Mean of the step's publishing, ms.
+    pub mean_publish_ms: f64,
+    /// Mean rays traced per server frame.
+    pub mean_rays: f64,
+    /// CPU time of the whole server process (all threads) per server frame, ms: unlike the
+    /// wall times it is not inflated by other processes on a shared machine.
+    pub cpu_ms: f64,
+    /// Mean per server frame of collecting the clients' updates (`update_for`), ms.
+    pub mean_update_ms: f64,
+    /// Mean per server frame of encoding them (codec + framing), ms.
+    pub mean_encode_ms: f64,
+    /// Mean per server frame of hashing the server state for verifying clients, ms.
+    pub mean_hash_ms: f64,
+    /// Server frames that started late because the previous one overran the period.
+    pub late_frames: u64,
+    /// Hash of the server's final buckets + cells.
+    pub state_hash: String,
+    /// Every client session, in order of joining.
+    pub clients: Vec<ClientStats>,
+}
+
+/// A connection's request to join, answered with its session.
+struct Join {
+    capabilities: u32,
+    out: mpsc::Sender<Vec<u8>>,
+    reply: oneshot::Sender<Result<Welcome, ErrorMsg>>,
+}
+
+/// What connections tell the simulation.
+enum Event {
+    Join(Join),
+    Camera(u32, psao_wire::CameraMsg),
+    Ack(u32, u64),
+    Leave(u32),
+}
+
+/// The simulation's record of one client.
+struct Session {
+    id: ClientId,
+    codec: Box<dyn Codec>,
+    out: mpsc::Sender<Vec<u8>>,
+    want_hash: bool,
+    view: Option<View>,
+    /// Lockstep: the camera frame awaiting an answer.
+    pending: Option<u32>,
+    unacked: VecDeque<u64>,
+    stats: ClientStats,
+}
+
+/// A bound server: listening, not yet stepping.
+pub struct Serve {
+    server: Server,
+    config: ServeConfig,
+    rt: tokio::runtime::Runtime,
+    listener: TcpListener,
+    local: SocketAddr,
+    stop: Arc<AtomicBool>,
+}
+
+impl Serve {
+    /// Checks `config` and binds its listen address (`server` steps for the clients).
+    pub fn bind(server: Server, config: ServeConfig) -> Result<Self, NetError> {
+        if config.hz == 0 || config.hz > CLIENT_HZ {
+            return Err(NetError::Config(format!(
+                "--hz must be in 1..={CLIENT_HZ}, got {}",
+                config.hz
+            )));
+        }
+        psao_delta::codec_by_name(&config.codec).map_err(NetError::codec("the server's codec"))?;
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .map_err(NetError::io("cannot start the async runtime"))?;
+        let listener = rt
+            .block_on(TcpListener::bind(config.listen))
+            .map_err(NetError::io(format!("cannot listen on {}", config.listen)))?;
+        let local = listener
+            .local_addr()
+            .map_err(NetError::io("cannot read the listening address"))?;
+        Ok(Self {
+            server,
+            config,
+            rt,
+            listener,
+            local,
+            stop: Arc::new(AtomicBool::new(false)),
+        })
+    }
+
+    /// The address actually listened on (resolves port 0).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local
+    }
+
+    /// A flag that stops [`Serve::run`] when set (checked at least every 50 ms).
+    pub fn stop_handle(&self) -> Arc<AtomicBool> {
+        self.stop.clone()
+    }
+
+    /// Accepts clients and steps until stopped (or, with `once`, until the last client
+    /// left); returns the statistics.
+    pub fn run(self) -> ServeStats {
+        let Serve {
+            server,
+            config,
+            rt,
+            listener,
+            local,
+            stop,
+        } = self;
+        tracing::info!("listening on {local} (TCP and WebSocket)");
+        let (events_tx, events_rx) = mpsc::channel::<Event>(1024);
+        rt.spawn(accept_loop(listener, events_tx, config.token.clone()));
+        if config.stop_on_ctrl_c {
+            let stop_signal = stop.clone();
+            rt.spawn(async move {
+                if tokio::signal::ctrl_c().await.is_ok() {
+                    tracing::info!("Ctrl-C: shutting down");
+                    stop_signal.store(true, Ordering::SeqCst);
+                }
+            });
+        }
+        let sim = Simulation {
+            server,
+            codec: config.codec.clone(),
+            scene: config.scene_name.clone(),
+            hz: config.hz,
+            lockstep: config.lockstep,
+            sessions: BTreeMap::new(),
+            stats: ServeStats::default(),
+            events: events_rx,
+            rt: rt.handle().clone(),
+            stop,
+            ever_joined: false,
+            once: config.once,
+            wait_clients: config.wait_clients,
+            max_clients: config.max_clients,
+            step_ms: Vec::new(),
+            phase_ms: [0.0; 3],
+            frame_ms: Vec::new(),
+            rays: 0,
+            cpu_start: None,
+            update_ms: 0.0,
+            encode_ms: 0.0,
+            unsent: None,
+            hash_ms: 0.0,
+        };
+        let stats = sim.run();
+        rt.shutdown_timeout(Duration::from_millis(500));
+        stats
+    }
+}
+
+async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, token: Option<String>) {
+    loop {
+        match listener.accept().await {
+            Ok((stream, peer)) => {
+                let events = events.clone();
+                let token = token.clone();
+                tokio::spawn(async move {
+                    if let Err(e) = connection(stream, events, token).await {
+                        tracing::info!("session with {peer} ended: {e}");
+                    }
+                });
+            }
+            Err(e) => {
+                tracing::warn!("accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+    }
+}
+
+/// Sends `error`, lets the peer read it, and closes.
+async fn refuse(
+    reader: &mut FrameReader,
+    writer: &mut FrameWriter,
+    code: ErrorCode,
+    message: String,
+) -> NetError {
+    let text = message.clone();
+    if let Ok(frame) = encode_frame(&Message::Error(ErrorMsg { code, message })) {
+        let _ = writer.send(frame).await;
+    }
+    writer.close().await;
+    reader.drain(Duration::from_millis(500)).await;
+    NetError::Protocol(format!("refused ({code:?}): {text}"))
+}
+
+/// One client connection: handshake, then cameras/acks in, queued frames out.
+async fn connection(
+    stream: tokio::net::TcpStream,
+    events: mpsc::Sender<Event>,
+    token: Option<String>,
+) -> Result<(), NetError> {
+    let (mut reader, mut writer, kind) = accept(stream, MAX_CLIENT_FRAME, HELLO_TIMEOUT).await?;
+    let first = tokio::time::timeout(HELLO_TIMEOUT, reader.next(MAX_CLIENT_FRAME)).await;
+    let hello = match first {
+        Err(_) => {
+            return Err(refuse(
+                &mut reader,
+                &mut writer,
+                ErrorCode::Protocol,
+                "no hello in time".into(),
+            )
+            .await)
+        }
+        Ok(Ok(Some((Message::Hello(h), _)))) => h,
+        Ok(Ok(Some((m, _)))) => {
+            let text = format!("expected hello, got {}", m.kind());
+            return Err(refuse(&mut reader, &mut writer, ErrorCode::Protocol, text).await);
+        }
+        Ok(Ok(None)) => return Err(NetError::Protocol("closed before hello".into())),
+        Ok(Err(e)) => return Err(read_failure(&mut reader, &mut writer, e).await),
+    };
+    if hello.version != PROTOCOL_VERSION {
+        let text = format!(
+            "protocol version {} not supported (server speaks {PROTOCOL_VERSION})",
+            hello.version
+        );
+        return Err(refuse(&mut reader, &mut writer, ErrorCode::Version, text).await);
+    }
+    if let Some(expected) = &token {
+        let given = hello.token.as_deref().unwrap_or("");
+        if !constant_time_eq(given.as_bytes(), expected.as_bytes()) {
+            return Err(refuse(
+                &mut reader,
+                &mut writer,
+                ErrorCode::Token,
+                "missing or wrong token".into(),
+            )
+            .await);
+        }
+    }
+    let (out_tx, mut out_rx) = mpsc::channel::<Vec<u8>>(QUEUE_FRAMES);
+    let (reply_tx, reply_rx) = oneshot::channel();
+    events
+        .send(Event::Join(Join {
+            capabilities: hello.capabilities,
+            out: out_tx.clone(),
+            reply: reply_tx,
+        }))
+        .await
+        .map_err(|_| shutting_down())?;
+    let welcome = match reply_rx.await.map_err(|_| shutting_down())? {
+        Ok(w) => w,
+        Err(e) => return Err(refuse(&mut reader, &mut writer, e.code, e.message).await),
+    };
+    let id = welcome.client_id;
+    tracing::info!("client {id} ({}, {kind}) joined", hello.name);
+    writer
+        .send(encode_frame(&Message::Welcome(welcome))?)
+        .await?;
+    let writer_task = tokio::spawn(async move {
+        while let Some(frame) = out_rx.recv().await {
+            if writer.send(frame).await.is_err() {
+                break;
+            }
+        }
+        writer.close().await;
+    });
+    let result = read_loop(&mut reader, id, &events).await;
+    if let Err(e) = &result {
+        let (code, message) = match e {
+            ReadError::Wire(w) => (ErrorCode::Frame, w.to_string()),
+            ReadError::Io(_) => (ErrorCode::Protocol, e.to_string()),
+        };
+        if let Ok(frame) = encode_frame(&Message::Error(ErrorMsg { code, message })) {
+            let _ = out_tx.send(frame).await;
+        }
+    }
+    drop(out_tx);
+    let _ = events.send(Event::Leave(id)).await;
+    let _ = tokio::time::timeout(Duration::from_secs(2), writer_task).await;
+    reader.drain(Duration::from_millis(500)).await;
+    result.map_err(|e| match e {
+        ReadError::Wire(w) => NetError::Wire(w),
+        ReadError::Io(m) => NetError::Protocol(m),
+    })
+}
+
+fn shutting_down() -> NetError {
+    NetError::Protocol("server is shutting down".into())
+}
+
+async fn read_failure(
+    reader: &mut FrameReader,
+    writer: &mut FrameWriter,
+    e: ReadError,
+) -> NetError {
+    let code = match e {
+        ReadError::Wire(_) => ErrorCode::Frame,
+        ReadError::Io(_) => ErrorCode::Protocol,
+    };
+    refuse(reader, writer, code, e.to_string()).await
+}
+
+/// Messages after the welcome until the client leaves.
+async fn read_loop(
+    reader: &mut FrameReader,
+    id: u32,
+    events: &mpsc::Sender<Event>,
+) -> Result<(), ReadError> {
+    loop {
+        let Some((message, _)) = reader.next(MAX_CLIENT_FRAME).await? else {
+            return Ok(());
+        };
+        let event = match message {
+            Message::Camera(c) => Event::Camera(id, c),
+            Message::Ack(a) => Event::Ack(id, a.frame),
+            Message::Bye(_) => return Ok(()),
+            other => {
+                return Err(ReadError::Io(format!(
+                    "unexpected {} from a client",
+                    other.kind()
+                )))
+            }
+        };
+        if events.send(event).await.is_err() {
+            return Ok(());
+        }
+    }
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// The simulation thread's state.
+struct Simulation {
+    server: Server,
+    codec: String,
+    scene: String,
+    hz: u32,
+    lockstep: bool,
+    sessions: BTreeMap<u32, Session>,
+    stats: ServeStats,
+    events: mpsc::Receiver<Event>,
+    rt: tokio::runtime::Handle,
+    stop: Arc<AtomicBool>,
+    ever_joined: bool,
+    once: bool,
+    wait_clients: usize,
+    max_clients: usize,
+    step_ms: Vec<f64>,
+    /// Sums of the steps' cull, trace and publish ms.
+    phase_ms: [f64; 3],
+    frame_ms: Vec<f64>,
+    /// Rays traced, summed over frames.
+    rays: u64,
+    /// Process CPU seconds when the first frame started.
+    cpu_start: Option<f64>,
+    /// Summed over frames: update collection, encoding, hashing (ms).
+    update_ms: f64,
+    encode_ms: f64,
+    hash_ms: f64,
+    /// The last frame's updates, sent during the next frame (not in lockstep).
+    unsent: Option<FrameUpdates>,
+}
+
+impl Simulation {
+    /// The main loop until Ctrl-C (or, with `--once`, until the last client left).
+    fn run(mut self) -> ServeStats {
+        let period = Duration::from_secs_f64(1.0 / f64::from(self.hz));
+        let mut next = Instant::now();
+        let mut started = false;
+        let mut round = 0u64;
+        let mut last_tick = None;
+        loop {
+            if self.stop.load(Ordering::SeqCst)
+                || (self.once && self.ever_joined && self.sessions.is_empty())
+            {
+                break;
+            }
+            if !started {
+                started = self.sessions.len() >= self.wait_clients.max(1);
+                if !started {
+                    self.wait_event(Duration::from_millis(50));
+                    continue;
+                }
+                next = Instant::now();
+                self.cpu_start = cpu_seconds();
+            }
+            if self.lockstep {
+                // Every client must have sent the camera of its next frame.
+                let ready = !self.sessions.is_empty()
+                    && self.sessions.values().all(|s| s.pending.is_some());
+                if !ready {
+                    self.wait_event(Duration::from_millis(50));
+                    continue;
+                }
+                let tick = round * u64::from(self.hz) / u64::from(CLIENT_HZ);
+                let seconds = round as f64 / f64::from(CLIENT_HZ);
+                round += 1;
+                if last_tick != Some(tick) {
+                    last_tick = Some(tick);
+                    self.frame(seconds, true);
+                } else {
+                    self.answer_without_update(seconds);
+                }
+            } else {
+                let now = Instant::now();
+                if now < next {
+                    self.wait_event(next - now);
+                    continue;
+                }
+                if now > next + period {
+                    self.stats.late_frames += 1;
+                    next = now;
+                }
+                next += period;
+                self.drain_events();
+                let seconds = (self.server.frame() + 1) as f64 / f64::from(self.hz);
+                self.frame(seconds, false);
+            }
+        }
+        self.shutdown()
+    }
+
+    /// Wait up to `timeout` for one event, then handle everything pending.
+    fn wait_event(&mut self, timeout: Duration) {
+        let got = self
+            .rt
+            .block_on(async { tokio::time::timeout(timeout, self.events.recv()).await });
+        if let Ok(Some(e)) = got {
+            self.handle(e);
+        }
+        self.drain_events();
+    }
+
+    fn drain_events(&mut self) {
+        while let Ok(e) = self.events.try_recv() {
+            self.handle(e);
+        }
+    }
+
+    fn handle(&mut self, event: Event) {
+        match event {
+            Event::Join(join) => self.join(join),
+            Event::Camera(id, cam) => {
+                if let Some(s) = self.sessions.get_mut(&id) {
+                    s.view = Some(view_of(&cam));
+                    s.pending = Some(cam.frame);
+                }
+            }
+            Event::Ack(id, frame) => {
+                if let Some(s) = self.sessions.get_mut(&id) {
+                    while s.unacked.front().is_some_and(|&f| f <= frame) {
+                        s.unacked.pop_front();
+                    }
+                }
+            }
+            Event::Leave(id) => {
+                if let Some(s) = self.sessions.remove(&id) {
+                    self.server.remove_client(s.id);
+                    tracing::info!("client {id} left");
+                    self.stats.clients.push(s.stats);
+                }
+            }
+        }
+    }
+
+    fn join(&mut self, join: Join) {
+        let wanted = match self.codec.as_str() {
+            "paper" => capabilities::CODEC_PAPER,
+            _ => capabilities::CODEC_COMPACT,
+        };
+        if join.capabilities & wanted == 0 {
+            let _ = join.reply.send(Err(ErrorMsg {
+                code: ErrorCode::Protocol,
+                message: format!(
+                    "the client cannot decode the server's codec `{}`",
+                    self.codec
+                ),
+            }));
+            return;
+        }
+        if self.sessions.len() >= self.max_clients {
+            let _ = join.reply.send(Err(ErrorMsg {
+                code: ErrorCode::Server,
+                message: format!("server full ({} clients)", self.max_clients),
+            }));
+            return;
+        }
+        let id = self.server.add_client();
+        let Ok(codec) = psao_delta::codec_by_name(&self.codec) else {
+            return;
+        };
+        let welcome = Welcome {
+            version: PROTOCOL_VERSION,
+            client_id: id.0,
+            codec: self.codec.clone(),
+            server_hz: self.hz,
+            client_hz: CLIENT_HZ,
+            lockstep: self.lockstep,
+            scene: self.scene.clone(),
+            frame: self.server.frame(),
+            scene_time: self.server.frame() as f64 / f64::from(self.hz),
+            instances: self.server.instance_table().iter().map(entry_of).collect(),
+        };
+        if join.reply.send(Ok(welcome)).is_err() {
+            self.server.remove_client(id);
+            return;
+        }
+        self.ever_joined = true;
+        self.sessions.insert(
+            id.0,
+            Session {
+                id,
+                codec,
+                out: join.out,
+                want_hash: join.capabilities & capabilities::STATE_HASH != 0,
+                view: None,
+                pending: None,
+                unacked: VecDeque::new(),
+                stats: ClientStats {
+                    id: id.0,
+                    ..Default::default()
+                },
+            },
+        );
+    }
+
+    /// Step once for the union of the clients' views and collect the update of each client
+    /// with room (lockstep: every client, waiting for room). Lockstep encodes and sends them
+    /// at once; otherwise they are encoded and sent during the next frame's step, which
+    /// they overlap (a server frame of latency for the use of both cores).
+    fn frame(&mut self, seconds: f64, lockstep: bool) {
+        let t = Instant::now();
+        let mut views: Vec<View> = Vec::new();
+        for v in self.sessions.values().filter_map(|s| s.view) {
+            if !views.contains(&v) {
+                views.push(v);
+            }
+        }
+        let previous = self.unsent.take();
+        let (server, sessions, rt) = (&mut self.server, &mut self.sessions, &self.rt);
+        let (step, sent) = rayon::join(
+            || server.step_at(&views, seconds as f32),
+            || previous.map(|u| send_updates(sessions, u, false, rt)),
+        );
+        if let Some(sent) = sent {
+            self.sent(sent);
+        }
+        let step = match step {
+            Ok(step) => step,
+            Err(e) => {
+                tracing::error!("server frame at {seconds:.3} s skipped: {e}");
+                return;
+            }
+        };
+        self.step_ms.push(step.ms);
+        for (sum, ms) in
+            self.phase_ms
+                .iter_mut()
+                .zip([step.cull_ms, step.trace_ms, step.publish_ms])
+        {
+            *sum += ms;
+        }
+        self.rays += step.rays;
+        let th = Instant::now();
+        let hash = self
+            .sessions
+            .values()
+            .any(|s| s.want_hash)
+            .then(|| self.state_hash());
+        self.hash_ms += th.elapsed().as_secs_f64() * 1e3;
+        let tu = Instant::now();
+        let mut due = Vec::new();
+        for s in self.sessions.values_mut() {
+            s.stats.frames += 1;
+            let room = s.out.capacity() > 0 && s.unacked.len() < ACK_WINDOW;
+            if !lockstep && !room {
+                s.stats.coalesced += 1;
+                continue;
+            }
+            due.push(s.id);
+        }
+        let updates = FrameUpdates {
+            frame: self.server.frame(),
+            seconds,
+            hash,
+            groups: self.server.updates_for(&due),
+        };
+        self.update_ms += tu.elapsed().as_secs_f64() * 1e3;
+        if lockstep {
+            self.send_now(updates, true);
+        } else {
+            self.unsent = Some(updates);
+        }
+        self.frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+
+    /// Encode and send `updates` now (see [`send_updates`]) and drop the sessions that are
+    /// gone.
+    fn send_now(&mut self, updates: FrameUpdates, lockstep: bool) {
+        let sent = send_updates(&mut self.sessions, updates, lockstep, &self.rt);
+        self.sent(sent);
+    }
+
+    /// Account what [`send_updates`] returned: its time, and the sessions that are gone.
+    fn sent(&mut self, (gone, ms): (Vec<u32>, f64)) {
+        self.encode_ms += ms;
+        for id in gone {
+            self.handle(Event::Leave(id));
+        }
+    }
+
+    /// Lockstep round without a server frame: tell each client its frame is done.
+    fn answer_without_update(&mut self, seconds: f64) {
+        let frame = self.server.frame();
+        for s in self.sessions.values_mut() {
+            let msg = Message::SceneTime(SceneTime {
+                frame,
+                seconds,
+                client_frame: s.pending.take(),
+            });
+            if let Ok(bytes) = encode_frame(&msg) {
+                s.stats.bytes += bytes.len() as u64;
+                let _ = self.rt.block_on(s.out.send(bytes));
+            }
+        }
+    }
+
+    fn state_hash(&self) -> u64 {
+        psao_client::state_hash_of((0..self.server.instance_count()).map(|i| self.server.grid(i)))
+    }
+
+    /// Say bye to everyone and collect the statistics.
+    fn shutdown(mut self) -> ServeStats {
+        if let Some(u) = self.unsent.take() {
+            self.send_now(u, false);
+        }
+        let bye = encode_frame(&Message::Bye(Bye {
+            reason: "server shutting down".into(),
+        }));
+        for s in self.sessions.values() {
+            if let Ok(b) = &bye {
+                let _ = s.out.try_send(b.clone());
+            }
+        }
+        let ids: Vec<u32> = self.sessions.keys().copied().collect();
+        for id in ids {
+            self.handle(Event::Leave(id));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        let mut stats = std::mem::take(&mut self.stats);
+        stats.frames = self.server.frame();
+        stats.mean_ms = mean(&self.frame_ms);
+        stats.p95_ms = percentile(&self.frame_ms, 0.95);
+        stats.median_ms = percentile(&self.frame_ms, 0.5);
+        stats.mean_step_ms = mean(&self.step_ms);
+        let steps = self.step_ms.len().max(1) as f64;
+        [
+            stats.mean_cull_ms,
+            stats.mean_trace_ms,
+            stats.mean_publish_ms,
+        ] = self.phase_ms.map(|sum| sum / steps);
+        let frames = self.frame_ms.len().max(1) as f64;
+        stats.mean_update_ms = self.update_ms / frames;
+        stats.mean_encode_ms = self.encode_ms / frames;
+        stats.mean_hash_ms = self.hash_ms / frames;
+        stats.mean_rays = self.rays as f64 / frames;
+        if let (Some(a), Some(b)) = (self.cpu_start, cpu_seconds()) {
+            stats.cpu_ms = (b - a) * 1e3 / frames;
+        }
+        stats.state_hash = format!("{:016x}", self.state_hash());
+        stats.clients.sort_by_key(|c| c.id);
+        tracing::info!(
+            "{} server frames, {:.2} ms mean ({:.2} ms step), {} late",
+            stats.frames,
+            stats.mean_ms,
+            stats.mean_step_ms,
+            stats.late_frames
+        );
+        stats
+    }
+}
+
+/// One server frame's updates, collected but not yet encoded: clients due the same update
+/// share it (see [`Server::updates_for`]).
+struct FrameUpdates {
+    frame: u64,
+    seconds: f64,
+    /// The server's state hash at this frame, for clients that verify.
+    hash: Option<u64>,
+    groups: Vec<(Vec<ClientId>, psao_delta::Update)>,
+}
+
+/// Who codes what of `groups` for the clients `ids`, in their order: each client's group and
+/// whether it encodes the group's update (the group's first client among `ids`; the others
+/// only advance their codec, see [`send_updates`]); `None` for a client in no group.
+pub fn coding_plan(
+    ids: impl IntoIterator<Item = ClientId>,
+    groups: &[(Vec<ClientId>, psao_delta::Update)],
+) -> Vec<Option<(usize, bool)>> {
+    let group_of: HashMap<ClientId, usize> = groups
+        .iter()
+        .enumerate()
+        .flat_map(|(g, (members, _))| members.iter().map(move |m| (*m, g)))
+        .collect();
+    let mut encoders: HashSet<usize> = HashSet::new();
+    ids.into_iter()
+        .map(|id| {
+            let g = *group_of.get(&id)?;
+            Some((g, encoders.insert(g)))
+        })
+        .collect()
+}
+
+/// `update` through `codec`: its payload when the codec `encodes`, else only taken into the
+/// codec's state ([`Codec::advance`]).
+pub fn code(codec: &mut dyn Codec, update: &psao_delta::Update, encodes: bool) -> Option<Vec<u8>> {
+    if encodes {
+        Some(codec.encode(update))
+    } else {
+        codec.advance(update);
+        None
+    }
+}
+
+/// Encode `updates` and queue them to their sessions (lockstep: waiting for room, with the
+/// camera frame each answers); returns the sessions whose connection is gone and the ms
+/// taken. Each group's update is encoded once, in parallel with the others: the other
+/// clients of a group only advance their codec's state (one codec for the whole server),
+/// which equals the encoder's because their decoders hold the same state.
+fn send_updates(
+    sessions: &mut BTreeMap<u32, Session>,
+    updates: FrameUpdates,
+    lockstep: bool,
+    rt: &tokio::runtime::Handle,
+) -> (Vec<u32>, f64) {
+    let te = Instant::now();
+    let FrameUpdates {
+        frame,
+        seconds,
+        hash,
+        groups,
+    } = updates;
+    // Sessions that left since the updates were collected are in no group: skipped.
+    let plan = coding_plan(sessions.values().map(|s| s.id), &groups);
+    let jobs: Vec<(&mut Session, usize, bool)> = sessions
+        .values_mut()
+        .zip(plan)
+        .filter_map(|(s, job)| job.map(|(g, encodes)| (s, g, encodes)))
+        .collect();
+    let payloads: Vec<(&mut Session, usize, Option<Vec<u8>>)> = jobs
+        .into_par_iter()
+        .map(|(s, g, encodes)| {
+            let payload = code(s.codec.as_mut(), &groups[g].1, encodes);
+            (s, g, payload)
+        })
+        .collect();
+    // Copies of the encoded payloads for the other clients of groups with several.
+    let shared: HashMap<usize, Vec<u8>> = payloads
+        .iter()
+        .filter(|(_, g, _)| groups[*g].0.len() > 1)
+        .filter_map(|(_, g, payload)| Some((*g, payload.clone()?)))
+        .collect();
+    let encoded: Vec<(&mut Session, Option<Vec<u8>>)> = payloads
+        .into_par_iter()
+        .map(|(s, g, payload)| {
+            let delta = Delta {
+                frame,
+                scene_time: seconds,
+                client_frame: if lockstep { s.pending.take() } else { None },
+                state_hash: if s.want_hash { hash } else { None },
+                payload: payload.unwrap_or_else(|| shared[&g].clone()),
+            };
+            let message = if groups[g].1.snapshot {
+                s.stats.snapshots += 1;
+                Message::Snapshot(delta)
+            } else {
+                Message::Delta(delta)
+            };
+            let bytes = encode_frame(&message).ok();
+            (s, bytes)
+        })
+        .collect();
+    let mut gone = Vec::new();
+    for (s, bytes) in encoded {
+        let Some(bytes) = bytes else {
+            gone.push(s.id.0);
+            continue;
+        };
+        s.stats.bytes += bytes.len() as u64;
+        s.stats.updates += 1;
+        s.unacked.push_back(frame);
+        let sent = if lockstep {
+            rt.block_on(s.out.send(bytes)).is_ok()
+        } else {
+            s.out.try_send(bytes).is_ok()
+        };
+        if !sent {
+            gone.push(s.id.0);
+        }
+    }
+    (gone, te.elapsed().as_secs_f64() * 1e3)
+}
+
+/// The mean of `v` (0 when empty).
+pub fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// The `q` quantile (0..=1) of `v` (nearest rank; 0 when empty).
+pub fn percentile(v: &[f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * q).round() as usize]
+}

@@ -1,0 +1,578 @@
+//! Viewing: a headless client. It follows a camera path at 60 Hz of scene time, sends its
+//! camera, applies the server's deltas as they arrive, renders exactly as `psao run` does,
+//! and reconnects with backoff when the connection drops.
+//!
+//! A network task owns the connection (and the simulated slow link: `--latency-ms`,
+//! `--max-mbit`); the frame loop decodes and applies updates, so the codec state always
+//! matches the session it belongs to.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use psao_client::ClientState;
+use psao_delta::Codec;
+use psao_scene::path::CameraPath;
+use psao_scene::Scene;
+use psao_wire::{
+    capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, Welcome, WireError,
+    MAX_SERVER_FRAME, PROTOCOL_VERSION,
+};
+use serde::Serialize;
+use tokio::sync::mpsc;
+
+use crate::convert::{camera_msg, client_decoder, table_of};
+use crate::cpu_time::cpu_seconds;
+use crate::pipeline::{ClientFrame, ClientRenderer, CLIENT_HZ};
+use crate::transport::{connect, ReadError};
+use crate::{NetError, Resolution};
+
+/// How a client connects and what it runs.
+#[derive(Debug, Clone)]
+pub struct ViewConfig {
+    /// Server address: `HOST:PORT` (TCP) or `ws://HOST:PORT` (WebSocket).
+    pub connect: String,
+    /// Access token.
+    pub token: Option<String>,
+    /// Client frames to run (default: the whole camera path).
+    pub frames: Option<u32>,
+    /// Image size (also the aspect of the camera sent to the server).
+    pub res: Resolution,
+    /// Render every frame and hand it to the caller's sink; otherwise updates are only
+    /// received and applied.
+    pub render: bool,
+    /// Simulated one-way latency of received frames, ms.
+    pub latency_ms: u64,
+    /// Simulated link capacity for received frames, Mbit/s (0 = unlimited).
+    pub max_mbit: f64,
+    /// Give up after this many seconds without a connection.
+    pub retry_secs: f64,
+    /// Do not ask for the server's state hash with every update.
+    pub no_verify: bool,
+    /// Start this many frames into the camera path (wrapping around at its end).
+    pub path_offset: u32,
+    /// Fault injection: drop the connection once, at this client frame.
+    pub drop_at: Option<u32>,
+    /// Write the first received frames (≤ 64 KiB each) and their update payloads to this
+    /// folder (seed corpus for the fuzz targets).
+    pub record: Option<PathBuf>,
+}
+
+/// What the caller does with each rendered frame (e.g. write images).
+pub type FrameSink<'a> =
+    dyn FnMut(u32, &ClientFrame) -> Result<(), Box<dyn std::error::Error + Send + Sync>> + 'a;
+
+/// Frames (and update payloads) `--record` writes at most.
+const RECORD_MAX: u32 = 8;
+
+/// What a client run measured (`psao view --json` writes it).
+#[derive(Debug, Default, Serialize)]
+pub struct ViewStats {
+    /// Client frames run.
+    pub frames: u32,
+    /// Received Mbit per second of scene time (frames on the wire, headers included).
+    pub mbit_s: f64,
+    /// Connections after the first.
+    pub reconnects: u32,
+    /// Hash of the client's final buckets + cells.
+    pub state_hash: String,
+    /// The server's hash at the last applied update (when it sent one).
+    pub server_state_hash: Option<String>,
+    /// Updates whose server hash differed from the client's after applying.
+    pub hash_mismatches: u32,
+    /// Bytes received.
+    pub bytes: u64,
+    /// Deltas and snapshots applied.
+    pub updates: u32,
+    /// Snapshots among them.
+    pub snapshots: u32,
+    /// Server frame of the last applied update.
+    pub last_server_frame: u64,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// CPU seconds of this process (all threads) over those (0 where unknown).
+    pub cpu_seconds: f64,
+    /// The server's id of every session, in order.
+    pub client_ids: Vec<u32>,
+}
+
+/// From the network task to the frame loop.
+enum NetEvent {
+    /// A (new) session started.
+    Welcome(Welcome),
+    /// A message after the welcome and its size on the wire.
+    Message(Message, usize),
+    /// The session ended; the task reconnects.
+    Lost(String),
+    /// The task gave up.
+    Fatal(NetError),
+}
+
+/// From the frame loop to the network task.
+enum Outgoing {
+    Send(Message),
+    /// Drop the connection (fault injection).
+    Drop,
+}
+
+/// Runs a client on `scene` along `path` (see the module documentation); rendered frames go
+/// to `sink` when `args.render`. Returns the statistics (also when some updates left the
+/// state different from the server's: see [`ViewStats::hash_mismatches`]).
+pub fn view(
+    scene: &Scene,
+    path: &CameraPath,
+    args: &ViewConfig,
+    sink: &mut FrameSink<'_>,
+) -> Result<ViewStats, NetError> {
+    let total = path.frame_count() as u32;
+    let frames = args.frames.unwrap_or(total).min(total);
+    if frames == 0 {
+        return Err(NetError::Config("nothing to do: 0 frames".into()));
+    }
+    if !(args.max_mbit.is_finite() && args.max_mbit >= 0.0) {
+        return Err(NetError::Config("--max-mbit must be >= 0".into()));
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .map_err(NetError::io("cannot start the async runtime"))?;
+    let (event_tx, mut events) = mpsc::channel::<NetEvent>(8);
+    let (out_tx, out_rx) = mpsc::unbounded_channel::<Outgoing>();
+    rt.spawn(network(args.clone(), event_tx, out_rx));
+
+    let mut client = Client {
+        record: args.record.clone(),
+        ..Client::default()
+    };
+    if let Some(dir) = &args.record {
+        std::fs::create_dir_all(dir)
+            .map_err(NetError::io(format!("cannot create {}", dir.display())))?;
+    }
+    let aspect = args.res.width as f32 / args.res.height as f32;
+    let mut renderer = ClientRenderer::new(scene)?;
+    let mut start = Instant::now();
+    let mut cpu_start = cpu_seconds();
+    let mut lockstep = None;
+    for frame in 0..frames {
+        let camera = path.camera_at_frame(((frame + args.path_offset) % total) as usize);
+        if args.drop_at == Some(frame) {
+            let _ = out_tx.send(Outgoing::Drop);
+        }
+        // Before a session exists nothing can be sent: wait for the welcome.
+        while lockstep.is_none() {
+            let e = events.blocking_recv().ok_or_else(network_ended)?;
+            lockstep = client.handle(e, &out_tx)?;
+            // The 60 Hz clock starts with the first session.
+            start = Instant::now();
+            cpu_start = cpu_seconds();
+        }
+        let _ = out_tx.send(Outgoing::Send(Message::Camera(camera_msg(
+            frame, &camera, aspect,
+        ))));
+        if lockstep == Some(true) {
+            // Wait for the server's answer to this frame; resend after a reconnect.
+            loop {
+                let e = events.blocking_recv().ok_or_else(network_ended)?;
+                let reconnected = matches!(e, NetEvent::Welcome(_));
+                if let Some(l) = client.handle(e, &out_tx)? {
+                    lockstep = Some(l);
+                }
+                if reconnected {
+                    let msg = Message::Camera(camera_msg(frame, &camera, aspect));
+                    let _ = out_tx.send(Outgoing::Send(msg));
+                }
+                if client.answered == Some(frame) {
+                    break;
+                }
+            }
+        } else {
+            let due = start + Duration::from_secs_f64(f64::from(frame) / f64::from(CLIENT_HZ));
+            if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+            while let Ok(e) = events.try_recv() {
+                if let Some(l) = client.handle(e, &out_tx)? {
+                    lockstep = Some(l);
+                }
+            }
+        }
+        if args.render {
+            // The client's clock: frame / 60 s (equal to the server's in lockstep).
+            let time = frame as f32 / CLIENT_HZ as f32;
+            let img = renderer.render(scene, &client.state, &camera, args.res, time)?;
+            sink(frame, &img).map_err(NetError::Sink)?;
+        }
+    }
+    let _ = out_tx.send(Outgoing::Send(Message::Bye(Bye {
+        reason: "done".into(),
+    })));
+    std::thread::sleep(Duration::from_millis(50));
+    rt.shutdown_timeout(Duration::from_millis(200));
+    let seconds = f64::from(frames) / f64::from(CLIENT_HZ);
+    let stats = ViewStats {
+        frames,
+        mbit_s: client.bytes as f64 * 8.0 / seconds / 1e6,
+        reconnects: client.sessions.saturating_sub(1),
+        state_hash: format!("{:016x}", client.state.state_hash()),
+        server_state_hash: client.server_hash.map(|h| format!("{h:016x}")),
+        hash_mismatches: client.mismatches,
+        bytes: client.bytes,
+        updates: client.updates,
+        snapshots: client.snapshots,
+        last_server_frame: client.last_frame,
+        seconds: start.elapsed().as_secs_f64(),
+        cpu_seconds: match (cpu_start, cpu_seconds()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        },
+        client_ids: client.ids.clone(),
+    };
+    Ok(stats)
+}
+
+fn network_ended() -> NetError {
+    NetError::Protocol("network task ended".into())
+}
+
+/// The frame loop's session state.
+struct Client {
+    state: ClientState,
+    codec: Option<Box<dyn Codec>>,
+    sessions: u32,
+    bytes: u64,
+    updates: u32,
+    snapshots: u32,
+    mismatches: u32,
+    last_frame: u64,
+    server_hash: Option<u64>,
+    /// Lockstep: the latest client frame the server answered.
+    answered: Option<u32>,
+    record: Option<PathBuf>,
+    recorded: u32,
+    ids: Vec<u32>,
+}
+
+impl Default for Client {
+    fn default() -> Self {
+        Self {
+            state: ClientState::new(&[]),
+            codec: None,
+            sessions: 0,
+            bytes: 0,
+            updates: 0,
+            snapshots: 0,
+            mismatches: 0,
+            last_frame: 0,
+            server_hash: None,
+            answered: None,
+            record: None,
+            recorded: 0,
+            ids: Vec::new(),
+        }
+    }
+}
+
+impl Client {
+    /// Handle one network event; returns the session's lockstep flag on a welcome.
+    fn handle(
+        &mut self,
+        event: NetEvent,
+        out: &mpsc::UnboundedSender<Outgoing>,
+    ) -> Result<Option<bool>, NetError> {
+        match event {
+            NetEvent::Welcome(w) => {
+                let table = table_of(&w.instances)?;
+                let codec = client_decoder(&w.codec, &table)?;
+                self.state = ClientState::new(&table);
+                self.codec = Some(codec);
+                self.sessions += 1;
+                self.ids.push(w.client_id);
+                self.answered = None;
+                tracing::info!(
+                    "session {} with the server: client {}, codec {}, {} Hz, lockstep {}",
+                    self.sessions,
+                    w.client_id,
+                    w.codec,
+                    w.server_hz,
+                    w.lockstep
+                );
+                return Ok(Some(w.lockstep));
+            }
+            NetEvent::Message(m, size) => {
+                self.bytes += size as u64;
+                self.record(&m)?;
+                match m {
+                    Message::Delta(d) => self.apply(d, false, out)?,
+                    Message::Snapshot(d) => self.apply(d, true, out)?,
+                    Message::SceneTime(t) => {
+                        if t.client_frame.is_some() {
+                            self.answered = t.client_frame;
+                        }
+                    }
+                    Message::Error(e) => {
+                        return Err(NetError::Refused {
+                            code: e.code,
+                            message: e.message,
+                        })
+                    }
+                    Message::Bye(b) => tracing::info!("server said bye: {}", b.reason),
+                    other => {
+                        return Err(NetError::Protocol(format!(
+                            "unexpected {} from the server",
+                            other.kind()
+                        )))
+                    }
+                }
+            }
+            NetEvent::Lost(why) => tracing::warn!("connection lost: {why}; reconnecting"),
+            NetEvent::Fatal(why) => return Err(why),
+        }
+        Ok(None)
+    }
+
+    /// `--record`: keep small frames and update payloads as fuzzing seeds.
+    fn record(&mut self, m: &Message) -> Result<(), NetError> {
+        let Some(dir) = &self.record else {
+            return Ok(());
+        };
+        let frame = encode_frame(m)?;
+        if self.recorded >= RECORD_MAX || frame.len() > 64 << 10 {
+            return Ok(());
+        }
+        let n = self.recorded;
+        self.recorded += 1;
+        let write = |name: String, bytes: &[u8]| {
+            let file = dir.join(name);
+            std::fs::write(&file, bytes)
+                .map_err(NetError::io(format!("cannot write {}", file.display())))
+        };
+        write(format!("frame_{n:03}.bin"), &frame)?;
+        if let Message::Delta(d) | Message::Snapshot(d) = m {
+            write(format!("delta_{n:03}.bin"), &d.payload)?;
+        }
+        Ok(())
+    }
+
+    fn apply(
+        &mut self,
+        d: Delta,
+        snapshot: bool,
+        out: &mpsc::UnboundedSender<Outgoing>,
+    ) -> Result<(), NetError> {
+        let codec = self
+            .codec
+            .as_mut()
+            .ok_or_else(|| NetError::Protocol("update before the welcome".into()))?;
+        let update = codec
+            .decode(&d.payload)
+            .map_err(NetError::codec("cannot decode the server's update"))?;
+        if update.snapshot != snapshot {
+            return Err(NetError::Protocol(
+                "the update's snapshot flag does not match its message".into(),
+            ));
+        }
+        self.state.apply(&update)?;
+        self.updates += 1;
+        self.snapshots += u32::from(snapshot);
+        self.last_frame = d.frame;
+        if let Some(h) = d.state_hash {
+            self.server_hash = Some(h);
+            if h != self.state.state_hash() {
+                self.mismatches += 1;
+                tracing::error!("state differs from the server's after frame {}", d.frame);
+            }
+        }
+        if d.client_frame.is_some() {
+            self.answered = d.client_frame;
+        }
+        let _ = out.send(Outgoing::Send(Message::Ack(Ack { frame: d.frame })));
+        Ok(())
+    }
+}
+
+/// Connect, handshake, pump frames both ways; reconnect with backoff until `retry_secs`
+/// pass without a session.
+async fn network(
+    args: ViewConfig,
+    events: mpsc::Sender<NetEvent>,
+    mut outgoing: mpsc::UnboundedReceiver<Outgoing>,
+) {
+    let mut backoff = Duration::from_millis(100);
+    let mut last_ok = Instant::now();
+    loop {
+        match session(&args, &events, &mut outgoing).await {
+            Ok(SessionEnd::Closed) => return,
+            Ok(SessionEnd::Reconnect(why)) => {
+                last_ok = Instant::now();
+                backoff = Duration::from_millis(100);
+                if events.send(NetEvent::Lost(why)).await.is_err() {
+                    return;
+                }
+            }
+            Err(SessionError::Fatal(why)) => {
+                let _ = events.send(NetEvent::Fatal(why)).await;
+                return;
+            }
+            Err(SessionError::Retry(why)) => {
+                if last_ok.elapsed().as_secs_f64() > args.retry_secs {
+                    let _ = events
+                        .send(NetEvent::Fatal(NetError::Unreachable {
+                            seconds: args.retry_secs,
+                            last: why,
+                        }))
+                        .await;
+                    return;
+                }
+                tracing::debug!("connect failed ({why}); retrying in {backoff:?}");
+            }
+        }
+        tokio::time::sleep(backoff).await;
+        backoff = (backoff * 2).min(Duration::from_secs(2));
+    }
+}
+
+enum SessionEnd {
+    /// The frame loop is done.
+    Closed,
+    /// The session ended after a welcome; connect again.
+    Reconnect(String),
+}
+
+enum SessionError {
+    /// Could not establish a session; try again.
+    Retry(String),
+    /// The server refused us for good.
+    Fatal(NetError),
+}
+
+async fn session(
+    args: &ViewConfig,
+    events: &mpsc::Sender<NetEvent>,
+    outgoing: &mut mpsc::UnboundedReceiver<Outgoing>,
+) -> Result<SessionEnd, SessionError> {
+    let retry = |e: NetError| SessionError::Retry(e.to_string());
+    let (mut reader, mut writer) = connect(&args.connect, MAX_SERVER_FRAME)
+        .await
+        .map_err(retry)?;
+    let hello = Message::Hello(Hello {
+        version: PROTOCOL_VERSION,
+        capabilities: if args.no_verify {
+            capabilities::CODEC_PAPER | capabilities::CODEC_COMPACT
+        } else {
+            capabilities::ALL
+        },
+        token: args.token.clone(),
+        name: format!("psao view {}", std::process::id()),
+    });
+    let frame = encode_frame(&hello).map_err(|e| SessionError::Fatal(e.into()))?;
+    writer.send(frame).await.map_err(retry)?;
+    let welcome = match reader.next(MAX_SERVER_FRAME).await {
+        Ok(Some((Message::Welcome(w), _))) => w,
+        Ok(Some((Message::Error(e), _))) => {
+            return Err(SessionError::Fatal(NetError::Refused {
+                code: e.code,
+                message: e.message,
+            }))
+        }
+        Ok(Some((m, _))) => {
+            return Err(SessionError::Fatal(NetError::Protocol(format!(
+                "expected welcome, got {}",
+                m.kind()
+            ))))
+        }
+        Ok(None) => return Err(SessionError::Retry("closed before the welcome".into())),
+        Err(e) => return Err(SessionError::Retry(e.to_string())),
+    };
+    if welcome.version != PROTOCOL_VERSION {
+        return Err(SessionError::Fatal(NetError::Protocol(format!(
+            "the server speaks protocol version {}",
+            welcome.version
+        ))));
+    }
+    if events.send(NetEvent::Welcome(welcome)).await.is_err() {
+        return Ok(SessionEnd::Closed);
+    }
+    // Received frames pass through a delay line (latency) after a rate limiter (capacity).
+    let latency = Duration::from_millis(args.latency_ms);
+    let max_mbit = args.max_mbit;
+    let (delay_tx, mut delay_rx) = mpsc::channel::<(Instant, Message, usize)>(64);
+    let reader_task = tokio::spawn(async move {
+        loop {
+            match reader.next(MAX_SERVER_FRAME).await {
+                Ok(Some((m, size))) => {
+                    if max_mbit > 0.0 {
+                        let secs = size as f64 * 8.0 / (max_mbit * 1e6);
+                        tokio::time::sleep(Duration::from_secs_f64(secs)).await;
+                    }
+                    if delay_tx
+                        .send((Instant::now() + latency, m, size))
+                        .await
+                        .is_err()
+                    {
+                        return Ok(());
+                    }
+                }
+                Ok(None) => return Ok(()),
+                // A frame cut short is what a crashing server leaves: reconnect. Any other
+                // malformed frame ends the client.
+                Err(ReadError::Wire(w)) if !matches!(w, WireError::Truncated { .. }) => {
+                    return Err((true, w.to_string()))
+                }
+                Err(e) => return Err((false, e.to_string())),
+            }
+        }
+    });
+    let mut reader_task = reader_task;
+    loop {
+        tokio::select! {
+            item = delay_rx.recv() => {
+                let Some((due, m, size)) = item else {
+                    let why = match (&mut reader_task).await {
+                        Ok(Err((true, e))) => {
+                            return Err(SessionError::Fatal(NetError::Protocol(format!("bad frame from the server: {e}"))))
+                        }
+                        Ok(Err((false, e))) => e,
+                        _ => "the server closed the connection".into(),
+                    };
+                    return Ok(SessionEnd::Reconnect(why));
+                };
+                tokio::time::sleep_until(due.into()).await;
+                let fatal = matches!(m, Message::Error(_));
+                if events.send(NetEvent::Message(m, size)).await.is_err() {
+                    return Ok(SessionEnd::Closed);
+                }
+                if fatal {
+                    return Ok(SessionEnd::Closed);
+                }
+            }
+            out = outgoing.recv() => {
+                match out {
+                    None => {
+                        writer.close().await;
+                        return Ok(SessionEnd::Closed);
+                    }
+                    Some(Outgoing::Drop) => {
+                        reader_task.abort();
+                        writer.close().await;
+                        return Ok(SessionEnd::Reconnect("dropped on purpose".into()));
+                    }
+                    Some(Outgoing::Send(m)) => {
+                        let bye = matches!(m, Message::Bye(_));
+                        let sent = match encode_frame(&m) {
+                            Ok(f) => writer.send(f).await.is_ok(),
+                            Err(_) => false,
+                        };
+                        if bye {
+                            writer.close().await;
+                            return Ok(SessionEnd::Closed);
+                        }
+                        if !sent {
+                            reader_task.abort();
+                            return Ok(SessionEnd::Reconnect("send failed".into()));
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

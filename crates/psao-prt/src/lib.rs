@@ -1,0 +1,27 @@
+//! psao-prt: shadowed relighting of skinned characters (DESIGN §7; paper
+//! `shadowed-relighting-1d-brdfs`).
+//!
+//! Order-4 real SH ([`sh`]), projection by quadrature ([`quadrature`]), rotation
+//! ([`rotation`]), zonal lobes ([`zonal`]) and the analytic normalised-Phong convolution
+//! operator ([`phong`]) form the toolkit. On top: per-vertex visibility of a posed character
+//! ([`visibility`]), multi-lobe zonal fits kept in correspondence over frames ([`fit`]), the
+//! linear pose model ([`model`]), environment lighting ([`lighting`]) and run-time shading
+//! ([`shade`]) with its Monte Carlo reference ([`reference`]). Pure code: no file I/O.
+
+pub mod character;
+mod error;
+pub mod fit;
+pub mod lighting;
+pub mod model;
+pub mod model_file;
+pub mod phong;
+pub mod quadrature;
+pub mod reference;
+pub mod rotation;
+pub mod sh;
+pub mod shade;
+mod small;
+pub mod visibility;
+pub mod zonal;
+
+pub use error::PrtError;

@@ -1,0 +1,155 @@
+//! Environment lighting: an equirectangular (latitude–longitude) radiance map, its order-4
+//! SH projection per colour channel, and rotation about the vertical axis.
+//!
+//! Convention: +Y is up (glTF). Pixel row `y` (0 at the top) has polar angle
+//! `θ = π (y + ½) / h` from +Y, column `x` azimuth `φ = 2π (x + ½) / w`, and the direction
+//! is `(sin θ cos φ, cos θ, sin θ sin φ)`.
+
+use glam::{Mat3, Vec3};
+
+use crate::rotation::ShRotation;
+use crate::sh::{self, ShVec, COEFFS};
+use crate::PrtError;
+
+/// Rec. 709 luminance weights.
+pub const LUMINANCE: [f32; 3] = [0.2126, 0.7152, 0.0722];
+
+/// A linear-radiance latitude–longitude map.
+#[derive(Clone, Debug)]
+pub struct EnvMap {
+    width: usize,
+    height: usize,
+    pixels: Vec<[f32; 3]>,
+}
+
+impl EnvMap {
+    /// A map of `width × height` RGB pixels, row-major from the top; negative or
+    /// non-finite values are refused.
+    pub fn new(width: usize, height: usize, pixels: Vec<[f32; 3]>) -> Result<Self, PrtError> {
+        if width == 0 || height == 0 || pixels.len() != width * height {
+            return Err(PrtError::Parameter(format!(
+                "environment map {width}x{height} with {} pixels",
+                pixels.len()
+            )));
+        }
+        if pixels.iter().flatten().any(|v| !v.is_finite() || *v < 0.0) {
+            return Err(PrtError::Parameter(
+                "environment map has negative or non-finite radiance".into(),
+            ));
+        }
+        Ok(Self {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    /// The direction at the centre of pixel (x, y).
+    pub fn direction(&self, x: usize, y: usize) -> Vec3 {
+        let theta = std::f32::consts::PI * (y as f32 + 0.5) / self.height as f32;
+        let phi = std::f32::consts::TAU * (x as f32 + 0.5) / self.width as f32;
+        Vec3::new(
+            theta.sin() * phi.cos(),
+            theta.cos(),
+            theta.sin() * phi.sin(),
+        )
+    }
+
+    /// Radiance in direction `d` (unit), nearest pixel.
+    pub fn radiance(&self, d: Vec3) -> [f32; 3] {
+        let theta = d.y.clamp(-1.0, 1.0).acos();
+        let phi = d.z.atan2(d.x).rem_euclid(std::f32::consts::TAU);
+        let y = ((theta / std::f32::consts::PI) * self.height as f32) as usize;
+        let x = ((phi / std::f32::consts::TAU) * self.width as f32) as usize;
+        self.pixels[y.min(self.height - 1) * self.width + x.min(self.width - 1)]
+    }
+
+    /// Order-4 SH projection of each channel (pixel solid angles `Δφ Δθ sin θ`).
+    pub fn project(&self) -> ShLighting {
+        let mut rgb = [[0.0f64; COEFFS]; 3];
+        let dphi = std::f64::consts::TAU / self.width as f64;
+        let dtheta = std::f64::consts::PI / self.height as f64;
+        for y in 0..self.height {
+            let theta = (y as f64 + 0.5) * dtheta;
+            let w = dphi * dtheta * theta.sin();
+            for x in 0..self.width {
+                let basis = sh::eval_f64(self.direction(x, y).as_dvec3().normalize());
+                let p = self.pixels[y * self.width + x];
+                for (c, acc) in rgb.iter_mut().enumerate() {
+                    let v = w * p[c] as f64;
+                    for (a, b) in acc.iter_mut().zip(&basis) {
+                        *a += v * b;
+                    }
+                }
+            }
+        }
+        ShLighting {
+            rgb: rgb.map(|c| c.map(|x| x as f32)),
+        }
+    }
+}
+
+/// SH environment lighting, one vector per colour channel (world frame).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShLighting {
+    /// Red, green and blue radiance coefficients.
+    pub rgb: [ShVec; 3],
+}
+
+impl ShLighting {
+    /// The luminance channel.
+    pub fn luminance(&self) -> ShVec {
+        std::array::from_fn(|i| (0..3).map(|c| LUMINANCE[c] * self.rgb[c][i]).sum())
+    }
+
+    /// The lighting turned by `angle` radians about +Y.
+    pub fn rotated_about_up(&self, angle: f32) -> Self {
+        let r = ShRotation::new(Mat3::from_rotation_y(angle));
+        Self {
+            rgb: self.rgb.map(|c| r.apply(&c)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_sky_projects_to_a_constant() {
+        let env = EnvMap::new(64, 32, vec![[1.0, 2.0, 0.5]; 64 * 32]).unwrap();
+        let l = env.project();
+        let c0 = 2.0 * std::f32::consts::PI.sqrt();
+        for (c, scale) in [1.0, 2.0, 0.5].iter().enumerate() {
+            assert!((l.rgb[c][0] - c0 * scale).abs() < 1e-3 * c0 * scale);
+            assert!(l.rgb[c][1..].iter().all(|v| v.abs() < 1e-2));
+        }
+    }
+
+    #[test]
+    fn lookup_and_direction_agree() {
+        let pixels = (0..16 * 8).map(|i| [i as f32, 0.0, 0.0]).collect();
+        let env = EnvMap::new(16, 8, pixels).unwrap();
+        for (x, y) in [(0, 0), (5, 3), (15, 7)] {
+            assert_eq!(env.radiance(env.direction(x, y))[0], (y * 16 + x) as f32);
+        }
+    }
+
+    #[test]
+    fn sky_above_projects_to_an_upward_lobe() {
+        // Light only from the upper half: band-1 coefficient along y is positive, others 0.
+        let (w, h) = (64, 32);
+        let pixels = (0..w * h)
+            .map(|i| if i / w < h / 2 { [1.0; 3] } else { [0.0; 3] })
+            .collect();
+        let l = EnvMap::new(w, h, pixels).unwrap().project().luminance();
+        assert!(l[1] > 0.5);
+        assert!(l[2].abs() < 1e-2 && l[3].abs() < 1e-2);
+    }
+
+    #[test]
+    fn rejects_bad_maps() {
+        assert!(EnvMap::new(2, 2, vec![[0.0; 3]; 3]).is_err());
+        assert!(EnvMap::new(1, 1, vec![[f32::NAN, 0.0, 0.0]]).is_err());
+    }
+}

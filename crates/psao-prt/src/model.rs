@@ -1,0 +1,351 @@
+//! The linear pose model: joint rotations → zonal lobes per vertex (paper §3.1).
+//!
+//! Pose vector `a` = the rotation vectors (axis × angle) of the active joints' local
+//! rotations relative to the bind pose, 3 numbers per joint, plus a constant. Per vertex and
+//! lobe the model predicts 7 numbers: the axis as a 3-vector (normalised after prediction)
+//! and the 4 zonal coefficients. Why a 3-vector and not the paper's 2 angles: angles wrap
+//! (φ jumps by 2π) and are singular at the poles, so a lobe moving smoothly can have
+//! angles that jump, which no linear model fits; the 3 components vary as smoothly as the
+//! lobe. Training solves `A·X = B` in least squares with faer (thin SVD of the centred
+//! pose matrix, so every ridge value costs one product), the ridge chosen by the SH
+//! visibility error on frames held back from training.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::fit::{fit_sequence, rms_difference};
+use crate::sh::ShVec;
+use crate::zonal::ZhLobe;
+use crate::PrtError;
+
+/// Numbers per lobe in the model's output: axis (3) + zonal coefficients (4).
+pub const LOBE_DIM: usize = 7;
+
+/// Joints whose rotation varies less than this (radians, std over training) are left out.
+const ACTIVE_JOINT_STD: f32 = 1e-4;
+
+/// Ridge candidates, relative to the largest squared singular value of the pose matrix.
+const RIDGE_GRID: [f64; 9] = [0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1, 1.0];
+
+/// One posed frame of training or validation data.
+#[derive(Clone, Debug)]
+pub struct Sample {
+    /// Rotation vector of every skin joint (relative to the bind pose).
+    pub joint_rotations: Vec<Vec3>,
+    /// SH visibility per vertex in its local frame.
+    pub visibility: Vec<ShVec>,
+}
+
+/// What training measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainReport {
+    /// Mean and standard deviation over training vertices×frames of the direct lobe fit's
+    /// RMS error over the sphere.
+    pub lobe_fit_error: (f32, f32),
+    /// Per ridge candidate (absolute λ): mean RMS SH error on the validation frames.
+    pub ridge_errors: Vec<(f64, f32)>,
+    /// The chosen λ.
+    pub ridge: f64,
+}
+
+/// A trained linear pose model for one character.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseModel {
+    /// Name of the character it was trained on.
+    pub character: String,
+    /// Vertex count of that character.
+    pub vertices: usize,
+    /// Skin joint count of that character.
+    pub joints: usize,
+    /// Lobes per vertex.
+    pub lobes: usize,
+    /// Skin joint indices whose rotations form the pose vector.
+    pub active: Vec<u32>,
+    /// Row-major `(1 + 3·active) × (vertices·lobes·7)`: row 0 is the constant.
+    pub weights: Vec<f32>,
+}
+
+impl PoseModel {
+    /// Length of the pose vector (constant included).
+    pub fn pose_len(&self) -> usize {
+        1 + 3 * self.active.len()
+    }
+
+    /// Outputs per frame.
+    pub fn output_len(&self) -> usize {
+        self.vertices * self.lobes * LOBE_DIM
+    }
+
+    /// The pose vector for all skin joints' rotation vectors.
+    pub fn pose_vector(&self, joint_rotations: &[Vec3]) -> Vec<f32> {
+        let mut a = Vec::with_capacity(self.pose_len());
+        a.push(1.0);
+        for &j in &self.active {
+            let r = joint_rotations
+                .get(j as usize)
+                .copied()
+                .unwrap_or(Vec3::ZERO);
+            a.extend_from_slice(&r.to_array());
+        }
+        a
+    }
+
+    /// Raw predicted outputs (`vertices·lobes·7` numbers) for `pose` (from
+    /// [`Self::pose_vector`]) into `out`: one matrix-vector product on all threads.
+    pub fn predict_raw(&self, pose: &[f32], out: &mut Vec<f32>) {
+        let n = self.output_len();
+        out.resize(n, 0.0);
+        const CHUNK: usize = 4096;
+        out.par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, chunk)| {
+                let base = c * CHUNK;
+                chunk.fill(0.0);
+                for (k, &a) in pose.iter().enumerate() {
+                    let row = &self.weights[k * n + base..k * n + base + chunk.len()];
+                    for (o, w) in chunk.iter_mut().zip(row) {
+                        *o += a * w;
+                    }
+                }
+            });
+    }
+
+    /// The lobes of vertex `v` from raw outputs (axes normalised; a vanishing axis becomes +z).
+    pub fn lobes_of(&self, raw: &[f32], v: usize, out: &mut Vec<ZhLobe>) {
+        out.clear();
+        let base = v * self.lobes * LOBE_DIM;
+        for x in 0..self.lobes {
+            let p = &raw[base + x * LOBE_DIM..base + (x + 1) * LOBE_DIM];
+            out.push(unpack_lobe(p));
+        }
+    }
+
+    /// Size of the weights in megabytes (10⁶ bytes).
+    pub fn megabytes(&self) -> f64 {
+        self.weights.len() as f64 * 4.0 / 1e6
+    }
+}
+
+/// A lobe from its 7 model numbers.
+pub fn unpack_lobe(p: &[f32]) -> ZhLobe {
+    ZhLobe {
+        axis: Vec3::new(p[0], p[1], p[2]).normalize_or(Vec3::Z),
+        coeffs: [p[3], p[4], p[5], p[6]],
+    }
+}
+
+fn pack_lobe(l: &ZhLobe, out: &mut [f32]) {
+    out[..3].copy_from_slice(&l.axis.to_array());
+    out[3..7].copy_from_slice(&l.coeffs);
+}
+
+/// Mean and standard deviation.
+pub fn mean_std(values: impl Iterator<Item = f32>) -> (f32, f32) {
+    let (mut n, mut s, mut s2) = (0.0f64, 0.0f64, 0.0f64);
+    for v in values {
+        n += 1.0;
+        s += v as f64;
+        s2 += (v as f64) * (v as f64);
+    }
+    if n == 0.0 {
+        return (0.0, 0.0);
+    }
+    let mean = s / n;
+    (
+        (mean) as f32,
+        ((s2 / n - mean * mean).max(0.0)).sqrt() as f32,
+    )
+}
+
+/// Fits `lobes` lobes per vertex to the time-ordered `train` frames (in correspondence) and
+/// solves the linear model, choosing the ridge on `validate`. `progress(done, total)` is
+/// called as vertices finish fitting.
+pub fn train(
+    character: &str,
+    train: &[Sample],
+    validate: &[Sample],
+    lobes: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<(PoseModel, TrainReport), PrtError> {
+    let frames = train.len();
+    if frames < 2 {
+        return Err(PrtError::Parameter(format!(
+            "need at least 2 training frames, got {frames}"
+        )));
+    }
+    if !(1..=3).contains(&lobes) {
+        return Err(PrtError::Parameter(format!(
+            "lobes must be 1, 2 or 3, got {lobes}"
+        )));
+    }
+    let vertices = train[0].visibility.len();
+    let joints = train[0].joint_rotations.len();
+    if train
+        .iter()
+        .chain(validate)
+        .any(|s| s.visibility.len() != vertices || s.joint_rotations.len() != joints)
+    {
+        return Err(PrtError::Parameter(
+            "frames differ in vertex or joint count".into(),
+        ));
+    }
+    let active = active_joints(train);
+
+    // Lobes per vertex over the training frames, in correspondence.
+    let out_dim = lobes * LOBE_DIM;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let per_vertex: Vec<(Vec<f32>, Vec<f32>)> = (0..vertices)
+        .into_par_iter()
+        .map(|v| {
+            let seq: Vec<ShVec> = train.iter().map(|s| s.visibility[v]).collect();
+            let fits = fit_sequence(&seq, lobes);
+            let mut packed = vec![0.0f32; frames * out_dim];
+            let mut errs = Vec::with_capacity(frames);
+            for (f, (ls, e)) in fits.iter().enumerate() {
+                for (x, l) in ls.iter().enumerate() {
+                    pack_lobe(l, &mut packed[f * out_dim + x * LOBE_DIM..]);
+                }
+                errs.push(e / (4.0 * std::f32::consts::PI).sqrt());
+            }
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if d % 64 == 0 || d == vertices {
+                progress(d, vertices);
+            }
+            (packed, errs)
+        })
+        .collect();
+    let lobe_fit_error = mean_std(per_vertex.iter().flat_map(|(_, e)| e.iter().copied()));
+
+    // B: frames × (vertices·out_dim), column v·out_dim + k.
+    let cols = vertices * out_dim;
+    let b = faer::Mat::<f64>::from_fn(frames, cols, |f, c| {
+        per_vertex[c / out_dim].0[f * out_dim + c % out_dim] as f64
+    });
+    drop(per_vertex);
+    let feats = |s: &Sample| -> Vec<f64> {
+        active
+            .iter()
+            .flat_map(|&j| s.joint_rotations[j as usize].to_array())
+            .map(f64::from)
+            .collect()
+    };
+    let p = 3 * active.len();
+    let train_feats: Vec<Vec<f64>> = train.iter().map(feats).collect();
+    let mean_a: Vec<f64> = (0..p)
+        .map(|k| train_feats.iter().map(|r| r[k]).sum::<f64>() / frames as f64)
+        .collect();
+    let mean_b: Vec<f64> = (0..cols)
+        .map(|c| (0..frames).map(|f| b[(f, c)]).sum::<f64>() / frames as f64)
+        .collect();
+    let a = faer::Mat::<f64>::from_fn(frames, p.max(1), |f, k| {
+        if p == 0 {
+            0.0
+        } else {
+            train_feats[f][k] - mean_a[k]
+        }
+    });
+    let bc = faer::Mat::<f64>::from_fn(frames, cols, |f, c| b[(f, c)] - mean_b[c]);
+    drop(b);
+    let svd = a
+        .thin_svd()
+        .map_err(|e| PrtError::Solve(format!("SVD did not converge: {e:?}")))?;
+    let (u, s, vmat) = (svd.U(), svd.S().column_vector(), svd.V());
+    let rank = s.nrows();
+    let utb = u.transpose() * &bc; // rank × cols
+    let smax2 = (0..rank)
+        .map(|i| s[i] * s[i])
+        .fold(0.0f64, f64::max)
+        .max(1e-300);
+
+    let build = |lambda: f64| -> Vec<f32> {
+        // X = V diag(s / (s² + λ)) Uᵀ Bc, then the constant row folded in.
+        let scaled = faer::Mat::<f64>::from_fn(rank, cols, |i, c| {
+            let si = s[i];
+            let g = if si * si > 1e-12 * smax2 {
+                si / (si * si + lambda)
+            } else {
+                0.0
+            };
+            g * utb[(i, c)]
+        });
+        let x = vmat * &scaled; // p × cols
+        let mut w = vec![0.0f32; (1 + p) * cols];
+        for c in 0..cols {
+            let mut bias = mean_b[c];
+            for k in 0..p {
+                bias -= mean_a[k] * x[(k, c)];
+                w[(1 + k) * cols + c] = x[(k, c)] as f32;
+            }
+            w[c] = bias as f32;
+        }
+        w
+    };
+    let model_for = |weights: Vec<f32>| PoseModel {
+        character: character.to_string(),
+        vertices,
+        joints,
+        lobes,
+        active: active.clone(),
+        weights,
+    };
+    let mut ridge_errors = Vec::new();
+    let mut best: Option<(f32, f64, PoseModel)> = None;
+    for rel in RIDGE_GRID {
+        let lambda = rel * smax2;
+        let model = model_for(build(lambda));
+        let err = if validate.is_empty() {
+            0.0
+        } else {
+            model_error(&model, validate).0
+        };
+        ridge_errors.push((lambda, err));
+        if best.as_ref().map_or(true, |(e, _, _)| err < *e) {
+            best = Some((err, lambda, model));
+        }
+        if validate.is_empty() {
+            break;
+        }
+    }
+    let (_, ridge, model) = best.expect("the ridge grid is not empty");
+    Ok((
+        model,
+        TrainReport {
+            lobe_fit_error,
+            ridge_errors,
+            ridge,
+        },
+    ))
+}
+
+/// Mean and standard deviation over vertices×frames of the RMS error over the sphere between
+/// the model's predicted visibility and the projected visibility of `frames`.
+pub fn model_error(model: &PoseModel, frames: &[Sample]) -> (f32, f32) {
+    let mut raw = Vec::new();
+    let mut errors = Vec::with_capacity(frames.len() * model.vertices);
+    for s in frames {
+        model.predict_raw(&model.pose_vector(&s.joint_rotations), &mut raw);
+        let e: Vec<f32> = (0..model.vertices)
+            .into_par_iter()
+            .map_init(Vec::new, |lobes, v| {
+                model.lobes_of(&raw, v, lobes);
+                rms_difference(&crate::zonal::lobes_to_sh(lobes), &s.visibility[v])
+            })
+            .collect();
+        errors.extend(e);
+    }
+    mean_std(errors.into_iter())
+}
+
+/// Joints whose rotation varies over the training frames.
+fn active_joints(train: &[Sample]) -> Vec<u32> {
+    let joints = train[0].joint_rotations.len();
+    (0..joints)
+        .filter(|&j| {
+            (0..3).any(|k| {
+                let (_, std) = mean_std(train.iter().map(|s| s.joint_rotations[j][k]));
+                std > ACTIVE_JOINT_STD
+            })
+        })
+        .map(|j| j as u32)
+        .collect()
+}

@@ -1,0 +1,450 @@
+//! `psao relight eval`: fit errors and image quality of shadowed relighting against a Monte
+//! Carlo reference on test frames that training never saw; writes `report.json`,
+//! `report.md` and side-by-side pictures.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use psao_eval::{AoImage, Metrics};
+use psao_prt::lighting::LUMINANCE;
+use psao_prt::model::{model_error, PoseModel};
+use psao_prt::reference::{reference_shading, ReferenceSettings};
+use psao_prt::shade::{Shader, ShadingGeometry, Visibility};
+use psao_prt::visibility::SelfTracer;
+use serde::Serialize;
+
+use crate::args::{FrameRange, Resolution};
+use crate::png_io::write_rgb_png;
+use crate::relight_cmd::{frame_range, gather, split, train_model, ShadingArgs};
+use crate::relight_io::{
+    display, exposure_for, framing_camera, load_character, load_env, VertexImage,
+};
+
+/// Arguments of `psao relight eval`.
+#[derive(Args, Debug)]
+pub struct EvalArgs {
+    /// The skinned character (glTF/GLB).
+    #[arg(long)]
+    pub character: PathBuf,
+    /// Clip name or index (default: the first clip).
+    #[arg(long)]
+    pub clip: Option<String>,
+    /// Frames `A..B` (30 fps) to train on (default: the whole clip).
+    #[arg(long)]
+    pub train: Option<FrameRange>,
+    /// Train on every K-th frame.
+    #[arg(long, default_value_t = 1)]
+    pub every: u32,
+    /// Number of test frames (half a frame after training frames, never trained on).
+    #[arg(long, default_value_t = 4)]
+    pub tests: usize,
+    /// Radiance `.hdr` environment map.
+    #[arg(long)]
+    pub env: PathBuf,
+    #[command(flatten)]
+    pub shading: ShadingArgs,
+    /// Lobe counts to train and compare.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+    pub lobes: Vec<usize>,
+    /// Visibility rays per vertex and frame.
+    #[arg(long, default_value_t = 512)]
+    pub rays: u32,
+    /// Reference samples per vertex.
+    #[arg(long, default_value_t = 2048)]
+    pub ref_samples: u32,
+    /// Image size.
+    #[arg(long, default_value = "480x480")]
+    pub res: Resolution,
+    /// Seed of all sampling.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Fit error of one lobe count.
+#[derive(Serialize)]
+struct FitError {
+    lobes: usize,
+    /// Mean RMS-over-the-sphere error of the model's visibility on the test frames.
+    mean: f32,
+    std: f32,
+    /// The direct lobe fit's error on the training frames (before the linear model).
+    lobe_fit_mean: f32,
+    lobe_fit_std: f32,
+    train_s: f64,
+    model_mb: f64,
+    ridge: f64,
+    ms_per_frame: f64,
+}
+
+/// Averages of one method.
+#[derive(Serialize)]
+struct MethodRow {
+    name: String,
+    psnr: f64,
+    ssim: f64,
+    flip: f64,
+}
+
+/// One method on one test frame.
+#[derive(Serialize)]
+struct FrameRow {
+    name: String,
+    time_s: f32,
+    psnr: f64,
+    ssim: f64,
+    flip: f64,
+}
+
+#[derive(Serialize)]
+struct Report {
+    character: String,
+    clip: String,
+    mode: String,
+    vertices: usize,
+    train_frames: usize,
+    validation_frames: usize,
+    test_times_s: Vec<f32>,
+    rays: u32,
+    ref_samples: u32,
+    fit_error: Vec<FitError>,
+    methods: Vec<MethodRow>,
+    frames: Vec<FrameRow>,
+}
+
+/// Runs `psao relight eval`.
+pub fn run(args: &EvalArgs) -> Result<()> {
+    if args.lobes.is_empty() || args.lobes.iter().any(|l| !(1..=3).contains(l)) {
+        bail!("--lobes takes counts among 1, 2 and 3");
+    }
+    if args.tests == 0 || args.rays == 0 || args.ref_samples == 0 {
+        bail!("--tests, --rays and --ref-samples must be at least 1");
+    }
+    let loaded = load_character(&args.character, args.clip.as_deref())?;
+    let env = load_env(&args.env)?;
+    let mode = args.shading.mode()?;
+    let shader = Shader::new(mode)?;
+    let c = &loaded.character;
+    let range = frame_range(c, args.train)?;
+    let split = split(range, args.every)?;
+    if split.test.is_empty() {
+        bail!("the training range leaves no test frames");
+    }
+    let step = (split.test.len() as f32 / args.tests as f32).max(1.0);
+    let test_times: Vec<f32> = (0..args.tests.min(split.test.len()))
+        .map(|k| split.test[(k as f32 * step) as usize])
+        .collect();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+
+    let train_set = gather(
+        c,
+        &split.train,
+        args.rays,
+        args.seed,
+        "tracing training frames",
+    )?;
+    let validate = gather(
+        c,
+        &split.validate,
+        args.rays,
+        args.seed,
+        "tracing validation frames",
+    )?;
+    let tests = gather(c, &test_times, args.rays, args.seed, "tracing test frames")?;
+
+    let mut models: Vec<(usize, PoseModel)> = Vec::new();
+    let mut fit_error = Vec::new();
+    for &lobes in &args.lobes {
+        let start = Instant::now();
+        let (model, report) = train_model(&loaded.name, &train_set, &validate, lobes)?;
+        let train_s = start.elapsed().as_secs_f64();
+        let (mean, std) = model_error(&model, &tests);
+        fit_error.push(FitError {
+            lobes,
+            mean,
+            std,
+            lobe_fit_mean: report.lobe_fit_error.0,
+            lobe_fit_std: report.lobe_fit_error.1,
+            train_s,
+            model_mb: model.megabytes(),
+            ridge: report.ridge,
+            ms_per_frame: 0.0,
+        });
+        models.push((lobes, model));
+    }
+
+    let lighting = env.project();
+    let (w, h) = (args.res.width, args.res.height);
+    let camera = framing_camera(&c.pose(test_times[0]), w, h);
+    let mut tracer = SelfTracer::new(c.mesh())?;
+    let mut image = VertexImage::new(c);
+    let mut exposure = None;
+    let mut rows: Vec<FrameRow> = Vec::new();
+    let mut raw = Vec::new();
+    let progress = crate::progress::bar(test_times.len() as u64, "rendering test frames", "frames");
+    for (k, (&t, sample)) in test_times.iter().zip(&tests).enumerate() {
+        let pose = c.pose(t);
+        tracer.set_pose(&pose)?;
+        let reference: Vec<f32> = reference_shading(
+            &tracer,
+            &pose,
+            &env,
+            &ReferenceSettings {
+                mode,
+                eye: camera.position,
+                env_rotation: 0.0,
+                samples: args.ref_samples,
+                seed: args.seed ^ 0x5245_4600 ^ k as u64,
+            },
+        )
+        .into_iter()
+        .flatten()
+        .collect();
+        image.rasterize(&pose, &camera, w, h)?;
+        let ref_pixels = image.shade(&reference, 3);
+        let exposure = *exposure.get_or_insert_with(|| exposure_for(&luminance(&ref_pixels)));
+        let ref_image = to_image(&ref_pixels, w, h, exposure);
+        let geometry = ShadingGeometry {
+            positions: &pose.positions,
+            frames: &pose.frames,
+            transform: pose.transform,
+        };
+        let mut methods: Vec<(String, Vec<f32>)> = vec![
+            (
+                "unshadowed".into(),
+                shader.shade(
+                    Visibility::Unshadowed,
+                    geometry,
+                    &lighting.rgb,
+                    camera.position,
+                )?,
+            ),
+            (
+                "projected".into(),
+                shader.shade(
+                    Visibility::Projected(&sample.visibility),
+                    geometry,
+                    &lighting.rgb,
+                    camera.position,
+                )?,
+            ),
+        ];
+        for (lobes, model) in &models {
+            model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+            methods.push((
+                format!("lobes{lobes}"),
+                shader.shade(
+                    Visibility::Model(model, &raw),
+                    geometry,
+                    &lighting.rgb,
+                    camera.position,
+                )?,
+            ));
+        }
+        let mut pictures = vec![("reference".to_string(), ref_pixels.clone())];
+        for (name, values) in &methods {
+            let pixels = image.shade(values, 3);
+            let m: Metrics = psao_eval::compare(&ref_image, &to_image(&pixels, w, h, exposure))?;
+            rows.push(FrameRow {
+                name: name.clone(),
+                time_s: t,
+                psnr: m.psnr,
+                ssim: m.ssim,
+                flip: m.flip,
+            });
+            pictures.push((name.clone(), pixels));
+        }
+        if k == 0 {
+            write_pictures(args, &pictures, w, h, exposure)?;
+        }
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+
+    // Run time: synthesis + shading per frame, median of the test frames (3 runs each).
+    for (fe, (_, model)) in fit_error.iter_mut().zip(&models) {
+        let mut times = Vec::new();
+        for &t in &test_times {
+            let pose = c.pose(t);
+            for _ in 0..3 {
+                let start = Instant::now();
+                model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+                let v = shader.shade(
+                    Visibility::Model(model, &raw),
+                    ShadingGeometry {
+                        positions: &pose.positions,
+                        frames: &pose.frames,
+                        transform: pose.transform,
+                    },
+                    &[lighting.luminance()],
+                    camera.position,
+                )?;
+                std::hint::black_box(v);
+                times.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+        times.sort_by(f64::total_cmp);
+        fe.ms_per_frame = times[times.len() / 2];
+    }
+
+    let names: Vec<String> = rows
+        .iter()
+        .map(|r| r.name.clone())
+        .fold(Vec::new(), |mut v, n| {
+            if !v.contains(&n) {
+                v.push(n);
+            }
+            v
+        });
+    let methods: Vec<MethodRow> = names
+        .iter()
+        .map(|n| {
+            let r: Vec<&FrameRow> = rows.iter().filter(|r| &r.name == n).collect();
+            let avg =
+                |f: fn(&FrameRow) -> f64| r.iter().map(|x| f(x)).sum::<f64>() / r.len() as f64;
+            MethodRow {
+                name: n.clone(),
+                psnr: avg(|x| x.psnr),
+                ssim: avg(|x| x.ssim),
+                flip: avg(|x| x.flip),
+            }
+        })
+        .collect();
+    let report = Report {
+        character: loaded.name.clone(),
+        clip: c.clip_name().to_string(),
+        mode: format!("{mode:?}"),
+        vertices: c.vertex_count(),
+        train_frames: train_set.len(),
+        validation_frames: validate.len(),
+        test_times_s: test_times.clone(),
+        rays: args.rays,
+        ref_samples: args.ref_samples,
+        fit_error,
+        methods,
+        frames: rows,
+    };
+    let json = serde_json::to_string_pretty(&report)?;
+    std::fs::write(args.out.join("report.json"), json).context("cannot write report.json")?;
+    std::fs::write(args.out.join("report.md"), markdown(&report))
+        .context("cannot write report.md")?;
+    print!("{}", markdown(&report));
+    Ok(())
+}
+
+/// Per-pixel luminance of interleaved RGB.
+fn luminance(rgb: &[f32]) -> Vec<f32> {
+    rgb.chunks(3)
+        .map(|p| p.iter().zip(LUMINANCE).map(|(a, b)| a * b).sum())
+        .collect()
+}
+
+/// The displayed luminance image compared by the metrics.
+fn to_image(rgb: &[f32], w: u32, h: u32, exposure: f32) -> AoImage {
+    AoImage {
+        width: w,
+        height: h,
+        data: luminance(rgb)
+            .iter()
+            .map(|&v| display(v, exposure))
+            .collect(),
+    }
+}
+
+/// Each method's picture of the first test frame, and reference | lobes2 | unshadowed side by side.
+fn write_pictures(
+    args: &EvalArgs,
+    pictures: &[(String, Vec<f32>)],
+    w: u32,
+    h: u32,
+    exposure: f32,
+) -> Result<()> {
+    let to_u8 = |p: &[f32]| -> Vec<u8> {
+        p.iter()
+            .map(|&v| (display(v, exposure) * 255.0).round() as u8)
+            .collect()
+    };
+    for (name, p) in pictures {
+        write_rgb_png(&args.out.join(format!("{name}.png")), w, h, to_u8(p))?;
+    }
+    let shadowed = pictures
+        .iter()
+        .find(|(n, _)| n == "lobes2")
+        .or_else(|| pictures.iter().find(|(n, _)| n.starts_with("lobes")));
+    let order = ["reference", "unshadowed"];
+    let mut panels: Vec<&Vec<f32>> = Vec::new();
+    if let Some(r) = pictures.iter().find(|(n, _)| n == order[0]) {
+        panels.push(&r.1);
+    }
+    if let Some(s) = shadowed {
+        panels.push(&s.1);
+    }
+    if let Some(u) = pictures.iter().find(|(n, _)| n == order[1]) {
+        panels.push(&u.1);
+    }
+    let pw = w as usize * panels.len();
+    let mut side = vec![0u8; pw * h as usize * 3];
+    for (k, p) in panels.iter().enumerate() {
+        let bytes = to_u8(p);
+        for y in 0..h as usize {
+            let src = &bytes[y * w as usize * 3..(y + 1) * w as usize * 3];
+            let dst = (y * pw + k * w as usize) * 3;
+            side[dst..dst + src.len()].copy_from_slice(src);
+        }
+    }
+    write_rgb_png(&args.out.join("side_by_side.png"), pw as u32, h, side)
+}
+
+fn markdown(r: &Report) -> String {
+    let mut s = format!(
+        "# Relighting evaluation: {} (clip `{}`, {} vertices), mode {}\n\n\
+         {} training frames, {} validation frames (ridge choice), test times {:?} s; \
+         {} visibility rays per vertex; reference {} samples per vertex.\n\n\
+         ## Fit error (RMS over the sphere of predicted vs projected visibility, test frames)\n\n\
+         | lobes | mean | std | lobe fit (train) | training s | model MB | ridge | ms per frame |\n\
+         |---|---|---|---|---|---|---|---|\n",
+        r.character,
+        r.clip,
+        r.vertices,
+        r.mode,
+        r.train_frames,
+        r.validation_frames,
+        r.test_times_s,
+        r.rays,
+        r.ref_samples
+    );
+    for f in &r.fit_error {
+        s += &format!(
+            "| {} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} |\n",
+            f.lobes,
+            f.mean,
+            f.std,
+            f.lobe_fit_mean,
+            f.lobe_fit_std,
+            f.train_s,
+            f.model_mb,
+            f.ridge,
+            f.ms_per_frame
+        );
+    }
+    s += "\n## Image quality against the reference (mean over test frames)\n\n| method | PSNR dB | SSIM | FLIP |\n|---|---|---|---|\n";
+    for m in &r.methods {
+        s += &format!(
+            "| {} | {:.2} | {:.4} | {:.4} |\n",
+            m.name, m.psnr, m.ssim, m.flip
+        );
+    }
+    s += "\n## Per frame\n\n| time s | method | PSNR dB | SSIM | FLIP |\n|---|---|---|---|---|\n";
+    for f in &r.frames {
+        s += &format!(
+            "| {:.3} | {} | {:.2} | {:.4} | {:.4} |\n",
+            f.time_s, f.name, f.psnr, f.ssim, f.flip
+        );
+    }
+    s
+}
