@@ -88,8 +88,8 @@ pub fn run(args: &BenchClientArgs) -> Result<()> {
     Ok(())
 }
 
-/// Median wall time of `repeat` calls of `f`, in ms.
-fn median_ms(repeat: u32, mut f: impl FnMut()) -> f64 {
+/// Median wall time of `repeat` calls of `f` (after one untimed call), in ms.
+pub fn median_ms(repeat: u32, mut f: impl FnMut()) -> f64 {
     f();
     let mut times: Vec<f64> = (0..repeat)
         .map(|_| {

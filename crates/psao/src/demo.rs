@@ -9,13 +9,13 @@ use crate::progress;
 use crate::reference::ReferenceRenderer;
 use crate::run::{write_frame_images, write_json, ServerTuning};
 use crate::scene_source::{SceneInput, BUILTIN_SCENE};
+use crate::video::encode_video;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{compare, ssao, Metrics, SsaoSettings};
 use psao_net::pipeline::{Pipeline, CLIENT_HZ};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Arguments of `psao demo`.
@@ -99,7 +99,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let video = encode_video(&args.out, CLIENT_HZ / args.every);
+    let video = encode_video(&args.out, CLIENT_HZ / args.every, "demo.mp4");
     let seconds = frames as f64 / CLIENT_HZ as f64;
     let server: Vec<_> = records.iter().filter(|r| r.server_frame).collect();
     let mean = |v: &mut dyn Iterator<Item = f64>, n: usize| v.sum::<f64>() / n.max(1) as f64;
@@ -160,25 +160,4 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 
 fn fmt_metrics(m: &Metrics) -> String {
     format!("{:.2} dB / {:.4} / {:.4}", m.psnr, m.ssim, m.flip)
-}
-
-/// Encodes `frame_*.png` into `demo.mp4` with ffmpeg when it is installed; says what happened.
-fn encode_video(dir: &Path, fps: u32) -> String {
-    let status = Command::new("ffmpeg")
-        .args(["-y", "-loglevel", "error", "-framerate", &fps.to_string()])
-        .args(["-pattern_type", "glob", "-i"])
-        .arg(dir.join("frame_*.png"))
-        .args([
-            "-pix_fmt",
-            "yuv420p",
-            "-vf",
-            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-        ])
-        .arg(dir.join("demo.mp4"))
-        .status();
-    match status {
-        Ok(s) if s.success() => "`demo.mp4`".into(),
-        Ok(s) => format!("ffmpeg failed ({s}); PNG frames only"),
-        Err(_) => "ffmpeg not installed; PNG frames only".into(),
-    }
 }

@@ -22,6 +22,7 @@ mod run;
 mod scene_source;
 mod scene_volume;
 mod serve;
+mod video;
 mod view;
 mod volume_cmd;
 

@@ -2,7 +2,6 @@
 //! crate `psao-prt`).
 
 use std::path::{Path, PathBuf};
-use std::process::Command as Process;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -19,6 +18,7 @@ use crate::relight_io::{
     clip_frames, display, exposure_for, framing_camera, load_character, load_env, read_model,
     write_model, LoadedCharacter, VertexImage, FPS,
 };
+use crate::video::encode_video;
 
 /// The relighting subcommands.
 #[derive(Subcommand, Debug)]
@@ -334,30 +334,9 @@ fn run_render(args: &RenderArgs) -> Result<()> {
         "{} frames in {}; {}",
         range.end - range.start,
         args.out.display(),
-        encode_video(&args.out)
+        encode_video(&args.out, 30, "relight.mp4")
     );
     Ok(())
-}
-
-/// Encodes `frame_*.png` into `relight.mp4` with ffmpeg when it is installed.
-fn encode_video(dir: &Path) -> String {
-    let status = Process::new("ffmpeg")
-        .args(["-y", "-loglevel", "error", "-framerate", "30"])
-        .args(["-pattern_type", "glob", "-i"])
-        .arg(dir.join("frame_*.png"))
-        .args([
-            "-pix_fmt",
-            "yuv420p",
-            "-vf",
-            "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-        ])
-        .arg(dir.join("relight.mp4"))
-        .status();
-    match status {
-        Ok(s) if s.success() => "relight.mp4 written".into(),
-        Ok(s) => format!("ffmpeg failed ({s}); PNG frames only"),
-        Err(_) => "ffmpeg not installed; PNG frames only".into(),
-    }
 }
 
 /// Loads a character and its model (used by eval and bench).

@@ -4,6 +4,7 @@
 //! the path and splatted there.
 
 use crate::args::Resolution;
+use crate::bench_client::median_ms;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Result};
 use clap::Args;
@@ -86,20 +87,6 @@ fn samples_of(g: &GBuffer, view: &ScreenView, hierarchy: &Hierarchy, count: usiz
         }
     }
     out
-}
-
-/// Median wall time of `repeat` calls of `f` (after one untimed call), in ms.
-fn median_ms(repeat: u32, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut times: Vec<f64> = (0..repeat)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    times.sort_by(f64::total_cmp);
-    times[times.len() / 2]
 }
 
 /// Runs `psao corrective bench`.
