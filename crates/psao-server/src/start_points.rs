@@ -90,6 +90,8 @@ impl StartPoints {
     /// burial switch and tracing backend (burial verdicts may differ between backends on
     /// coincident faces). Equal keys give equal points.
     pub fn key(scene: &Scene, config: &ServerConfig) -> u64 {
+        // std's SipHash with fixed keys: deterministic within a Rust release; another release
+        // may hash differently, which only makes stored points look stale (regenerated).
         let mut h = std::hash::DefaultHasher::new();
         let floats = |h: &mut std::hash::DefaultHasher, v: &mut dyn Iterator<Item = f32>| {
             let mut n = 0usize;
