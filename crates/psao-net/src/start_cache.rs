@@ -1,7 +1,8 @@
 //! Start points kept on disk between runs: a server restarted with the same scene and
 //! settings reads its generated, burial-tested points back instead of making them again.
-//! One file per [`StartPoints::key`]; a stale, foreign or damaged file is reported and
-//! replaced, never trusted.
+//! One file per [`StartPoints::key`] and build of the running program (another build may
+//! generate points differently, so its files count as stale); a stale, foreign or damaged
+//! file is reported and replaced, never trusted.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -25,9 +26,26 @@ pub fn default_dir() -> Option<PathBuf> {
         .map(|d| d.join("points"))
 }
 
-/// The file in `dir` holding the start points of `key`.
-pub fn file_for(dir: &Path, key: u64) -> PathBuf {
-    dir.join(format!("{key:016x}.points"))
+/// The file in `dir` holding the start points of `key` made by the build `build`.
+pub fn file_for(dir: &Path, key: u64, build: u64) -> PathBuf {
+    dir.join(format!("{key:016x}-{build:016x}.points"))
+}
+
+/// An identity of the running program's build: a hash of its executable's path, size and
+/// modification time (0 when they cannot be read, so nothing stored is ever reused).
+pub fn build_id() -> u64 {
+    use std::hash::{Hash, Hasher};
+    let exe = std::env::current_exe().ok();
+    let meta = exe.as_ref().and_then(|e| std::fs::metadata(e).ok());
+    let modified = meta.as_ref().and_then(|m| m.modified().ok());
+    match (exe, meta, modified) {
+        (Some(exe), Some(meta), Some(modified)) => {
+            let mut h = std::hash::DefaultHasher::new();
+            (exe, meta.len(), modified).hash(&mut h);
+            h.finish() | 1
+        }
+        _ => 0,
+    }
 }
 
 /// A server for `scene` with `config`; with a `cache` folder, from the start points stored
@@ -43,23 +61,47 @@ pub fn start_server(
         return Ok(Server::with_medium(scene, config, medium)?);
     };
     let key = StartPoints::key(scene, &config);
-    let file = file_for(dir, key);
-    match std::fs::read(&file) {
-        Ok(bytes) => match StartPoints::from_bytes(&bytes, key) {
-            Ok(start) => {
-                tracing::info!("start points read from {}", file.display());
-                return Ok(Server::with_start_points(scene, config, medium, start)?);
-            }
-            Err(e) => tracing::warn!("{}: {e}; generating the points again", file.display()),
-        },
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => tracing::warn!("cannot read {}: {e}", file.display()),
+    let build = build_id();
+    let file = file_for(dir, key, build);
+    if build != 0 {
+        match std::fs::read(&file) {
+            Ok(bytes) => match StartPoints::from_bytes(&bytes, key) {
+                Ok(start) => {
+                    tracing::info!("start points read from {}", file.display());
+                    return Ok(Server::with_start_points(scene, config, medium, start)?);
+                }
+                Err(e) => tracing::warn!("{}: {e}; generating the points again", file.display()),
+            },
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => tracing::warn!("cannot read {}: {e}", file.display()),
+        }
     }
     let start = StartPoints::generate(scene, &config)?;
-    if let Err(e) = store(dir, &file, &start.to_bytes()) {
-        tracing::warn!("cannot store the start points in {}: {e}", file.display());
+    if build != 0 {
+        match store(dir, &file, &start.to_bytes()) {
+            Ok(()) => forget_other_builds(dir, key, &file),
+            Err(e) => tracing::warn!("cannot store the start points in {}: {e}", file.display()),
+        }
     }
     Ok(Server::with_start_points(scene, config, medium, start)?)
+}
+
+/// Remove the files of `key` that other builds stored in `dir` (they are never read again).
+fn forget_other_builds(dir: &Path, key: u64, kept: &Path) {
+    let prefix = format!("{key:016x}-");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let ours = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with(&prefix) && n.ends_with(".points"));
+        if ours && path != kept {
+            let _ = std::fs::remove_file(&path);
+        }
+    }
 }
 
 /// Write `bytes` to `file` atomically (a temporary file in `dir`, then a rename), so that
