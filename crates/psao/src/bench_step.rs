@@ -85,8 +85,8 @@ pub struct BenchStepReport {
     pub cores_busy: f64,
     /// Payload Mbit per second of scene time, averaged over the clients.
     pub mbit_s: f64,
-    /// Seconds from loading the scene to a server ready to step (point generation, burial
-    /// test, grids, tracer).
+    /// Seconds from the loaded scene to a server ready to step (point generation and burial
+    /// test, or reading the stored start points; grids; tracer).
     pub startup_s: f64,
     /// Points the server stores.
     pub points: usize,
