@@ -191,6 +191,30 @@ pub fn split(range: FrameRange, every: u32) -> Result<Split> {
     })
 }
 
+/// Visibility samples of a split's training and validation times (see [`gather`]).
+pub fn gather_split(
+    character: &Character,
+    split: &Split,
+    rays: u32,
+    seed: u64,
+) -> Result<(Vec<Sample>, Vec<Sample>)> {
+    let train = gather(
+        character,
+        &split.train,
+        rays,
+        seed,
+        "tracing training frames",
+    )?;
+    let validate = gather(
+        character,
+        &split.validate,
+        rays,
+        seed,
+        "tracing validation frames",
+    )?;
+    Ok((train, validate))
+}
+
 /// Visibility samples at `times`, traced with `rays` rays per vertex (a progress bar).
 pub fn gather(
     character: &Character,
@@ -244,20 +268,7 @@ fn run_train(args: &TrainArgs) -> Result<()> {
     let range = frame_range(c, args.clip.frames)?;
     let split = split(range, args.every)?;
     let start = Instant::now();
-    let train_set = gather(
-        c,
-        &split.train,
-        args.rays,
-        args.seed,
-        "tracing training frames",
-    )?;
-    let validate = gather(
-        c,
-        &split.validate,
-        args.rays,
-        args.seed,
-        "tracing validation frames",
-    )?;
+    let (train_set, validate) = gather_split(c, &split, args.rays, args.seed)?;
     let (model, report) = train_model(&loaded.name, &train_set, &validate, args.lobes)?;
     write_model(&args.out, &model)?;
     println!(

@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use crate::args::{FrameRange, Resolution};
 use crate::png_io::write_rgb_png;
-use crate::relight_cmd::{frame_range, gather, split, train_model, ShadingArgs};
+use crate::relight_cmd::{frame_range, gather, gather_split, split, train_model, ShadingArgs};
 use crate::relight_io::{
     display, exposure_for, framing_camera, load_character, load_env, VertexImage,
 };
@@ -141,20 +141,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
 
-    let train_set = gather(
-        c,
-        &split.train,
-        args.rays,
-        args.seed,
-        "tracing training frames",
-    )?;
-    let validate = gather(
-        c,
-        &split.validate,
-        args.rays,
-        args.seed,
-        "tracing validation frames",
-    )?;
+    let (train_set, validate) = gather_split(c, &split, args.rays, args.seed)?;
     let tests = gather(c, &test_times, args.rays, args.seed, "tracing test frames")?;
 
     let mut models: Vec<(usize, PoseModel)> = Vec::new();
