@@ -51,6 +51,9 @@ pub struct Sampler<'a> {
     /// The brick whose slot holds all its blocks and was used last, and that slot (compressed
     /// formats; runs of samples in one brick skip the cache lookup).
     current: (u32, usize),
+    /// Bricks evicted from the cache so far (a sample that looked up several bricks checks
+    /// whether one took another's slot meanwhile).
+    evictions: u64,
     /// Blocks decoded so far (for statistics).
     pub decodes: u64,
 }
@@ -81,6 +84,7 @@ impl<'a> Sampler<'a> {
             cells: [(IVec3::MAX, None); CELLS],
             next_cell: 0,
             current: (u32::MAX, 0),
+            evictions: 0,
             decodes: 0,
         }
     }
@@ -149,6 +153,7 @@ impl<'a> Sampler<'a> {
     #[inline(never)]
     fn fill(&mut self, s: usize, brick: u32, need: u8) -> usize {
         if self.keys[s] != brick {
+            self.evictions += (self.keys[s] != u32::MAX) as u64;
             self.keys[s] = brick;
             self.valid[s] = 0;
             if self.current.1 == s {
@@ -217,6 +222,7 @@ impl<'a> Sampler<'a> {
     fn corners_across(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
         let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
         let compressed = !self.slots.is_empty();
+        let evictions = self.evictions;
         // Per neighbour offset d (a subset of `cross`): its brick and, compressed, its slot.
         let mut brick = [NO_LEAF; 8];
         let mut slot = [0usize; 8];
@@ -229,7 +235,10 @@ impl<'a> Sampler<'a> {
             };
             if n != NO_LEAF {
                 brick[d] = self.vol.tree.l3[n as usize].brick();
-                if compressed {
+                if compressed && d == 0 && self.current.0 == brick[0] {
+                    // The node's own brick, whole in the cache already.
+                    slot[0] = self.current.1;
+                } else if compressed {
                     // 4-voxel halves read along each axis: across the border only the
                     // neighbour's first layer (half 0) or the node's last one (half 1).
                     let halves = |axis: usize, v: i32| {
@@ -251,9 +260,9 @@ impl<'a> Sampler<'a> {
                 break;
             }
         }
-        // Two of these bricks may share a cache slot: then read each corner on its own.
-        let collided =
-            compressed && (0..8).any(|d| brick[d] != NO_LEAF && self.keys[slot[d]] != brick[d]);
+        // A brick looked up here may have taken another's slot: then read each corner on its
+        // own.
+        let collided = self.evictions != evictions;
         for (k, v) in c.iter_mut().enumerate() {
             let d = k & cross;
             let q: IVec3 =
