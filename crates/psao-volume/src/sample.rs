@@ -9,9 +9,10 @@ use crate::tree::Locate;
 use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
 
-/// Bricks kept per sampler; their 4³ blocks are decoded when first needed.
-const SLOT_BITS: u32 = 10;
-const SLOTS: usize = 1 << SLOT_BITS;
+/// Most bricks kept per sampler (log2); their 4³ blocks are decoded when first needed. A small
+/// pool gets a power of two near twice its size, so a render of a small volume does not
+/// allocate (and fault in) a 2 MiB cache per sampler.
+const MAX_SLOT_BITS: u32 = 10;
 /// The cache is set-associative: a brick may sit in any of the `WAYS` slots of the set its
 /// hashed index picks (a direct-mapped cache made bricks that a tile's rays all cross evict
 /// each other over and over; the oldest brick of a set is replaced).
@@ -39,6 +40,8 @@ pub struct Sampler<'a> {
     vol: &'a Volume,
     frame: usize,
     keys: Vec<u32>,
+    /// log2 of the slot count.
+    slot_bits: u32,
     /// Per slot: which of the eight 4³ blocks are decoded.
     valid: Vec<u8>,
     /// Per set: the way filled next (the oldest one).
@@ -62,25 +65,18 @@ impl<'a> Sampler<'a> {
     /// A sampler of `frame` of `vol`.
     pub fn new(vol: &'a Volume, frame: usize) -> Self {
         let decoded = vol.pool.format != BrickFormat::F32;
+        // Twice the pool, so its bricks rarely crowd one set; at least two sets.
+        let slot_bits = ((2 * vol.pool.len()).next_power_of_two().trailing_zeros())
+            .clamp(WAY_BITS + 1, MAX_SLOT_BITS);
+        let slots = if decoded { 1usize << slot_bits } else { 0 };
         Sampler {
             vol,
             frame,
-            keys: if decoded {
-                vec![u32::MAX; SLOTS]
-            } else {
-                Vec::new()
-            },
-            valid: if decoded { vec![0; SLOTS] } else { Vec::new() },
-            next_way: if decoded {
-                vec![0; SLOTS / WAYS]
-            } else {
-                Vec::new()
-            },
-            slots: if decoded {
-                vec![[0.0; BRICK_VOXELS]; SLOTS]
-            } else {
-                Vec::new()
-            },
+            keys: vec![u32::MAX; slots],
+            slot_bits,
+            valid: vec![0; slots],
+            next_way: vec![0; slots / WAYS],
+            slots: vec![[0.0; BRICK_VOXELS]; slots],
             cells: [(IVec3::MAX, None); CELLS],
             next_cell: 0,
             current: (u32::MAX, 0),
@@ -133,8 +129,8 @@ impl<'a> Sampler<'a> {
     /// (compressed formats only).
     #[inline(always)]
     fn slot(&mut self, brick: u32, need: u8) -> usize {
-        let set =
-            ((brick.wrapping_mul(0x9E37_79B9) >> (32 - SLOT_BITS + WAY_BITS)) as usize) << WAY_BITS;
+        let set = ((brick.wrapping_mul(0x9E37_79B9) >> (32 - self.slot_bits + WAY_BITS)) as usize)
+            << WAY_BITS;
         for s in set..set + WAYS {
             if self.keys[s] == brick {
                 if need & !self.valid[s] == 0 {
