@@ -836,6 +836,11 @@
         }
         const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
         r = new Received(buckets * BUCKET_ENTRIES, maxPoints);
+        if (this.bucketCounts) {
+          r.lo = new Uint32Array(r.maxBucketWords);
+          r.hi = new Uint32Array(r.maxBucketWords);
+          r.slots = new Uint32Array(r.maxBucketWords);
+        }
         this.received.set(instance, r);
       }
       return r;
@@ -1011,6 +1016,14 @@
       this.slots = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
       this.points = new Uint32Array(0);
     }
+    /// Empties the grid (a snapshot follows), keeping its memory.
+    clear() {
+      this.keyLo.fill(0);
+      this.keyHi.fill(0);
+      this.slots.fill(0);
+      this.points.fill(0, 0, this.slotCount * CELL_POINTS);
+      this.slotCount = 0;
+    }
     /// Most cell slots the layout allows.
     maxCells() {
       return this.entry.bucketCount * BUCKET_ENTRIES;
@@ -1065,10 +1078,7 @@
     apply(u) {
       this.validate(u);
       if (u.snapshot) {
-        for (let i = 0; i < this.grids.length; i++) {
-          const g = this.grids[i];
-          if (g) this.grids[i] = new Grid(g.entry);
-        }
+        for (const g of this.grids) g?.clear();
         this.transforms.fill(null);
       }
       for (const [instance, t] of u.transforms) this.transforms[instance] = t;

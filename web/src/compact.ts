@@ -277,6 +277,12 @@ export class CompactDecoder {
       }
       const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
       r = new Received(buckets * BUCKET_ENTRIES, maxPoints);
+      if (this.bucketCounts) {
+        // Known sizes: every bucket at once (as the client's grid), no growing.
+        r.lo = new Uint32Array(r.maxBucketWords);
+        r.hi = new Uint32Array(r.maxBucketWords);
+        r.slots = new Uint32Array(r.maxBucketWords);
+      }
       this.received.set(instance, r);
     }
     return r;

@@ -29,6 +29,15 @@ export class Grid {
     this.points = new Uint32Array(0);
   }
 
+  /// Empties the grid (a snapshot follows), keeping its memory.
+  clear() {
+    this.keyLo.fill(0);
+    this.keyHi.fill(0);
+    this.slots.fill(0);
+    this.points.fill(0, 0, this.slotCount * CELL_POINTS);
+    this.slotCount = 0;
+  }
+
   /// Most cell slots the layout allows.
   maxCells(): number {
     return this.entry.bucketCount * BUCKET_ENTRIES;
@@ -104,10 +113,7 @@ export class ClientState {
   apply(u: Update) {
     this.validate(u);
     if (u.snapshot) {
-      for (let i = 0; i < this.grids.length; i++) {
-        const g = this.grids[i];
-        if (g) this.grids[i] = new Grid(g.entry);
-      }
+      for (const g of this.grids) g?.clear();
       this.transforms.fill(null);
     }
     for (const [instance, t] of u.transforms) this.transforms[instance] = t;
