@@ -1,5 +1,5 @@
 //! Voxel sampling that decodes compressed bricks on the fly, one 4³ block (one BC7 block) at
-//! a time: a sampler keeps a direct-mapped cache of decoded blocks, so a block is decoded once
+//! a time: a sampler keeps a set-associative cache of decoded blocks, so a block is decoded once
 //! per ray segment, and usually once per tile of neighbouring rays. `f32` bricks are read in
 //! place.
 
@@ -9,10 +9,14 @@ use crate::tree::Locate;
 use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
 
-/// Bricks kept per sampler (direct-mapped by hashed brick index); their 4³ blocks are decoded
-/// when first needed.
+/// Bricks kept per sampler; their 4³ blocks are decoded when first needed.
 const SLOT_BITS: u32 = 10;
 const SLOTS: usize = 1 << SLOT_BITS;
+/// The cache is set-associative: a brick may sit in any of the `WAYS` slots of the set its
+/// hashed index picks (a direct-mapped cache made bricks that a tile's rays all cross evict
+/// each other over and over; the oldest brick of a set is replaced).
+const WAY_BITS: u32 = 2;
+const WAYS: usize = 1 << WAY_BITS;
 /// Located cells remembered per sampler.
 const CELLS: usize = 4;
 
@@ -37,6 +41,8 @@ pub struct Sampler<'a> {
     keys: Vec<u32>,
     /// Per slot: which of the eight 4³ blocks are decoded.
     valid: Vec<u8>,
+    /// Per set: the way filled next (the oldest one).
+    next_way: Vec<u8>,
     /// Per slot: the brick's values ([`voxel_index`] layout; only decoded blocks are valid).
     slots: Vec<[f32; BRICK_VOXELS]>,
     /// Recently located 8³ cells and their L3 nodes (round robin).
@@ -62,6 +68,11 @@ impl<'a> Sampler<'a> {
                 Vec::new()
             },
             valid: if decoded { vec![0; SLOTS] } else { Vec::new() },
+            next_way: if decoded {
+                vec![0; SLOTS / WAYS]
+            } else {
+                Vec::new()
+            },
             slots: if decoded {
                 vec![[0.0; BRICK_VOXELS]; SLOTS]
             } else {
@@ -118,10 +129,19 @@ impl<'a> Sampler<'a> {
     /// (compressed formats only).
     #[inline(always)]
     fn slot(&mut self, brick: u32, need: u8) -> usize {
-        let s = (brick.wrapping_mul(0x9E37_79B9) >> (32 - SLOT_BITS)) as usize;
-        if self.keys[s] == brick && need & !self.valid[s] == 0 {
-            return s;
+        let set =
+            ((brick.wrapping_mul(0x9E37_79B9) >> (32 - SLOT_BITS + WAY_BITS)) as usize) << WAY_BITS;
+        for s in set..set + WAYS {
+            if self.keys[s] == brick {
+                if need & !self.valid[s] == 0 {
+                    return s;
+                }
+                return self.fill(s, brick, need);
+            }
         }
+        let way = &mut self.next_way[set >> WAY_BITS];
+        let s = set + *way as usize;
+        *way = ((*way as usize + 1) % WAYS) as u8;
         self.fill(s, brick, need)
     }
 
