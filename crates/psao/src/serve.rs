@@ -93,7 +93,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         max_clients: args.max_clients,
         once: args.once,
         stop_on_ctrl_c: true,
-        scene_glb: psao_net::glb::scene_glb(&input.scene)?,
+        scene_glb: psao_net::glb::scene_glb(&input.scene, &input.paths)?,
         tls,
     };
     let serve = Serve::bind(server, config)?;
