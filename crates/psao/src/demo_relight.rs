@@ -44,7 +44,12 @@ fn shared_data() -> Option<PathBuf> {
 
 /// Runs the section and returns its markdown (a note when the data is missing).
 pub fn section(out: &Path) -> Result<String> {
-    let Some(data) = shared_data() else {
+    section_with(out, shared_data())
+}
+
+/// The section with the shared data folder `data` (None: skipped).
+fn section_with(out: &Path, data: Option<PathBuf>) -> Result<String> {
+    let Some(data) = data else {
         return Ok(format!(
             "## Shadowed relighting\n\nSkipped: `../shared/data/{CHARACTER}` and \
              `../shared/data/{ENVIRONMENT}` are not both present (see docs/RELIGHTING.md \
@@ -135,4 +140,17 @@ pub fn section(out: &Path) -> Result<String> {
         c.vertex_count(),
         train_set.len(),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn without_the_shared_data_the_section_says_it_was_skipped() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = section_with(dir.path(), None).unwrap();
+        assert!(text.contains("Skipped"), "{text}");
+        assert!(!dir.path().join(PICTURE).exists());
+    }
 }
