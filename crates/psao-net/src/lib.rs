@@ -16,6 +16,7 @@ pub mod http;
 pub mod io;
 pub mod pipeline;
 mod resolution;
+pub mod scale;
 pub mod serve;
 pub mod start_cache;
 pub mod tls;

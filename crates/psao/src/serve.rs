@@ -95,7 +95,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         max_clients: args.max_clients,
         once: args.once,
         stop_on_ctrl_c: true,
-        scene_glb: psao_net::glb::scene_glb(&input.scene)?,
+        scene_glb: psao_net::glb::scene_glb(&input.scene, &input.paths)?,
         tls,
     };
     let mut serve = Serve::bind(server, config)?;

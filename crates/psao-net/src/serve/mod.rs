@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use psao_delta::Codec;
-use psao_server::{ClientId, Server, View};
+use psao_server::{ClientId, Server, StepStats, View};
 use psao_wire::{
     capabilities, encode_frame, Bye, Delta, ErrorCode, ErrorMsg, Message, SceneTime, Welcome,
     MAX_CLIENT_FRAME, PROTOCOL_VERSION,
@@ -131,6 +131,33 @@ pub struct ServeStats {
     pub clients: Vec<ClientStats>,
 }
 
+/// How a [`Serve`] advances its [`Server`] by one server frame: [`LocalStep`] traces in
+/// this process (`psao serve`); an edge applies what trace nodes published
+/// ([`crate::scale::edge`]).
+pub trait Stepper: Send {
+    /// One server frame for the union of the clients' `views` at scene time `seconds`.
+    fn step(
+        &mut self,
+        server: &mut Server,
+        views: &[View],
+        seconds: f32,
+    ) -> Result<StepStats, NetError>;
+}
+
+/// Tracing in this process: [`Server::step_at`].
+pub struct LocalStep;
+
+impl Stepper for LocalStep {
+    fn step(
+        &mut self,
+        server: &mut Server,
+        views: &[View],
+        seconds: f32,
+    ) -> Result<StepStats, NetError> {
+        server.step_at(views, seconds).map_err(NetError::from)
+    }
+}
+
 /// A connection's request to join, answered with its session.
 struct Join {
     capabilities: u32,
@@ -170,6 +197,7 @@ pub struct Serve {
     listener: TcpListener,
     local: SocketAddr,
     stop: Arc<AtomicBool>,
+    stepper: Box<dyn Stepper>,
     corrections: Option<Corrections>,
 }
 
@@ -201,8 +229,15 @@ impl Serve {
             listener,
             local,
             stop: Arc::new(AtomicBool::new(false)),
+            stepper: Box::new(LocalStep),
             corrections: None,
         })
+    }
+
+    /// Step with `stepper` instead of tracing in this process ([`LocalStep`]).
+    pub fn with_stepper(mut self, stepper: Box<dyn Stepper>) -> Self {
+        self.stepper = stepper;
+        self
     }
 
     /// The address actually listened on (resolves port 0).
@@ -225,6 +260,7 @@ impl Serve {
             listener,
             local,
             stop,
+            stepper,
             corrections,
         } = self;
         let scheme = if config.tls.is_some() {
@@ -254,6 +290,7 @@ impl Serve {
         }
         let sim = Simulation {
             server,
+            stepper,
             codec: config.codec.clone(),
             scene: config.scene_name.clone(),
             hz: config.hz,
@@ -527,6 +564,7 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 /// The simulation thread's state.
 struct Simulation {
     server: Server,
+    stepper: Box<dyn Stepper>,
     codec: String,
     scene: String,
     hz: u32,
@@ -754,8 +792,9 @@ impl Simulation {
         }
         let previous = self.unsent.take();
         let (server, sessions, rt) = (&mut self.server, &mut self.sessions, &self.rt);
+        let stepper = &mut self.stepper;
         let (step, sent) = rayon::join(
-            || server.step_at(&views, seconds as f32),
+            || stepper.step(server, &views, seconds as f32),
             || previous.map(|u| send_updates(sessions, u, false, rt)),
         );
         if let Some(sent) = sent {
