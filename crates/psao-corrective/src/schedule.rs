@@ -2,8 +2,8 @@
 //! priority, the √5 level and the iterator position inside that level. A worker takes the
 //! entry of highest priority and at most `N_job` positions from it; the remainder of the level
 //! goes back with the same priority, a finished level comes back as the next level with the
-//! priority reduced by the decay (10–20 %), so other objects of similar priority get a rough
-//! correction before the first one is refined.
+//! priority reduced by the decay ([`DEFAULT_DECAY`]), so other objects get a rough correction
+//! before the first one is refined.
 
 use crate::attention::ObjectRegion;
 use crate::sqrt5::{Hierarchy, PixelRect};
@@ -13,8 +13,13 @@ use std::collections::BinaryHeap;
 /// Default job size `N_job` (positions per job).
 pub const DEFAULT_JOB_SIZE: u64 = 64;
 
-/// Default priority decay per finished level.
-pub const DEFAULT_DECAY: f32 = 0.15;
+/// Default priority decay per finished level: 0.8 = 1 − 1/5, the share of area a sample
+/// stops covering from one √5 level to the next (a level-ℓ+1 sample's footprint is a fifth of
+/// a level-ℓ one's), so an entry's priority stays proportional to the (saliency-weighted)
+/// image area each of its samples corrects. The paper's 10–20 % let the most salient object
+/// run through several levels before objects of half its priority got a first coarse splat,
+/// which lost to equal priorities on saliency-weighted FLIP (docs/CORRECTIVE.md).
+pub const DEFAULT_DECAY: f32 = 0.8;
 
 /// A piece of work: `len` positions of one level of one region, from position `start` on.
 #[derive(Clone, Copy, Debug, PartialEq)]

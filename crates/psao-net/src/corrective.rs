@@ -534,3 +534,51 @@ impl InProcessCorrections {
         corrected
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn budgets_of_one_second_add_up_to_the_rate() {
+        for (rate, hz) in [(6000, 60), (3000, 30), (7, 60), (1_000_003, 45)] {
+            let mut r = RemoteCorrections::new(rate);
+            let total: usize = (0..hz).map(|_| r.next_budget(hz)).sum();
+            assert_eq!(total, rate as usize, "rate {rate} at {hz} Hz");
+        }
+    }
+
+    #[test]
+    fn samples_of_levels_the_client_lacks_are_refused() {
+        let mut c = CorrectiveClient::new(64, 36, CorrectiveClientConfig::default()).unwrap();
+        let levels = hierarchy_for(64, 36).levels();
+        let sample = |level| SampleMsg {
+            object: 1,
+            level,
+            position: [0.0; 3],
+            normal: [0.0, 1.0, 0.0],
+            ndotv: 0.5,
+            color: [0.5; 3],
+        };
+        let msg = |level| SamplesMsg {
+            client_frame: None,
+            camera_age: 0,
+            samples: vec![sample(level)],
+        };
+        c.receive(&msg(levels)).unwrap();
+        assert!(matches!(
+            c.receive(&msg(levels + 1)),
+            Err(NetError::Protocol(_))
+        ));
+        assert_eq!(c.cache().len(), 1);
+        assert!(CorrectiveClient::new(
+            64,
+            36,
+            CorrectiveClientConfig {
+                analyze_every: 0,
+                ..Default::default()
+            }
+        )
+        .is_err());
+    }
+}

@@ -83,6 +83,9 @@ pub struct EvalArgs {
     /// Orderings, comma-separated: saliency, uniform, random.
     #[arg(long, value_delimiter = ',', default_value = "saliency,uniform,random")]
     pub order: Vec<Order>,
+    /// Priority reduction per finished √5 level, in [0, 1).
+    #[arg(long, default_value_t = DEFAULT_DECAY)]
+    pub decay: f32,
     /// Frames between analyses (9 = 0.3 s at the paths' 30 Hz).
     #[arg(long, default_value_t = 9)]
     pub analyze_every: u32,
@@ -177,10 +180,13 @@ fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
-/// Region priorities for `order`.
+/// Region priorities for `order`; the saliency ordering analyses `shown`, the frame as the
+/// viewer sees it now (base frame with the cached corrections splatted, as the paper's
+/// analyzer reads the frame buffer).
 fn priorities(
     order: Order,
     f: &FrameImages,
+    shown: &[[f32; 3]],
     seed: u64,
     frame: u32,
     clock: &mut Clock,
@@ -188,7 +194,7 @@ fn priorities(
     let (w, h) = (f.gbuffer.width as usize, f.gbuffer.height as usize);
     let t = Instant::now();
     let sal = match order {
-        Order::Saliency => saliency(&rgb_image(&f.base, w as u32, h as u32)),
+        Order::Saliency => saliency(&rgb_image(shown, w as u32, h as u32)),
         _ => psao_corrective::saliency::Map {
             width: w,
             height: h,
@@ -246,12 +252,29 @@ fn step(
     Ok(color)
 }
 
-fn new_corrector(hierarchy: Hierarchy) -> Result<Corrector> {
+/// The frame as `corrector`'s viewer sees it before this frame's new samples: the base frame
+/// with the cache splatted.
+fn shown(corrector: &Corrector, f: &FrameImages) -> Vec<[f32; 3]> {
+    let mut color = f.base.clone();
+    let mut written = vec![false; color.len()];
+    corrector.splat(
+        &f.view,
+        &mut SplatTarget {
+            color: &mut color,
+            written: &mut written,
+            ids: &f.ids,
+            depth: &f.gbuffer.depth,
+        },
+    );
+    color
+}
+
+fn new_corrector(hierarchy: Hierarchy, decay: f32) -> Result<Corrector> {
     Ok(Corrector::new(
         hierarchy,
         CacheConfig::default(),
         DEFAULT_JOB_SIZE,
-        DEFAULT_DECAY,
+        decay,
     )?)
 }
 
@@ -265,6 +288,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     }
     if args.analyze_every == 0 {
         bail!("--analyze-every must be at least 1");
+    }
+    if !(0.0..1.0).contains(&args.decay) {
+        bail!("--decay must be in [0, 1), got {}", args.decay);
     }
     let (mut input, path) = args.input.load()?;
     input.scene.freeze();
@@ -304,7 +330,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             sims.push(Sim {
                 order,
                 budget,
-                corrector: new_corrector(hierarchy)?,
+                corrector: new_corrector(hierarchy, args.decay)?,
                 sums: FrameError::default(),
             });
         }
@@ -348,7 +374,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                 clock.aging_ms.push(t.elapsed().as_secs_f64() * 1e3);
             }
             if analyze_now {
-                let regions = priorities(sim.order, &f, args.seed, frame, &mut clock);
+                let now = shown(&sim.corrector, &f);
+                let regions = priorities(sim.order, &f, &now, args.seed, frame, &mut clock);
                 sim.corrector.analyze(&regions);
             }
             let corrected = step(sim, &f, &tracer, &mut clock)?;
@@ -477,7 +504,7 @@ fn static_convergence(
         let mut sim = Sim {
             order,
             budget,
-            corrector: new_corrector(hierarchy)?,
+            corrector: new_corrector(hierarchy, args.decay)?,
             sums: FrameError::default(),
         };
         let mut curve = Vec::new();
@@ -485,7 +512,8 @@ fn static_convergence(
         let mut last = f.base.clone();
         for i in 0..args.static_frames {
             if i % args.analyze_every == 0 {
-                let regions = priorities(order, &f, args.seed, i, clock);
+                let now = shown(&sim.corrector, &f);
+                let regions = priorities(order, &f, &now, args.seed, i, clock);
                 sim.corrector.analyze(&regions);
             }
             let before = sim.corrector.cache().len();
