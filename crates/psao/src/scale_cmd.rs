@@ -181,7 +181,7 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
         frame_timeout: Duration::from_secs_f64(args.frame_timeout),
     })?;
     if !args.lockstep {
-        let frames = stepper.catch_up(&mut server, Duration::from_millis(300))?;
+        let frames = stepper.catch_up(&mut server, Duration::from_secs(1))?;
         tracing::info!("caught up {frames} frames from the records stream");
     }
     let counters = stepper.counters();

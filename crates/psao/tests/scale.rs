@@ -297,10 +297,65 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
             out("late.json").to_str().unwrap(),
         ],
     );
-    let v = view(&addr(&line), &scene, &path, 3, &out("lv.json"));
+    let v = view(&addr(&line), &scene, &path, 30, &out("lv.json"));
     finished(v);
     let mut late = late;
     late.wait(20);
     assert_eq!(edge_hash("late.json"), edge_hash("e0.json"));
     assert_eq!(view_hashes(&[out("lv.json")]), vec![edge_hash("e0.json")]);
+}
+
+#[test]
+fn a_dead_trace_node_and_a_dead_edge_are_survived() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_nats, url)) = nats(dir.path()) else {
+        return;
+    };
+    let (scene, path) = fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+    // Few samples per point: the state converges within a second of the path.
+    let quick = ["--nats", &url, "--max-samples", "16"];
+    let node = |k: u32| {
+        let partition = format!("{k}/2");
+        let json = out(&format!("t{k}.json"));
+        let mut args = quick.to_vec();
+        args.extend(["--partition", &partition, "--json", json.to_str().unwrap()]);
+        start("trace-node", &scene, &args).0
+    };
+    let (t0, t1) = (node(0), node(1));
+    let edge = |e: u32| {
+        let json = out(&format!("e{e}.json"));
+        let mut args = quick.to_vec();
+        args.extend([
+            "--listen",
+            "127.0.0.1:0",
+            "--once",
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        let (p, line) = start("edge", &scene, &args);
+        (p, addr(&line))
+    };
+    let ((e0, a0), (mut e1, a1)) = (edge(0), edge(1));
+    let v0 = view(&format!("{a0},{a1}"), &scene, &path, 600, &out("v0.json"));
+    let v1 = view(&format!("{a1},{a0}"), &scene, &path, 600, &out("v1.json"));
+    std::thread::sleep(Duration::from_millis(1500));
+    drop(t1);
+    std::thread::sleep(Duration::from_millis(1000));
+    drop(e0);
+    finished(v0);
+    finished(v1);
+    e1.wait(20);
+    t0.interrupt(20);
+    let hashes = view_hashes(&[out("v0.json"), out("v1.json")]);
+    assert_eq!(hashes[0], hashes[1], "both viewers converged to one state");
+    let e1 = json(&out("e1.json"));
+    assert_eq!(e1["state_hash"].as_str(), Some(hashes[0].as_str()), "{e1}");
+    assert!(json(&out("v0.json"))["reconnects"].as_u64().unwrap() >= 1);
+    let t0 = json(&out("t0.json"));
+    assert_eq!(t0["partitions"], serde_json::json!([0, 1]), "{t0}");
+    let adoption = &t0["adopted"][0];
+    assert_eq!(adoption["partition"], 1, "{t0}");
+    let after = adoption["after_s"].as_f64().unwrap();
+    assert!(after <= 5.0, "partition taken over after {after} s");
 }

@@ -157,7 +157,10 @@ pub struct EdgeStepper {
     rt: tokio::runtime::Runtime,
     client: async_nats::Client,
     names: Names,
-    batches: mpsc::Receiver<Batch>,
+    /// The stream's batches with their sequence numbers.
+    batches: mpsc::Receiver<(u64, Batch)>,
+    /// The stream's last sequence number when the edge connected.
+    backlog: u64,
     assembler: Assembler,
     counters: Arc<EdgeCounters>,
 }
@@ -172,10 +175,11 @@ impl EdgeStepper {
             .map_err(NetError::io("cannot start the async runtime"))?;
         let names = Names::new(&config.scene);
         let counters = Arc::new(EdgeCounters::default());
-        let (client, batches) = rt.block_on(async {
+        let (client, batches, backlog) = rt.block_on(async {
             let client = connect(&config.nats).await?;
             let js = async_nats::jetstream::new(client.clone());
             let stream = records_stream(&js, &names).await?;
+            let backlog = stream.cached_info().state.last_sequence;
             let consumer = stream
                 .create_consumer(pull::OrderedConfig {
                     deliver_policy: DeliverPolicy::All,
@@ -190,7 +194,7 @@ impl EdgeStepper {
                 .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?;
             let (tx, rx) = mpsc::channel(INBOX);
             tokio::spawn(read_stream(messages, tx, counters.clone()));
-            Ok::<_, NetError>((client, rx))
+            Ok::<_, NetError>((client, rx, backlog))
         })?;
         Ok(Self {
             config,
@@ -198,6 +202,7 @@ impl EdgeStepper {
             client,
             names,
             batches,
+            backlog,
             assembler: Assembler::default(),
             counters,
         })
@@ -208,8 +213,9 @@ impl EdgeStepper {
         self.counters.clone()
     }
 
-    /// Apply every complete frame already in the stream, until none arrives for `quiet`
-    /// (a joining edge's snapshot); returns the frames applied.
+    /// Apply every complete frame that was in the stream when the edge connected (a joining
+    /// edge's snapshot), giving up when nothing arrives for `quiet`; returns the frames
+    /// applied.
     pub fn catch_up(&mut self, server: &mut Server, quiet: Duration) -> Result<u64, NetError> {
         let start = server.frame();
         loop {
@@ -217,9 +223,12 @@ impl EdgeStepper {
                 .rt
                 .block_on(async { tokio::time::timeout(quiet, self.batches.recv()).await });
             match got {
-                Ok(Some(batch)) => {
+                Ok(Some((seq, batch))) => {
                     self.add(batch, server);
                     self.apply_ready(server)?;
+                    if seq >= self.backlog {
+                        return Ok(server.frame() - start);
+                    }
                 }
                 Ok(None) => return Err(NetError::Nats("the records stream ended".into())),
                 Err(_) => return Ok(server.frame() - start),
@@ -268,7 +277,7 @@ impl EdgeStepper {
 /// Forwards the stream's batches, checking that sequence numbers follow one another.
 async fn read_stream(
     mut messages: pull::Ordered,
-    tx: mpsc::Sender<Batch>,
+    tx: mpsc::Sender<(u64, Batch)>,
     counters: Arc<EdgeCounters>,
 ) {
     let mut last: Option<u64> = None;
@@ -280,8 +289,9 @@ async fn read_stream(
                 continue;
             }
         };
+        let mut seq = 0;
         if let Ok(info) = message.info() {
-            let seq = info.stream_sequence;
+            seq = info.stream_sequence;
             if let Some(prev) = last {
                 if seq <= prev {
                     counters.duplicates.fetch_add(1, Ordering::Relaxed);
@@ -300,7 +310,7 @@ async fn read_stream(
             .fetch_add(message.payload.len() as u64, Ordering::Relaxed);
         match Batch::decode(&message.payload) {
             Ok(batch) => {
-                if tx.send(batch).await.is_err() {
+                if tx.send((seq, batch)).await.is_err() {
                     return;
                 }
             }
@@ -340,7 +350,7 @@ impl Stepper for EdgeStepper {
                 .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))
         })?;
         if !self.config.lockstep {
-            while let Ok(batch) = self.batches.try_recv() {
+            while let Ok((_, batch)) = self.batches.try_recv() {
                 self.add(batch, server);
             }
             return self.apply_ready(server);
@@ -361,7 +371,7 @@ impl Stepper for EdgeStepper {
                 .rt
                 .block_on(async { tokio::time::timeout(left, self.batches.recv()).await });
             match got {
-                Ok(Some(batch)) => self.add(batch, server),
+                Ok(Some((_, batch))) => self.add(batch, server),
                 Ok(None) => return Err(NetError::Nats("the records stream ended".into())),
                 Err(_) => {}
             }
