@@ -16,7 +16,8 @@ use common::{json, stderr, BIN};
 /// Server settings of every process: few points, small budget.
 const SERVER: &[&str] = &["--points", "96", "--ray-budget", "20000", "--hz", "30"];
 
-/// A small room (floor, wall, box) and a 1-second camera path.
+/// A small room (floor, wall, box) and a camera path that moves for 1 s, then stays still
+/// until 10 s (so a clocked session converges).
 fn fixture(dir: &Path) -> (String, String) {
     let quads: [[[f32; 3]; 4]; 5] = [
         [[-4., 0., -4.], [4., 0., -4.], [4., 0., 4.], [-4., 0., 4.]],
@@ -36,7 +37,8 @@ fn fixture(dir: &Path) -> (String, String) {
     std::fs::write(dir.join("room.obj"), obj).unwrap();
     let path = "name = \"room\"\nfov_y_deg = 60.0\n\
         [[key]]\ntime = 0.0\nposition = [3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, 0.0]\n\
-        [[key]]\ntime = 1.0\nposition = [-3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, -1.0]\n";
+        [[key]]\ntime = 1.0\nposition = [-3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, -1.0]\n\
+        [[key]]\ntime = 10.0\nposition = [-3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, -1.0]\n";
     std::fs::write(dir.join("path.toml"), path).unwrap();
     let s = |n: &str| dir.join(n).to_string_lossy().into_owned();
     (s("room.obj"), s("path.toml"))
