@@ -127,8 +127,7 @@ impl Drop for Scratch {
 
 /// Runs `psao bench scale`.
 pub fn run(args: &BenchScaleArgs) -> Result<()> {
-    if args.frames == 0 || args.nodes.iter().any(|&n| n == 0) || args.hz == 0 || args.hz > CLIENT_HZ
-    {
+    if args.frames == 0 || args.nodes.contains(&0) || args.hz == 0 || args.hz > CLIENT_HZ {
         bail!("--frames and every --nodes count must be at least 1, --hz in 1..={CLIENT_HZ}");
     }
     let input = SceneInput::load(&args.scene)?;
