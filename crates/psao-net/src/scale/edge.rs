@@ -24,6 +24,8 @@ const INBOX: usize = 1024;
 /// Frames an edge keeps incomplete before it refuses more (a partition that never
 /// publishes again would otherwise grow this without bound).
 pub const MAX_PENDING_FRAMES: usize = 1 << 16;
+/// How long a lockstep edge waits for a frame's batches before publishing its views again.
+const VIEWS_AGAIN: Duration = Duration::from_secs(1);
 
 /// How an edge follows the trace nodes.
 #[derive(Clone, Debug)]
@@ -322,6 +324,24 @@ async fn read_stream(
     }
 }
 
+impl EdgeStepper {
+    /// Publish a view set on this edge's subject.
+    fn publish_views(&mut self, payload: &[u8]) -> Result<(), NetError> {
+        let subject = self.names.views(&self.config.edge_id);
+        let payload = bytes::Bytes::copy_from_slice(payload);
+        self.rt.block_on(async {
+            self.client
+                .publish(subject, payload)
+                .await
+                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))?;
+            self.client
+                .flush()
+                .await
+                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))
+        })
+    }
+}
+
 impl Stepper for EdgeStepper {
     /// Publish the viewers' views for the next frame; lockstep: wait until every
     /// partition's batch of it arrived and apply it; clocked: apply the complete frames
@@ -338,17 +358,8 @@ impl Stepper for EdgeStepper {
             seconds: f64::from(seconds),
             views: views.to_vec(),
         };
-        let subject = self.names.views(&self.config.edge_id);
-        self.rt.block_on(async {
-            self.client
-                .publish(subject, set.encode().into())
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))?;
-            self.client
-                .flush()
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))
-        })?;
+        let payload = set.encode();
+        self.publish_views(&payload)?;
         if !self.config.lockstep {
             while let Ok((_, batch)) = self.batches.try_recv() {
                 self.add(batch, server);
@@ -367,13 +378,15 @@ impl Stepper for EdgeStepper {
                     self.config.frame_timeout.as_secs_f64()
                 )));
             }
+            let slice = left.min(VIEWS_AGAIN);
             let got = self
                 .rt
-                .block_on(async { tokio::time::timeout(left, self.batches.recv()).await });
+                .block_on(async { tokio::time::timeout(slice, self.batches.recv()).await });
             match got {
                 Ok(Some((_, batch))) => self.add(batch, server),
                 Ok(None) => return Err(NetError::Nats("the records stream ended".into())),
-                Err(_) => {}
+                // A trace node that subscribed late missed them: say them again.
+                Err(_) => self.publish_views(&payload)?,
             }
         }
     }
