@@ -135,11 +135,11 @@ impl Leases {
         Ok(())
     }
 
-    /// Take every partition whose lease is free; returns them.
-    async fn adopt_free(&mut self) -> Vec<u32> {
+    /// Take every partition of `candidates` whose lease is free; returns them.
+    async fn adopt_free(&mut self, candidates: impl Iterator<Item = u32>) -> Vec<u32> {
         let mut adopted = Vec::new();
-        for k in 0..self.count {
-            if !self.held.contains_key(&k) && self.try_take(k).await {
+        for k in candidates {
+            if k < self.count && !self.held.contains_key(&k) && self.try_take(k).await {
                 adopted.push(k);
             }
         }
@@ -550,11 +550,14 @@ impl Node {
                 let _ = self.rt.block_on(self.leases.kv.put("epoch", epoch));
             }
         }
-        let adopted = self.rt.block_on(self.leases.adopt_free());
+        // Only partitions that published and then went quiet are adopted (a node still
+        // starting up has not published yet).
+        self.note_batches();
+        let seen: Vec<u32> = self.last_seen.keys().copied().collect();
+        let adopted = self.rt.block_on(self.leases.adopt_free(seen.into_iter()));
         if adopted.is_empty() {
             return Ok(());
         }
-        self.note_batches();
         let frame = self.server.frame();
         for k in adopted {
             let (last, at) = self
