@@ -8,6 +8,7 @@
 //! prints; another program can embed a server or a client the same way.
 
 pub mod convert;
+pub mod corrective;
 pub mod cpu_time;
 mod error;
 pub mod glb;

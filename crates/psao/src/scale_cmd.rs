@@ -61,7 +61,7 @@ impl SceneArgs {
             tuning.points_cache.as_deref(),
         )
         .context("cannot start the server (point generation or tracer)")?;
-        let glb = psao_net::glb::scene_glb(&input.scene)?;
+        let glb = psao_net::glb::scene_glb(&input.scene, &input.paths)?;
         Ok((input.name, server, glb))
     }
 }

@@ -24,6 +24,10 @@ use serde::Serialize;
 use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot, Semaphore};
 
+mod corrective;
+
+pub use corrective::Corrections;
+
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
 use crate::http::{serve_http, Health, HttpContext};
@@ -85,6 +89,8 @@ pub struct ClientStats {
     pub coalesced: u64,
     /// Server frames stepped while the client was connected.
     pub frames: u64,
+    /// Correction samples sent.
+    pub samples: u64,
 }
 
 /// What `psao serve --json` writes.
@@ -164,6 +170,7 @@ enum Event {
     Join(Join),
     Camera(u32, psao_wire::CameraMsg),
     Ack(u32, u64),
+    Regions(u32, psao_wire::RegionsMsg),
     Leave(u32),
 }
 
@@ -178,6 +185,8 @@ struct Session {
     pending: Option<u32>,
     unacked: VecDeque<u64>,
     stats: ClientStats,
+    /// Corrective splatting state, when both ends want it.
+    corrective: Option<crate::corrective::RemoteCorrections>,
 }
 
 /// A bound server: listening, not yet stepping.
@@ -189,6 +198,7 @@ pub struct Serve {
     local: SocketAddr,
     stop: Arc<AtomicBool>,
     stepper: Box<dyn Stepper>,
+    corrections: Option<Corrections>,
 }
 
 impl Serve {
@@ -220,6 +230,7 @@ impl Serve {
             local,
             stop: Arc::new(AtomicBool::new(false)),
             stepper: Box::new(LocalStep),
+            corrections: None,
         })
     }
 
@@ -250,6 +261,7 @@ impl Serve {
             local,
             stop,
             stepper,
+            corrections,
         } = self;
         let scheme = if config.tls.is_some() {
             "TLS: https, wss and raw frames"
@@ -302,6 +314,7 @@ impl Serve {
             unsent: None,
             hash_ms: 0.0,
             health,
+            corrections,
         };
         let stats = sim.run();
         rt.shutdown_timeout(Duration::from_millis(500));
@@ -529,6 +542,7 @@ async fn read_loop(
         let event = match message {
             Message::Camera(c) => Event::Camera(id, c),
             Message::Ack(a) => Event::Ack(id, a.frame),
+            Message::Regions(r) => Event::Regions(id, r),
             Message::Bye(_) => return Ok(()),
             other => {
                 return Err(ReadError::Io(format!(
@@ -580,6 +594,8 @@ struct Simulation {
     unsent: Option<FrameUpdates>,
     /// What `/health` reports.
     health: Arc<Health>,
+    /// Corrective splatting, when served.
+    corrections: Option<Corrections>,
 }
 
 impl Simulation {
@@ -616,6 +632,7 @@ impl Simulation {
                 let tick = round * u64::from(self.hz) / u64::from(CLIENT_HZ);
                 let seconds = round as f64 / f64::from(CLIENT_HZ);
                 round += 1;
+                self.corrections(CLIENT_HZ, true);
                 if last_tick != Some(tick) {
                     last_tick = Some(tick);
                     self.frame(seconds, true);
@@ -634,6 +651,7 @@ impl Simulation {
                 }
                 next += period;
                 self.drain_events();
+                self.corrections(self.hz, false);
                 let seconds = (self.server.frame() + 1) as f64 / f64::from(self.hz);
                 self.frame(seconds, false);
             }
@@ -665,6 +683,9 @@ impl Simulation {
                 if let Some(s) = self.sessions.get_mut(&id) {
                     s.view = Some(view_of(&cam));
                     s.pending = Some(cam.frame);
+                    if let Some(c) = &mut s.corrective {
+                        c.camera(&cam);
+                    }
                 }
             }
             Event::Ack(id, frame) => {
@@ -672,6 +693,11 @@ impl Simulation {
                     while s.unacked.front().is_some_and(|&f| f <= frame) {
                         s.unacked.pop_front();
                     }
+                }
+            }
+            Event::Regions(id, regions) => {
+                if let Some(s) = self.sessions.get_mut(&id) {
+                    corrective::regions(s, &regions);
                 }
             }
             Event::Leave(id) => {
@@ -744,6 +770,7 @@ impl Simulation {
                     id: id.0,
                     ..Default::default()
                 },
+                corrective: corrective::session_state(self.corrections.as_ref(), join.capabilities),
             },
         );
         self.health
