@@ -31,7 +31,7 @@ use crate::{NetError, Resolution};
 #[derive(Debug, Clone)]
 pub struct ViewConfig {
     /// Server address: `HOST:PORT` (TCP), `ws://HOST:PORT` or `wss://HOST:PORT` (WebSocket,
-    /// over TLS).
+    /// over TLS); several, comma separated, are tried in turn on each reconnect.
     pub connect: String,
     /// PEM certificates to trust for `wss://` (default: the Mozilla roots).
     pub tls_ca: Option<PathBuf>,
@@ -463,8 +463,11 @@ async fn network(
 ) {
     let mut backoff = Duration::from_millis(100);
     let mut last_ok = Instant::now();
-    loop {
-        match session(&args, &events, &mut outgoing).await {
+    // A list of servers (edges, docs/SCALE-OUT.md) is tried in turn, one per attempt.
+    let servers: Vec<&str> = args.connect.split(',').map(str::trim).collect();
+    for attempt in 0.. {
+        let server = servers[attempt % servers.len()];
+        match session(&args, server, &events, &mut outgoing).await {
             Ok(SessionEnd::Closed) => return,
             Ok(SessionEnd::Reconnect(why)) => {
                 last_ok = Instant::now();
@@ -511,11 +514,12 @@ enum SessionError {
 
 async fn session(
     args: &ViewConfig,
+    server: &str,
     events: &mpsc::Sender<NetEvent>,
     outgoing: &mut mpsc::UnboundedReceiver<Outgoing>,
 ) -> Result<SessionEnd, SessionError> {
     let retry = |e: NetError| SessionError::Retry(e.to_string());
-    let (mut reader, mut writer) = connect(&args.connect, MAX_SERVER_FRAME, args.tls_ca.as_deref())
+    let (mut reader, mut writer) = connect(server, MAX_SERVER_FRAME, args.tls_ca.as_deref())
         .await
         .map_err(retry)?;
     let hello = Message::Hello(Hello {

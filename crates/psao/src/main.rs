@@ -3,6 +3,7 @@
 mod args;
 mod bench_client;
 mod bench_relight;
+mod bench_scale;
 mod bench_serve;
 mod bench_step;
 mod bench_trace;
@@ -20,6 +21,7 @@ mod relight_eval;
 mod relight_io;
 mod report;
 mod run;
+mod scale_cmd;
 mod scene_source;
 mod scene_volume;
 mod serve;
@@ -56,6 +58,11 @@ enum Command {
     Compare(compare::CompareArgs),
     /// Serve AO updates to `psao view` clients over TCP and WebSocket.
     Serve(serve::ServeArgs),
+    /// Trace one partition of a scene's points and publish its records through NATS
+    /// (docs/SCALE-OUT.md).
+    TraceNode(scale_cmd::TraceNodeArgs),
+    /// Rebuild the published point state from NATS and serve viewers like `psao serve`.
+    Edge(scale_cmd::EdgeArgs),
     /// Connect to a `psao serve`, follow a camera path and write frames (headless client).
     View(view::ViewArgs),
     /// Sparse volumes: inspect, convert and render OpenVDB and `.psv` files.
@@ -82,6 +89,8 @@ enum BenchCommand {
     Serve(bench_serve::BenchServeArgs),
     /// The server alone in this process: N clients' views, per-phase ms and CPU per frame.
     Step(bench_step::BenchStepArgs),
+    /// Trace nodes over NATS against the one-process server: rays/s, bytes, takeover time.
+    Scale(bench_scale::BenchScaleArgs),
     /// Synthesis + shading time per frame of a relighting model.
     Relight(bench_relight::BenchRelightArgs),
 }
@@ -116,8 +125,11 @@ fn run(command: Command) -> Result<()> {
         Command::Bench(BenchCommand::Serve(a)) => bench_serve::run(&a),
         Command::Bench(BenchCommand::Step(a)) => bench_step::run(&a),
         Command::Bench(BenchCommand::Relight(a)) => bench_relight::run(&a),
+        Command::Bench(BenchCommand::Scale(a)) => bench_scale::run(&a),
         Command::Serve(a) => serve::run(&a),
         Command::View(a) => view::run(&a),
+        Command::TraceNode(a) => scale_cmd::run_trace_node(&a),
+        Command::Edge(a) => scale_cmd::run_edge(&a),
         Command::Volume(c) => volume_cmd::run(&c),
         Command::Relight(c) => relight_cmd::run(&c),
         Command::Corrective(c) => corrective::run(&c),

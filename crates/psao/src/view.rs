@@ -14,7 +14,8 @@ use crate::scene_source::SceneArgs;
 #[derive(clap::Args, Debug, Clone)]
 pub struct ViewArgs {
     /// Server address: `HOST:PORT` (TCP), `ws://HOST:PORT[/PATH]` (WebSocket, path `/ws` by
-    /// default) or `wss://HOST:PORT[/PATH]` (WebSocket over TLS).
+    /// default) or `wss://HOST:PORT[/PATH]` (WebSocket over TLS). Several, comma separated
+    /// (e.g. the edges of docs/SCALE-OUT.md), are tried in turn on each reconnect.
     #[arg(long, default_value = "127.0.0.1:7878")]
     pub connect: String,
     /// PEM file of the certificates to trust for `wss://` (default: the Mozilla roots).

@@ -24,6 +24,8 @@ const INBOX: usize = 1024;
 /// Frames an edge keeps incomplete before it refuses more (a partition that never
 /// publishes again would otherwise grow this without bound).
 pub const MAX_PENDING_FRAMES: usize = 1 << 16;
+/// How long a lockstep edge waits for a frame's batches before publishing its views again.
+const VIEWS_AGAIN: Duration = Duration::from_secs(1);
 
 /// How an edge follows the trace nodes.
 #[derive(Clone, Debug)]
@@ -157,7 +159,10 @@ pub struct EdgeStepper {
     rt: tokio::runtime::Runtime,
     client: async_nats::Client,
     names: Names,
-    batches: mpsc::Receiver<Batch>,
+    /// The stream's batches with their sequence numbers.
+    batches: mpsc::Receiver<(u64, Batch)>,
+    /// The stream's last sequence number when the edge connected.
+    backlog: u64,
     assembler: Assembler,
     counters: Arc<EdgeCounters>,
 }
@@ -172,10 +177,11 @@ impl EdgeStepper {
             .map_err(NetError::io("cannot start the async runtime"))?;
         let names = Names::new(&config.scene);
         let counters = Arc::new(EdgeCounters::default());
-        let (client, batches) = rt.block_on(async {
+        let (client, batches, backlog) = rt.block_on(async {
             let client = connect(&config.nats).await?;
             let js = async_nats::jetstream::new(client.clone());
             let stream = records_stream(&js, &names).await?;
+            let backlog = stream.cached_info().state.last_sequence;
             let consumer = stream
                 .create_consumer(pull::OrderedConfig {
                     deliver_policy: DeliverPolicy::All,
@@ -190,7 +196,7 @@ impl EdgeStepper {
                 .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?;
             let (tx, rx) = mpsc::channel(INBOX);
             tokio::spawn(read_stream(messages, tx, counters.clone()));
-            Ok::<_, NetError>((client, rx))
+            Ok::<_, NetError>((client, rx, backlog))
         })?;
         Ok(Self {
             config,
@@ -198,6 +204,7 @@ impl EdgeStepper {
             client,
             names,
             batches,
+            backlog,
             assembler: Assembler::default(),
             counters,
         })
@@ -208,8 +215,9 @@ impl EdgeStepper {
         self.counters.clone()
     }
 
-    /// Apply every complete frame already in the stream, until none arrives for `quiet`
-    /// (a joining edge's snapshot); returns the frames applied.
+    /// Apply every complete frame that was in the stream when the edge connected (a joining
+    /// edge's snapshot), giving up when nothing arrives for `quiet`; returns the frames
+    /// applied.
     pub fn catch_up(&mut self, server: &mut Server, quiet: Duration) -> Result<u64, NetError> {
         let start = server.frame();
         loop {
@@ -217,9 +225,12 @@ impl EdgeStepper {
                 .rt
                 .block_on(async { tokio::time::timeout(quiet, self.batches.recv()).await });
             match got {
-                Ok(Some(batch)) => {
+                Ok(Some((seq, batch))) => {
                     self.add(batch, server);
                     self.apply_ready(server)?;
+                    if seq >= self.backlog {
+                        return Ok(server.frame() - start);
+                    }
                 }
                 Ok(None) => return Err(NetError::Nats("the records stream ended".into())),
                 Err(_) => return Ok(server.frame() - start),
@@ -268,7 +279,7 @@ impl EdgeStepper {
 /// Forwards the stream's batches, checking that sequence numbers follow one another.
 async fn read_stream(
     mut messages: pull::Ordered,
-    tx: mpsc::Sender<Batch>,
+    tx: mpsc::Sender<(u64, Batch)>,
     counters: Arc<EdgeCounters>,
 ) {
     let mut last: Option<u64> = None;
@@ -280,8 +291,9 @@ async fn read_stream(
                 continue;
             }
         };
+        let mut seq = 0;
         if let Ok(info) = message.info() {
-            let seq = info.stream_sequence;
+            seq = info.stream_sequence;
             if let Some(prev) = last {
                 if seq <= prev {
                     counters.duplicates.fetch_add(1, Ordering::Relaxed);
@@ -300,7 +312,7 @@ async fn read_stream(
             .fetch_add(message.payload.len() as u64, Ordering::Relaxed);
         match Batch::decode(&message.payload) {
             Ok(batch) => {
-                if tx.send(batch).await.is_err() {
+                if tx.send((seq, batch)).await.is_err() {
                     return;
                 }
             }
@@ -309,6 +321,24 @@ async fn read_stream(
                 counters.malformed.fetch_add(1, Ordering::Relaxed);
             }
         }
+    }
+}
+
+impl EdgeStepper {
+    /// Publish a view set on this edge's subject.
+    fn publish_views(&mut self, payload: &[u8]) -> Result<(), NetError> {
+        let subject = self.names.views(&self.config.edge_id);
+        let payload = bytes::Bytes::copy_from_slice(payload);
+        self.rt.block_on(async {
+            self.client
+                .publish(subject, payload)
+                .await
+                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))?;
+            self.client
+                .flush()
+                .await
+                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))
+        })
     }
 }
 
@@ -328,19 +358,10 @@ impl Stepper for EdgeStepper {
             seconds: f64::from(seconds),
             views: views.to_vec(),
         };
-        let subject = self.names.views(&self.config.edge_id);
-        self.rt.block_on(async {
-            self.client
-                .publish(subject, set.encode().into())
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))?;
-            self.client
-                .flush()
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))
-        })?;
+        let payload = set.encode();
+        self.publish_views(&payload)?;
         if !self.config.lockstep {
-            while let Ok(batch) = self.batches.try_recv() {
+            while let Ok((_, batch)) = self.batches.try_recv() {
                 self.add(batch, server);
             }
             return self.apply_ready(server);
@@ -357,13 +378,15 @@ impl Stepper for EdgeStepper {
                     self.config.frame_timeout.as_secs_f64()
                 )));
             }
+            let slice = left.min(VIEWS_AGAIN);
             let got = self
                 .rt
-                .block_on(async { tokio::time::timeout(left, self.batches.recv()).await });
+                .block_on(async { tokio::time::timeout(slice, self.batches.recv()).await });
             match got {
-                Ok(Some(batch)) => self.add(batch, server),
+                Ok(Some((_, batch))) => self.add(batch, server),
                 Ok(None) => return Err(NetError::Nats("the records stream ended".into())),
-                Err(_) => {}
+                // A trace node that subscribed late missed them: say them again.
+                Err(_) => self.publish_views(&payload)?,
             }
         }
     }

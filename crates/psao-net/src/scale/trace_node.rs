@@ -11,7 +11,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use async_nats::jetstream::kv;
 use futures_util::StreamExt;
 use psao_server::{Partition, PointRecord, Server, View};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tokio::sync::mpsc;
 
 use super::wire::{Batch, ViewSet};
@@ -45,7 +45,7 @@ pub struct TraceNodeConfig {
 }
 
 /// A partition adopted from a node that stopped refreshing its lease.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Adoption {
     /// The partition.
     pub partition: u32,
@@ -58,7 +58,7 @@ pub struct Adoption {
 }
 
 /// What a trace node did (`psao trace-node --json`).
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct TraceNodeStats {
     /// Server frames stepped.
     pub frames: u64,
@@ -135,11 +135,11 @@ impl Leases {
         Ok(())
     }
 
-    /// Take every partition whose lease is free; returns them.
-    async fn adopt_free(&mut self) -> Vec<u32> {
+    /// Take every partition of `candidates` whose lease is free; returns them.
+    async fn adopt_free(&mut self, candidates: impl Iterator<Item = u32>) -> Vec<u32> {
         let mut adopted = Vec::new();
-        for k in 0..self.count {
-            if !self.held.contains_key(&k) && self.try_take(k).await {
+        for k in candidates {
+            if k < self.count && !self.held.contains_key(&k) && self.try_take(k).await {
                 adopted.push(k);
             }
         }
@@ -147,22 +147,33 @@ impl Leases {
     }
 }
 
-/// The leases bucket of `names`, created when missing.
+/// The leases bucket of `names`, created when missing. The bucket's stream is made here
+/// with the key-value conventions (`KV_<bucket>` over `$KV.<bucket>.>`, one message per
+/// key, roll-ups allowed) because `create_key_value` first queries the account, whose
+/// answer from Debian's nats-server 2.9 async-nats 0.42 does not parse.
 async fn leases_bucket(
     js: &async_nats::jetstream::Context,
     names: &Names,
 ) -> Result<kv::Store, NetError> {
-    if let Ok(store) = js.get_key_value(names.leases()).await {
-        return Ok(store);
-    }
-    js.create_key_value(kv::Config {
-        bucket: names.leases(),
-        history: 1,
+    use async_nats::jetstream::stream;
+    let bucket = names.leases();
+    js.get_or_create_stream(stream::Config {
+        name: format!("KV_{bucket}"),
+        subjects: vec![format!("$KV.{bucket}.>")],
+        max_messages_per_subject: 1,
         max_age: LEASE_TTL,
+        allow_rollup: true,
+        deny_delete: true,
+        allow_direct: true,
+        discard: stream::DiscardPolicy::New,
+        storage: stream::StorageType::Memory,
         ..Default::default()
     })
     .await
-    .map_err(|e| NetError::Nats(format!("cannot open bucket {}: {e}", names.leases())))
+    .map_err(|e| NetError::Nats(format!("cannot open bucket {bucket}: {e}")))?;
+    js.get_key_value(bucket.clone())
+        .await
+        .map_err(|e| NetError::Nats(format!("cannot open bucket {bucket}: {e}")))
 }
 
 /// The shared clock's epoch (Unix ms) kept in the bucket: the first node's start. The
@@ -190,7 +201,8 @@ struct Node {
     names: Names,
     leases: Leases,
     views: mpsc::Receiver<(String, ViewSet)>,
-    batches: mpsc::Receiver<Batch>,
+    /// Every partition's batches, with the time each arrived.
+    batches: mpsc::Receiver<(Instant, Batch)>,
     counters: Arc<Counters>,
     /// Lockstep: view sets by frame and edge. Clocked: the latest of each edge.
     pending_views: BTreeMap<u64, BTreeMap<String, Vec<View>>>,
@@ -242,7 +254,7 @@ pub fn run(
         &client,
         names.records_wildcard(),
         counters.clone(),
-        |_, payload| Batch::decode(payload).ok(),
+        |_, payload| Batch::decode(payload).ok().map(|b| (Instant::now(), b)),
     ))?;
     let partition = config.partition;
     let mut leases = Leases {
@@ -445,13 +457,13 @@ impl Node {
     /// Take in the other partitions' batches: their records become this node's published
     /// state (to adopt from), and their frames are noted.
     fn note_batches(&mut self) {
-        while let Ok(batch) = self.batches.try_recv() {
+        while let Ok((arrived, batch)) = self.batches.try_recv() {
             let seen = self
                 .last_seen
                 .entry(batch.partition)
-                .or_insert((0, Instant::now()));
+                .or_insert((0, arrived));
             if batch.frame >= seen.0 {
-                *seen = (batch.frame, Instant::now());
+                *seen = (batch.frame, arrived);
             }
             if self.leases.held.contains_key(&batch.partition) {
                 continue;
@@ -538,11 +550,14 @@ impl Node {
                 let _ = self.rt.block_on(self.leases.kv.put("epoch", epoch));
             }
         }
-        let adopted = self.rt.block_on(self.leases.adopt_free());
+        // Only partitions that published and then went quiet are adopted (a node still
+        // starting up has not published yet).
+        self.note_batches();
+        let seen: Vec<u32> = self.last_seen.keys().copied().collect();
+        let adopted = self.rt.block_on(self.leases.adopt_free(seen.into_iter()));
         if adopted.is_empty() {
             return Ok(());
         }
-        self.note_batches();
         let frame = self.server.frame();
         for k in adopted {
             let (last, at) = self

@@ -1,0 +1,355 @@
+//! `psao bench scale`: trace nodes (`psao trace-node` child processes) over a
+//! `nats-server -js` started here, and an edge in this process following a camera path in
+//! lockstep (docs/SCALE-OUT.md). Reports each node's rays per second of step time against
+//! the one-process server's, the bytes through NATS per server frame against the bytes one
+//! viewer receives, and the time a dead node's partition takes to be adopted.
+
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use psao_net::pipeline::CLIENT_HZ;
+use psao_net::scale::edge::{EdgeConfig, EdgeStepper};
+use psao_net::scale::trace_node::TraceNodeStats;
+use psao_net::serve::Stepper;
+use psao_net::start_cache::start_server;
+use psao_net::Resolution;
+use psao_scene::CameraPath;
+use psao_server::{Server, View};
+use serde::Serialize;
+
+use crate::run::{write_json, ServerTuning};
+use crate::scene_source::SceneInput;
+
+/// Arguments of `psao bench scale`.
+#[derive(clap::Args, Debug)]
+pub struct BenchScaleArgs {
+    /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file.
+    #[arg(long, default_value = crate::scene_source::BUILTIN_SCENE)]
+    pub scene: String,
+    /// Camera path file (default: the scene's first path).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Points per unit area.
+    #[arg(long, default_value_t = 1024.0)]
+    pub points: f32,
+    /// Server frames per second of scene time.
+    #[arg(long, default_value_t = 30)]
+    pub hz: u32,
+    /// Server frames per run.
+    #[arg(long, default_value_t = 60)]
+    pub frames: u64,
+    /// Trace-node counts to run, comma separated.
+    #[arg(long, default_value = "1,2,4", value_delimiter = ',')]
+    pub nodes: Vec<u32>,
+    #[command(flatten)]
+    pub tuning: ServerTuning,
+    /// The NATS server program.
+    #[arg(long, default_value = "nats-server")]
+    pub nats_server: PathBuf,
+    /// Write the report as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// One run of `nodes` trace nodes.
+#[derive(Debug, Serialize)]
+pub struct ScaleRow {
+    /// Trace nodes.
+    pub nodes: u32,
+    /// Rays per second of step time of each node, and their sum.
+    pub rays_per_s: Vec<f64>,
+    pub sum_rays_per_s: f64,
+    /// The first node's rate over the one-process server's.
+    pub node_over_serve: f64,
+    /// Mean step ms of each node.
+    pub step_ms: Vec<f64>,
+    /// Bytes of record batches through NATS per server frame (all partitions).
+    pub nats_bytes_per_frame: f64,
+    /// Bytes one viewer receives per server frame (the update encoded with the codec).
+    pub viewer_bytes_per_frame: f64,
+    /// Whether the edge's final grids hash like the one-process server's.
+    pub same_state: bool,
+}
+
+/// What `psao bench scale` reports.
+#[derive(Debug, Serialize)]
+pub struct ScaleReport {
+    /// Scene and settings.
+    pub scene: String,
+    pub frames: u64,
+    pub ray_budget: u64,
+    /// The one-process server's rays per second of step time.
+    pub serve_rays_per_s: f64,
+    /// Its final state hash.
+    pub serve_state_hash: String,
+    /// One row per trace-node count.
+    pub runs: Vec<ScaleRow>,
+    /// Two nodes, the second killed a third of the way: seconds from its last batch to the
+    /// adoption of its partition by the first.
+    pub takeover_s: Option<f64>,
+}
+
+/// A child process killed on drop.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A scratch folder for one nats-server's store, removed on drop.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Result<Self> {
+        let dir =
+            std::env::temp_dir().join(format!("psao-bench-scale-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create {}", dir.display()))?;
+        Ok(Self(dir))
+    }
+
+    fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Runs `psao bench scale`.
+pub fn run(args: &BenchScaleArgs) -> Result<()> {
+    if args.frames == 0 || args.nodes.contains(&0) || args.hz == 0 || args.hz > CLIENT_HZ {
+        bail!("--frames and every --nodes count must be at least 1, --hz in 1..={CLIENT_HZ}");
+    }
+    let input = SceneInput::load(&args.scene)?;
+    let path = input.camera_path(args.path.as_ref())?;
+    let config = args.tuning.config(
+        args.points,
+        args.hz,
+        Resolution {
+            width: 1,
+            height: 1,
+        },
+    )?;
+    let make = || {
+        start_server(
+            &input.scene,
+            config.server,
+            input.medium(),
+            config.points_cache.as_deref(),
+        )
+        .context("cannot start the server (point generation or tracer)")
+    };
+    let (serve_rays_per_s, serve_hash) = {
+        let mut server = make()?;
+        let (mut rays, mut ms) = (0u64, 0.0);
+        for f in 1..=args.frames {
+            let step = server.step_at(&[view_at(&path, f, args.hz)], seconds(f, args.hz))?;
+            rays += step.rays;
+            ms += step.ms;
+        }
+        (rays as f64 / (ms / 1e3).max(1e-9), state_hash(&server))
+    };
+    tracing::info!("one process: {serve_rays_per_s:.0} rays/s");
+    let mut runs = Vec::new();
+    for &n in &args.nodes {
+        let dir = Scratch::new(&format!("n{n}"))?;
+        let (_nats, url) = start_nats(&args.nats_server, dir.path())?;
+        let mut nodes: Vec<Proc> = (0..n)
+            .map(|k| trace_node(args, &url, k, n, &dir.path().join(format!("t{k}.json"))))
+            .collect::<Result<_>>()?;
+        let mut replica = make()?;
+        let (viewer_bytes, nats_bytes) =
+            follow(args, &url, &input.name, &path, &mut replica, None)?;
+        let stats: Vec<TraceNodeStats> = (0..n)
+            .map(|k| {
+                wait_stats(
+                    &mut nodes[k as usize],
+                    &dir.path().join(format!("t{k}.json")),
+                )
+            })
+            .collect::<Result<_>>()?;
+        let rays_per_s: Vec<f64> = stats.iter().map(|s| s.rays_per_s).collect();
+        let frames = args.frames as f64;
+        let row = ScaleRow {
+            nodes: n,
+            sum_rays_per_s: rays_per_s.iter().sum(),
+            node_over_serve: rays_per_s[0] / serve_rays_per_s.max(1e-9),
+            rays_per_s,
+            step_ms: stats.iter().map(|s| s.mean_step_ms).collect(),
+            nats_bytes_per_frame: nats_bytes as f64 / frames,
+            viewer_bytes_per_frame: viewer_bytes as f64 / frames,
+            same_state: state_hash(&replica) == serve_hash,
+        };
+        tracing::info!("{n} nodes: {row:?}");
+        runs.push(row);
+    }
+    let takeover_s = takeover(args, &input.name, &path, make()?)?;
+    let report = ScaleReport {
+        scene: input.name.clone(),
+        frames: args.frames,
+        ray_budget: config.server.ray_budget,
+        serve_rays_per_s,
+        serve_state_hash: serve_hash,
+        runs,
+        takeover_s,
+    };
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    if let Some(json) = &args.json {
+        write_json(json, &report)?;
+    }
+    Ok(())
+}
+
+/// Two nodes; the second is killed a third of the way; the first's adoption time.
+fn takeover(
+    args: &BenchScaleArgs,
+    scene: &str,
+    path: &CameraPath,
+    mut replica: Server,
+) -> Result<Option<f64>> {
+    let dir = Scratch::new("takeover")?;
+    let (_nats, url) = start_nats(&args.nats_server, dir.path())?;
+    let first = dir.path().join("t0.json");
+    let mut survivor = trace_node(args, &url, 0, 2, &first)?;
+    let victim = trace_node(args, &url, 1, 2, &dir.path().join("t1.json"))?;
+    follow(
+        args,
+        &url,
+        scene,
+        path,
+        &mut replica,
+        Some((args.frames / 3, victim)),
+    )?;
+    let stats = wait_stats(&mut survivor, &first)?;
+    Ok(stats.adopted.first().map(|a| a.after_s))
+}
+
+/// Follow the path for `args.frames` server frames as an edge in lockstep; returns the
+/// bytes one viewer would receive and the bytes of batches received. `kill`: at that frame,
+/// kill that node.
+fn follow(
+    args: &BenchScaleArgs,
+    url: &str,
+    scene: &str,
+    path: &CameraPath,
+    replica: &mut Server,
+    mut kill: Option<(u64, Proc)>,
+) -> Result<(u64, u64)> {
+    let mut edge = EdgeStepper::connect(EdgeConfig {
+        nats: url.to_string(),
+        scene: scene.to_string(),
+        edge_id: "bench".into(),
+        lockstep: true,
+        frame_timeout: Duration::from_secs(300),
+    })?;
+    let client = replica.add_client();
+    let mut codec = psao_delta::codec_by_name(&args.tuning.codec)?;
+    let mut viewer_bytes = 0u64;
+    for f in 1..=args.frames {
+        if kill.as_ref().is_some_and(|(at, _)| *at == f) {
+            drop(kill.take());
+        }
+        edge.step(replica, &[view_at(path, f, args.hz)], seconds(f, args.hz))?;
+        viewer_bytes += codec.encode(&replica.update_for(client)).len() as u64;
+    }
+    Ok((viewer_bytes, edge.counters().snapshot().batch_bytes))
+}
+
+fn seconds(frame: u64, hz: u32) -> f32 {
+    frame as f32 / hz as f32
+}
+
+/// The path's view at server frame `frame`.
+fn view_at(path: &CameraPath, frame: u64, hz: u32) -> View {
+    let total = path.frame_count() as u64;
+    let at = (frame * u64::from(CLIENT_HZ) / u64::from(hz)) % total;
+    View {
+        camera: path.camera_at_frame(at as usize),
+        aspect: 16.0 / 9.0,
+    }
+}
+
+fn state_hash(server: &Server) -> String {
+    let h = psao_client::state_hash_of((0..server.instance_count()).map(|i| server.grid(i)));
+    format!("{h:016x}")
+}
+
+/// A `nats-server -js` on a free loopback port storing into `dir`.
+fn start_nats(program: &Path, dir: &Path) -> Result<(Proc, String)> {
+    let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
+    let child = Command::new(program)
+        .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
+        .arg(dir.join("js"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .with_context(|| {
+            format!(
+                "cannot start {} (apt-get install nats-server)",
+                program.display()
+            )
+        })?;
+    let proc = Proc(child);
+    let end = Instant::now() + Duration::from_secs(10);
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        if Instant::now() > end {
+            bail!("nats-server did not listen on port {port} within 10 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok((proc, format!("nats://127.0.0.1:{port}")))
+}
+
+/// A `psao trace-node` child for partition `k/n`, lockstep with one edge.
+fn trace_node(args: &BenchScaleArgs, url: &str, k: u32, n: u32, json: &Path) -> Result<Proc> {
+    let exe = std::env::current_exe()?;
+    let mut c = Command::new(exe);
+    c.args([
+        "--log",
+        "warn",
+        "trace-node",
+        "--scene",
+        &args.scene,
+        "--nats",
+        url,
+    ]);
+    c.args(["--partition", &format!("{k}/{n}"), "--lockstep-edges", "1"]);
+    c.args([
+        "--frames",
+        &args.frames.to_string(),
+        "--hz",
+        &args.hz.to_string(),
+    ]);
+    c.args(["--points", &args.points.to_string()]);
+    c.args(["--ray-budget", &args.tuning.ray_budget.to_string()]);
+    c.args(["--rays-per-point", &args.tuning.rays_per_point.to_string()]);
+    c.args(["--max-samples", &args.tuning.max_samples.to_string()]);
+    c.args(["--seed", &args.tuning.seed.to_string()]);
+    if let Some(b) = &args.tuning.backend {
+        c.args(["--backend", &format!("{b:?}").to_lowercase()]);
+    }
+    c.arg("--json").arg(json);
+    c.stdout(Stdio::null()).stderr(Stdio::inherit());
+    Ok(Proc(c.spawn().context("cannot start psao trace-node")?))
+}
+
+/// Wait for a node to exit and read its statistics.
+fn wait_stats(node: &mut Proc, json: &Path) -> Result<TraceNodeStats> {
+    let status = node.0.wait()?;
+    if !status.success() {
+        bail!("psao trace-node exited with {status}");
+    }
+    let text =
+        std::fs::read_to_string(json).with_context(|| format!("cannot read {}", json.display()))?;
+    Ok(serde_json::from_str(&text)?)
+}

@@ -1,0 +1,363 @@
+//! Scale-out over a real `nats-server -js` started on a free loopback port
+//! (docs/SCALE-OUT.md): trace nodes and edges in lockstep end with the client state of
+//! `psao serve` alone; a dead trace node's partition is adopted; a late edge catches up.
+//! Every test skips with a note when `nats-server` is not installed.
+
+use std::io::{BufRead, BufReader};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+mod common;
+
+use common::{json, stderr, BIN};
+
+/// Server settings of every process: few points, small budget.
+const SERVER: &[&str] = &["--points", "96", "--ray-budget", "20000", "--hz", "30"];
+
+/// A small room (floor, wall, box) and a camera path that moves for 1 s, then stays still
+/// until 10 s (so a clocked session converges).
+fn fixture(dir: &Path) -> (String, String) {
+    let quads: [[[f32; 3]; 4]; 5] = [
+        [[-4., 0., -4.], [4., 0., -4.], [4., 0., 4.], [-4., 0., 4.]],
+        [[-4., 0., -4.], [-4., 3., -4.], [4., 3., -4.], [4., 0., -4.]],
+        [[-1., 0., -1.], [-1., 1., -1.], [1., 1., -1.], [1., 0., -1.]],
+        [[-1., 0., 1.], [1., 0., 1.], [1., 1., 1.], [-1., 1., 1.]],
+        [[-1., 1., -1.], [-1., 1., 1.], [1., 1., 1.], [1., 1., -1.]],
+    ];
+    let mut obj = String::new();
+    for (i, q) in quads.iter().enumerate() {
+        for v in q {
+            obj += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+        }
+        let b = i * 4 + 1;
+        obj += &format!("f {} {} {}\nf {} {} {}\n", b, b + 1, b + 2, b, b + 2, b + 3);
+    }
+    std::fs::write(dir.join("room.obj"), obj).unwrap();
+    let path = "name = \"room\"\nfov_y_deg = 60.0\n\
+        [[key]]\ntime = 0.0\nposition = [3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, 0.0]\n\
+        [[key]]\ntime = 1.0\nposition = [-3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, -1.0]\n\
+        [[key]]\ntime = 10.0\nposition = [-3.0, 1.6, 3.0]\nlook_at = [0.0, 0.5, -1.0]\n";
+    std::fs::write(dir.join("path.toml"), path).unwrap();
+    let s = |n: &str| dir.join(n).to_string_lossy().into_owned();
+    (s("room.obj"), s("path.toml"))
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// A child process killed on drop.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Proc {
+    /// Ask it to stop as Ctrl-C does, and wait for it to exit (successfully).
+    fn interrupt(mut self, secs: u64) {
+        let pid = self.0.id().to_string();
+        Command::new("kill").args(["-INT", &pid]).status().unwrap();
+        self.wait(secs);
+    }
+
+    fn wait(&mut self, secs: u64) {
+        let end = Instant::now() + Duration::from_secs(secs);
+        loop {
+            if let Some(status) = self.0.try_wait().unwrap() {
+                assert!(status.success(), "exited with {status}");
+                return;
+            }
+            assert!(Instant::now() < end, "process did not exit in {secs} s");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// A `nats-server -js` on a free port, or `None` (with a note) when it is not installed.
+fn nats(dir: &Path) -> Option<(Proc, String)> {
+    if Command::new("nats-server")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("note: nats-server is not installed: scale-out test skipped");
+        return None;
+    }
+    let port = free_port();
+    let child = Command::new("nats-server")
+        .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
+        .arg(dir.join("js"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let end = Instant::now() + Duration::from_secs(10);
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(Instant::now() < end, "nats-server did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Some((Proc(child), format!("nats://127.0.0.1:{port}")))
+}
+
+/// `psao <role> --scene SCENE <SERVER> <extra>`, its stdout's first line awaited.
+fn start(role: &str, scene: &str, extra: &[&str]) -> (Proc, String) {
+    let mut child = Command::new(BIN)
+        .args(["--log", "warn", role, "--scene", scene])
+        .args(SERVER)
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    (Proc(child), line.trim().to_string())
+}
+
+/// The address of a server that printed `listening on ADDR`.
+fn addr(line: &str) -> String {
+    line.strip_prefix("listening on ")
+        .unwrap_or_else(|| panic!("unexpected output {line:?}"))
+        .to_string()
+}
+
+/// A `psao view` of `frames` frames writing its statistics to `out`.
+fn view(connect: &str, scene: &str, path: &str, frames: u32, out: &Path) -> Child {
+    Command::new(BIN)
+        .args([
+            "--log",
+            "warn",
+            "view",
+            "--connect",
+            connect,
+            "--scene",
+            scene,
+        ])
+        .args([
+            "--path",
+            path,
+            "--frames",
+            &frames.to_string(),
+            "--res",
+            "32x24",
+        ])
+        .arg("--json")
+        .arg(out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+fn finished(child: Child) {
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// Every view's final state hash, after checking it matched the server's all along.
+fn view_hashes(files: &[PathBuf]) -> Vec<String> {
+    files
+        .iter()
+        .map(|f| {
+            let s = json(f);
+            assert_eq!(s["hash_mismatches"], 0, "{s}");
+            assert_eq!(
+                s["state_hash"].as_str(),
+                s["server_state_hash"].as_str(),
+                "{s}"
+            );
+            s["state_hash"].as_str().unwrap().to_string()
+        })
+        .collect()
+}
+
+const FRAMES: u32 = 8;
+
+#[test]
+fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_nats, url)) = nats(dir.path()) else {
+        return;
+    };
+    let (scene, path) = fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+
+    // psao serve alone, four lockstep viewers.
+    let (serve, line) = start(
+        "serve",
+        &scene,
+        &[
+            "--listen",
+            "127.0.0.1:0",
+            "--lockstep",
+            "--wait-clients",
+            "4",
+            "--once",
+        ],
+    );
+    let at = addr(&line);
+    let files: Vec<PathBuf> = (0..4).map(|i| out(&format!("s{i}.json"))).collect();
+    let views: Vec<Child> = files
+        .iter()
+        .map(|f| view(&at, &scene, &path, FRAMES, f))
+        .collect();
+    views.into_iter().for_each(finished);
+    let mut serve = serve;
+    serve.wait(20);
+    let alone = view_hashes(&files);
+
+    // Two trace nodes, two edges with two viewers each.
+    let nodes: Vec<Proc> = (0..2)
+        .map(|k| {
+            let partition = format!("{k}/2");
+            let (p, line) = start(
+                "trace-node",
+                &scene,
+                &[
+                    "--nats",
+                    &url,
+                    "--partition",
+                    &partition,
+                    "--lockstep-edges",
+                    "2",
+                ],
+            );
+            assert!(line.starts_with("trace node"), "{line}");
+            p
+        })
+        .collect();
+    let edges: Vec<(Proc, String)> = (0..2)
+        .map(|e| {
+            let (p, line) = start(
+                "edge",
+                &scene,
+                &[
+                    "--nats",
+                    &url,
+                    "--listen",
+                    "127.0.0.1:0",
+                    "--lockstep",
+                    "--wait-clients",
+                    "2",
+                    "--once",
+                    "--edge-id",
+                    &format!("e{e}"),
+                    "--json",
+                    out(&format!("e{e}.json")).to_str().unwrap(),
+                ],
+            );
+            (p, addr(&line))
+        })
+        .collect();
+    let files: Vec<PathBuf> = (0..4).map(|i| out(&format!("v{i}.json"))).collect();
+    let views: Vec<Child> = files
+        .iter()
+        .enumerate()
+        .map(|(i, f)| view(&edges[i % 2].1, &scene, &path, FRAMES, f))
+        .collect();
+    views.into_iter().for_each(finished);
+    for (mut p, _) in edges {
+        p.wait(20);
+    }
+    let split = view_hashes(&files);
+    assert_eq!(split, alone, "same client states as psao serve alone");
+    let edge_hash = |n: &str| json(&out(n))["state_hash"].as_str().unwrap().to_string();
+    assert_eq!(edge_hash("e0.json"), edge_hash("e1.json"));
+    for e in ["e0.json", "e1.json"] {
+        let s = json(&out(e));
+        assert_eq!(s["edge"]["malformed"], 0, "{s}");
+        assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
+        assert!(s["edge"]["frames"].as_u64().unwrap() > 0, "{s}");
+    }
+    for n in nodes {
+        n.interrupt(20);
+    }
+
+    // A late edge (clocked) replays the stream: the same state as the lockstep edges.
+    let (late, line) = start(
+        "edge",
+        &scene,
+        &[
+            "--nats",
+            &url,
+            "--listen",
+            "127.0.0.1:0",
+            "--once",
+            "--json",
+            out("late.json").to_str().unwrap(),
+        ],
+    );
+    let v = view(&addr(&line), &scene, &path, 30, &out("lv.json"));
+    finished(v);
+    let mut late = late;
+    late.wait(20);
+    assert_eq!(edge_hash("late.json"), edge_hash("e0.json"));
+    assert_eq!(view_hashes(&[out("lv.json")]), vec![edge_hash("e0.json")]);
+}
+
+#[test]
+fn a_dead_trace_node_and_a_dead_edge_are_survived() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_nats, url)) = nats(dir.path()) else {
+        return;
+    };
+    let (scene, path) = fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+    // Few samples per point: the state converges within a second of the path.
+    let quick = ["--nats", &url, "--max-samples", "16"];
+    let node = |k: u32| {
+        let partition = format!("{k}/2");
+        let json = out(&format!("t{k}.json"));
+        let mut args = quick.to_vec();
+        args.extend(["--partition", &partition, "--json", json.to_str().unwrap()]);
+        start("trace-node", &scene, &args).0
+    };
+    let (t0, t1) = (node(0), node(1));
+    let edge = |e: u32| {
+        let json = out(&format!("e{e}.json"));
+        let mut args = quick.to_vec();
+        args.extend([
+            "--listen",
+            "127.0.0.1:0",
+            "--once",
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        let (p, line) = start("edge", &scene, &args);
+        (p, addr(&line))
+    };
+    let ((e0, a0), (mut e1, a1)) = (edge(0), edge(1));
+    let v0 = view(&format!("{a0},{a1}"), &scene, &path, 600, &out("v0.json"));
+    let v1 = view(&format!("{a1},{a0}"), &scene, &path, 600, &out("v1.json"));
+    std::thread::sleep(Duration::from_millis(1500));
+    drop(t1);
+    std::thread::sleep(Duration::from_millis(1000));
+    drop(e0);
+    finished(v0);
+    finished(v1);
+    e1.wait(20);
+    t0.interrupt(20);
+    let hashes = view_hashes(&[out("v0.json"), out("v1.json")]);
+    assert_eq!(hashes[0], hashes[1], "both viewers converged to one state");
+    let e1 = json(&out("e1.json"));
+    assert_eq!(e1["state_hash"].as_str(), Some(hashes[0].as_str()), "{e1}");
+    assert!(json(&out("v0.json"))["reconnects"].as_u64().unwrap() >= 1);
+    let t0 = json(&out("t0.json"));
+    assert_eq!(t0["partitions"], serde_json::json!([0, 1]), "{t0}");
+    let adoption = &t0["adopted"][0];
+    assert_eq!(adoption["partition"], 1, "{t0}");
+    let after = adoption["after_s"].as_f64().unwrap();
+    assert!(after <= 5.0, "partition taken over after {after} s");
+}
