@@ -3,7 +3,7 @@
 //! Nothing goes around the codec: the client's state is built only from decoded updates.
 
 use crate::{NetError, Resolution};
-use psao_client::{ClientState, ReconstructSettings, Shading};
+use psao_client::{ClientState, DetailSettings, ReconstructSettings, Shading};
 use psao_delta::Codec;
 use psao_eval::AoImage;
 use psao_raster::{GBuffer, InstancePose, RasterOptions, Rasterizer};
@@ -277,7 +277,9 @@ impl ClientRenderer {
                     .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)?;
             }
         }
-        let ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());
+        let mut ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());
+        // Sub-spacing contact detail from the G-buffer (psao-client's `detail` module).
+        psao_client::apply_detail(state, &gbuffer, camera, &DetailSettings::default(), &mut ao);
         Ok(ClientFrame {
             ao: AoImage {
                 width: gbuffer.width,
