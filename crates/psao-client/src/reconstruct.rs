@@ -3,8 +3,8 @@
 
 use glam::{Affine3A, Mat3A, Vec3A};
 use psao_points::{
-    InstanceGrid, ReconstructParams, DEFAULT_INTERPOLATION_FACTOR, DEFAULT_LINEAR_RIDGE,
-    DEFAULT_NORMAL_EXPONENT, DEFAULT_PLANE_TOLERANCE,
+    InstanceGrid, ReconstructParams, DEFAULT_INTERPOLATION_FACTOR, DEFAULT_NORMAL_EXPONENT,
+    DEFAULT_PLANE_TOLERANCE,
 };
 use psao_raster::GBuffer;
 use rayon::prelude::*;
@@ -38,7 +38,7 @@ impl Default for ReconstructSettings {
             plane_tolerance: DEFAULT_PLANE_TOLERANCE,
             normal_exponent: DEFAULT_NORMAL_EXPONENT,
             nearest_fallback: true,
-            linear_ridge: Some(DEFAULT_LINEAR_RIDGE),
+            linear_ridge: None,
         }
     }
 }

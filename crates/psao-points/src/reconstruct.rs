@@ -26,12 +26,13 @@ pub const DEFAULT_DIRECTION_THRESHOLD: f32 = 0.7;
 
 /// Default plane tolerance, in Poisson radii: points farther than this from the shaded
 /// position's tangent plane are ignored (our addition to Eq. 3, see [`reconstruct_ao`]).
-pub const DEFAULT_PLANE_TOLERANCE: f32 = 0.3;
+pub const DEFAULT_PLANE_TOLERANCE: f32 = 0.5;
 /// Default exponent of the normal-agreement weight `(n·n_i)^k` (our addition, see
 /// [`reconstruct_ao`]).
 pub const DEFAULT_NORMAL_EXPONENT: i32 = 8;
-/// Default ridge of the planar fit, in Poisson radii (see [`ReconstructParams::linear_ridge`]).
-/// Measured against the weighted mean in docs/BENCHMARKS.md ("Fine detail").
+/// Ridge of the planar fit, in Poisson radii, when it is chosen
+/// ([`ReconstructParams::linear_ridge`]; off by default: on streamed frames whose points hold
+/// few samples it tilts with their noise and lowers SSIM, see docs/BENCHMARKS.md).
 pub const DEFAULT_LINEAR_RIDGE: f32 = 0.25;
 
 /// Parameters of the reconstruction.
@@ -65,7 +66,7 @@ impl Default for ReconstructParams {
             plane_tolerance: DEFAULT_PLANE_TOLERANCE,
             normal_exponent: DEFAULT_NORMAL_EXPONENT,
             nearest_fallback: true,
-            linear_ridge: Some(DEFAULT_LINEAR_RIDGE),
+            linear_ridge: None,
         }
     }
 }
@@ -83,7 +84,7 @@ impl Default for ReconstructParams {
 /// they lie mostly sideways. (1) A point farther than `plane_tolerance × r_max` from the
 /// tangent plane at `p` (`|n·(p_i − p)| >`, with the pixel's normal `n`) is ignored: on a
 /// flat or gently curved surface its own points lie within a fraction of `r_max` of the
-/// plane (quantisation: `r_max / 16` at most; curvature radius ≥ 14 `r_max` keeps every
+/// plane (quantisation: `r_max / 16` at most; curvature radius ≥ 8 `r_max` keeps every
 /// point within the radius), points of a surface offset by more do not. (2) `w` is
 /// multiplied by `(n·n_i)^normal_exponent`, so on creases points of the other face (tilted
 /// normals) count less than points of the pixel's own face. Both only ever zero or shrink
@@ -94,7 +95,7 @@ impl Default for ReconstructParams {
 /// ([`InstanceGrid::ring_cells`]); and 1 only when there is none: DESIGN's fallback 1 draws
 /// such detail as white gaps (a dark groove breaks into dashes), while the nearest point on
 /// the same surface carries nearly the same occlusion. (4) With
-/// [`ReconstructParams::linear_ridge`] (the default) the result is not `Σ w·AO_i / Σ w` but
+/// [`ReconstructParams::linear_ridge`] set (off by default) the result is not `Σ w·AO_i / Σ w` but
 /// the value at `p` of the plane fitted through the same weighted points ([`LinearFit`]),
 /// which keeps AO gradients steeper than the radius (the foot of a low wall).
 pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &ReconstructParams) -> f32 {
