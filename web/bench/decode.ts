@@ -4,8 +4,10 @@
 // (without hash checks, as the page runs by default), and prints the mean wall ms per update
 // spent decoding and applying, this process's CPU ms per update over the session (an upper
 // bound of the decoding's CPU that a loaded machine does not inflate), the mean update size,
-// and the ms of one full state hash.
+// and the ms of one full state hash. RECORD=FILE also writes every received WebSocket
+// message to FILE (u32 little-endian length, then the bytes) for `bench/replay.ts`.
 import { spawn } from "node:child_process";
+import { appendFileSync, writeFileSync } from "node:fs";
 import { createInterface } from "node:readline";
 import { fileURLToPath } from "node:url";
 import { Session } from "../src/session";
@@ -17,6 +19,23 @@ const FRAMES = process.env.FRAMES ?? "600";
 const serve = spawn(BIN, ["--log", "warn", "serve", "--listen", "127.0.0.1:0"], { stdio: ["ignore", "pipe", "inherit"] });
 const line: string = await new Promise((r) => createInterface({ input: serve.stdout! }).once("line", r));
 const addr = line.replace("listening on ", "").trim();
+if (process.env.RECORD) {
+  const file = process.env.RECORD;
+  writeFileSync(file, new Uint8Array(0));
+  const Base = globalThis.WebSocket;
+  globalThis.WebSocket = class extends Base {
+    constructor(url: string | URL, protocols?: string | string[]) {
+      super(url, protocols);
+      this.addEventListener("message", (ev) => {
+        const data = new Uint8Array(ev.data as ArrayBuffer);
+        const len = new Uint8Array(4);
+        new DataView(len.buffer).setUint32(0, data.length, true);
+        appendFileSync(file, len);
+        appendFileSync(file, data);
+      });
+    }
+  } as typeof WebSocket;
+}
 let bytes = 0;
 const cpuStart = process.cpuUsage();
 const session = new Session(

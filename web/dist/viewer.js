@@ -645,13 +645,6 @@
   var MAX_DECODE_LIMIT = 4 * 2 ** 30;
   var DeltaError = class extends Error {
   };
-  function emptyBucket() {
-    return {
-      lo: new Uint32Array(BUCKET_ENTRIES),
-      hi: new Uint32Array(BUCKET_ENTRIES),
-      slots: new Uint32Array(BUCKET_ENTRIES)
-    };
-  }
   function zstdContentSize(bytes) {
     if (bytes.length < 5) throw new DeltaError("corrupt compressed data: too short");
     const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
@@ -763,37 +756,54 @@
     }
     return acc >>> 0;
   }
-  function usedEntries(b) {
+  function usedEntries(lo, hi, base) {
     let n = 0;
-    while (n < BUCKET_ENTRIES && (b.lo[n] !== 0 || b.hi[n] !== 0)) n++;
+    while (n < BUCKET_ENTRIES && (lo[base + n] !== 0 || hi[base + n] !== 0)) n++;
     return n;
   }
-  function usedPoints(points) {
+  function usedPoints(points, base) {
     let n = 0;
-    while (n < CELL_POINTS && points[n] !== 0) n++;
+    while (n < CELL_POINTS && points[base + n] !== 0) n++;
     return n;
   }
+  function grown(a, words, max, what) {
+    if (words <= a.length) return a;
+    if (words > max) throw new DeltaError(`${what} out of range`);
+    const b = new Uint32Array(Math.min(Math.max(words, 2 * a.length, 64), max));
+    b.set(a);
+    return b;
+  }
+  var Received = class {
+    constructor(maxBucketWords, maxPointWords) {
+      this.maxBucketWords = maxBucketWords;
+      this.maxPointWords = maxPointWords;
+      this.lo = new Uint32Array(0);
+      this.hi = new Uint32Array(0);
+      this.slots = new Uint32Array(0);
+      this.points = new Uint32Array(0);
+    }
+  };
   function decodeCount(code, old, capacity, at, plane, what) {
     if (code > capacity) throw new DeltaError(`${what} ${code} exceeds ${capacity}`);
     const n = (code + old) % (capacity + 1);
     if (at + n > plane) throw new DeltaError(`byte planes hold ${plane} records, the index stream implies ${at + n}`);
     return n;
   }
-  var EMPTY_BUCKET = emptyBucket();
   var EMPTY_CELL = new Uint32Array(CELL_POINTS);
   var CompactDecoder = class {
-    /// Most decompressed bytes accepted per update (a client sets it from its instance table).
-    constructor(limit = MAX_DECODED_BYTES) {
+    /// Most decompressed bytes accepted per update (a client sets it from its instance table),
+    /// and the instances' bucket counts when known (indices beyond them are refused; without
+    /// them the reference arrays are bounded by the limit).
+    constructor(limit = MAX_DECODED_BYTES, bucketCounts = null) {
       this.limit = limit;
+      this.bucketCounts = bucketCounts;
       this.transforms = /* @__PURE__ */ new Map();
-      this.buckets = /* @__PURE__ */ new Map();
-      this.cells = /* @__PURE__ */ new Map();
+      this.received = /* @__PURE__ */ new Map();
       this.limit = Math.min(limit, MAX_DECODE_LIMIT);
     }
     clear() {
       this.transforms.clear();
-      this.buckets.clear();
-      this.cells.clear();
+      this.received.clear();
     }
     /// Decodes one update. After an error the state is undefined: the session must restart.
     decode(bytes) {
@@ -816,6 +826,25 @@
       if (snapshot) this.clear();
       return this.assemble(layout, s, frame, snapshot);
     }
+    receivedOf(instance) {
+      let r = this.received.get(instance);
+      if (!r) {
+        let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
+        if (this.bucketCounts) {
+          if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
+          buckets = this.bucketCounts[instance];
+        }
+        const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
+        r = new Received(buckets * BUCKET_ENTRIES, maxPoints);
+        if (this.bucketCounts) {
+          r.lo = new Uint32Array(r.maxBucketWords);
+          r.hi = new Uint32Array(r.maxBucketWords);
+          r.slots = new Uint32Array(r.maxBucketWords);
+        }
+        this.received.set(instance, r);
+      }
+      return r;
+    }
     assemble(layout, s, frame, snapshot) {
       const transforms = layout.transforms.map((instance, k) => {
         const old = this.transforms.get(instance) ?? new Uint32Array(TRANSFORM_WORDS);
@@ -830,14 +859,21 @@
       let point = 0;
       const instances = [];
       for (const { instance, buckets: bucketIds, cells: slotIds } of layout.instances) {
-        let received2 = this.buckets.get(instance);
-        if (!received2) this.buckets.set(instance, received2 = /* @__PURE__ */ new Map());
-        const buckets = [];
-        for (const b of bucketIds) {
+        const r = this.receivedOf(instance);
+        const nb = bucketIds.length;
+        const lo = new Uint32Array(nb * BUCKET_ENTRIES);
+        const hi = new Uint32Array(nb * BUCKET_ENTRIES);
+        const slots = new Uint32Array(nb * BUCKET_ENTRIES);
+        for (let k = 0; k < nb; k++) {
+          const b = bucketIds[k];
+          const base = b * BUCKET_ENTRIES;
+          const end = base + BUCKET_ENTRIES;
+          r.lo = grown(r.lo, end, r.maxBucketWords, `bucket ${b}`);
+          r.hi = grown(r.hi, end, r.maxBucketWords, `bucket ${b}`);
+          r.slots = grown(r.slots, end, r.maxBucketWords, `bucket ${b}`);
           const code = s.entryCounts[entryCount++];
-          const old = received2.get(b) ?? EMPTY_BUCKET;
-          const n = decodeCount(code, usedEntries(old), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
-          const bucket = emptyBucket();
+          const n = decodeCount(code, usedEntries(r.lo, r.hi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
+          const out = k * BUCKET_ENTRIES;
           for (let i = 0; i < n; i++) {
             const c = s.entryChoices[entry];
             let tLo = s.keyLo[entry];
@@ -849,51 +885,59 @@
               if (sr >= slotIds.length) throw new DeltaError("bad reference choice for a bucket entry");
               slot = slotIds[sr];
             } else if (c < RANK_CHOICE) {
-              const o = (i + c) % BUCKET_ENTRIES;
-              const rLo = old.lo[o];
-              const rHi = old.hi[o];
+              const o = base + (i + c) % BUCKET_ENTRIES;
+              const rLo = r.lo[o];
+              const rHi = r.hi[o];
               if (rLo !== 0 || rHi !== 0) {
                 const mLo = rLo === 0 ? 4294967295 : rLo - 1;
                 const mHi = rLo === 0 ? rHi - 1 : rHi;
                 tLo = (tLo ^ mLo ^ b) >>> 0;
                 tHi = (tHi ^ mHi) >>> 0;
               }
-              slot = (sr ^ old.slots[o]) >>> 0;
+              slot = (sr ^ r.slots[o]) >>> 0;
             } else {
               throw new DeltaError("bad reference choice for a bucket entry");
             }
             const xLo = (tLo ^ b) >>> 0;
             if (xLo === 4294967295 && tHi === 4294967295) throw new DeltaError("bad bucket key");
-            bucket.lo[i] = xLo === 4294967295 ? 0 : xLo + 1;
-            bucket.hi[i] = xLo === 4294967295 ? tHi + 1 : tHi;
-            bucket.slots[i] = slot;
+            lo[out + i] = xLo === 4294967295 ? 0 : xLo + 1;
+            hi[out + i] = xLo === 4294967295 ? tHi + 1 : tHi;
+            slots[out + i] = slot;
           }
-          received2.set(b, bucket);
-          buckets.push([b, bucket]);
+          r.lo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
+          r.hi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
+          r.slots.set(slots.subarray(out, out + BUCKET_ENTRIES), base);
         }
-        let receivedCells = this.cells.get(instance);
-        if (!receivedCells) this.cells.set(instance, receivedCells = /* @__PURE__ */ new Map());
-        const cells = [];
-        let previous = EMPTY_CELL;
-        for (const slot of slotIds) {
+        const nc = slotIds.length;
+        const pts = new Uint32Array(nc * CELL_POINTS);
+        for (let k = 0; k < nc; k++) {
+          const slot = slotIds[k];
+          const base = slot * CELL_POINTS;
+          r.points = grown(r.points, base + CELL_POINTS, r.maxPointWords, `cell slot ${slot}`);
+          const old = r.points;
           const code = s.cellLengths[cellCount++];
-          const old = receivedCells.get(slot) ?? EMPTY_CELL;
-          const n = decodeCount(code, usedPoints(old), CELL_POINTS, point, s.pointChoices.length, "cell length");
-          const cell = new Uint32Array(CELL_POINTS);
+          const n = decodeCount(code, usedPoints(old, base), CELL_POINTS, point, s.pointChoices.length, "cell length");
+          const out = k * CELL_POINTS;
           for (let i = 0; i < n; i++) {
             const c = s.pointChoices[point];
             const residual = s.points[point];
             point++;
             if (c >= POINT_CHOICES) throw new DeltaError("bad reference choice for a point");
             if ((residual & VALID_BIT) !== 0) throw new DeltaError("bad point residual");
-            const reference = c < CELL_POINTS ? old[(i + c) % CELL_POINTS] : previous[c - CELL_POINTS];
-            cell[i] = applyPointResidual(residual, reference);
+            const reference = c < CELL_POINTS ? old[base + (i + c) % CELL_POINTS] : k > 0 ? pts[out - CELL_POINTS + c - CELL_POINTS] : EMPTY_CELL[0];
+            pts[out + i] = applyPointResidual(residual, reference);
           }
-          receivedCells.set(slot, cell);
-          previous = cell;
-          cells.push([slot, cell]);
+          old.set(pts.subarray(out, out + CELL_POINTS), base);
         }
-        instances.push({ instance, buckets, cells });
+        instances.push({
+          instance,
+          bucketIds: Uint32Array.from(bucketIds),
+          keyLo: lo,
+          keyHi: hi,
+          slots,
+          cellSlots: Uint32Array.from(slotIds),
+          points: pts
+        });
       }
       if (entry !== s.entryChoices.length || point !== s.pointChoices.length) {
         throw new DeltaError(`${s.entryChoices.length - entry + s.pointChoices.length - point} trailing records`);
@@ -972,6 +1016,14 @@
       this.slots = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
       this.points = new Uint32Array(0);
     }
+    /// Empties the grid (a snapshot follows), keeping its memory.
+    clear() {
+      this.keyLo.fill(0);
+      this.keyHi.fill(0);
+      this.slots.fill(0);
+      this.points.fill(0, 0, this.slotCount * CELL_POINTS);
+      this.slotCount = 0;
+    }
     /// Most cell slots the layout allows.
     maxCells() {
       return this.entry.bucketCount * BUCKET_ENTRIES;
@@ -980,9 +1032,9 @@
       if (slot < this.slotCount) return;
       this.slotCount = slot + 1;
       if (this.points.length < this.slotCount * CELL_POINTS) {
-        const grown = new Uint32Array(Math.max(this.slotCount, 2 * (this.points.length / CELL_POINTS)) * CELL_POINTS);
-        grown.set(this.points);
-        this.points = grown;
+        const grown2 = new Uint32Array(Math.max(this.slotCount, 2 * (this.points.length / CELL_POINTS)) * CELL_POINTS);
+        grown2.set(this.points);
+        this.points = grown2;
       }
     }
     /// Whether cell id `hi · 2^32 + lo` lies in the grid (psao-points' `coord_of_id`): in
@@ -1026,27 +1078,28 @@
     apply(u) {
       this.validate(u);
       if (u.snapshot) {
-        for (let i = 0; i < this.grids.length; i++) {
-          const g = this.grids[i];
-          if (g) this.grids[i] = new Grid(g.entry);
-        }
+        for (const g of this.grids) g?.clear();
         this.transforms.fill(null);
       }
       for (const [instance, t] of u.transforms) this.transforms[instance] = t;
       for (const d of u.instances) {
         const g = this.grids[d.instance];
-        for (const [b, bucket] of d.buckets) {
-          const base = b * BUCKET_ENTRIES;
+        for (let k = 0; k < d.bucketIds.length; k++) {
+          const base = d.bucketIds[k] * BUCKET_ENTRIES;
+          const src = k * BUCKET_ENTRIES;
           for (let i = 0; i < BUCKET_ENTRIES; i++) {
-            g.keyLo[base + i] = bucket.lo[i];
-            g.keyHi[base + i] = bucket.hi[i];
-            g.slots[base + i] = bucket.slots[i];
-            if (bucket.lo[i] !== 0 || bucket.hi[i] !== 0) g.ensureSlot(bucket.slots[i]);
+            const lo = d.keyLo[src + i];
+            const hi = d.keyHi[src + i];
+            g.keyLo[base + i] = lo;
+            g.keyHi[base + i] = hi;
+            g.slots[base + i] = d.slots[src + i];
+            if (lo !== 0 || hi !== 0) g.ensureSlot(d.slots[src + i]);
           }
         }
-        for (const [slot, cell] of d.cells) {
+        for (let k = 0; k < d.cellSlots.length; k++) {
+          const slot = d.cellSlots[k];
           g.ensureSlot(slot);
-          g.points.set(cell, slot * CELL_POINTS);
+          g.points.set(d.points.subarray(k * CELL_POINTS, (k + 1) * CELL_POINTS), slot * CELL_POINTS);
         }
       }
       this.lastFrame = u.frame;
@@ -1066,13 +1119,14 @@
         if (!g) throw new ApplyError(`instance ${d.instance} has no grid`);
         const max = g.maxCells();
         const mask = g.entry.bucketCount - 1;
-        for (const [b, bucket] of d.buckets) {
+        for (let k = 0; k < d.bucketIds.length; k++) {
+          const b = d.bucketIds[k];
           if (b >= g.entry.bucketCount) throw new ApplyError(`instance ${d.instance}: bucket ${b} out of range`);
-          for (let i = 0; i < BUCKET_ENTRIES; i++) {
-            const lo = bucket.lo[i];
-            const hi = bucket.hi[i];
+          for (let i = k * BUCKET_ENTRIES; i < (k + 1) * BUCKET_ENTRIES; i++) {
+            const lo = d.keyLo[i];
+            const hi = d.keyHi[i];
             if (lo === 0 && hi === 0) continue;
-            if (bucket.slots[i] >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${bucket.slots[i]} out of range`);
+            if (d.slots[i] >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${d.slots[i]} out of range`);
             const idLo = lo === 0 ? 4294967295 : lo - 1;
             const idHi = lo === 0 ? hi - 1 : hi;
             if (!g.idIsValid(idHi, idLo) || (idLo & mask) >>> 0 !== b) {
@@ -1080,7 +1134,7 @@
             }
           }
         }
-        for (const [slot] of d.cells) {
+        for (const slot of d.cellSlots) {
           if (slot >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${slot} out of range`);
         }
       }
@@ -1519,7 +1573,10 @@
           if (w.codec !== "compact") return this.fail(`the server's codec \`${w.codec}\` is not supported`, true);
           this.welcomeMsg = w;
           this.state = new ClientState(w.instances);
-          this.decoder = new CompactDecoder(decodeLimit(w.instances));
+          this.decoder = new CompactDecoder(
+            decodeLimit(w.instances),
+            w.instances.map((e) => e.bucketCount)
+          );
           this.handler.welcome(w);
           return;
         }
@@ -1611,27 +1668,459 @@
     return { centre, radius };
   }
 
-  // src/render.ts
+  // src/grids.ts
+  var TEX_WIDTH = 1024;
+  var MIN_CELLS = 64;
+  var DataTexture = class {
+    constructor(gl2) {
+      this.gl = gl2;
+      /// The texture (immutable storage: a resize makes a new one).
+      this.texture = null;
+      this.mirror = new Uint32Array(0);
+      this.rows = 0;
+      this.dirty = new Uint8Array(0);
+      this.anyDirty = false;
+    }
+    /// Resizes to hold `texels` (contents zeroed, all rows dirty).
+    resize(texels) {
+      const gl2 = this.gl;
+      this.rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
+      this.mirror = new Uint32Array(this.rows * TEX_WIDTH * 4);
+      this.dirty = new Uint8Array(this.rows).fill(1);
+      this.anyDirty = true;
+      if (this.texture) gl2.deleteTexture(this.texture);
+      this.texture = gl2.createTexture();
+      gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
+      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
+      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
+      gl2.texStorage2D(gl2.TEXTURE_2D, 1, gl2.RGBA32UI, TEX_WIDTH, this.rows);
+    }
+    /// Marks the rows of texels `first..first + count` for upload.
+    touch(first, count) {
+      const last = Math.floor((first + count - 1) / TEX_WIDTH);
+      for (let r = Math.floor(first / TEX_WIDTH); r <= last; r++) this.dirty[r] = 1;
+      this.anyDirty = true;
+    }
+    /// Uploads runs of dirty rows; returns the bytes uploaded.
+    upload() {
+      if (!this.anyDirty) return 0;
+      const gl2 = this.gl;
+      gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
+      let bytes = 0;
+      for (let r = 0; r < this.rows; ) {
+        if (!this.dirty[r]) {
+          r++;
+          continue;
+        }
+        let end = r;
+        while (end < this.rows && this.dirty[end]) this.dirty[end++] = 0;
+        const data = this.mirror.subarray(r * TEX_WIDTH * 4, end * TEX_WIDTH * 4);
+        gl2.texSubImage2D(gl2.TEXTURE_2D, 0, 0, r, TEX_WIDTH, end - r, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, data);
+        bytes += data.byteLength;
+        r = end;
+      }
+      this.anyDirty = false;
+      return bytes;
+    }
+  };
+  var GridTextures = class {
+    constructor(gl2) {
+      this.gl = gl2;
+      this.slots = [];
+      /// Why AO cannot be drawn (textures too large), or null.
+      this.problem = null;
+      /// Bytes uploaded so far and full rebuilds.
+      this.uploadedBytes = 0;
+      this.rebuilds = 0;
+      this.state = null;
+      this.stale = true;
+      this.buckets = new DataTexture(gl2);
+      this.cells = new DataTexture(gl2);
+    }
+    /// Follows a new session's (empty) state.
+    reset(state) {
+      this.state = state;
+      this.stale = true;
+    }
+    /// Mirrors one applied update (call after `state.apply(u)`).
+    apply(u) {
+      const state = this.state;
+      if (!state || this.stale || u.snapshot) {
+        this.stale = true;
+        return;
+      }
+      for (const d of u.instances) {
+        const slot = this.slots[d.instance];
+        const grid = state.grids[d.instance];
+        if (!slot || !grid || grid.slotCount > slot.cellCapacity) {
+          this.stale = true;
+          return;
+        }
+        const bm = this.buckets.mirror;
+        for (let k = 0; k < d.bucketIds.length; k++) {
+          const first = slot.bucketBase + d.bucketIds[k] * BUCKET_ENTRIES;
+          for (let e = 0; e < BUCKET_ENTRIES; e++) {
+            const o = (first + e) * 4;
+            const src = k * BUCKET_ENTRIES + e;
+            bm[o] = d.keyLo[src];
+            bm[o + 1] = d.keyHi[src];
+            bm[o + 2] = d.slots[src];
+          }
+          this.buckets.touch(first, BUCKET_ENTRIES);
+        }
+        const cm = this.cells.mirror;
+        for (let k = 0; k < d.cellSlots.length; k++) {
+          const first = 2 * (slot.cellBase + d.cellSlots[k]);
+          cm.set(d.points.subarray(k * CELL_POINTS, (k + 1) * CELL_POINTS), first * 4);
+          this.cells.touch(first, 2);
+        }
+      }
+    }
+    /// Brings the textures up to date (a full rebuild when needed) and binds nothing.
+    upload() {
+      if (this.stale && this.state) this.rebuild(this.state);
+      this.uploadedBytes += this.buckets.upload() + this.cells.upload();
+    }
+    rebuild(state) {
+      this.stale = false;
+      this.rebuilds++;
+      const gl2 = this.gl;
+      const maxRows = gl2.getParameter(gl2.MAX_TEXTURE_SIZE);
+      let bucketTexels = 0;
+      let cellSlots = 0;
+      this.slots = state.grids.map((g) => {
+        if (!g) return null;
+        let capacity = MIN_CELLS;
+        while (capacity < g.slotCount) capacity *= 2;
+        capacity = Math.min(capacity, Math.max(g.maxCells(), g.slotCount));
+        const s = { bucketBase: bucketTexels, cellBase: cellSlots, cellCapacity: capacity };
+        bucketTexels += g.entry.bucketCount * BUCKET_ENTRIES;
+        cellSlots += capacity;
+        return s;
+      });
+      const rows = Math.max(bucketTexels, 2 * cellSlots) / TEX_WIDTH;
+      if (rows > maxRows) {
+        this.problem = `the grids need ${Math.ceil(rows)} texture rows, this GPU allows ${maxRows}: AO not drawn`;
+        this.slots = state.grids.map(() => null);
+        return;
+      }
+      this.problem = null;
+      this.buckets.resize(bucketTexels);
+      this.cells.resize(2 * cellSlots);
+      const bm = this.buckets.mirror;
+      const cm = this.cells.mirror;
+      state.grids.forEach((g, k) => {
+        const slot = this.slots[k];
+        if (!g || !slot) return;
+        const n = g.entry.bucketCount * BUCKET_ENTRIES;
+        for (let e = 0; e < n; e++) {
+          const o = (slot.bucketBase + e) * 4;
+          bm[o] = g.keyLo[e];
+          bm[o + 1] = g.keyHi[e];
+          bm[o + 2] = g.slots[e];
+        }
+        for (let s = 0; s < g.slotCount; s++) {
+          cm.set(g.points.subarray(s * CELL_POINTS, (s + 1) * CELL_POINTS), 8 * (slot.cellBase + s));
+        }
+      });
+    }
+  };
+
+  // src/aoshader.ts
+  var MODE_COMPOSITED = 0;
+  var MODE_AO = 1;
+  var MODE_NO_AO = 2;
+  var MODE_COST = 3;
   var VERTEX = `#version 300 es
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
-uniform mat4 view_proj;
-uniform mat4 model;
-out vec3 world_normal;
+uniform mat4 u_view_proj;
+uniform mat4 u_model;
+uniform mat3 u_normal_matrix;
+out vec3 v_world;
+out vec3 v_normal;
+invariant gl_Position;
+
 void main() {
-  world_normal = mat3(model) * normal;
-  gl_Position = view_proj * model * vec4(position, 1.0);
+  vec4 world = u_model * vec4(position, 1.0);
+  v_normal = u_normal_matrix * normal;
+  v_world = world.xyz;
+  gl_Position = u_view_proj * world;
+}`;
+  var GBUFFER = `#version 300 es
+precision highp float;
+in vec3 v_world;
+in vec3 v_normal;
+uniform vec3 u_eye;
+uniform float u_instance;
+uniform float u_colour_index;
+layout(location = 0) out vec4 out_position;
+layout(location = 1) out vec4 out_normal;
+
+void main() {
+  // The face normal turned towards the eye, and the shading normal in its hemisphere
+  // (psao-raster's resolve).
+  vec3 g = cross(dFdx(v_world), dFdy(v_world));
+  float glen = length(g);
+  vec3 to_eye = u_eye - v_world;
+  g = glen > 0.0 ? g / glen : normalize(to_eye);
+  if (dot(g, to_eye) < 0.0) g = -g;
+  float sl = length(v_normal);
+  vec3 n = sl > 0.0 ? v_normal / sl : g;
+  if (dot(n, g) < 0.0) n = -n;
+  out_position = vec4(v_world, u_instance);
+  out_normal = vec4(n, u_colour_index);
+}`;
+  var FULLSCREEN = `#version 300 es
+void main() {
+  vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+  gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
 }`;
   var FRAGMENT = `#version 300 es
 precision highp float;
-in vec3 world_normal;
-uniform vec3 colour;
-uniform vec3 light;
+precision highp int;
+precision highp usampler2D;
 out vec4 out_colour;
+
+uniform int u_mode;
+uniform int u_scale;
+uniform highp sampler2D u_gposition;
+uniform highp sampler2D u_gnormal;
+uniform highp sampler2D u_colours; // base colour by index
+uniform vec3 u_sky;
+uniform vec3 u_light_dir;
+uniform float u_light;
+uniform float u_ambient;
+
+// Per instance (one row each, see grids.ts' instanceRows): its view (has_view false: AO 1,
+// as psao-client without a grid or an invertible transform) and grid layout.
+uniform highp sampler2D u_instf;
+uniform usampler2D u_instu;
+bool u_has_view;
+mat4 u_to_local;
+mat3 u_normal_to_local;
+vec3 u_origin;
+float u_cell;
+float u_inv_cell;
+ivec3 u_dims;
+float u_poisson;
+uint u_bucket_mask;
+uint u_bucket_base;
+uint u_cell_base;
+uint u_cell_capacity;
+uvec2 u_row;   // Dx\xB717 as (low, high) 32-bit halves
+uvec2 u_slice; // Dx\xB7Dy\xB731
+uniform usampler2D u_buckets;
+uniform usampler2D u_cells;
+uniform highp sampler2D u_normals; // the 256 decoded normal codes
+
+// Reconstruction settings (psao-client's ReconstructSettings, psao-points' thresholds).
+uniform float u_factor;
+uniform float u_plane_tolerance;
+uniform float u_normal_threshold;
+uniform float u_direction_threshold;
+uniform int u_exponent;
+uniform bool u_fallback;
+
+const uint WIDTH = ${TEX_WIDTH}u;
+
+ivec2 at(uint i) { return ivec2(int(i % WIDTH), int(i / WIDTH)); }
+
+// The 64-bit product of two 32-bit words, from 16-bit limbs, as (low, high).
+uvec2 mul32(uint a, uint b) {
+  uint a0 = a & 0xFFFFu, a1 = a >> 16, b0 = b & 0xFFFFu, b1 = b >> 16;
+  uint p00 = a0 * b0, p01 = a0 * b1, p10 = a1 * b0, p11 = a1 * b1;
+  uint mid = (p00 >> 16) + (p01 & 0xFFFFu) + (p10 & 0xFFFFu);
+  return uvec2((mid << 16) | (p00 & 0xFFFFu), p11 + (p01 >> 16) + (p10 >> 16) + (mid >> 16));
+}
+uvec2 add64(uvec2 a, uvec2 b) {
+  uint lo = a.x + b.x;
+  return uvec2(lo, a.y + b.y + (lo < a.x ? 1u : 0u));
+}
+uvec2 mul64(uint s, uvec2 v) { return add64(mul32(s, v.x), uvec2(0u, s * v.y)); }
+
+// Per pixel: the shaded point and the running sums.
+vec3 P, N;
+float R, R2, INV_R, PLANE;
+float w_sum, ao_sum, nearest_d2, nearest_ao;
+int cells_visited, points_visited;
+
+// The slot of allocated cell c (InstanceGrid::find_cell), or -1.
+int find_cell(ivec3 c) {
+  if (any(lessThan(c, ivec3(0))) || any(greaterThanEqual(c, u_dims))) return -1;
+  uvec3 u = uvec3(c);
+  uvec2 id = add64(add64(uvec2(u.x, 0u), mul64(u.y, u_row)), mul64(u.z, u_slice));
+  uvec2 key = add64(id, uvec2(1u, 0u));
+  uint first = u_bucket_base + (id.x & u_bucket_mask) * 8u;
+  for (uint e = 0u; e < 8u; e++) {
+    uvec4 t = texelFetch(u_buckets, at(first + e), 0);
+    if (t.x == key.x && t.y == key.y) return t.z < u_cell_capacity ? int(t.z) : -1;
+  }
+  return -1;
+}
+
+float pow_k(float x) {
+  float y = 1.0;
+  for (int i = 0; i < u_exponent; i++) y *= x;
+  return y;
+}
+
+// One packed point of cell c: the block pass weights it and tracks the nearest compatible
+// point; the ring pass only tracks the nearest.
+void point(uint bits, vec3 cell_min, bool weigh) {
+  if ((bits & 0x80000000u) == 0u) return;
+  points_visited++;
+  vec3 frac = (vec3((uvec3(bits >> 26, bits >> 21, bits >> 16)) & 31u) + 0.5) * (1.0 / 32.0);
+  vec3 delta = (u_origin + (cell_min + frac) * u_cell) - P;
+  vec3 ni = texelFetch(u_normals, ivec2(int((bits >> 8) & 255u), 0), 0).xyz;
+  float d2 = dot(delta, delta);
+  float c = dot(ni, delta) / sqrt(d2);
+  float nn = dot(ni, N);
+  bool compatible = nn > u_normal_threshold && abs(dot(N, delta)) <= PLANE &&
+                    (d2 == 0.0 || c * c < u_direction_threshold);
+  if (!compatible) return;
+  float ao = float(bits & 255u) * (1.0 / 255.0);
+  if (weigh && d2 < R2) {
+    float w = (R - sqrt(d2)) * INV_R * pow_k(nn);
+    w_sum += w;
+    ao_sum += w * ao;
+  }
+  if (d2 < nearest_d2) {
+    nearest_d2 = d2;
+    nearest_ao = ao;
+  }
+}
+
+void cell(ivec3 c, bool weigh) {
+  int slot = find_cell(c);
+  if (slot < 0) return;
+  cells_visited++;
+  uint t = 2u * (u_cell_base + uint(slot));
+  uvec4 a = texelFetch(u_cells, at(t), 0);
+  uvec4 b = texelFetch(u_cells, at(t + 1u), 0);
+  vec3 m = vec3(c);
+  point(a.x, m, weigh); point(a.y, m, weigh); point(a.z, m, weigh); point(a.w, m, weigh);
+  point(b.x, m, weigh); point(b.y, m, weigh); point(b.z, m, weigh);
+}
+
+void load_instance(int i) {
+  vec4 f[9];
+  for (int k = 0; k < 9; k++) f[k] = texelFetch(u_instf, ivec2(k, i), 0);
+  u_to_local = mat4(f[0], f[1], f[2], f[3]);
+  u_normal_to_local = mat3(f[4].xyz, f[5].xyz, f[6].xyz);
+  u_origin = f[7].xyz;
+  u_cell = f[7].w;
+  u_inv_cell = f[8].x;
+  u_poisson = f[8].y;
+  u_has_view = f[8].z > 0.5;
+  uvec4 a = texelFetch(u_instu, ivec2(0, i), 0);
+  uvec4 b = texelFetch(u_instu, ivec2(1, i), 0);
+  uvec4 c = texelFetch(u_instu, ivec2(2, i), 0);
+  u_dims = ivec3(a.xyz);
+  u_bucket_mask = a.w;
+  u_bucket_base = b.x;
+  u_cell_base = b.y;
+  u_cell_capacity = b.z;
+  u_row = c.xy;
+  u_slice = c.zw;
+}
+
+float reconstruct(vec3 world, vec3 normal) {
+  if (!u_has_view) return 1.0;
+  P = (u_to_local * vec4(world, 1.0)).xyz;
+  vec3 n = u_normal_to_local * normal;
+  float l = length(n);
+  N = l > 0.0 ? n / l : vec3(0.0);
+  R = u_poisson * u_factor;
+  if (!(R > 0.0)) return 1.0;
+  R2 = R * R;
+  INV_R = 1.0 / R;
+  PLANE = u_plane_tolerance * u_poisson;
+  w_sum = 0.0;
+  ao_sum = 0.0;
+  nearest_d2 = 3.4e38;
+  nearest_ao = -1.0;
+  ivec3 base = ivec3(floor((P - u_origin) * u_inv_cell - 0.5));
+  for (int k = 0; k < 8; k++) cell(base + ivec3(k & 1, (k >> 1) & 1, k >> 2), true);
+  if (w_sum > 0.0) return ao_sum / w_sum;
+  if (!u_fallback) return 1.0;
+  if (nearest_ao >= 0.0) return nearest_ao;
+  for (int k = 0; k < 64; k++) {
+    ivec3 o = ivec3(k & 3, (k >> 2) & 3, k >> 4) - 1;
+    if (all(greaterThanEqual(o, ivec3(0))) && all(lessThanEqual(o, ivec3(1)))) continue;
+    cell(base + o, false);
+  }
+  return nearest_ao >= 0.0 ? nearest_ao : 1.0;
+}
+
+float srgb(float linear) {
+  float c = clamp(linear, 0.0, 1.0);
+  return c <= 0.0031308 ? 12.92 * c : 1.055 * pow(c, 1.0 / 2.4) - 0.055;
+}
+
 void main() {
-  float d = abs(dot(normalize(world_normal), light));
-  out_colour = vec4(pow(colour * (0.25 + 0.75 * d), vec3(1.0 / 2.2)), 1.0);
+  // This pixel's centre sample of the (scaled) G-buffer.
+  ivec2 at_g = ivec2(gl_FragCoord.xy) * u_scale + u_scale / 2;
+  vec4 gp = texelFetch(u_gposition, at_g, 0);
+  vec4 gn = texelFetch(u_gnormal, at_g, 0);
+  cells_visited = 0;
+  points_visited = 0;
+  if (gp.w < 0.0) {
+    // Nothing covers the pixel: AO 1, no cost, the sky.
+    out_colour = u_mode == ${MODE_AO} ? vec4(1.0) : u_mode == ${MODE_COST} ? vec4(0.0) : vec4(u_sky, 1.0);
+    return;
+  }
+  vec3 n = gn.xyz;
+  load_instance(int(gp.w));
+  float ao = u_mode == ${MODE_NO_AO} ? 1.0 : reconstruct(gp.xyz, n);
+  if (u_mode == ${MODE_AO}) {
+    out_colour = vec4(vec3(ao), 1.0);
+  } else if (u_mode == ${MODE_COST}) {
+    out_colour = vec4(float(cells_visited), float(points_visited & 255), float(points_visited >> 8), 255.0) / 255.0;
+  } else {
+    vec3 colour = texelFetch(u_colours, ivec2(int(gn.w), 0), 0).rgb;
+    vec3 rgb = colour * (u_ambient * ao + u_light * max(0.0, dot(n, u_light_dir)));
+    out_colour = vec4(srgb(rgb.r), srgb(rgb.g), srgb(rgb.b), 1.0);
+  }
 }`;
+
+  // src/render.ts
+  var SETTINGS = {
+    factor: Math.fround(2 * Math.SQRT2),
+    planeTolerance: 0.5,
+    normalThreshold: Math.fround(0.1),
+    directionThreshold: Math.fround(0.7),
+    exponent: 8,
+    fallback: true,
+    ambient: Math.fround(0.6),
+    light: 0.5
+  };
+  var SKY_GREY = [0.62, 0.66, 0.72];
+  var MIN_DETERMINANT = 1e-12;
+  function encodeSrgb(linear) {
+    const c = Math.min(Math.max(linear, 0), 1);
+    const s = c <= 31308e-7 ? 12.92 * c : 1.055 * Math.pow(c, 1 / 2.4) - 0.055;
+    return Math.round(s * 255);
+  }
+  function normalTable() {
+    const f = Math.fround;
+    const step = f(2 / 14);
+    const level = (q) => f(f(Math.min(q, 14) * step) - 1);
+    const sign = (x) => x >= 0 ? 1 : -1;
+    const out = new Float32Array(256 * 4);
+    for (let code = 0; code < 256; code++) {
+      const ox = level(code >> 4);
+      const oy = level(code & 15);
+      const z = f(f(1 - Math.abs(ox)) - Math.abs(oy));
+      let v;
+      if (z >= 0) v = [ox, oy, z];
+      else v = [f(f(1 - Math.abs(oy)) * sign(ox)), f(f(1 - Math.abs(ox)) * sign(oy)), z];
+      const len = f(Math.sqrt(f(f(f(v[0] * v[0]) + f(v[1] * v[1])) + f(v[2] * v[2]))));
+      const inv = f(1 / len);
+      out.set([f(v[0] * inv), f(v[1] * inv), f(v[2] * inv), 0], code * 4);
+    }
+    return out;
+  }
   function compile(gl2, type, source) {
     const s = gl2.createShader(type);
     gl2.shaderSource(s, source);
@@ -1639,28 +2128,120 @@ void main() {
     if (!gl2.getShaderParameter(s, gl2.COMPILE_STATUS)) throw new Error(`shader: ${gl2.getShaderInfoLog(s)}`);
     return s;
   }
+  function instanceView(t) {
+    const [a, b, c, d, e, f, g, h, i] = t;
+    const det = a * (e * i - f * h) - d * (b * i - c * h) + g * (b * f - c * e);
+    if (!(Math.abs(det) > MIN_DETERMINANT)) return null;
+    const inv = [
+      (e * i - f * h) / det,
+      (c * h - b * i) / det,
+      (b * f - c * e) / det,
+      (f * g - d * i) / det,
+      (a * i - c * g) / det,
+      (c * d - a * f) / det,
+      (d * h - e * g) / det,
+      (b * g - a * h) / det,
+      (a * e - b * d) / det
+    ];
+    const [tx, ty, tz] = [t[9], t[10], t[11]];
+    const ix = -(inv[0] * tx + inv[3] * ty + inv[6] * tz);
+    const iy = -(inv[1] * tx + inv[4] * ty + inv[7] * tz);
+    const iz = -(inv[2] * tx + inv[5] * ty + inv[8] * tz);
+    const toLocal = new Float32Array([inv[0], inv[1], inv[2], 0, inv[3], inv[4], inv[5], 0, inv[6], inv[7], inv[8], 0, ix, iy, iz, 1]);
+    if (!toLocal.every(Number.isFinite)) return null;
+    return { toLocal, normalToLocal: new Float32Array([a, d, g, b, e, h, c, f, i]) };
+  }
+  var GBufferTargets = class {
+    constructor(gl2) {
+      this.gl = gl2;
+      this.position = null;
+      this.normal = null;
+      this.depth = null;
+      this.width = 0;
+      this.height = 0;
+      this.fbo = gl2.createFramebuffer();
+    }
+    resize(width, height) {
+      if (width === this.width && height === this.height) return;
+      const gl2 = this.gl;
+      this.width = width;
+      this.height = height;
+      for (const t of [this.position, this.normal]) if (t) gl2.deleteTexture(t);
+      if (this.depth) gl2.deleteRenderbuffer(this.depth);
+      const target = () => {
+        const t = gl2.createTexture();
+        gl2.bindTexture(gl2.TEXTURE_2D, t);
+        gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
+        gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
+        gl2.texStorage2D(gl2.TEXTURE_2D, 1, gl2.RGBA32F, width, height);
+        return t;
+      };
+      this.position = target();
+      this.normal = target();
+      this.depth = gl2.createRenderbuffer();
+      gl2.bindRenderbuffer(gl2.RENDERBUFFER, this.depth);
+      gl2.renderbufferStorage(gl2.RENDERBUFFER, gl2.DEPTH_COMPONENT24, width, height);
+      gl2.bindFramebuffer(gl2.FRAMEBUFFER, this.fbo);
+      gl2.framebufferTexture2D(gl2.FRAMEBUFFER, gl2.COLOR_ATTACHMENT0, gl2.TEXTURE_2D, this.position, 0);
+      gl2.framebufferTexture2D(gl2.FRAMEBUFFER, gl2.COLOR_ATTACHMENT1, gl2.TEXTURE_2D, this.normal, 0);
+      gl2.framebufferRenderbuffer(gl2.FRAMEBUFFER, gl2.DEPTH_ATTACHMENT, gl2.RENDERBUFFER, this.depth);
+      gl2.drawBuffers([gl2.COLOR_ATTACHMENT0, gl2.COLOR_ATTACHMENT1]);
+      const status2 = gl2.checkFramebufferStatus(gl2.FRAMEBUFFER);
+      gl2.bindFramebuffer(gl2.FRAMEBUFFER, null);
+      if (status2 !== gl2.FRAMEBUFFER_COMPLETE) throw new Error(`G-buffer framebuffer incomplete (${status2})`);
+    }
+  };
+  function program(gl2, vertex, fragment) {
+    const p = gl2.createProgram();
+    gl2.attachShader(p, compile(gl2, gl2.VERTEX_SHADER, vertex));
+    gl2.attachShader(p, compile(gl2, gl2.FRAGMENT_SHADER, fragment));
+    gl2.linkProgram(p);
+    if (!gl2.getProgramParameter(p, gl2.LINK_STATUS)) throw new Error(`program: ${gl2.getProgramInfoLog(p)}`);
+    const u = {};
+    const count = gl2.getProgramParameter(p, gl2.ACTIVE_UNIFORMS);
+    for (let i = 0; i < count; i++) {
+      const name = gl2.getActiveUniform(p, i).name;
+      u[name] = gl2.getUniformLocation(p, name);
+    }
+    return { p, u };
+  }
+  function dataTexture(gl2) {
+    const t = gl2.createTexture();
+    gl2.bindTexture(gl2.TEXTURE_2D, t);
+    gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
+    gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
+    return t;
+  }
+  var INST_F = 9;
+  var INST_U = 3;
   var SceneRenderer = class {
     constructor(gl2, glb) {
       this.gl = gl2;
       this.meshes = [];
       this.instances = [];
-      const p = gl2.createProgram();
-      gl2.attachShader(p, compile(gl2, gl2.VERTEX_SHADER, VERTEX));
-      gl2.attachShader(p, compile(gl2, gl2.FRAGMENT_SHADER, FRAGMENT));
-      gl2.linkProgram(p);
-      if (!gl2.getProgramParameter(p, gl2.LINK_STATUS)) throw new Error(`program: ${gl2.getProgramInfoLog(p)}`);
-      this.program = p;
-      this.uViewProj = gl2.getUniformLocation(p, "view_proj");
-      this.uModel = gl2.getUniformLocation(p, "model");
-      this.uColour = gl2.getUniformLocation(p, "colour");
-      this.uLight = gl2.getUniformLocation(p, "light");
-      this.load(glb);
+      /// The scene's camera paths (from the glb's extras).
+      this.paths = [];
+      if (!gl2.getExtension("EXT_color_buffer_float")) throw new Error("WebGL2 without EXT_color_buffer_float");
+      this.gbuffer = program(gl2, VERTEX, GBUFFER);
+      this.shade = program(gl2, FULLSCREEN, FRAGMENT);
+      this.targets = new GBufferTargets(gl2);
+      this.normals = dataTexture(gl2);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, 256, 1, 0, gl2.RGBA, gl2.FLOAT, normalTable());
+      this.instF = dataTexture(gl2);
+      this.instU = dataTexture(gl2);
+      this.emptyU = dataTexture(gl2);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32UI, 1, 1, 0, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, new Uint32Array(4));
+      const colours = this.load(glb);
+      this.colours = dataTexture(gl2);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, Math.max(1, colours.length / 4), 1, 0, gl2.RGBA, gl2.FLOAT, colours.length ? colours : new Float32Array(4));
     }
+    /// Uploads the meshes; returns the primitives' base colours (RGBA per colour index).
     load(glb) {
       const gl2 = this.gl;
       const view = new DataView(glb.buffer, glb.byteOffset, glb.byteLength);
       const jsonLen = view.getUint32(12, true);
       const doc = JSON.parse(new TextDecoder().decode(glb.subarray(20, 20 + jsonLen)));
+      this.paths = doc.extras?.psao_camera_paths ?? [];
       const binAt = 20 + jsonLen + 8;
       const bin = glb.subarray(binAt, binAt + view.getUint32(20 + jsonLen, true));
       const data = (index) => {
@@ -1670,6 +2251,7 @@ void main() {
         const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
         return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
       };
+      const colours = [];
       for (const mesh of doc.meshes ?? []) {
         const prims = [];
         for (const prim of mesh.primitives) {
@@ -1692,7 +2274,8 @@ void main() {
           gl2.bufferData(gl2.ELEMENT_ARRAY_BUFFER, idx.bytes, gl2.STATIC_DRAW);
           gl2.bindVertexArray(null);
           const c = doc.materials?.[prim.material ?? 0]?.pbrMetallicRoughness?.baseColorFactor ?? [0.8, 0.8, 0.8, 1];
-          prims.push({ vao, count: idx.count, colour: [c[0], c[1], c[2]] });
+          prims.push({ vao, count: idx.count, colour: colours.length / 4 });
+          colours.push(c[0], c[1], c[2], 1);
         }
         this.meshes.push(prims);
       }
@@ -1700,39 +2283,144 @@ void main() {
         if (node.mesh === void 0 || !node.matrix) break;
         this.instances.push({ mesh: node.mesh, matrix: new Float32Array(node.matrix) });
       }
+      return new Float32Array(colours);
     }
-    /// Draws the scene from `camera`; `transforms[i]`, when set, is instance i's Affine3A from
-    /// the last update (12 floats: matrix columns, then translation).
-    draw(camera, transforms) {
+    /// Draws the scene from `camera` in `opts.mode`; instance i is drawn at
+    /// `state.transforms[i]` when set (else its rest matrix), and its AO reconstructed from
+    /// its grid when the state has its transform (as psao-client). The G-buffer is `scale`
+    /// times the canvas size (1 by default; odd scales put a sample on every pixel centre).
+    draw(camera, opts) {
       const gl2 = this.gl;
-      gl2.viewport(0, 0, gl2.drawingBufferWidth, gl2.drawingBufferHeight);
-      gl2.clearColor(0.07, 0.07, 0.07, 1);
-      gl2.clear(gl2.COLOR_BUFFER_BIT | gl2.DEPTH_BUFFER_BIT);
+      const grids2 = opts.grids && !opts.grids.problem ? opts.grids : null;
+      const state = opts.state;
+      const scale2 = Math.max(1, Math.floor(opts.scale ?? 1));
+      const w = gl2.drawingBufferWidth;
+      const h = gl2.drawingBufferHeight;
+      this.targets.resize(w * scale2, h * scale2);
+      const g = this.gbuffer.u;
+      gl2.bindFramebuffer(gl2.FRAMEBUFFER, this.targets.fbo);
+      gl2.viewport(0, 0, w * scale2, h * scale2);
+      gl2.clearBufferfv(gl2.COLOR, 0, [0, 0, 0, -1]);
+      gl2.clearBufferfv(gl2.COLOR, 1, [0, 0, 0, 0]);
+      gl2.clearBufferfi(gl2.DEPTH_STENCIL, 0, 1, 0);
       gl2.enable(gl2.DEPTH_TEST);
-      gl2.useProgram(this.program);
-      gl2.uniformMatrix4fv(this.uViewProj, false, viewProj(camera));
-      const [px, py, pz] = camera.position;
-      const [tx, ty, tz] = camera.target;
-      const l = Math.hypot(tx - px, ty - py, tz - pz) || 1;
-      gl2.uniform3f(this.uLight, (tx - px) / l, (ty - py) / l, (tz - pz) / l);
+      gl2.depthFunc(gl2.LESS);
+      gl2.useProgram(this.gbuffer.p);
+      gl2.uniformMatrix4fv(g.u_view_proj, false, viewProj(camera));
+      gl2.uniform3fv(g.u_eye, camera.position);
       const model = new Float32Array(16);
+      const instF = new Float32Array(this.instances.length * INST_F * 4);
+      const instU = new Uint32Array(this.instances.length * INST_U * 4);
       for (const [i, inst] of this.instances.entries()) {
-        const t = transforms[i];
+        const t = state?.transforms[i] ?? null;
         if (t) {
           model.set([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
         } else {
           model.set(inst.matrix);
         }
-        gl2.uniformMatrix4fv(this.uModel, false, model);
+        gl2.uniformMatrix4fv(g.u_model, false, model);
+        gl2.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
+        gl2.uniform1f(g.u_instance, i);
         for (const p of this.meshes[inst.mesh] ?? []) {
-          gl2.uniform3f(this.uColour, p.colour[0], p.colour[1], p.colour[2]);
+          gl2.uniform1f(g.u_colour_index, p.colour);
           gl2.bindVertexArray(p.vao);
           gl2.drawElements(gl2.TRIANGLES, p.count, gl2.UNSIGNED_INT, 0);
         }
+        this.instanceRow(i, t, state, grids2, instF, instU);
       }
       gl2.bindVertexArray(null);
+      gl2.bindFramebuffer(gl2.FRAMEBUFFER, null);
+      gl2.disable(gl2.DEPTH_TEST);
+      const u = this.shade.u;
+      gl2.viewport(0, 0, w, h);
+      gl2.useProgram(this.shade.p);
+      const rows = Math.max(1, this.instances.length);
+      gl2.bindTexture(gl2.TEXTURE_2D, this.instF);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, INST_F, rows, 0, gl2.RGBA, gl2.FLOAT, instF.length ? instF : new Float32Array(INST_F * 4));
+      gl2.bindTexture(gl2.TEXTURE_2D, this.instU);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32UI, INST_U, rows, 0, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, instU.length ? instU : new Uint32Array(INST_U * 4));
+      const textures = [
+        ["u_buckets", grids2?.buckets.texture ?? this.emptyU],
+        ["u_cells", grids2?.cells.texture ?? this.emptyU],
+        ["u_normals", this.normals],
+        ["u_gposition", this.targets.position],
+        ["u_gnormal", this.targets.normal],
+        ["u_colours", this.colours],
+        ["u_instf", this.instF],
+        ["u_instu", this.instU]
+      ];
+      textures.forEach(([name, t], unit) => {
+        gl2.activeTexture(gl2.TEXTURE0 + unit);
+        gl2.bindTexture(gl2.TEXTURE_2D, t);
+        gl2.uniform1i(u[name], unit);
+      });
+      gl2.activeTexture(gl2.TEXTURE0);
+      gl2.uniform1i(u.u_mode, opts.mode);
+      gl2.uniform1i(u.u_scale, scale2);
+      gl2.uniform3f(u.u_sky, ...SKY_GREY.map((c) => encodeSrgb(c) / 255));
+      const l = [0.35, 1, 0.6];
+      const ll = Math.hypot(l[0], l[1], l[2]);
+      gl2.uniform3f(u.u_light_dir, l[0] / ll, l[1] / ll, l[2] / ll);
+      gl2.uniform1f(u.u_light, SETTINGS.light);
+      gl2.uniform1f(u.u_ambient, SETTINGS.ambient);
+      gl2.uniform1f(u.u_factor, SETTINGS.factor);
+      gl2.uniform1f(u.u_plane_tolerance, SETTINGS.planeTolerance);
+      gl2.uniform1f(u.u_normal_threshold, SETTINGS.normalThreshold);
+      gl2.uniform1f(u.u_direction_threshold, SETTINGS.directionThreshold);
+      gl2.uniform1i(u.u_exponent, SETTINGS.exponent);
+      gl2.uniform1i(u.u_fallback, SETTINGS.fallback ? 1 : 0);
+      gl2.drawArrays(gl2.TRIANGLES, 0, 3);
+    }
+    /// Instance i's row of the instance textures: its view and grid layout.
+    instanceRow(i, t, state, grids2, f, u) {
+      const grid = state?.grids[i] ?? null;
+      const slot = grids2?.slots[i] ?? null;
+      const view = t && grid && slot ? instanceView(t) : null;
+      if (!view || !grid || !slot) return;
+      const e = grid.entry;
+      const fo = i * INST_F * 4;
+      f.set(view.toLocal, fo);
+      const n = view.normalToLocal;
+      f.set([n[0], n[1], n[2], 0, n[3], n[4], n[5], 0, n[6], n[7], n[8], 0], fo + 16);
+      f.set([e.origin[0], e.origin[1], e.origin[2], e.cellSize, Math.fround(1 / e.cellSize), e.layoutPoissonRadius, 1, 0], fo + 28);
+      const row = BigInt(e.dims[0]) * 17n;
+      const slice = BigInt(e.dims[0]) * BigInt(e.dims[1]) * 31n;
+      u.set(
+        [
+          e.dims[0],
+          e.dims[1],
+          e.dims[2],
+          e.bucketCount - 1,
+          slot.bucketBase,
+          slot.cellBase,
+          slot.cellCapacity,
+          0,
+          Number(row & 0xffffffffn),
+          Number(row >> 32n),
+          Number(slice & 0xffffffffn),
+          Number(slice >> 32n)
+        ],
+        i * INST_U * 4
+      );
     }
   };
+  function normalMatrixOf(m) {
+    const [a, b, c] = [m[0], m[1], m[2]];
+    const [d, e, f] = [m[4], m[5], m[6]];
+    const [g, h, i] = [m[8], m[9], m[10]];
+    const det = a * (e * i - f * h) - d * (b * i - c * h) + g * (b * f - c * e) || 1;
+    return [
+      (e * i - f * h) / det,
+      (f * g - d * i) / det,
+      (d * h - e * g) / det,
+      (c * h - b * i) / det,
+      (a * i - c * g) / det,
+      (b * g - a * h) / det,
+      (b * f - c * e) / det,
+      (c * d - a * f) / det,
+      (a * e - b * d) / det
+    ];
+  }
   function viewProj(c) {
     const [px, py, pz] = c.position;
     let fx = c.target[0] - px;
@@ -1800,12 +2488,28 @@ void main() {
     fps: 0,
     drawn: 0,
     camera: null,
-    autoOrbit: true
+    autoOrbit: true,
+    mode: MODE_COMPOSITED,
+    rttMs: null,
+    path: null,
+    pathFrame: 0,
+    done: false,
+    decodeMs: 0,
+    uploadedBytes: 0,
+    rebuilds: 0,
+    textureBytes: 0
   };
   window.psao = status;
   var params = new URLSearchParams(location.search);
   var token = params.get("token");
   var verify = params.get("verify") === "1";
+  var pathName = params.get("path");
+  var testFrames = params.has("frames") ? Math.max(1, Number(params.get("frames"))) : null;
+  var lockstep = params.get("lockstep") === "1";
+  var fixedRes = /^(\d+)x(\d+)$/.exec(params.get("res") ?? "");
+  var scale = Math.max(1, Math.floor(Number(params.get("scale") ?? "1")) | 1);
+  var MODES = { composited: MODE_COMPOSITED, ao: MODE_AO, noao: MODE_NO_AO };
+  status.mode = MODES[params.get("mode") ?? ""] ?? MODE_COMPOSITED;
   var wsUrl = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`;
   var session = null;
   var backoff = 200;
@@ -1819,8 +2523,16 @@ void main() {
           status.sessions++;
           status.message = null;
           backoff = 200;
+          if (session?.state) grids?.reset(session.state);
+          pathFrame = 0;
+          answered = -1;
+          sent = -1;
+        },
+        sceneTime: (_frame, clientFrame) => {
+          if (clientFrame !== null) answered = Math.max(answered, clientFrame);
         },
         update: (u, bytes, verified) => {
+          grids?.apply(u);
           status.updates++;
           if (verified) status.verified++;
           status.mismatches = session?.mismatches ?? status.mismatches;
@@ -1855,8 +2567,21 @@ void main() {
     return n;
   }
   var canvas = document.getElementById("view");
-  var gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true });
+  var gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
   var renderer = null;
+  var grids = gl ? new GridTextures(gl) : null;
+  var path = null;
+  var pathFrame = 0;
+  var sent = -1;
+  var answered = -1;
+  var pathStart = 0;
+  for (const [id, mode] of [
+    ["mode-composited", MODE_COMPOSITED],
+    ["mode-ao", MODE_AO],
+    ["mode-noao", MODE_NO_AO]
+  ]) {
+    document.getElementById(id)?.addEventListener("click", () => status.mode = mode);
+  }
   var control = { auto: true, yaw: 0, pitch: 0.3, distance: 0, keys: /* @__PURE__ */ new Set(), last: 0 };
   canvas.addEventListener("mousedown", (e) => {
     control.auto = false;
@@ -1883,7 +2608,10 @@ void main() {
     { passive: false }
   );
   window.addEventListener("keydown", (e) => {
-    if (e.key === " ") control.auto = true;
+    if (e.key === "1") status.mode = MODE_COMPOSITED;
+    else if (e.key === "2") status.mode = MODE_AO;
+    else if (e.key === "3") status.mode = MODE_NO_AO;
+    else if (e.key === " ") control.auto = true;
     else control.keys.add(e.key.toLowerCase());
   });
   window.addEventListener("keyup", (e) => control.keys.delete(e.key.toLowerCase()));
@@ -1920,51 +2648,147 @@ void main() {
       aspect: canvas.width / Math.max(canvas.height, 1)
     };
   }
+  function pathCamera(p, frame, index) {
+    const f = p.frames[index % p.frames.length];
+    return {
+      frame,
+      position: [f[0], f[1], f[2]],
+      target: [f[3], f[4], f[5]],
+      up: [f[6], f[7], f[8]],
+      fovY: f[9],
+      near: f[10],
+      far: f[11],
+      aspect: canvas.width / Math.max(canvas.height, 1)
+    };
+  }
+  function currentCamera(now) {
+    if (path && lockstep && testFrames !== null) {
+      if (!session?.state) return { cam: null, send: false };
+      if (answered === sent && sent < testFrames - 1) {
+        sent++;
+        return { cam: pathCamera(path, sent, sent), send: true };
+      }
+      return { cam: pathCamera(path, Math.max(answered, 0), Math.max(answered, 0)), send: false };
+    }
+    if (path && control.auto) {
+      if (!pathStart) pathStart = now;
+      pathFrame = Math.floor((now - pathStart) / 1e3 * 60);
+      return { cam: pathCamera(path, cameraFrame2, pathFrame), send: true };
+    }
+    return { cam: orbitCamera(now), send: true };
+  }
+  function measureCost() {
+    const cam = status.camera;
+    if (!gl || !renderer || !cam) return null;
+    renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale });
+    const w = gl.drawingBufferWidth;
+    const h = gl.drawingBufferHeight;
+    const px = new Uint8Array(w * h * 4);
+    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    let covered = 0;
+    let cells = 0;
+    let points = 0;
+    let maxCells = 0;
+    let maxPoints = 0;
+    for (let i = 0; i < px.length; i += 4) {
+      if (px[i + 3] !== 255) continue;
+      covered++;
+      const p = px[i + 1] + 256 * px[i + 2];
+      cells += px[i];
+      points += p;
+      maxCells = Math.max(maxCells, px[i]);
+      maxPoints = Math.max(maxPoints, p);
+    }
+    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+    return {
+      width: w,
+      height: h,
+      covered,
+      cellsPerPixel: covered ? cells / covered : 0,
+      pointsPerPixel: covered ? points / covered : 0,
+      maxCells,
+      maxPoints
+    };
+  }
+  window.psaoCost = measureCost;
   var lastCamera = 0;
   var lastPointCount = 0;
+  var lastPing = 0;
+  var cost = null;
+  function ping(now) {
+    if (now - lastPing < 2e3) return;
+    lastPing = now;
+    const t0 = performance.now();
+    fetch("/health", { cache: "no-store" }).then((r) => r.arrayBuffer()).then(() => status.rttMs = performance.now() - t0).catch(() => status.rttMs = null);
+  }
   function tick(now) {
     frames.push(now);
     frames = frames.filter((t) => now - t < 1e3);
     received = received.filter((r) => now - r.t < 1e3);
     status.fps = frames.length;
     status.mbitS = received.reduce((a, r) => a + r.bytes, 0) * 8 / 1e6;
-    const w0 = Math.round(window.innerWidth * devicePixelRatio);
-    const h0 = Math.round(window.innerHeight * devicePixelRatio);
+    const w0 = fixedRes ? Number(fixedRes[1]) : Math.round(window.innerWidth * devicePixelRatio);
+    const h0 = fixedRes ? Number(fixedRes[2]) : Math.round(window.innerHeight * devicePixelRatio);
     if (canvas.width !== w0 || canvas.height !== h0) {
       canvas.width = w0;
       canvas.height = h0;
+      if (fixedRes) {
+        canvas.style.width = `${w0}px`;
+        canvas.style.height = `${h0}px`;
+      }
     }
-    const cam = orbitCamera(now);
+    if (!lockstep) ping(now);
+    const { cam, send } = currentCamera(now);
     status.camera = cam;
     status.autoOrbit = control.auto;
-    if (cam && now - lastCamera > 1e3 / 30) {
+    status.path = path && (control.auto || lockstep) ? path.name : null;
+    status.pathFrame = lockstep ? Math.max(answered, 0) : pathFrame;
+    if (cam && send && (lockstep || now - lastCamera > 1e3 / 30)) {
       lastCamera = now;
       session?.sendCamera(cam);
       cameraFrame2++;
     }
-    if (cam && renderer) {
-      renderer.draw(cam, session?.state?.transforms ?? []);
+    const drawNow = !(lockstep && testFrames !== null) || answered === testFrames - 1;
+    if (cam && renderer && drawNow) {
+      grids?.upload();
+      renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
       status.drawn++;
+      if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
     }
     if (now - lastPointCount > 500) {
       lastPointCount = now;
       status.points = countPoints();
     }
+    status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
+    status.uploadedBytes = grids?.uploadedBytes ?? 0;
+    status.rebuilds = grids?.rebuilds ?? 0;
+    status.textureBytes = grids ? grids.buckets.mirror.byteLength + grids.cells.mirror.byteLength : 0;
     const w = session?.welcomeMsg;
+    const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
     overlay.textContent = [
       `psao viewer \u2014 ${status.connected ? `connected, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}`,
-      `${status.fps} fps \xB7 ${status.mbitS.toFixed(2)} Mbit/s \xB7 server frame ${status.serverFrame}`,
-      `${status.updates} updates \xB7 ${status.points} points received \xB7 ${session && session.updates > 0 ? (session.decodeMs / session.updates).toFixed(2) : "-"} ms decode per update`,
-      renderer ? "WebGL2: the scene without AO (the AO shader is not here yet)" : "WebGL2 unavailable: nothing drawn",
+      `${status.fps} fps \xB7 ${status.mbitS.toFixed(2)} Mbit/s \xB7 server frame ${status.serverFrame} \xB7 round trip ${status.rttMs === null ? "-" : `${status.rttMs.toFixed(1)} ms`}`,
+      `${status.updates} updates \xB7 ${status.points} points received \xB7 ${status.decodeMs ? status.decodeMs.toFixed(2) : "-"} ms decode per update`,
+      !renderer ? "WebGL2 unavailable: nothing drawn" : grids?.problem ? grids.problem : `view: ${modeName} (keys 1 2 3)${cost ? ` \xB7 AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " \xB7 C: shader cost"}`,
+      status.path ? `camera path ${status.path}, frame ${status.pathFrame}` : "camera: orbit (drag, wheel, W A S D Q E; Space: auto)",
       verify ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ` : "state hash not checked (add ?verify=1)"
     ].join("\n");
     message.textContent = status.message ? status.fatal ? `error: ${status.message}` : `${status.message}; reconnecting` : "";
     requestAnimationFrame(tick);
   }
+  window.addEventListener("keydown", (e) => {
+    if (e.key === "c") cost = measureCost();
+  });
   fetch("/scene.glb").then((r) => r.arrayBuffer()).then((b) => {
     const glb = new Uint8Array(b);
     orbit = sceneBounds(glb);
-    if (gl) renderer = new SceneRenderer(gl, glb);
+    if (gl) {
+      renderer = new SceneRenderer(gl, glb);
+      if (pathName !== null) {
+        path = renderer.paths.find((p) => p.name === pathName) ?? null;
+        if (!path) status.message = `the scene has no camera path named ${pathName}`;
+      }
+    }
   }).catch((e) => {
     status.message = `cannot load /scene.glb: ${e}`;
   });

@@ -37,27 +37,18 @@ export const MAX_DECODE_LIMIT = 4 * 2 ** 30;
 /// A payload that does not decode.
 export class DeltaError extends Error {}
 
-/// A bucket: 8 keys (cell id + 1, 0 = empty; as low and high 32-bit halves) and their cell
-/// slots, used entries first. (Keys are 64-bit; BigInt per entry made decoding ~10× slower.)
-export interface Bucket {
-  lo: Uint32Array;
-  hi: Uint32Array;
-  slots: Uint32Array;
-}
-
-function emptyBucket(): Bucket {
-  return {
-    lo: new Uint32Array(BUCKET_ENTRIES),
-    hi: new Uint32Array(BUCKET_ENTRIES),
-    slots: new Uint32Array(BUCKET_ENTRIES),
-  };
-}
-
-/// One instance's changed buckets and cells.
+/// One instance's changed buckets and cells, in flat typed arrays (no object per bucket,
+/// cell or point). Bucket `bucketIds[k]`'s 8 entries are `keyLo`, `keyHi` (the 64-bit key:
+/// cell id + 1, 0 = empty, as 32-bit halves) and `slots` at `8k .. 8k + 8`, used entries
+/// first; cell slot `cellSlots[k]`'s 7 points are `points[7k .. 7k + 7]`.
 export interface InstanceDelta {
   instance: number;
-  buckets: [number, Bucket][];
-  cells: [number, Uint32Array][];
+  bucketIds: Uint32Array;
+  keyLo: Uint32Array;
+  keyHi: Uint32Array;
+  slots: Uint32Array;
+  cellSlots: Uint32Array;
+  points: Uint32Array;
 }
 
 /// A decoded update.
@@ -191,16 +182,38 @@ export function applyPointResidual(residual: number, reference: number): number 
   return acc >>> 0;
 }
 
-function usedEntries(b: Bucket): number {
+function usedEntries(lo: Uint32Array, hi: Uint32Array, base: number): number {
   let n = 0;
-  while (n < BUCKET_ENTRIES && (b.lo[n] !== 0 || b.hi[n] !== 0)) n++;
+  while (n < BUCKET_ENTRIES && (lo[base + n] !== 0 || hi[base + n] !== 0)) n++;
   return n;
 }
 
-function usedPoints(points: Uint32Array): number {
+function usedPoints(points: Uint32Array, base: number): number {
   let n = 0;
-  while (n < CELL_POINTS && points[n] !== 0) n++;
+  while (n < CELL_POINTS && points[base + n] !== 0) n++;
   return n;
+}
+
+/// `a` grown (doubling, zero-filled) to hold at least `words`, refused beyond `max`.
+function grown(a: Uint32Array, words: number, max: number, what: string): Uint32Array {
+  if (words <= a.length) return a;
+  if (words > max) throw new DeltaError(`${what} out of range`);
+  const b = new Uint32Array(Math.min(Math.max(words, 2 * a.length, 64), max));
+  b.set(a);
+  return b;
+}
+
+/// What the decoder last received for one instance: its buckets' entries and its cells, in
+/// flat arrays indexed like the grid (bucket b at 8b, cell slot s at 7s), grown on demand.
+class Received {
+  lo: Uint32Array = new Uint32Array(0);
+  hi: Uint32Array = new Uint32Array(0);
+  slots: Uint32Array = new Uint32Array(0);
+  points: Uint32Array = new Uint32Array(0);
+  constructor(
+    readonly maxBucketWords: number,
+    readonly maxPointWords: number,
+  ) {}
 }
 
 function decodeCount(code: number, old: number, capacity: number, at: number, plane: number, what: string): number {
@@ -210,24 +223,26 @@ function decodeCount(code: number, old: number, capacity: number, at: number, pl
   return n;
 }
 
-const EMPTY_BUCKET: Bucket = emptyBucket();
 const EMPTY_CELL = new Uint32Array(CELL_POINTS);
 
 /// The decoder: its reference state lives between updates of one session.
 export class CompactDecoder {
   private transforms = new Map<number, Uint32Array>();
-  private buckets = new Map<number, Map<number, Bucket>>();
-  private cells = new Map<number, Map<number, Uint32Array>>();
+  private received = new Map<number, Received>();
 
-  /// Most decompressed bytes accepted per update (a client sets it from its instance table).
-  constructor(private limit = MAX_DECODED_BYTES) {
+  /// Most decompressed bytes accepted per update (a client sets it from its instance table),
+  /// and the instances' bucket counts when known (indices beyond them are refused; without
+  /// them the reference arrays are bounded by the limit).
+  constructor(
+    private limit = MAX_DECODED_BYTES,
+    private bucketCounts: number[] | null = null,
+  ) {
     this.limit = Math.min(limit, MAX_DECODE_LIMIT);
   }
 
   private clear() {
     this.transforms.clear();
-    this.buckets.clear();
-    this.cells.clear();
+    this.received.clear();
   }
 
   /// Decodes one update. After an error the state is undefined: the session must restart.
@@ -252,6 +267,27 @@ export class CompactDecoder {
     return this.assemble(layout, s, frame, snapshot);
   }
 
+  private receivedOf(instance: number): Received {
+    let r = this.received.get(instance);
+    if (!r) {
+      let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
+      if (this.bucketCounts) {
+        if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
+        buckets = this.bucketCounts[instance];
+      }
+      const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
+      r = new Received(buckets * BUCKET_ENTRIES, maxPoints);
+      if (this.bucketCounts) {
+        // Known sizes: every bucket at once (as the client's grid), no growing.
+        r.lo = new Uint32Array(r.maxBucketWords);
+        r.hi = new Uint32Array(r.maxBucketWords);
+        r.slots = new Uint32Array(r.maxBucketWords);
+      }
+      this.received.set(instance, r);
+    }
+    return r;
+  }
+
   private assemble(layout: IndexLayout, s: Sections, frame: bigint, snapshot: boolean): Update {
     const transforms: [number, Float32Array][] = layout.transforms.map((instance, k) => {
       const old = this.transforms.get(instance) ?? new Uint32Array(TRANSFORM_WORDS);
@@ -266,14 +302,21 @@ export class CompactDecoder {
     let point = 0;
     const instances: InstanceDelta[] = [];
     for (const { instance, buckets: bucketIds, cells: slotIds } of layout.instances) {
-      let received = this.buckets.get(instance);
-      if (!received) this.buckets.set(instance, (received = new Map()));
-      const buckets: [number, Bucket][] = [];
-      for (const b of bucketIds) {
+      const r = this.receivedOf(instance);
+      const nb = bucketIds.length;
+      const lo = new Uint32Array(nb * BUCKET_ENTRIES);
+      const hi = new Uint32Array(nb * BUCKET_ENTRIES);
+      const slots = new Uint32Array(nb * BUCKET_ENTRIES);
+      for (let k = 0; k < nb; k++) {
+        const b = bucketIds[k];
+        const base = b * BUCKET_ENTRIES;
+        const end = base + BUCKET_ENTRIES;
+        r.lo = grown(r.lo, end, r.maxBucketWords, `bucket ${b}`);
+        r.hi = grown(r.hi, end, r.maxBucketWords, `bucket ${b}`);
+        r.slots = grown(r.slots, end, r.maxBucketWords, `bucket ${b}`);
         const code = s.entryCounts[entryCount++];
-        const old = received.get(b) ?? EMPTY_BUCKET;
-        const n = decodeCount(code, usedEntries(old), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
-        const bucket = emptyBucket();
+        const n = decodeCount(code, usedEntries(r.lo, r.hi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
+        const out = k * BUCKET_ENTRIES;
         for (let i = 0; i < n; i++) {
           const c = s.entryChoices[entry];
           let tLo = s.keyLo[entry];
@@ -286,52 +329,62 @@ export class CompactDecoder {
             slot = slotIds[sr];
           } else if (c < RANK_CHOICE) {
             // XOR with the reference's `(key − 1) XOR b` (0 for an empty entry).
-            const o = (i + c) % BUCKET_ENTRIES;
-            const rLo = old.lo[o];
-            const rHi = old.hi[o];
+            const o = base + ((i + c) % BUCKET_ENTRIES);
+            const rLo = r.lo[o];
+            const rHi = r.hi[o];
             if (rLo !== 0 || rHi !== 0) {
               const mLo = rLo === 0 ? 0xffffffff : rLo - 1;
               const mHi = rLo === 0 ? rHi - 1 : rHi;
               tLo = (tLo ^ mLo ^ b) >>> 0;
               tHi = (tHi ^ mHi) >>> 0;
             }
-            slot = (sr ^ old.slots[o]) >>> 0;
+            slot = (sr ^ r.slots[o]) >>> 0;
           } else {
             throw new DeltaError("bad reference choice for a bucket entry");
           }
           // key = (t XOR b) + 1, refused when it overflows 64 bits.
           const xLo = (tLo ^ b) >>> 0;
           if (xLo === 0xffffffff && tHi === 0xffffffff) throw new DeltaError("bad bucket key");
-          bucket.lo[i] = xLo === 0xffffffff ? 0 : xLo + 1;
-          bucket.hi[i] = xLo === 0xffffffff ? tHi + 1 : tHi;
-          bucket.slots[i] = slot;
+          lo[out + i] = xLo === 0xffffffff ? 0 : xLo + 1;
+          hi[out + i] = xLo === 0xffffffff ? tHi + 1 : tHi;
+          slots[out + i] = slot;
         }
-        received.set(b, bucket);
-        buckets.push([b, bucket]);
+        r.lo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
+        r.hi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
+        r.slots.set(slots.subarray(out, out + BUCKET_ENTRIES), base);
       }
-      let receivedCells = this.cells.get(instance);
-      if (!receivedCells) this.cells.set(instance, (receivedCells = new Map()));
-      const cells: [number, Uint32Array][] = [];
-      let previous = EMPTY_CELL;
-      for (const slot of slotIds) {
+      const nc = slotIds.length;
+      const pts = new Uint32Array(nc * CELL_POINTS);
+      for (let k = 0; k < nc; k++) {
+        const slot = slotIds[k];
+        const base = slot * CELL_POINTS;
+        r.points = grown(r.points, base + CELL_POINTS, r.maxPointWords, `cell slot ${slot}`);
+        const old = r.points;
         const code = s.cellLengths[cellCount++];
-        const old = receivedCells.get(slot) ?? EMPTY_CELL;
-        const n = decodeCount(code, usedPoints(old), CELL_POINTS, point, s.pointChoices.length, "cell length");
-        const cell = new Uint32Array(CELL_POINTS);
+        const n = decodeCount(code, usedPoints(old, base), CELL_POINTS, point, s.pointChoices.length, "cell length");
+        const out = k * CELL_POINTS;
         for (let i = 0; i < n; i++) {
           const c = s.pointChoices[point];
           const residual = s.points[point];
           point++;
           if (c >= POINT_CHOICES) throw new DeltaError("bad reference choice for a point");
           if ((residual & VALID_BIT) !== 0) throw new DeltaError("bad point residual");
-          const reference = c < CELL_POINTS ? old[(i + c) % CELL_POINTS] : previous[c - CELL_POINTS];
-          cell[i] = applyPointResidual(residual, reference);
+          // References: this cell as last received, or the previous cell of this update.
+          const reference =
+            c < CELL_POINTS ? old[base + ((i + c) % CELL_POINTS)] : k > 0 ? pts[out - CELL_POINTS + c - CELL_POINTS] : EMPTY_CELL[0];
+          pts[out + i] = applyPointResidual(residual, reference);
         }
-        receivedCells.set(slot, cell);
-        previous = cell;
-        cells.push([slot, cell]);
+        old.set(pts.subarray(out, out + CELL_POINTS), base);
       }
-      instances.push({ instance, buckets, cells });
+      instances.push({
+        instance,
+        bucketIds: Uint32Array.from(bucketIds),
+        keyLo: lo,
+        keyHi: hi,
+        slots,
+        cellSlots: Uint32Array.from(slotIds),
+        points: pts,
+      });
     }
     if (entry !== s.entryChoices.length || point !== s.pointChoices.length) {
       throw new DeltaError(`${s.entryChoices.length - entry + s.pointChoices.length - point} trailing records`);

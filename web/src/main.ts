@@ -1,13 +1,24 @@
 // The page served at `/`: connects to the server's WebSocket (`/ws`, token from `?token=`),
-// keeps the client state current, orbits a camera around the scene (bounds from
-// `/scene.glb`) so the server traces what it would show, reconnects with backoff, and shows
-// an overlay: fps, Mbit/s, server frame, updates, points, state-hash checks (`?verify=1`
-// asks the server for its hash with every update), and a clear message for a wrong token or
-// protocol version. `window.psao` exposes the same numbers to tests.
+// keeps the client state current and its grids in GPU textures, draws the scene with
+// per-pixel AO (keys 1/2/3 or the overlay's buttons: composited, AO only, no AO), orbits a
+// camera around the scene (bounds from `/scene.glb`) or follows a camera path of the scene
+// by name (`?path=NAME`) so the server traces what it would show, reconnects with backoff,
+// and shows an overlay: fps, Mbit/s, server frame, round-trip time (a GET of `/health`
+// every 2 s), updates, points, decode ms, state-hash checks (`?verify=1` asks the server for
+// its hash with every update), and a clear message for a wrong token or protocol version.
+//
+// Test mode (`?path=NAME&frames=N&lockstep=1&res=WxH&mode=ao`): the canvas is WxH, camera
+// frame f of the path is sent only after the server answered frame f − 1 (the server runs
+// with `--lockstep`), the view after the answer to frame N − 1 stays on screen and
+// `window.psao.done` turns true: the same frames `psao view --frames N` renders;
+// `&scale=K` rasterizes the G-buffer at K× (see `scale` below).
+// `window.psao` exposes the numbers to tests; `window.psaoCost()` measures the shader's cost.
 
 import { Session } from "./session";
 import { sceneBounds } from "./bounds";
-import { SceneRenderer } from "./render";
+import { GridTextures } from "./grids";
+import { MODE_AO, MODE_COMPOSITED, MODE_COST, MODE_NO_AO } from "./aoshader";
+import { SceneRenderer, type CameraPathDoc } from "./render";
 import type { Camera } from "./wire";
 
 interface Status {
@@ -29,6 +40,22 @@ interface Status {
   camera: Camera | null;
   /// Whether the camera orbits by itself (until the user moves it).
   autoOrbit: boolean;
+  /// The drawn view: 0 composited, 1 AO only, 2 no AO.
+  mode: number;
+  /// Round-trip time of a GET /health, ms.
+  rttMs: number | null;
+  /// The followed camera path's name and frame.
+  path: string | null;
+  pathFrame: number;
+  /// Test mode: the last frame was answered and drawn.
+  done: boolean;
+  /// Decode (and apply) ms per update, and texture bytes uploaded.
+  decodeMs: number;
+  uploadedBytes: number;
+  /// Full rebuilds of the grid textures (first update, snapshots, outgrown reserves) and
+  /// their size in bytes.
+  rebuilds: number;
+  textureBytes: number;
 }
 
 const status: Status = {
@@ -47,12 +74,31 @@ const status: Status = {
   drawn: 0,
   camera: null,
   autoOrbit: true,
+  mode: MODE_COMPOSITED,
+  rttMs: null,
+  path: null,
+  pathFrame: 0,
+  done: false,
+  decodeMs: 0,
+  uploadedBytes: 0,
+  rebuilds: 0,
+  textureBytes: 0,
 };
 (window as unknown as { psao: Status }).psao = status;
 
 const params = new URLSearchParams(location.search);
 const token = params.get("token");
 const verify = params.get("verify") === "1";
+const pathName = params.get("path");
+const testFrames = params.has("frames") ? Math.max(1, Number(params.get("frames"))) : null;
+const lockstep = params.get("lockstep") === "1";
+const fixedRes = /^(\d+)x(\d+)$/.exec(params.get("res") ?? "");
+/// G-buffer samples per pixel and axis (`?scale=K`, odd): with K > 1 the rasterizer's
+/// 4-bit sub-pixel snapping (SwiftShader's) moves edges by 1/(16·K) pixel instead of 1/16, so
+/// which surface covers a pixel centre agrees with psao-raster's 12-bit edges far more often.
+const scale = Math.max(1, Math.floor(Number(params.get("scale") ?? "1")) | 1);
+const MODES: Record<string, number> = { composited: MODE_COMPOSITED, ao: MODE_AO, noao: MODE_NO_AO };
+status.mode = MODES[params.get("mode") ?? ""] ?? MODE_COMPOSITED;
 const wsUrl = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`;
 
 let session: Session | null = null;
@@ -68,8 +114,17 @@ function connect() {
         status.sessions++;
         status.message = null;
         backoff = 200;
+        if (session?.state) grids?.reset(session.state);
+        // A new session (also after a restart) starts the path again.
+        pathFrame = 0;
+        answered = -1;
+        sent = -1;
+      },
+      sceneTime: (_frame, clientFrame) => {
+        if (clientFrame !== null) answered = Math.max(answered, clientFrame);
       },
       update: (u, bytes, verified) => {
+        grids?.apply(u);
         status.updates++;
         if (verified) status.verified++;
         status.mismatches = session?.mismatches ?? status.mismatches;
@@ -108,8 +163,23 @@ function countPoints(): number {
 
 const canvas = document.getElementById("view") as HTMLCanvasElement;
 // Kept after compositing so that tests (and screenshots) can read the frame back.
-const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true });
+const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
 let renderer: SceneRenderer | null = null;
+const grids = gl ? new GridTextures(gl) : null;
+/// The followed path, its current frame, and (lockstep) the frames sent and answered.
+let path: CameraPathDoc | null = null;
+let pathFrame = 0;
+let sent = -1;
+let answered = -1;
+let pathStart = 0;
+
+for (const [id, mode] of [
+  ["mode-composited", MODE_COMPOSITED],
+  ["mode-ao", MODE_AO],
+  ["mode-noao", MODE_NO_AO],
+] as const) {
+  document.getElementById(id)?.addEventListener("click", () => (status.mode = mode));
+}
 
 /// The camera: it orbits the scene by itself until the user drags (orbit), scrolls (zoom)
 /// or flies (W/A/S/D forward/left/back/right, Q/E down/up); Space resumes the auto-orbit.
@@ -140,7 +210,10 @@ canvas.addEventListener(
   { passive: false },
 );
 window.addEventListener("keydown", (e) => {
-  if (e.key === " ") control.auto = true;
+  if (e.key === "1") status.mode = MODE_COMPOSITED;
+  else if (e.key === "2") status.mode = MODE_AO;
+  else if (e.key === "3") status.mode = MODE_NO_AO;
+  else if (e.key === " ") control.auto = true;
   else control.keys.add(e.key.toLowerCase());
 });
 window.addEventListener("keyup", (e) => control.keys.delete(e.key.toLowerCase()));
@@ -179,44 +252,153 @@ function orbitCamera(now: number): Camera | null {
   };
 }
 
+/// Camera `frame` of the followed path (wrapping around), as sent to the server.
+function pathCamera(p: CameraPathDoc, frame: number, index: number): Camera {
+  const f = p.frames[index % p.frames.length];
+  return {
+    frame,
+    position: [f[0], f[1], f[2]],
+    target: [f[3], f[4], f[5]],
+    up: [f[6], f[7], f[8]],
+    fovY: f[9],
+    near: f[10],
+    far: f[11],
+    aspect: canvas.width / Math.max(canvas.height, 1),
+  };
+}
+
+/// The camera of this tick and whether to send it: the lockstep test path, the followed path
+/// (60 Hz of wall time, until the user takes over), or the orbit.
+function currentCamera(now: number): { cam: Camera | null; send: boolean } {
+  if (path && lockstep && testFrames !== null) {
+    if (!session?.state) return { cam: null, send: false };
+    if (answered === sent && sent < testFrames - 1) {
+      sent++;
+      return { cam: pathCamera(path, sent, sent), send: true };
+    }
+    return { cam: pathCamera(path, Math.max(answered, 0), Math.max(answered, 0)), send: false };
+  }
+  if (path && control.auto) {
+    if (!pathStart) pathStart = now;
+    pathFrame = Math.floor(((now - pathStart) / 1000) * 60);
+    return { cam: pathCamera(path, cameraFrame, pathFrame), send: true };
+  }
+  return { cam: orbitCamera(now), send: true };
+}
+
+/// Draws one frame in the cost mode and reads it back: per covered pixel, the mean and
+/// largest number of cells and points the AO shader visited.
+function measureCost() {
+  const cam = status.camera;
+  if (!gl || !renderer || !cam) return null;
+  renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale });
+  const w = gl.drawingBufferWidth;
+  const h = gl.drawingBufferHeight;
+  const px = new Uint8Array(w * h * 4);
+  gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  let covered = 0;
+  let cells = 0;
+  let points = 0;
+  let maxCells = 0;
+  let maxPoints = 0;
+  for (let i = 0; i < px.length; i += 4) {
+    if (px[i + 3] !== 255) continue;
+    covered++;
+    const p = px[i + 1] + 256 * px[i + 2];
+    cells += px[i];
+    points += p;
+    maxCells = Math.max(maxCells, px[i]);
+    maxPoints = Math.max(maxPoints, p);
+  }
+  renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+  return {
+    width: w,
+    height: h,
+    covered,
+    cellsPerPixel: covered ? cells / covered : 0,
+    pointsPerPixel: covered ? points / covered : 0,
+    maxCells,
+    maxPoints,
+  };
+}
+(window as unknown as { psaoCost: typeof measureCost }).psaoCost = measureCost;
+
 let lastCamera = 0;
 let lastPointCount = 0;
+let lastPing = 0;
+let cost: ReturnType<typeof measureCost> = null;
+function ping(now: number) {
+  if (now - lastPing < 2000) return;
+  lastPing = now;
+  const t0 = performance.now();
+  fetch("/health", { cache: "no-store" })
+    .then((r) => r.arrayBuffer())
+    .then(() => (status.rttMs = performance.now() - t0))
+    .catch(() => (status.rttMs = null));
+}
+
 function tick(now: number) {
   frames.push(now);
   frames = frames.filter((t) => now - t < 1000);
   received = received.filter((r) => now - r.t < 1000);
   status.fps = frames.length;
   status.mbitS = (received.reduce((a, r) => a + r.bytes, 0) * 8) / 1e6;
-  const w0 = Math.round(window.innerWidth * devicePixelRatio);
-  const h0 = Math.round(window.innerHeight * devicePixelRatio);
+  const w0 = fixedRes ? Number(fixedRes[1]) : Math.round(window.innerWidth * devicePixelRatio);
+  const h0 = fixedRes ? Number(fixedRes[2]) : Math.round(window.innerHeight * devicePixelRatio);
   if (canvas.width !== w0 || canvas.height !== h0) {
     canvas.width = w0;
     canvas.height = h0;
+    if (fixedRes) {
+      canvas.style.width = `${w0}px`;
+      canvas.style.height = `${h0}px`;
+    }
   }
-  const cam = orbitCamera(now);
+  if (!lockstep) ping(now);
+  const { cam, send } = currentCamera(now);
   status.camera = cam;
   status.autoOrbit = control.auto;
-  if (cam && now - lastCamera > 1000 / 30) {
+  status.path = path && (control.auto || lockstep) ? path.name : null;
+  status.pathFrame = lockstep ? Math.max(answered, 0) : pathFrame;
+  if (cam && send && (lockstep || now - lastCamera > 1000 / 30)) {
     lastCamera = now;
     session?.sendCamera(cam);
     cameraFrame++;
   }
-  if (cam && renderer) {
-    renderer.draw(cam, session?.state?.transforms ?? []);
+  // Lockstep test runs draw only the last frame (what is compared), so that stepping
+  // through the path does not wait for frames nobody looks at.
+  const drawNow = !(lockstep && testFrames !== null) || answered === testFrames - 1;
+  if (cam && renderer && drawNow) {
+    grids?.upload();
+    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
     status.drawn++;
+    if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
   }
   if (now - lastPointCount > 500) {
     lastPointCount = now;
     status.points = countPoints();
   }
+  status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
+  status.uploadedBytes = grids?.uploadedBytes ?? 0;
+  status.rebuilds = grids?.rebuilds ?? 0;
+  status.textureBytes = grids ? grids.buckets.mirror.byteLength + grids.cells.mirror.byteLength : 0;
   const w = session?.welcomeMsg;
+  const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
   overlay.textContent = [
     `psao viewer — ${status.connected ? `connected, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}`,
-    `${status.fps} fps · ${status.mbitS.toFixed(2)} Mbit/s · server frame ${status.serverFrame}`,
+    `${status.fps} fps · ${status.mbitS.toFixed(2)} Mbit/s · server frame ${status.serverFrame} · round trip ${
+      status.rttMs === null ? "-" : `${status.rttMs.toFixed(1)} ms`
+    }`,
     `${status.updates} updates · ${status.points} points received · ${
-      session && session.updates > 0 ? (session.decodeMs / session.updates).toFixed(2) : "-"
+      status.decodeMs ? status.decodeMs.toFixed(2) : "-"
     } ms decode per update`,
-    renderer ? "WebGL2: the scene without AO (the AO shader is not here yet)" : "WebGL2 unavailable: nothing drawn",
+    !renderer
+      ? "WebGL2 unavailable: nothing drawn"
+      : grids?.problem
+        ? grids.problem
+        : `view: ${modeName} (keys 1 2 3)${
+            cost ? ` · AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " · C: shader cost"
+          }`,
+    status.path ? `camera path ${status.path}, frame ${status.pathFrame}` : "camera: orbit (drag, wheel, W A S D Q E; Space: auto)",
     verify
       ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ`
       : "state hash not checked (add ?verify=1)",
@@ -225,12 +407,22 @@ function tick(now: number) {
   requestAnimationFrame(tick);
 }
 
+window.addEventListener("keydown", (e) => {
+  if (e.key === "c") cost = measureCost();
+});
+
 fetch("/scene.glb")
   .then((r) => r.arrayBuffer())
   .then((b) => {
     const glb = new Uint8Array(b);
     orbit = sceneBounds(glb);
-    if (gl) renderer = new SceneRenderer(gl, glb);
+    if (gl) {
+      renderer = new SceneRenderer(gl, glb);
+      if (pathName !== null) {
+        path = renderer.paths.find((p) => p.name === pathName) ?? null;
+        if (!path) status.message = `the scene has no camera path named ${pathName}`;
+      }
+    }
   })
   .catch((e) => {
     status.message = `cannot load /scene.glb: ${e}`;

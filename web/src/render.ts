@@ -1,14 +1,20 @@
-// WebGL2 rasterization of `/scene.glb`: every instance node (node i = instance i of the
-// instance table) with its mesh, at the transform of the last update that carried one (its
-// rest matrix until then), shaded by its material's base colour and a fixed head light. This
-// is the no-AO view; skinning and the per-pixel AO reconstruction are not here yet.
+// WebGL2 rasterization of `/scene.glb` with per-pixel AO, deferred: every instance node
+// (node i = instance i of the instance table) with its mesh, at the transform of the last
+// update that carried one (its rest matrix until then), goes into a G-buffer (world
+// position, instance, shading normal, base colour); a full-screen pass then reconstructs AO
+// from the grids in GPU textures (`grids.ts`) once per pixel and composites as psao-client
+// does (`aoshader.ts`).
 
+import { FRAGMENT, FULLSCREEN, GBUFFER, VERTEX } from "./aoshader";
+import type { GridTextures } from "./grids";
+import type { ClientState } from "./state";
 import type { Camera } from "./wire";
 
 interface Primitive {
   vao: WebGLVertexArrayObject;
   count: number;
-  colour: [number, number, number];
+  /// Index of its base colour in the colour texture.
+  colour: number;
 }
 
 interface GltfDoc {
@@ -17,29 +23,61 @@ interface GltfDoc {
   materials?: { pbrMetallicRoughness?: { baseColorFactor?: number[] } }[];
   accessors?: { bufferView?: number; byteOffset?: number; count: number; componentType: number; type: string }[];
   bufferViews?: { byteOffset?: number; byteLength: number }[];
+  extras?: { psao_camera_paths?: CameraPathDoc[] };
 }
 
-const VERTEX = `#version 300 es
-layout(location = 0) in vec3 position;
-layout(location = 1) in vec3 normal;
-uniform mat4 view_proj;
-uniform mat4 model;
-out vec3 world_normal;
-void main() {
-  world_normal = mat3(model) * normal;
-  gl_Position = view_proj * model * vec4(position, 1.0);
-}`;
+/// A camera path of the scene, one camera per 60 Hz frame: position, target, up, vertical
+/// FOV, near, far (12 numbers; `crates/psao-net/src/glb.rs`).
+export interface CameraPathDoc {
+  name: string;
+  frames: number[][];
+}
 
-const FRAGMENT = `#version 300 es
-precision highp float;
-in vec3 world_normal;
-uniform vec3 colour;
-uniform vec3 light;
-out vec4 out_colour;
-void main() {
-  float d = abs(dot(normalize(world_normal), light));
-  out_colour = vec4(pow(colour * (0.25 + 0.75 * d), vec3(1.0 / 2.2)), 1.0);
-}`;
+/// psao-client's reconstruction settings and shading (`ReconstructSettings`, `Shading`,
+/// psao-points' thresholds), as f32.
+const SETTINGS = {
+  factor: Math.fround(2 * Math.SQRT2),
+  planeTolerance: 0.5,
+  normalThreshold: Math.fround(0.1),
+  directionThreshold: Math.fround(0.7),
+  exponent: 8,
+  fallback: true,
+  ambient: Math.fround(0.6),
+  light: 0.5,
+};
+/// psao-client's SKY_GREY (linear), drawn where nothing is covered.
+const SKY_GREY = [0.62, 0.66, 0.72];
+/// Smallest |det| of an instance transform that psao-client inverts.
+const MIN_DETERMINANT = 1e-12;
+
+/// psao-client's `encode_srgb` (8-bit).
+export function encodeSrgb(linear: number): number {
+  const c = Math.min(Math.max(linear, 0), 1);
+  const s = c <= 0.0031308 ? 12.92 * c : 1.055 * Math.pow(c, 1 / 2.4) - 0.055;
+  return Math.round(s * 255);
+}
+
+/// The 256 decoded normals of psao-points' 8-bit octahedral codes (`decode_normal`), in f32
+/// arithmetic step by step as the Rust code computes them.
+export function normalTable(): Float32Array {
+  const f = Math.fround;
+  const step = f(2 / 14);
+  const level = (q: number) => f(f(Math.min(q, 14) * step) - 1);
+  const sign = (x: number) => (x >= 0 ? 1 : -1);
+  const out = new Float32Array(256 * 4);
+  for (let code = 0; code < 256; code++) {
+    const ox = level(code >> 4);
+    const oy = level(code & 15);
+    const z = f(f(1 - Math.abs(ox)) - Math.abs(oy));
+    let v: number[];
+    if (z >= 0) v = [ox, oy, z];
+    else v = [f(f(1 - Math.abs(oy)) * sign(ox)), f(f(1 - Math.abs(ox)) * sign(oy)), z];
+    const len = f(Math.sqrt(f(f(f(v[0] * v[0]) + f(v[1] * v[1])) + f(v[2] * v[2]))));
+    const inv = f(1 / len);
+    out.set([f(v[0] * inv), f(v[1] * inv), f(v[2] * inv), 0], code * 4);
+  }
+  return out;
+}
 
 function compile(gl: WebGL2RenderingContext, type: number, source: string): WebGLShader {
   const s = gl.createShader(type)!;
@@ -49,38 +87,163 @@ function compile(gl: WebGL2RenderingContext, type: number, source: string): WebG
   return s;
 }
 
-/// The scene uploaded to the GPU.
+/// An instance's grid view for the shader: world → local, world normal → local normal.
+interface InstanceView {
+  toLocal: Float32Array; // mat4, column-major
+  normalToLocal: Float32Array; // mat3
+}
+
+/// psao-client's `InstanceView::new`: the inverse of an Affine3A (12 floats: columns, then
+/// translation) and the transpose of its linear part; null when not invertible.
+function instanceView(t: Float32Array): InstanceView | null {
+  const [a, b, c, d, e, f, g, h, i] = t; // columns (a b c), (d e f), (g h i)
+  const det = a * (e * i - f * h) - d * (b * i - c * h) + g * (b * f - c * e);
+  if (!(Math.abs(det) > MIN_DETERMINANT)) return null;
+  // Inverse of the column-major 3×3 [a d g; b e h; c f i].
+  const inv = [
+    (e * i - f * h) / det,
+    (c * h - b * i) / det,
+    (b * f - c * e) / det,
+    (f * g - d * i) / det,
+    (a * i - c * g) / det,
+    (c * d - a * f) / det,
+    (d * h - e * g) / det,
+    (b * g - a * h) / det,
+    (a * e - b * d) / det,
+  ];
+  const [tx, ty, tz] = [t[9], t[10], t[11]];
+  const ix = -(inv[0] * tx + inv[3] * ty + inv[6] * tz);
+  const iy = -(inv[1] * tx + inv[4] * ty + inv[7] * tz);
+  const iz = -(inv[2] * tx + inv[5] * ty + inv[8] * tz);
+  const toLocal = new Float32Array([inv[0], inv[1], inv[2], 0, inv[3], inv[4], inv[5], 0, inv[6], inv[7], inv[8], 0, ix, iy, iz, 1]);
+  if (!toLocal.every(Number.isFinite)) return null;
+  return { toLocal, normalToLocal: new Float32Array([a, d, g, b, e, h, c, f, i]) };
+}
+
+/// What a frame draws.
+export interface DrawOptions {
+  mode: number;
+  state: ClientState | null;
+  grids: GridTextures | null;
+  /// G-buffer samples per canvas pixel and axis (odd; default 1).
+  scale?: number;
+}
+
+/// A G-buffer: world position + instance, shading normal + colour index (RGBA32F each) and
+/// depth, `scale` times the canvas size.
+class GBufferTargets {
+  fbo: WebGLFramebuffer;
+  position: WebGLTexture | null = null;
+  normal: WebGLTexture | null = null;
+  depth: WebGLRenderbuffer | null = null;
+  width = 0;
+  height = 0;
+
+  constructor(private gl: WebGL2RenderingContext) {
+    this.fbo = gl.createFramebuffer()!;
+  }
+
+  resize(width: number, height: number) {
+    if (width === this.width && height === this.height) return;
+    const gl = this.gl;
+    this.width = width;
+    this.height = height;
+    for (const t of [this.position, this.normal]) if (t) gl.deleteTexture(t);
+    if (this.depth) gl.deleteRenderbuffer(this.depth);
+    const target = () => {
+      const t = gl.createTexture()!;
+      gl.bindTexture(gl.TEXTURE_2D, t);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+      gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, width, height);
+      return t;
+    };
+    this.position = target();
+    this.normal = target();
+    this.depth = gl.createRenderbuffer()!;
+    gl.bindRenderbuffer(gl.RENDERBUFFER, this.depth);
+    gl.renderbufferStorage(gl.RENDERBUFFER, gl.DEPTH_COMPONENT24, width, height);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo);
+    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, this.position, 0);
+    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT1, gl.TEXTURE_2D, this.normal, 0);
+    gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.RENDERBUFFER, this.depth);
+    gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1]);
+    const status = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    if (status !== gl.FRAMEBUFFER_COMPLETE) throw new Error(`G-buffer framebuffer incomplete (${status})`);
+  }
+}
+
+function program(gl: WebGL2RenderingContext, vertex: string, fragment: string) {
+  const p = gl.createProgram()!;
+  gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, vertex));
+  gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, fragment));
+  gl.linkProgram(p);
+  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(`program: ${gl.getProgramInfoLog(p)}`);
+  const u: Record<string, WebGLUniformLocation | null> = {};
+  const count = gl.getProgramParameter(p, gl.ACTIVE_UNIFORMS) as number;
+  for (let i = 0; i < count; i++) {
+    const name = gl.getActiveUniform(p, i)!.name;
+    u[name] = gl.getUniformLocation(p, name);
+  }
+  return { p, u };
+}
+
+function dataTexture(gl: WebGL2RenderingContext): WebGLTexture {
+  const t = gl.createTexture()!;
+  gl.bindTexture(gl.TEXTURE_2D, t);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  return t;
+}
+
+/// Texels per instance row of the float and integer instance textures.
+const INST_F = 9;
+const INST_U = 3;
+
+/// The scene uploaded to the GPU, drawn deferred: the G-buffer pass rasterizes every
+/// instance (at `scale` × the canvas size), the full-screen pass reconstructs AO and
+/// composites each canvas pixel from its centre sample.
 export class SceneRenderer {
-  private program: WebGLProgram;
+  private gbuffer: ReturnType<typeof program>;
+  private shade: ReturnType<typeof program>;
+  private targets: GBufferTargets;
   private meshes: Primitive[][] = [];
   private instances: { mesh: number; matrix: Float32Array }[] = [];
-  private uViewProj: WebGLUniformLocation;
-  private uModel: WebGLUniformLocation;
-  private uColour: WebGLUniformLocation;
-  private uLight: WebGLUniformLocation;
+  private normals: WebGLTexture;
+  private colours: WebGLTexture;
+  private instF: WebGLTexture;
+  private instU: WebGLTexture;
+  private emptyU: WebGLTexture;
+  /// The scene's camera paths (from the glb's extras).
+  paths: CameraPathDoc[] = [];
 
   constructor(
     private gl: WebGL2RenderingContext,
     glb: Uint8Array,
   ) {
-    const p = gl.createProgram()!;
-    gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, VERTEX));
-    gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, FRAGMENT));
-    gl.linkProgram(p);
-    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(`program: ${gl.getProgramInfoLog(p)}`);
-    this.program = p;
-    this.uViewProj = gl.getUniformLocation(p, "view_proj")!;
-    this.uModel = gl.getUniformLocation(p, "model")!;
-    this.uColour = gl.getUniformLocation(p, "colour")!;
-    this.uLight = gl.getUniformLocation(p, "light")!;
-    this.load(glb);
+    if (!gl.getExtension("EXT_color_buffer_float")) throw new Error("WebGL2 without EXT_color_buffer_float");
+    this.gbuffer = program(gl, VERTEX, GBUFFER);
+    this.shade = program(gl, FULLSCREEN, FRAGMENT);
+    this.targets = new GBufferTargets(gl);
+    this.normals = dataTexture(gl);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, 256, 1, 0, gl.RGBA, gl.FLOAT, normalTable());
+    this.instF = dataTexture(gl);
+    this.instU = dataTexture(gl);
+    this.emptyU = dataTexture(gl);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32UI, 1, 1, 0, gl.RGBA_INTEGER, gl.UNSIGNED_INT, new Uint32Array(4));
+    const colours = this.load(glb);
+    this.colours = dataTexture(gl);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, Math.max(1, colours.length / 4), 1, 0, gl.RGBA, gl.FLOAT, colours.length ? colours : new Float32Array(4));
   }
 
-  private load(glb: Uint8Array) {
+  /// Uploads the meshes; returns the primitives' base colours (RGBA per colour index).
+  private load(glb: Uint8Array): Float32Array {
     const gl = this.gl;
     const view = new DataView(glb.buffer, glb.byteOffset, glb.byteLength);
     const jsonLen = view.getUint32(12, true);
     const doc: GltfDoc = JSON.parse(new TextDecoder().decode(glb.subarray(20, 20 + jsonLen)));
+    this.paths = doc.extras?.psao_camera_paths ?? [];
     const binAt = 20 + jsonLen + 8;
     const bin = glb.subarray(binAt, binAt + view.getUint32(20 + jsonLen, true));
     const data = (index: number): { bytes: Uint8Array; count: number } => {
@@ -90,6 +253,7 @@ export class SceneRenderer {
       const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
       return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
     };
+    const colours: number[] = [];
     for (const mesh of doc.meshes ?? []) {
       const prims: Primitive[] = [];
       for (const prim of mesh.primitives) {
@@ -112,7 +276,8 @@ export class SceneRenderer {
         gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, idx.bytes, gl.STATIC_DRAW);
         gl.bindVertexArray(null);
         const c = doc.materials?.[prim.material ?? 0]?.pbrMetallicRoughness?.baseColorFactor ?? [0.8, 0.8, 0.8, 1];
-        prims.push({ vao, count: idx.count, colour: [c[0], c[1], c[2]] });
+        prims.push({ vao, count: idx.count, colour: colours.length / 4 });
+        colours.push(c[0], c[1], c[2], 1);
       }
       this.meshes.push(prims);
     }
@@ -120,39 +285,150 @@ export class SceneRenderer {
       if (node.mesh === undefined || !node.matrix) break;
       this.instances.push({ mesh: node.mesh, matrix: new Float32Array(node.matrix) });
     }
+    return new Float32Array(colours);
   }
 
-  /// Draws the scene from `camera`; `transforms[i]`, when set, is instance i's Affine3A from
-  /// the last update (12 floats: matrix columns, then translation).
-  draw(camera: Camera, transforms: (Float32Array | null)[]) {
+  /// Draws the scene from `camera` in `opts.mode`; instance i is drawn at
+  /// `state.transforms[i]` when set (else its rest matrix), and its AO reconstructed from
+  /// its grid when the state has its transform (as psao-client). The G-buffer is `scale`
+  /// times the canvas size (1 by default; odd scales put a sample on every pixel centre).
+  draw(camera: Camera, opts: DrawOptions) {
     const gl = this.gl;
-    gl.viewport(0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight);
-    gl.clearColor(0.07, 0.07, 0.07, 1);
-    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+    const grids = opts.grids && !opts.grids.problem ? opts.grids : null;
+    const state = opts.state;
+    const scale = Math.max(1, Math.floor(opts.scale ?? 1));
+    const w = gl.drawingBufferWidth;
+    const h = gl.drawingBufferHeight;
+    this.targets.resize(w * scale, h * scale);
+
+    // G-buffer pass.
+    const g = this.gbuffer.u;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, this.targets.fbo);
+    gl.viewport(0, 0, w * scale, h * scale);
+    gl.clearBufferfv(gl.COLOR, 0, [0, 0, 0, -1]);
+    gl.clearBufferfv(gl.COLOR, 1, [0, 0, 0, 0]);
+    gl.clearBufferfi(gl.DEPTH_STENCIL, 0, 1, 0);
     gl.enable(gl.DEPTH_TEST);
-    gl.useProgram(this.program);
-    gl.uniformMatrix4fv(this.uViewProj, false, viewProj(camera));
-    const [px, py, pz] = camera.position;
-    const [tx, ty, tz] = camera.target;
-    const l = Math.hypot(tx - px, ty - py, tz - pz) || 1;
-    gl.uniform3f(this.uLight, (tx - px) / l, (ty - py) / l, (tz - pz) / l);
+    gl.depthFunc(gl.LESS);
+    gl.useProgram(this.gbuffer.p);
+    gl.uniformMatrix4fv(g.u_view_proj, false, viewProj(camera));
+    gl.uniform3fv(g.u_eye, camera.position);
     const model = new Float32Array(16);
+    const instF = new Float32Array(this.instances.length * INST_F * 4);
+    const instU = new Uint32Array(this.instances.length * INST_U * 4);
     for (const [i, inst] of this.instances.entries()) {
-      const t = transforms[i];
+      const t = state?.transforms[i] ?? null;
       if (t) {
         model.set([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
       } else {
         model.set(inst.matrix);
       }
-      gl.uniformMatrix4fv(this.uModel, false, model);
+      gl.uniformMatrix4fv(g.u_model, false, model);
+      gl.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
+      gl.uniform1f(g.u_instance, i);
       for (const p of this.meshes[inst.mesh] ?? []) {
-        gl.uniform3f(this.uColour, p.colour[0], p.colour[1], p.colour[2]);
+        gl.uniform1f(g.u_colour_index, p.colour);
         gl.bindVertexArray(p.vao);
         gl.drawElements(gl.TRIANGLES, p.count, gl.UNSIGNED_INT, 0);
       }
+      this.instanceRow(i, t, state, grids, instF, instU);
     }
     gl.bindVertexArray(null);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.disable(gl.DEPTH_TEST);
+
+    // Full-screen pass.
+    const u = this.shade.u;
+    gl.viewport(0, 0, w, h);
+    gl.useProgram(this.shade.p);
+    const rows = Math.max(1, this.instances.length);
+    gl.bindTexture(gl.TEXTURE_2D, this.instF);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, INST_F, rows, 0, gl.RGBA, gl.FLOAT, instF.length ? instF : new Float32Array(INST_F * 4));
+    gl.bindTexture(gl.TEXTURE_2D, this.instU);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32UI, INST_U, rows, 0, gl.RGBA_INTEGER, gl.UNSIGNED_INT, instU.length ? instU : new Uint32Array(INST_U * 4));
+    const textures: [string, WebGLTexture | null][] = [
+      ["u_buckets", grids?.buckets.texture ?? this.emptyU],
+      ["u_cells", grids?.cells.texture ?? this.emptyU],
+      ["u_normals", this.normals],
+      ["u_gposition", this.targets.position],
+      ["u_gnormal", this.targets.normal],
+      ["u_colours", this.colours],
+      ["u_instf", this.instF],
+      ["u_instu", this.instU],
+    ];
+    textures.forEach(([name, t], unit) => {
+      gl.activeTexture(gl.TEXTURE0 + unit);
+      gl.bindTexture(gl.TEXTURE_2D, t);
+      gl.uniform1i(u[name], unit);
+    });
+    gl.activeTexture(gl.TEXTURE0);
+    gl.uniform1i(u.u_mode, opts.mode);
+    gl.uniform1i(u.u_scale, scale);
+    gl.uniform3f(u.u_sky, ...(SKY_GREY.map((c) => encodeSrgb(c) / 255) as [number, number, number]));
+    const l = [0.35, 1.0, 0.6];
+    const ll = Math.hypot(l[0], l[1], l[2]);
+    gl.uniform3f(u.u_light_dir, l[0] / ll, l[1] / ll, l[2] / ll);
+    gl.uniform1f(u.u_light, SETTINGS.light);
+    gl.uniform1f(u.u_ambient, SETTINGS.ambient);
+    gl.uniform1f(u.u_factor, SETTINGS.factor);
+    gl.uniform1f(u.u_plane_tolerance, SETTINGS.planeTolerance);
+    gl.uniform1f(u.u_normal_threshold, SETTINGS.normalThreshold);
+    gl.uniform1f(u.u_direction_threshold, SETTINGS.directionThreshold);
+    gl.uniform1i(u.u_exponent, SETTINGS.exponent);
+    gl.uniform1i(u.u_fallback, SETTINGS.fallback ? 1 : 0);
+    gl.drawArrays(gl.TRIANGLES, 0, 3);
   }
+
+  /// Instance i's row of the instance textures: its view and grid layout.
+  private instanceRow(
+    i: number,
+    t: Float32Array | null,
+    state: ClientState | null,
+    grids: GridTextures | null,
+    f: Float32Array,
+    u: Uint32Array,
+  ) {
+    const grid = state?.grids[i] ?? null;
+    const slot = grids?.slots[i] ?? null;
+    const view = t && grid && slot ? instanceView(t) : null;
+    if (!view || !grid || !slot) return; // has_view stays 0
+    const e = grid.entry;
+    const fo = i * INST_F * 4;
+    f.set(view.toLocal, fo);
+    const n = view.normalToLocal;
+    f.set([n[0], n[1], n[2], 0, n[3], n[4], n[5], 0, n[6], n[7], n[8], 0], fo + 16);
+    f.set([e.origin[0], e.origin[1], e.origin[2], e.cellSize, Math.fround(1 / e.cellSize), e.layoutPoissonRadius, 1, 0], fo + 28);
+    const row = BigInt(e.dims[0]) * 17n;
+    const slice = BigInt(e.dims[0]) * BigInt(e.dims[1]) * 31n;
+    u.set(
+      [
+        e.dims[0], e.dims[1], e.dims[2], e.bucketCount - 1,
+        slot.bucketBase, slot.cellBase, slot.cellCapacity, 0,
+        Number(row & 0xffffffffn), Number(row >> 32n), Number(slice & 0xffffffffn), Number(slice >> 32n),
+      ],
+      i * INST_U * 4,
+    );
+  }
+}
+
+/// The inverse transpose of a column-major mat4's linear part (psao-raster's normal matrix).
+function normalMatrixOf(m: Float32Array): number[] {
+  const [a, b, c] = [m[0], m[1], m[2]];
+  const [d, e, f] = [m[4], m[5], m[6]];
+  const [g, h, i] = [m[8], m[9], m[10]];
+  const det = a * (e * i - f * h) - d * (b * i - c * h) + g * (b * f - c * e) || 1;
+  // Cofactor matrix / det = inverse transpose, column-major.
+  return [
+    (e * i - f * h) / det,
+    (f * g - d * i) / det,
+    (d * h - e * g) / det,
+    (c * h - b * i) / det,
+    (a * i - c * g) / det,
+    (b * g - a * h) / det,
+    (b * f - c * e) / det,
+    (c * d - a * f) / det,
+    (a * e - b * d) / det,
+  ];
 }
 
 /// Perspective (OpenGL clip space) × look-at of `c`, column-major.

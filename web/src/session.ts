@@ -96,7 +96,10 @@ export class Session {
         if (w.codec !== "compact") return this.fail(`the server's codec \`${w.codec}\` is not supported`, true);
         this.welcomeMsg = w;
         this.state = new ClientState(w.instances);
-        this.decoder = new CompactDecoder(decodeLimit(w.instances));
+        this.decoder = new CompactDecoder(
+          decodeLimit(w.instances),
+          w.instances.map((e) => e.bucketCount),
+        );
         this.handler.welcome(w);
         return;
       }

@@ -29,6 +29,15 @@ export class Grid {
     this.points = new Uint32Array(0);
   }
 
+  /// Empties the grid (a snapshot follows), keeping its memory.
+  clear() {
+    this.keyLo.fill(0);
+    this.keyHi.fill(0);
+    this.slots.fill(0);
+    this.points.fill(0, 0, this.slotCount * CELL_POINTS);
+    this.slotCount = 0;
+  }
+
   /// Most cell slots the layout allows.
   maxCells(): number {
     return this.entry.bucketCount * BUCKET_ENTRIES;
@@ -104,28 +113,29 @@ export class ClientState {
   apply(u: Update) {
     this.validate(u);
     if (u.snapshot) {
-      for (let i = 0; i < this.grids.length; i++) {
-        const g = this.grids[i];
-        if (g) this.grids[i] = new Grid(g.entry);
-      }
+      for (const g of this.grids) g?.clear();
       this.transforms.fill(null);
     }
     for (const [instance, t] of u.transforms) this.transforms[instance] = t;
     for (const d of u.instances) {
       const g = this.grids[d.instance]!;
-      for (const [b, bucket] of d.buckets) {
-        const base = b * BUCKET_ENTRIES;
+      for (let k = 0; k < d.bucketIds.length; k++) {
+        const base = d.bucketIds[k] * BUCKET_ENTRIES;
+        const src = k * BUCKET_ENTRIES;
         // Entries this bucket held stop naming their slots (as InstanceGrid::set_bucket).
         for (let i = 0; i < BUCKET_ENTRIES; i++) {
-          g.keyLo[base + i] = bucket.lo[i];
-          g.keyHi[base + i] = bucket.hi[i];
-          g.slots[base + i] = bucket.slots[i];
-          if (bucket.lo[i] !== 0 || bucket.hi[i] !== 0) g.ensureSlot(bucket.slots[i]);
+          const lo = d.keyLo[src + i];
+          const hi = d.keyHi[src + i];
+          g.keyLo[base + i] = lo;
+          g.keyHi[base + i] = hi;
+          g.slots[base + i] = d.slots[src + i];
+          if (lo !== 0 || hi !== 0) g.ensureSlot(d.slots[src + i]);
         }
       }
-      for (const [slot, cell] of d.cells) {
+      for (let k = 0; k < d.cellSlots.length; k++) {
+        const slot = d.cellSlots[k];
         g.ensureSlot(slot);
-        g.points.set(cell, slot * CELL_POINTS);
+        g.points.set(d.points.subarray(k * CELL_POINTS, (k + 1) * CELL_POINTS), slot * CELL_POINTS);
       }
     }
     this.lastFrame = u.frame;
@@ -146,13 +156,14 @@ export class ClientState {
       if (!g) throw new ApplyError(`instance ${d.instance} has no grid`);
       const max = g.maxCells();
       const mask = g.entry.bucketCount - 1;
-      for (const [b, bucket] of d.buckets) {
+      for (let k = 0; k < d.bucketIds.length; k++) {
+        const b = d.bucketIds[k];
         if (b >= g.entry.bucketCount) throw new ApplyError(`instance ${d.instance}: bucket ${b} out of range`);
-        for (let i = 0; i < BUCKET_ENTRIES; i++) {
-          const lo = bucket.lo[i];
-          const hi = bucket.hi[i];
+        for (let i = k * BUCKET_ENTRIES; i < (k + 1) * BUCKET_ENTRIES; i++) {
+          const lo = d.keyLo[i];
+          const hi = d.keyHi[i];
           if (lo === 0 && hi === 0) continue;
-          if (bucket.slots[i] >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${bucket.slots[i]} out of range`);
+          if (d.slots[i] >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${d.slots[i]} out of range`);
           // id = key − 1
           const idLo = lo === 0 ? 0xffffffff : lo - 1;
           const idHi = lo === 0 ? hi - 1 : hi;
@@ -161,7 +172,7 @@ export class ClientState {
           }
         }
       }
-      for (const [slot] of d.cells) {
+      for (const slot of d.cellSlots) {
         if (slot >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${slot} out of range`);
       }
     }

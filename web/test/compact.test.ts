@@ -21,14 +21,14 @@ function shape(u: Update): unknown {
     transforms: u.transforms.map(([i, t]) => [i, Array.from(t)]),
     instances: u.instances.map((d) => ({
       instance: d.instance,
-      buckets: d.buckets.map(([b, bk]) => [
+      buckets: Array.from(d.bucketIds, (b, k) => [
         b,
-        Array.from(bk.slots, (slot, i) => [
-          ((BigInt(bk.hi[i]) << 32n) | BigInt(bk.lo[i])).toString(16).padStart(16, "0"),
+        Array.from(d.slots.subarray(8 * k, 8 * k + 8), (slot, i) => [
+          ((BigInt(d.keyHi[8 * k + i]) << 32n) | BigInt(d.keyLo[8 * k + i])).toString(16).padStart(16, "0"),
           slot,
         ]),
       ]),
-      cells: d.cells.map(([s, c]) => [s, Array.from(c)]),
+      cells: Array.from(d.cellSlots, (s, k) => [s, Array.from(d.points.subarray(7 * k, 7 * k + 7))]),
     })),
   };
 }

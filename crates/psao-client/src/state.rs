@@ -123,6 +123,15 @@ impl ClientState {
         self.grids.get(instance)?.as_ref()
     }
 
+    /// Heap bytes of the mirror's grids (allocated capacity of their tables).
+    pub fn heap_bytes(&self) -> u64 {
+        self.grids
+            .iter()
+            .flatten()
+            .map(InstanceGrid::heap_bytes)
+            .sum()
+    }
+
     /// Number of valid points over all instances.
     pub fn point_count(&self) -> usize {
         self.grids

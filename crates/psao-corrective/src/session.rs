@@ -1,5 +1,6 @@
-//! One viewer's correction state across frames: the region queue, the sample cache and the
-//! bookkeeping that ties them to camera changes. The frame loop is: on a camera change
+//! One viewer's correction state across frames: the region queue ([`Planner`], the server's
+//! half in the split), the sample cache (the client's half) and the bookkeeping that ties them
+//! to camera changes. The frame loop is: on a camera change
 //! [`Corrector::camera_changed`] (aging); every analysis period [`Corrector::analyze`];
 //! [`Corrector::plan`] the frame's positions within its sample budget; trace them (the caller,
 //! e.g. in parallel); [`Corrector::add`] the samples; [`Corrector::splat`] onto the base frame.
@@ -24,16 +25,86 @@ pub struct Planned {
     pub level: u8,
 }
 
-/// Correction state of one viewer.
+/// The scheduling half of the correction state (where the split puts it on the server): the
+/// region queue and which objects were finished since the last camera change.
 #[derive(Clone, Debug)]
-pub struct Corrector {
+pub struct Planner {
     hierarchy: Hierarchy,
-    cache: SampleCache,
     queue: RegionQueue,
     /// Camera age at the last analysis.
     analyzed_age: Option<u32>,
     /// Objects whose every level was planned since the last camera change.
     finished: Vec<u32>,
+}
+
+impl Planner {
+    /// An empty queue over `hierarchy`'s levels.
+    pub fn new(hierarchy: Hierarchy, job_size: u64, decay: f32) -> Self {
+        Self {
+            hierarchy,
+            queue: RegionQueue::new(hierarchy, job_size, decay),
+            analyzed_age: None,
+            finished: Vec::new(),
+        }
+    }
+
+    /// The √5 hierarchy.
+    pub fn hierarchy(&self) -> &Hierarchy {
+        &self.hierarchy
+    }
+
+    /// A new analysis (regions with their priorities) of a frame seen at `camera_age`.
+    pub fn analyze(&mut self, regions: &[ObjectRegion], camera_age: u32) {
+        let changed = self.analyzed_age != Some(camera_age);
+        if changed {
+            self.finished.clear();
+        }
+        self.queue.submit(regions, changed, &self.finished);
+        self.analyzed_age = Some(camera_age);
+    }
+
+    /// Positions to trace: jobs in priority order until `budget` positions satisfy `on_object`
+    /// (`(x, y, object)` → whether the pixel shows the object), the queue runs dry, or more
+    /// than `examine` positions were looked at (checked between jobs).
+    pub fn plan(
+        &mut self,
+        budget: usize,
+        examine: usize,
+        mut on_object: impl FnMut(i32, i32, u32) -> bool,
+    ) -> Vec<Planned> {
+        let mut out = Vec::with_capacity(budget);
+        let mut examined = 0usize;
+        while out.len() < budget && examined <= examine {
+            let Some((job, done)) = self.queue.take((budget - out.len()) as u64) else {
+                break;
+            };
+            if done {
+                self.finished.push(job.object);
+            }
+            let Ok(samples) = self.hierarchy.level_samples(job.level, job.rect) else {
+                continue;
+            };
+            for (x, y) in samples.iter_from(job.start).take(job.len as usize) {
+                examined += 1;
+                if on_object(x, y, job.object) {
+                    out.push(Planned {
+                        x,
+                        y,
+                        object: job.object,
+                        level: job.level,
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Correction state of one viewer in one place: the planner and the sample cache.
+#[derive(Clone, Debug)]
+pub struct Corrector {
+    planner: Planner,
+    cache: SampleCache,
 }
 
 impl Corrector {
@@ -45,11 +116,8 @@ impl Corrector {
         decay: f32,
     ) -> Result<Self, CacheError> {
         Ok(Self {
-            hierarchy,
+            planner: Planner::new(hierarchy, job_size, decay),
             cache: SampleCache::new(cache, hierarchy)?,
-            queue: RegionQueue::new(hierarchy, job_size, decay),
-            analyzed_age: None,
-            finished: Vec::new(),
         })
     }
 
@@ -60,7 +128,7 @@ impl Corrector {
 
     /// The √5 hierarchy.
     pub fn hierarchy(&self) -> &Hierarchy {
-        &self.hierarchy
+        self.planner.hierarchy()
     }
 
     /// The camera changed: age the cache (the camera age goes up by one).
@@ -75,43 +143,17 @@ impl Corrector {
 
     /// A new analysis of the current frame (regions with their priorities).
     pub fn analyze(&mut self, regions: &[ObjectRegion]) {
-        let age = self.cache.camera_age();
-        let changed = self.analyzed_age != Some(age);
-        if changed {
-            self.finished.clear();
-        }
-        self.queue.submit(regions, changed, &self.finished);
-        self.analyzed_age = Some(age);
+        self.planner.analyze(regions, self.cache.camera_age());
     }
 
     /// Positions to trace this frame: jobs in priority order until `budget` positions lie on
     /// their objects (`ids`, row-major with `width` columns) or the queue runs dry.
     pub fn plan(&mut self, ids: &[u32], width: usize, budget: usize) -> Vec<Planned> {
-        let mut out = Vec::with_capacity(budget);
         let height = ids.len().checked_div(width).unwrap_or(0);
-        while out.len() < budget {
-            let Some((job, done)) = self.queue.take((budget - out.len()) as u64) else {
-                break;
-            };
-            if done {
-                self.finished.push(job.object);
-            }
-            let Ok(samples) = self.hierarchy.level_samples(job.level, job.rect) else {
-                continue;
-            };
-            for (x, y) in samples.iter_from(job.start).take(job.len as usize) {
-                let on_screen = x >= 0 && y >= 0 && (x as usize) < width && (y as usize) < height;
-                if on_screen && ids[y as usize * width + x as usize] == job.object {
-                    out.push(Planned {
-                        x,
-                        y,
-                        object: job.object,
-                        level: job.level,
-                    });
-                }
-            }
-        }
-        out
+        self.planner.plan(budget, usize::MAX, |x, y, object| {
+            let on_screen = x >= 0 && y >= 0 && (x as usize) < width && (y as usize) < height;
+            on_screen && ids[y as usize * width + x as usize] == object
+        })
     }
 
     /// Store traced samples.

@@ -17,8 +17,9 @@
 //! misses return the sky colour. Random numbers are hashed from (seed, frame, pixel, path),
 //! so a sample is deterministic per (pixel, frame).
 
+use crate::splat::Sample;
 use glam::{Affine3A, Mat3A, Vec3};
-use psao_scene::{LightShape, Material, Scene};
+use psao_scene::{Camera, LightShape, Material, Scene};
 use psao_trace::ao::{hash64, orthonormal_basis, ray_offset, sample_2d};
 use psao_trace::{Hit, Ray, Tracer};
 
@@ -191,8 +192,7 @@ impl<'a> CorrectionTracer<'a> {
         frame: u64,
         pixel: u64,
     ) -> (Vec3, Option<(Vec3, Vec3)>) {
-        let key =
-            hash64(self.settings.seed ^ hash64(frame.wrapping_mul(0x9e37_79b9) ^ hash64(pixel)));
+        let key = self.key(frame, pixel);
         let ray = Ray::new(eye, dir.normalize(), f32::INFINITY);
         let Some(hit) = self.hit(&ray) else {
             return (self.settings.sky, None);
@@ -202,6 +202,70 @@ impl<'a> CorrectionTracer<'a> {
         };
         let l = self.shade_surface(&ray, &s, 0, key, true);
         (l, Some((s.point, s.normal)))
+    }
+
+    /// The object id (instance + 1 on a non-diffuse material, else 0) the primary ray of
+    /// pixel (`x`, `y`) of a `width × height` image of `camera` hits.
+    pub fn object_at(&self, camera: &Camera, width: u32, height: u32, x: i32, y: i32) -> u32 {
+        let ray = pixel_ray(camera, width, height, x, y);
+        self.hit(&ray)
+            .and_then(|hit| self.surface(&ray, &hit))
+            .map_or(0, |s| self.object_of(&s))
+    }
+
+    fn object_of(&self, s: &Surface) -> u32 {
+        let non_diffuse = self
+            .scene
+            .materials
+            .get(s.material)
+            .is_some_and(Material::is_non_diffuse);
+        if non_diffuse {
+            s.instance + 1
+        } else {
+            0
+        }
+    }
+
+    /// The correction sample of pixel (`x`, `y`) of a `width × height` image of `camera` at
+    /// camera age `age`: its surface from the primary ray (not a G-buffer), so a server can
+    /// trace it from the camera alone. `None` when the pixel does not show `object`. Its
+    /// colour equals [`Self::primary`]'s for the same pixel and age.
+    #[allow(clippy::too_many_arguments)]
+    pub fn camera_sample(
+        &self,
+        camera: &Camera,
+        width: u32,
+        height: u32,
+        x: i32,
+        y: i32,
+        object: u32,
+        level: u8,
+        age: u32,
+    ) -> Option<Sample> {
+        if x < 0 || y < 0 || x as u32 >= width || y as u32 >= height {
+            return None;
+        }
+        let ray = pixel_ray(camera, width, height, x, y);
+        let s = self.surface(&ray, &self.hit(&ray)?)?;
+        if self.object_of(&s) != object {
+            return None;
+        }
+        let pixel = y as u64 * width as u64 + x as u64;
+        let color = self.shade_surface(&ray, &s, 0, self.key(age as u64, pixel), true);
+        let v = (camera.position - s.point).normalize_or_zero();
+        Some(Sample {
+            position: s.point,
+            normal: s.normal,
+            ndotv: s.normal.dot(v).clamp(-1.0, 1.0),
+            color: color.max(Vec3::ZERO).to_array(),
+            object,
+            level,
+            age,
+        })
+    }
+
+    fn key(&self, frame: u64, pixel: u64) -> u64 {
+        hash64(self.settings.seed ^ hash64(frame.wrapping_mul(0x9e37_79b9) ^ hash64(pixel)))
     }
 
     fn radiance(&self, ray: &Ray, depth: u32, key: u64) -> Vec3 {
@@ -393,6 +457,12 @@ impl<'a> CorrectionTracer<'a> {
         }
         out
     }
+}
+
+/// The primary ray through the centre of pixel (`x`, `y`).
+fn pixel_ray(camera: &Camera, width: u32, height: u32, x: i32, y: i32) -> Ray {
+    let dir = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, width, height);
+    Ray::new(camera.position, dir.normalize(), f32::INFINITY)
 }
 
 /// The inverse transpose of a transform's linear part (for normals).

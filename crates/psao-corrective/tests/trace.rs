@@ -187,3 +187,41 @@ fn lights_add_highlights_and_shadow_rays_block_them() {
     assert!(bright.x > dark.x + 0.05, "{bright} vs {dark}");
     assert!((shadowed.x - dark.x).abs() < 0.02, "{shadowed} vs {dark}");
 }
+
+#[test]
+fn camera_samples_match_primary_rays_and_only_their_object() {
+    let s = scene(chrome(0.2));
+    let camera = psao_scene::Camera::look_at(Vec3::new(0.3, 0.2, 2.0), Vec3::ZERO, 50.0);
+    let (w, h) = (24u32, 16u32);
+    for t in tracers(&s) {
+        let tracer = CorrectionTracer::new(&s, &t, &PerInstance, TraceSettings::default());
+        let mut on_slab = 0;
+        for y in 0..h as i32 {
+            for x in 0..w as i32 {
+                let object = tracer.object_at(&camera, w, h, x, y);
+                // The slab (instance 0) is the only non-diffuse object.
+                assert!(object == 0 || object == 1);
+                let sample = tracer.camera_sample(&camera, w, h, x, y, 1, 2, 5);
+                assert_eq!(sample.is_some(), object == 1, "pixel {x}, {y}");
+                assert!(tracer.camera_sample(&camera, w, h, x, y, 2, 2, 5).is_none());
+                let Some(sample) = sample else { continue };
+                on_slab += 1;
+                let dir = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, w, h);
+                let pixel = (y as u32 * w + x as u32) as u64;
+                let (color, hit) = tracer.primary(camera.position, dir, 5, pixel);
+                assert_eq!(sample.color, color.to_array());
+                assert_eq!(hit.unwrap(), (sample.position, sample.normal));
+                assert!(sample.position.z.abs() < 0.02);
+                assert!(sample.ndotv > 0.0 && sample.ndotv <= 1.0);
+                assert_eq!((sample.level, sample.age, sample.object), (2, 5, 1));
+            }
+        }
+        assert!(on_slab > 20, "{on_slab} pixels on the slab");
+        assert!(tracer
+            .camera_sample(&camera, w, h, -1, 0, 1, 1, 0)
+            .is_none());
+        assert!(tracer
+            .camera_sample(&camera, w, h, 0, h as i32, 1, 1, 0)
+            .is_none());
+    }
+}

@@ -68,6 +68,9 @@ pub enum NetError {
         /// The last connection failure.
         last: String,
     },
+    /// The NATS server could not be reached or refused a request (scale-out roles).
+    #[error("NATS: {0}")]
+    Nats(String),
     /// TLS could not be set up (certificate, key) or its handshake failed.
     #[error("TLS: {0}")]
     Tls(String),

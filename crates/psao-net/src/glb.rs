@@ -8,6 +8,11 @@
 //! sidedness. Walkers (procedural motion) have no glTF form: their instances move by the
 //! transforms the server sends.
 //!
+//! The scene's camera paths ride along in the document's `extras.psao_camera_paths`, sampled
+//! at the 60 Hz of `psao view` (one camera per path frame: position, target, up, vertical
+//! FOV, near, far), so the browser follows a path by name with exactly the cameras the CPU
+//! client uses.
+//!
 //! The JSON document is built with `serde_json` rather than `gltf-json`, whose typed structs
 //! need every optional field spelled out (and change with the workspace's `gltf` features);
 //! the container is written by `gltf::binary::Glb`, and the tests read the result back with
@@ -16,6 +21,7 @@
 use std::borrow::Cow;
 
 use glam::Mat4;
+use psao_scene::path::CameraPath;
 use psao_scene::{AlphaMode, AnimatedProperty, Interpolation, Scene};
 use serde_json::{json, Value};
 
@@ -78,8 +84,8 @@ impl Builder {
     }
 }
 
-/// `scene` as a binary glTF file (see the module documentation).
-pub fn scene_glb(scene: &Scene) -> Result<Vec<u8>, NetError> {
+/// `scene` and its camera `paths` as a binary glTF file (see the module documentation).
+pub fn scene_glb(scene: &Scene, paths: &[CameraPath]) -> Result<Vec<u8>, NetError> {
     let mut b = Builder::default();
     let meshes: Vec<Value> = scene
         .meshes
@@ -293,6 +299,10 @@ pub fn scene_glb(scene: &Scene) -> Result<Vec<u8>, NetError> {
     if !animations.is_empty() {
         doc["animations"] = json!(animations);
     }
+    if !paths.is_empty() {
+        doc["extras"] =
+            json!({ "psao_camera_paths": paths.iter().map(path_json).collect::<Vec<_>>() });
+    }
     let json = serde_json::to_vec(&doc).map_err(|e| NetError::Protocol(e.to_string()))?;
     let glb = gltf::binary::Glb {
         header: gltf::binary::Header {
@@ -307,6 +317,23 @@ pub fn scene_glb(scene: &Scene) -> Result<Vec<u8>, NetError> {
         .map_err(|e| NetError::Protocol(format!("cannot write the scene as glTF: {e}")))
 }
 
+/// A camera path as `{ "name", "frames": [[position, target, up, fov_y, near, far], …] }`
+/// (12 numbers per frame, every frame of [`CameraPath::camera_at_frame`]).
+fn path_json(path: &CameraPath) -> Value {
+    let frames: Vec<Vec<f32>> = (0..path.frame_count())
+        .map(|i| {
+            let c = path.camera_at_frame(i);
+            let mut f = Vec::with_capacity(12);
+            f.extend(c.position.to_array());
+            f.extend(c.target.to_array());
+            f.extend(c.up.to_array());
+            f.extend([c.fov_y, c.near, c.far]);
+            f
+        })
+        .collect();
+    json!({ "name": path.name, "frames": frames })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -314,7 +341,8 @@ mod tests {
     #[test]
     fn builtin_scene_reads_back_in_instance_order() {
         let scene = psao_scene::builtin::default_scene();
-        let bytes = scene_glb(&scene).unwrap();
+        let path = CameraPath::parse(include_str!("../../../paths/default_a.toml")).unwrap();
+        let bytes = scene_glb(&scene, std::slice::from_ref(&path)).unwrap();
         let (doc, buffers, _) = gltf::import_slice(&bytes).unwrap();
         let nodes: Vec<_> = doc.nodes().collect();
         assert!(nodes.len() >= scene.instances.len());
@@ -336,5 +364,22 @@ mod tests {
             let colour = prim.material().pbr_metallic_roughness().base_color_factor();
             assert_eq!(colour, scene.materials[src.material].base_color.to_array());
         }
+        // The camera path's frames, exactly (f32 → JSON → f32).
+        let glb = gltf::binary::Glb::from_slice(&bytes).unwrap();
+        let json: Value = serde_json::from_slice(&glb.json).unwrap();
+        let served = &json["extras"]["psao_camera_paths"][0];
+        assert_eq!(served["name"], path.name.as_str());
+        let frames = served["frames"].as_array().unwrap();
+        assert_eq!(frames.len(), path.frame_count());
+        let c = path.camera_at_frame(37);
+        let got: Vec<f32> = frames[37]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap() as f32)
+            .collect();
+        assert_eq!(got[..3], c.position.to_array());
+        assert_eq!(got[3..6], c.target.to_array());
+        assert_eq!(got[9], c.fov_y);
     }
 }

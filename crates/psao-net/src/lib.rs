@@ -8,6 +8,7 @@
 //! prints; another program can embed a server or a client the same way.
 
 pub mod convert;
+pub mod corrective;
 pub mod cpu_time;
 mod error;
 pub mod glb;
@@ -15,6 +16,7 @@ pub mod http;
 pub mod io;
 pub mod pipeline;
 mod resolution;
+pub mod scale;
 pub mod serve;
 pub mod start_cache;
 pub mod tls;

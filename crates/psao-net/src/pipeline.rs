@@ -2,6 +2,7 @@
 //!
 //! Nothing goes around the codec: the client's state is built only from decoded updates.
 
+use crate::corrective::{CorrectiveClient, CorrectiveConfig, InProcessCorrections};
 use crate::{NetError, Resolution};
 use psao_client::{ClientState, DetailSettings, ReconstructSettings, Shading};
 use psao_delta::Codec;
@@ -35,6 +36,8 @@ pub struct PipelineConfig {
     /// The client's screen-space contact term below the point spacing
     /// ([`psao_client::apply_detail`]); `None` (the default) leaves it out.
     pub detail: Option<DetailSettings>,
+    /// Corrective splatting ([`crate::corrective`]), when wanted.
+    pub corrective: Option<CorrectiveConfig>,
 }
 
 /// What happened in one client frame.
@@ -65,6 +68,12 @@ pub struct FrameRecord {
     pub encode_ms: f64,
     /// Client time (decode + apply + rasterize + reconstruct) in ms; 0 when nothing was rendered.
     pub client_ms: f64,
+    /// Correction samples received in this frame.
+    pub samples: usize,
+    /// Bytes of the correction messages (both ways) in this frame.
+    pub sample_bytes: usize,
+    /// Server time tracing corrections, ms.
+    pub corrective_ms: f64,
 }
 
 /// One rendered client frame.
@@ -73,6 +82,8 @@ pub struct ClientFrame {
     pub gbuffer: GBuffer,
     /// Reconstructed AO.
     pub ao: AoImage,
+    /// With corrections: the client's frame (linear RGB) with the cached samples splatted.
+    pub corrected: Option<Vec<[f32; 3]>>,
 }
 
 /// A server and one client in one process.
@@ -87,6 +98,8 @@ pub struct Pipeline<'a> {
     server_hz: u32,
     last_tick: Option<u64>,
     res: Resolution,
+    /// Both ends of corrective splatting, when on.
+    corrective: Option<InProcessCorrections>,
     /// Bytes received so far.
     pub total_bytes: u64,
 }
@@ -111,6 +124,17 @@ impl<'a> Pipeline<'a> {
         let client = ClientState::new(&table);
         // Limited as a networked client's.
         let decoder = crate::convert::client_decoder(&config.codec, &table)?;
+        let corrective = match &config.corrective {
+            Some(c) => Some(InProcessCorrections::new(
+                scene,
+                config.server.backend,
+                config.server.seed,
+                config.res.width,
+                config.res.height,
+                c,
+            )?),
+            None => None,
+        };
         Ok(Self {
             scene,
             server,
@@ -123,6 +147,7 @@ impl<'a> Pipeline<'a> {
             server_hz: config.server_hz,
             last_tick: None,
             res: config.res,
+            corrective,
             total_bytes: 0,
         })
     }
@@ -135,6 +160,11 @@ impl<'a> Pipeline<'a> {
     /// The client's state.
     pub fn client(&self) -> &ClientState {
         &self.client
+    }
+
+    /// The client's correction state, when corrections are on.
+    pub fn corrective_client(&self) -> Option<&CorrectiveClient> {
+        self.corrective.as_ref().map(|c| &c.client)
     }
 
     /// The server clock's tick at client frame `frame`.
@@ -219,17 +249,30 @@ impl<'a> Pipeline<'a> {
             self.total_bytes += encoded.len() as u64;
             bytes = Some(encoded);
         }
+        if let Some(c) = &mut self.corrective {
+            let t = Instant::now();
+            let aspect = self.res.width as f32 / self.res.height as f32;
+            let exchanged = c.exchange(&crate::convert::camera_msg(frame, camera, aspect))?;
+            record.corrective_ms = t.elapsed().as_secs_f64() * 1e3;
+            record.samples = exchanged.samples;
+            record.sample_bytes = exchanged.bytes;
+        }
         let t = Instant::now();
         if let Some(encoded) = bytes {
             self.receive(&encoded)?;
         }
         let mut out = None;
-        if render {
+        // The client analyses every frame it shows when it corrects them.
+        if render || self.corrective.is_some() {
             let time = frame as f32 / CLIENT_HZ as f32;
-            out = Some(
-                self.renderer
-                    .render(self.scene, &self.client, camera, self.res, time)?,
-            );
+            let mut img = self
+                .renderer
+                .render(self.scene, &self.client, camera, self.res, time)?;
+            if let Some(c) = &mut self.corrective {
+                let corrected = c.correct(self.scene, frame, &img.gbuffer, &img.ao.data);
+                img.corrected = Some(corrected.image);
+            }
+            out = render.then_some(img);
         }
         record.client_ms = t.elapsed().as_secs_f64() * 1e3;
         Ok((record, out))
@@ -300,6 +343,7 @@ impl ClientRenderer {
                 data: ao,
             },
             gbuffer,
+            corrected: None,
         })
     }
 }

@@ -14,13 +14,14 @@ use psao_delta::Codec;
 use psao_scene::path::CameraPath;
 use psao_scene::Scene;
 use psao_wire::{
-    capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, Welcome, WireError,
+    capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, RegionsMsg, Welcome, WireError,
     MAX_SERVER_FRAME, PROTOCOL_VERSION,
 };
 use serde::Serialize;
 use tokio::sync::mpsc;
 
 use crate::convert::{camera_msg, client_decoder, table_of};
+use crate::corrective::{CorrectiveClient, CorrectiveClientConfig};
 use crate::cpu_time::cpu_seconds;
 use crate::pipeline::{ClientFrame, ClientRenderer, CLIENT_HZ};
 use crate::transport::{connect, ReadError};
@@ -58,6 +59,9 @@ pub struct ViewConfig {
     /// Write the first received frames (≤ 64 KiB each) and their update payloads to this
     /// folder (seed corpus for the fuzz targets).
     pub record: Option<PathBuf>,
+    /// Ask for corrective splatting: analyse every rendered frame, send the regions, splat the
+    /// server's samples (frames are rendered even without `render`).
+    pub corrective: Option<CorrectiveClientConfig>,
 }
 
 /// What the caller does with each rendered frame (e.g. write images).
@@ -96,6 +100,11 @@ pub struct ViewStats {
     pub cpu_seconds: f64,
     /// The server's id of every session, in order.
     pub client_ids: Vec<u32>,
+    /// With corrections: hash of the final correction state
+    /// ([`CorrectiveClient::state_hash`]).
+    pub corrective_state_hash: Option<String>,
+    /// With corrections: samples received (over every session).
+    pub samples: u64,
 }
 
 /// From the network task to the frame loop.
@@ -145,6 +154,8 @@ pub fn view(
 
     let mut client = Client {
         record: args.record.clone(),
+        corrective_config: args.corrective,
+        res: args.res,
         ..Client::default()
     };
     if let Some(dir) = &args.record {
@@ -169,9 +180,14 @@ pub fn view(
             start = Instant::now();
             cpu_start = cpu_seconds();
         }
-        let _ = out_tx.send(Outgoing::Send(Message::Camera(camera_msg(
-            frame, &camera, aspect,
-        ))));
+        let camera_message = camera_msg(frame, &camera, aspect);
+        if let Some(c) = &mut client.corrective {
+            if let Some(regions) = client.regions.take() {
+                let _ = out_tx.send(Outgoing::Send(Message::Regions(regions)));
+            }
+            c.camera(&camera_message);
+        }
+        let _ = out_tx.send(Outgoing::Send(Message::Camera(camera_message)));
         if lockstep == Some(true) {
             // Wait for the server's answer to this frame; resend after a reconnect.
             loop {
@@ -181,8 +197,11 @@ pub fn view(
                     lockstep = Some(l);
                 }
                 if reconnected {
-                    let msg = Message::Camera(camera_msg(frame, &camera, aspect));
-                    let _ = out_tx.send(Outgoing::Send(msg));
+                    let msg = camera_msg(frame, &camera, aspect);
+                    if let Some(c) = &mut client.corrective {
+                        c.camera(&msg);
+                    }
+                    let _ = out_tx.send(Outgoing::Send(Message::Camera(msg)));
                 }
                 if client.answered == Some(frame) {
                     break;
@@ -199,11 +218,18 @@ pub fn view(
                 }
             }
         }
-        if args.render {
+        if args.render || client.corrective.is_some() {
             // The client's clock: frame / 60 s (equal to the server's in lockstep).
             let time = frame as f32 / CLIENT_HZ as f32;
-            let img = renderer.render(scene, &client.state, &camera, args.res, time)?;
-            sink(frame, &img).map_err(NetError::Sink)?;
+            let mut img = renderer.render(scene, &client.state, &camera, args.res, time)?;
+            if let Some(c) = &client.corrective {
+                let corrected = c.frame(scene, frame, &img.gbuffer, &img.ao.data);
+                client.regions = corrected.regions;
+                img.corrected = Some(corrected.image);
+            }
+            if args.render {
+                sink(frame, &img).map_err(NetError::Sink)?;
+            }
         }
     }
     let _ = out_tx.send(Outgoing::Send(Message::Bye(Bye {
@@ -229,6 +255,11 @@ pub fn view(
             _ => 0.0,
         },
         client_ids: client.ids.clone(),
+        corrective_state_hash: client
+            .corrective
+            .as_ref()
+            .map(|c| format!("{:016x}", c.state_hash())),
+        samples: client.samples,
     };
     Ok(stats)
 }
@@ -253,6 +284,15 @@ struct Client {
     record: Option<PathBuf>,
     recorded: u32,
     ids: Vec<u32>,
+    /// Corrections wanted, and the image size they are for.
+    corrective_config: Option<CorrectiveClientConfig>,
+    res: Resolution,
+    /// This session's correction state.
+    corrective: Option<CorrectiveClient>,
+    /// The latest analysis, sent with the next camera.
+    regions: Option<RegionsMsg>,
+    /// Samples received over every session.
+    samples: u64,
 }
 
 impl Default for Client {
@@ -271,6 +311,14 @@ impl Default for Client {
             record: None,
             recorded: 0,
             ids: Vec::new(),
+            corrective_config: None,
+            res: Resolution {
+                width: 1,
+                height: 1,
+            },
+            corrective: None,
+            regions: None,
+            samples: 0,
         }
     }
 }
@@ -291,6 +339,12 @@ impl Client {
                 self.sessions += 1;
                 self.ids.push(w.client_id);
                 self.answered = None;
+                // A new session starts corrections afresh (the server's state is new too).
+                self.corrective = match self.corrective_config {
+                    Some(c) => Some(CorrectiveClient::new(self.res.width, self.res.height, c)?),
+                    None => None,
+                };
+                self.regions = None;
                 tracing::info!(
                     "session {} with the server: client {}, codec {}, {} Hz, lockstep {}",
                     self.sessions,
@@ -319,6 +373,13 @@ impl Client {
                         })
                     }
                     Message::Bye(b) => tracing::info!("server said bye: {}", b.reason),
+                    Message::Samples(samples) => {
+                        let c = self.corrective.as_mut().ok_or_else(|| {
+                            NetError::Protocol("samples from the server without asking".into())
+                        })?;
+                        c.receive(&samples)?;
+                        self.samples += samples.samples.len() as u64;
+                    }
                     other => {
                         return Err(NetError::Protocol(format!(
                             "unexpected {} from the server",
@@ -459,10 +520,18 @@ async fn session(
         .map_err(retry)?;
     let hello = Message::Hello(Hello {
         version: PROTOCOL_VERSION,
-        capabilities: if args.no_verify {
-            capabilities::CODEC_PAPER | capabilities::CODEC_COMPACT
-        } else {
-            capabilities::ALL
+        capabilities: {
+            let verify = if args.no_verify {
+                0
+            } else {
+                capabilities::STATE_HASH
+            };
+            let corrective = if args.corrective.is_some() {
+                capabilities::CORRECTIVE
+            } else {
+                0
+            };
+            capabilities::CODEC_PAPER | capabilities::CODEC_COMPACT | verify | corrective
         },
         token: args.token.clone(),
         name: format!("psao view {}", std::process::id()),

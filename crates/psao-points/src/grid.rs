@@ -13,8 +13,11 @@ use crate::generate::InstancePoints;
 use crate::layout::{DecodedPoint, GridLayout, BUCKET_ENTRIES, CELL_POINTS};
 use crate::pack::is_valid;
 
-/// One hash-bucket entry: which cell lives in which slot.
+/// One hash-bucket entry: which cell lives in which slot. Packed to 4-byte alignment so an
+/// entry takes 12 bytes, not 16: bucket tables are the largest part of a grid (server and
+/// client), and fields are only ever read or written by value.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[repr(C, packed(4))]
 pub struct BucketEntry {
     /// Cell id + 1 ([`GridLayout::cell_id`]); 0 marks an empty entry.
     pub key: u64,
@@ -379,7 +382,7 @@ impl InstanceGrid {
             }
         }
         for e in self.buckets[index].entries {
-            if e.key != 0 && self.slot_keys.get(e.slot as usize) == Some(&e.key) {
+            if e.key != 0 && self.slot_keys.get(e.slot as usize).copied() == Some(e.key) {
                 self.slot_keys[e.slot as usize] = 0;
             }
         }

@@ -313,3 +313,18 @@ fn client_mirror_reproduces_server_state() {
     ));
     assert!(client.set_cell(u32::MAX, Cell::default()).is_err());
 }
+
+/// Bucket tables are the largest part of a grid: an entry must stay 12 bytes (a 64-bit key and
+/// a 32-bit slot, no padding), and its fields keep their values through copies.
+#[test]
+fn bucket_entries_carry_no_padding() {
+    assert_eq!(std::mem::size_of::<BucketEntry>(), 12);
+    assert_eq!(
+        std::mem::size_of::<Bucket>(),
+        12 * psao_points::BUCKET_ENTRIES
+    );
+    let e = BucketEntry::new(u64::MAX - 1, u32::MAX - 7);
+    let copy = e;
+    assert_eq!(copy.cell_id(), Some(u64::MAX - 1));
+    assert_eq!({ copy.slot }, u32::MAX - 7);
+}

@@ -89,6 +89,27 @@ impl EnvMap {
     }
 }
 
+/// Radiance arriving from a world direction (what the Monte Carlo reference integrates).
+pub trait Radiance: Sync {
+    /// Linear RGB radiance arriving from unit direction `d`.
+    fn radiance_from(&self, d: Vec3) -> [f32; 3];
+}
+
+impl Radiance for EnvMap {
+    fn radiance_from(&self, d: Vec3) -> [f32; 3] {
+        self.radiance(d)
+    }
+}
+
+/// The band-limited lighting the run time uses, evaluated per direction (it may be
+/// negative where the order-4 projection rings).
+impl Radiance for ShLighting {
+    fn radiance_from(&self, d: Vec3) -> [f32; 3] {
+        let y = sh::eval(d);
+        self.rgb.map(|c| sh::dot(&c, &y))
+    }
+}
+
 /// SH environment lighting, one vector per colour channel (world frame).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShLighting {
@@ -145,6 +166,22 @@ mod tests {
         let l = EnvMap::new(w, h, pixels).unwrap().project().luminance();
         assert!(l[1] > 0.5);
         assert!(l[2].abs() < 1e-2 && l[3].abs() < 1e-2);
+    }
+
+    #[test]
+    fn sh_lighting_evaluates_its_expansion() {
+        let l = ShLighting {
+            rgb: [
+                crate::shade::unit_visibility(),
+                [0.0; COEFFS],
+                std::array::from_fn(|i| if i == 2 { 1.0 } else { 0.0 }),
+            ],
+        };
+        let d = Vec3::new(0.3, -0.4, 0.866).normalize();
+        let v = l.radiance_from(d);
+        assert!((v[0] - 1.0).abs() < 1e-5 && v[1] == 0.0);
+        // y_10 = √(3/4π)·z in this basis.
+        assert!((v[2] - (3.0 / (4.0 * std::f32::consts::PI)).sqrt() * d.z).abs() < 1e-5);
     }
 
     #[test]

@@ -1,5 +1,12 @@
 //! Binary visibility of a posed character over the whole sphere at every vertex, projected to
 //! order-4 SH in the vertex's local frame (paper §3.2: not cosine-weighted).
+//!
+//! Only the hemisphere above the tangent plane is traced; the one below counts as visible.
+//! No BRDF receives light from below its surface (the shading applies that horizon itself,
+//! see [`crate::shade`]), so the values there are free, and 1 is the choice that order-4 SH
+//! can represent: an unoccluded vertex then has the constant visibility 1 exactly, where the
+//! truncated expansion of the hemisphere step (0 below) rings to 0.81 at the normal and
+//! darkened every unoccluded vertex under a glossy lobe (by 10 % at Phong α = 16).
 
 use glam::{Mat3, Vec3};
 use psao_scene::{Mesh, Scene};
@@ -45,18 +52,30 @@ impl SelfTracer {
     }
 }
 
-/// A uniform direction on the sphere from two numbers in [0, 1).
-pub fn uniform_sphere(u1: f32, u2: f32) -> Vec3 {
-    let z = 1.0 - 2.0 * u1;
+/// A uniform direction on the upper (z ≥ 0) hemisphere from two numbers in [0, 1).
+pub fn uniform_hemisphere(u1: f32, u2: f32) -> Vec3 {
+    let z = 1.0 - u1;
     let r = (1.0 - z * z).max(0.0).sqrt();
     let (s, c) = (std::f32::consts::TAU * u2).sin_cos();
     Vec3::new(r * c, r * s, z)
 }
 
+/// The SH projection of the lower (z < 0) hemisphere's indicator: zonal, band l is
+/// `(−1)^l` times the upper hemisphere's `√π, √(3π)/2, 0, −√(7π)/8`.
+pub fn lower_hemisphere() -> ShVec {
+    let pi = std::f32::consts::PI;
+    let mut v = [0.0; COEFFS];
+    v[0] = pi.sqrt();
+    v[2] = -(3.0 * pi).sqrt() / 2.0;
+    v[12] = (7.0 * pi).sqrt() / 8.0;
+    v
+}
+
 /// Per vertex of `pose` (traced by `tracer`, already set to the pose): the SH projection of
 /// binary visibility to infinity in the vertex's local frame, from `rays` stratified
-/// uniform directions (R2 sequence, rotation hashed from `seed` and the vertex). Runs on
-/// all rayon threads; the result depends only on the inputs and `seed`.
+/// uniform directions over the upper hemisphere (R2 sequence, rotation hashed from `seed`
+/// and the vertex), the lower hemisphere counted as visible (see the module's doc). Runs
+/// on all rayon threads; the result depends only on the inputs and `seed`.
 pub fn visibility_sh(
     tracer: &SelfTracer,
     pose: &CharacterPose,
@@ -65,7 +84,8 @@ pub fn visibility_sh(
 ) -> Vec<ShVec> {
     let n = pose.positions.len();
     let mut out = vec![[0.0f32; COEFFS]; n];
-    let weight = 4.0 * std::f32::consts::PI / rays.max(1) as f32;
+    let weight = 2.0 * std::f32::consts::PI / rays.max(1) as f32;
+    let below = lower_hemisphere();
     out.par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(c, chunk)| {
@@ -80,7 +100,7 @@ pub fn visibility_sh(
                 local.clear();
                 for i in 0..rays {
                     let (u1, u2) = sample_2d(seed, v as u64, i);
-                    let d = uniform_sphere(u1, u2);
+                    let d = uniform_hemisphere(u1, u2);
                     local.push(d);
                     batch.push(Ray::new(origin, frame * d, RAY_LENGTH));
                 }
@@ -93,7 +113,7 @@ pub fn visibility_sh(
                         }
                     }
                 }
-                *slot = acc.map(|a| a * weight);
+                *slot = std::array::from_fn(|i| acc[i] * weight + below[i]);
             }
         });
     out

@@ -66,17 +66,18 @@ fn visibility_is_deterministic_and_in_range() {
     assert_eq!(a, b);
     let c = visibility_sh(&tracer, &pose, 64, 8);
     assert_ne!(a, c);
-    // Visible fraction v0 / (2√π) in [0, 1]; a closed body blocks a good part of the sphere.
+    // Visible fraction v0 / (2√π) in [½, 1] (the lower hemisphere counts as visible); the
+    // body blocks part of the upper hemisphere at many vertices.
     let fractions: Vec<f32> = a
         .iter()
         .map(|v| v[0] / (2.0 * std::f32::consts::PI.sqrt()))
         .collect();
-    assert!(fractions.iter().all(|f| (-1e-4..=1.0001).contains(f)));
+    assert!(fractions.iter().all(|f| (0.5 - 1e-4..=1.0001).contains(f)));
     let mean = fractions.iter().sum::<f32>() / fractions.len() as f32;
-    assert!((0.2..0.8).contains(&mean), "mean visible fraction {mean}");
-    // On average the visible directions lean towards the normal (+z in the local frame).
+    assert!((0.6..0.97).contains(&mean), "mean visible fraction {mean}");
+    // Occluders lie above the tangent plane, so on average visibility leans to −z.
     let mean_z = a.iter().map(|v| v[2]).sum::<f32>() / a.len() as f32;
-    assert!(mean_z > 0.1, "mean band-1 z {mean_z}");
+    assert!(mean_z < -0.05, "mean band-1 z {mean_z}");
 }
 
 #[test]

@@ -21,4 +21,7 @@ pub enum ServerError {
     /// Stored start points cannot be used.
     #[error("stored start points: {0}")]
     StartPoints(String),
+    /// Published point records from another node cannot be applied.
+    #[error("point records: {0}")]
+    Records(String),
 }

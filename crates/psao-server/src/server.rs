@@ -16,9 +16,12 @@ use crate::clients::Clients;
 use crate::dynamics::{Dynamics, Restarted};
 use crate::instance::{InstanceState, NONE};
 use crate::publish::{apply, republish};
-use crate::trace::{cull, select, trace};
+use crate::trace::{cull, select};
 use crate::StartPoints;
 use crate::{ClientId, Frustum, ServerConfig, ServerError, View};
+
+mod scale;
+pub use scale::PointRecord;
 
 /// What one [`Server::step`] did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -93,6 +96,8 @@ pub struct Server {
     /// Where culling starts searching this frame's selection cut (see [`cull`]).
     cut_guess: u16,
     buried_points: usize,
+    /// The partitions traced here, on a trace node (docs/SCALE-OUT.md).
+    held: Option<scale::Held>,
 }
 
 /// Server frames whose changed buckets and cells are listed (2 s at 30 Hz): a client that
@@ -201,6 +206,7 @@ impl Server {
             history_frames: CHANGE_HISTORY_FRAMES,
             cut_guess: 0,
             buried_points,
+            held: None,
         })
     }
 
@@ -283,17 +289,8 @@ impl Server {
         let visible = culled.visible;
         let t_cull = Instant::now();
         let selected = select(culled.candidates, max_points);
-        let traced = trace(
-            &self.tracer,
-            self.medium.as_deref(),
-            &self.instances,
-            &selected,
-            self.radius,
-            c.rays_per_point,
-            c.max_samples,
-            c.seed,
-        );
-        let (mut rays, mut retraced_points, mut retrace_rays) = (0u64, 0, 0u64);
+        let (traced, rays) = self.trace_held(&selected);
+        let (mut retraced_points, mut retrace_rays) = (0, 0u64);
         for t in &traced {
             if restarted.contains(t.instance, t.index) {
                 retraced_points += 1;
@@ -302,7 +299,6 @@ impl Server {
             let p = &mut self.instances[t.instance as usize].points;
             p.sum[t.index as usize] += t.sum;
             p.count[t.index as usize] += t.rays;
-            rays += u64::from(t.rays);
         }
         // `traced` is in (instance, index) order.
         let changed = runs_of(traced.iter().map(|t| (t.instance, t.index)));
@@ -318,6 +314,7 @@ impl Server {
             candidates.par_sort_unstable();
             candidates.dedup();
         }
+        self.retain_held(&mut candidates);
         let published = self.publish(&candidates);
         let forget = self.frame.saturating_sub(self.history_frames);
         for inst in &mut self.instances {
@@ -380,15 +377,19 @@ impl Server {
         let frame = self.frame;
         // `candidates` is sorted by (instance, index): split it per instance.
         let groups = runs_of(candidates.iter().copied());
-        let published = per_instance(&mut self.instances, groups, |inst, list| {
+        let order: Vec<u32> = groups.iter().map(|g| g.0).collect();
+        let results = per_instance(&mut self.instances, groups, |inst, list| {
             let updates: Vec<(u32, u32)> = list
                 .par_iter()
                 .filter_map(|&i| republish(inst, i as usize, &thresholds).map(|b| (i, b)))
                 .collect();
-            apply(inst, &updates, frame)
-        })
-        .into_iter()
-        .sum();
+            (apply(inst, &updates, frame), updates)
+        });
+        let mut published = 0;
+        for (instance, (n, updates)) in order.into_iter().zip(results) {
+            published += n;
+            self.record(instance, &updates);
+        }
         for inst in &mut self.instances {
             if !inst.pending_cells.is_empty() {
                 apply(inst, &[], frame);

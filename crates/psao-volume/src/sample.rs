@@ -1,5 +1,5 @@
 //! Voxel sampling that decodes compressed bricks on the fly, one 4³ block (one BC7 block) at
-//! a time: a sampler keeps a direct-mapped cache of decoded blocks, so a block is decoded once
+//! a time: a sampler keeps a set-associative cache of decoded blocks, so a block is decoded once
 //! per ray segment, and usually once per tile of neighbouring rays. `f32` bricks are read in
 //! place.
 
@@ -9,10 +9,15 @@ use crate::tree::Locate;
 use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
 
-/// Bricks kept per sampler (direct-mapped by hashed brick index); their 4³ blocks are decoded
-/// when first needed.
-const SLOT_BITS: u32 = 10;
-const SLOTS: usize = 1 << SLOT_BITS;
+/// Most bricks kept per sampler (log2); their 4³ blocks are decoded when first needed. A small
+/// pool gets a power of two near twice its size, so a render of a small volume does not
+/// allocate (and fault in) a 2 MiB cache per sampler.
+const MAX_SLOT_BITS: u32 = 10;
+/// The cache is set-associative: a brick may sit in any of the `WAYS` slots of the set its
+/// hashed index picks (a direct-mapped cache made bricks that a tile's rays all cross evict
+/// each other over and over; the oldest brick of a set is replaced).
+const WAY_BITS: u32 = 2;
+const WAYS: usize = 1 << WAY_BITS;
 /// Located cells remembered per sampler.
 const CELLS: usize = 4;
 
@@ -35,8 +40,12 @@ pub struct Sampler<'a> {
     vol: &'a Volume,
     frame: usize,
     keys: Vec<u32>,
+    /// log2 of the slot count.
+    slot_bits: u32,
     /// Per slot: which of the eight 4³ blocks are decoded.
     valid: Vec<u8>,
+    /// Per set: the way filled next (the oldest one).
+    next_way: Vec<u8>,
     /// Per slot: the brick's values ([`voxel_index`] layout; only decoded blocks are valid).
     slots: Vec<[f32; BRICK_VOXELS]>,
     /// Recently located 8³ cells and their L3 nodes (round robin).
@@ -45,6 +54,9 @@ pub struct Sampler<'a> {
     /// The brick whose slot holds all its blocks and was used last, and that slot (compressed
     /// formats; runs of samples in one brick skip the cache lookup).
     current: (u32, usize),
+    /// Bricks evicted from the cache so far (a sample that looked up several bricks checks
+    /// whether one took another's slot meanwhile).
+    evictions: u64,
     /// Blocks decoded so far (for statistics).
     pub decodes: u64,
 }
@@ -53,23 +65,22 @@ impl<'a> Sampler<'a> {
     /// A sampler of `frame` of `vol`.
     pub fn new(vol: &'a Volume, frame: usize) -> Self {
         let decoded = vol.pool.format != BrickFormat::F32;
+        // Twice the pool, so its bricks rarely crowd one set; at least two sets.
+        let slot_bits = ((2 * vol.pool.len()).next_power_of_two().trailing_zeros())
+            .clamp(WAY_BITS + 1, MAX_SLOT_BITS);
+        let slots = if decoded { 1usize << slot_bits } else { 0 };
         Sampler {
             vol,
             frame,
-            keys: if decoded {
-                vec![u32::MAX; SLOTS]
-            } else {
-                Vec::new()
-            },
-            valid: if decoded { vec![0; SLOTS] } else { Vec::new() },
-            slots: if decoded {
-                vec![[0.0; BRICK_VOXELS]; SLOTS]
-            } else {
-                Vec::new()
-            },
+            keys: vec![u32::MAX; slots],
+            slot_bits,
+            valid: vec![0; slots],
+            next_way: vec![0; slots / WAYS],
+            slots: vec![[0.0; BRICK_VOXELS]; slots],
             cells: [(IVec3::MAX, None); CELLS],
             next_cell: 0,
             current: (u32::MAX, 0),
+            evictions: 0,
             decodes: 0,
         }
     }
@@ -118,10 +129,19 @@ impl<'a> Sampler<'a> {
     /// (compressed formats only).
     #[inline(always)]
     fn slot(&mut self, brick: u32, need: u8) -> usize {
-        let s = (brick.wrapping_mul(0x9E37_79B9) >> (32 - SLOT_BITS)) as usize;
-        if self.keys[s] == brick && need & !self.valid[s] == 0 {
-            return s;
+        let set = ((brick.wrapping_mul(0x9E37_79B9) >> (32 - self.slot_bits + WAY_BITS)) as usize)
+            << WAY_BITS;
+        for s in set..set + WAYS {
+            if self.keys[s] == brick {
+                if need & !self.valid[s] == 0 {
+                    return s;
+                }
+                return self.fill(s, brick, need);
+            }
         }
+        let way = &mut self.next_way[set >> WAY_BITS];
+        let s = set + *way as usize;
+        *way = ((*way as usize + 1) % WAYS) as u8;
         self.fill(s, brick, need)
     }
 
@@ -129,6 +149,7 @@ impl<'a> Sampler<'a> {
     #[inline(never)]
     fn fill(&mut self, s: usize, brick: u32, need: u8) -> usize {
         if self.keys[s] != brick {
+            self.evictions += (self.keys[s] != u32::MAX) as u64;
             self.keys[s] = brick;
             self.valid[s] = 0;
             if self.current.1 == s {
@@ -197,6 +218,7 @@ impl<'a> Sampler<'a> {
     fn corners_across(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
         let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
         let compressed = !self.slots.is_empty();
+        let evictions = self.evictions;
         // Per neighbour offset d (a subset of `cross`): its brick and, compressed, its slot.
         let mut brick = [NO_LEAF; 8];
         let mut slot = [0usize; 8];
@@ -209,7 +231,10 @@ impl<'a> Sampler<'a> {
             };
             if n != NO_LEAF {
                 brick[d] = self.vol.tree.l3[n as usize].brick();
-                if compressed {
+                if compressed && d == 0 && self.current.0 == brick[0] {
+                    // The node's own brick, whole in the cache already.
+                    slot[0] = self.current.1;
+                } else if compressed {
                     // 4-voxel halves read along each axis: across the border only the
                     // neighbour's first layer (half 0) or the node's last one (half 1).
                     let halves = |axis: usize, v: i32| {
@@ -231,9 +256,9 @@ impl<'a> Sampler<'a> {
                 break;
             }
         }
-        // Two of these bricks may share a cache slot: then read each corner on its own.
-        let collided =
-            compressed && (0..8).any(|d| brick[d] != NO_LEAF && self.keys[slot[d]] != brick[d]);
+        // A brick looked up here may have taken another's slot: then read each corner on its
+        // own.
+        let collided = self.evictions != evictions;
         for (k, v) in c.iter_mut().enumerate() {
             let d = k & cross;
             let q: IVec3 =

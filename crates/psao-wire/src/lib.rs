@@ -8,10 +8,15 @@
 //! typed [`WireError`], sizes are checked against a caller-given limit before anything is
 //! allocated, and decoded messages are validated ([`Message::validate`]). No I/O here.
 
+mod corrective;
 mod error;
 mod frame;
 mod message;
 
+pub use corrective::{
+    Region, RegionsMsg, SampleMsg, SamplesMsg, MAX_RADIANCE, MAX_REGIONS, MAX_REGION_IMAGE_SIDE,
+    MAX_SAMPLES, MAX_SAMPLE_LEVEL,
+};
 pub use error::WireError;
 pub use frame::{
     decode_frame, decode_payload, encode_frame, frame_payload, FrameHeader, HEADER_LEN, MAGIC,

@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::corrective::{RegionsMsg, SamplesMsg};
 use crate::WireError;
 
 /// Protocol version spoken here; a hello with another version is refused.
@@ -23,8 +24,11 @@ pub mod capabilities {
     pub const CODEC_COMPACT: u32 = 2;
     /// Wants the server's state hash with every delta (to verify its mirror).
     pub const STATE_HASH: u32 = 4;
+    /// Wants corrective-splatting samples for the regions it sends (a server without
+    /// corrections ignores the bit and the regions).
+    pub const CORRECTIVE: u32 = 8;
     /// Every bit defined by this version.
-    pub const ALL: u32 = CODEC_PAPER | CODEC_COMPACT | STATE_HASH;
+    pub const ALL: u32 = CODEC_PAPER | CODEC_COMPACT | STATE_HASH | CORRECTIVE;
 }
 
 /// Every message of the protocol; the variant index (a postcard varint) comes first.
@@ -48,6 +52,10 @@ pub enum Message {
     Error(ErrorMsg),
     /// 8, either way: orderly end of the session.
     Bye(Bye),
+    /// 9, client → server: the regions of the client's latest frame analysis (corrections).
+    Regions(RegionsMsg),
+    /// 10, server → client: correction samples traced for the client's camera.
+    Samples(SamplesMsg),
 }
 
 /// Client → server, first message.
@@ -281,6 +289,8 @@ impl Message {
             }
             Message::Error(e) => check_text("error message", &e.message, MAX_TEXT),
             Message::Bye(b) => check_text("bye reason", &b.reason, MAX_TEXT),
+            Message::Regions(r) => r.validate(),
+            Message::Samples(s) => s.validate(),
             _ => Ok(()),
         }
     }
@@ -297,6 +307,8 @@ impl Message {
             Message::Snapshot(_) => "snapshot",
             Message::Error(_) => "error",
             Message::Bye(_) => "bye",
+            Message::Regions(_) => "regions",
+            Message::Samples(_) => "samples",
         }
     }
 }

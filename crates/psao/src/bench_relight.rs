@@ -64,7 +64,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         None => {
             let loaded = load_character(&args.character, args.clip.as_deref())?;
             let c = &loaded.character;
-            let s = split(frame_range(c, None)?, 2)?;
+            let s = split(frame_range(c, None)?, 2, None)?;
             let train_set = gather(c, &s.train, 64, 1, "tracing training frames")?;
             let validate = gather(c, &s.validate, 64, 1, "tracing validation frames")?;
             let (model, _) = train_model(&loaded.name, &train_set, &validate, 2)?;

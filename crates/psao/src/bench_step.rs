@@ -97,6 +97,11 @@ pub struct BenchStepReport {
     pub peak_bytes_per_point: f64,
     /// Heap bytes per stored point of each server structure after the last frame.
     pub memory: Vec<MemoryRow>,
+    /// Points in the first client's mirror after the last frame (what its views reached).
+    pub client_points: usize,
+    /// Heap bytes of the first client's mirror (`psao-client`'s grids, fed the same updates
+    /// its codec encodes) per point it holds.
+    pub client_bytes_per_point: f64,
     /// Rays per second of the step's tracing phase (selection, tracing, accumulation), Mrays/s.
     pub step_trace_mrays_s: f64,
     /// `psao bench trace`'s sorted closest-hit rate on this scene and backend, measured in this
@@ -161,6 +166,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     let ids: Vec<ClientId> = (0..args.load.clients)
         .map(|_| server.add_client())
         .collect();
+    let mut mirror = psao_client::ClientState::new(&server.instance_table());
     let mut codecs = ids
         .iter()
         .map(|_| psao_delta::codec_by_name(&args.tuning.codec))
@@ -204,7 +210,13 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         sums.trace_ms += step.trace_ms;
         sums.publish_ms += step.publish_ms;
         let tu = Instant::now();
-        pending = Some(server.updates_for(&ids));
+        let updates = server.updates_for(&ids);
+        if let Some((_, update)) = updates.iter().find(|(group, _)| group.contains(&ids[0])) {
+            mirror
+                .apply(update)
+                .context("the first client's mirror refused an update")?;
+        }
+        pending = Some(updates);
         sums.update_ms += tu.elapsed().as_secs_f64() * 1e3;
         frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
         bar.inc(1);
@@ -257,6 +269,8 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         bytes_per_point: per_point(rss),
         peak_bytes_per_point: per_point(peak),
         memory,
+        client_points: mirror.point_count(),
+        client_bytes_per_point: mirror.heap_bytes() as f64 / mirror.point_count().max(1) as f64,
         step_trace_mrays_s,
         bench_trace_mrays_s,
         trace_ratio: step_trace_mrays_s / bench_trace_mrays_s,
@@ -301,6 +315,10 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
             m.name, m.bytes_per_point
         );
     }
+    println!(
+        "first client's mirror: {} points, {:.1} bytes per point",
+        report.client_points, report.client_bytes_per_point
+    );
     if let Some(json) = &args.json {
         write_json(json, &report)?;
     }

@@ -107,6 +107,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         .iter()
         .filter(|r| r.frame.is_multiple_of(args.every))
         .collect();
+    let relight = crate::demo_relight::section(&args.out)?;
     let report = format!(
         "# psao demo\n\n\
          The split pipeline on the built-in default scene ({} instanced triangles): a server \
@@ -124,6 +125,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
          | frame | PSAO PSNR / SSIM / FLIP | SSAO PSNR / SSIM / FLIP |\n|---:|---|---|\n{}\n\
          Images: `frame_NNNNN.png` (composited), `ao_NNNNN.png` (AO only), \
          `reference_NNNNN.png`; per-frame numbers in `stats.json`.\n\n\
+         {}\n\
          Command: `{}`\n",
         input.scene.instanced_triangle_count(),
         pipeline.server().point_count(),
@@ -148,6 +150,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         start.elapsed().as_secs_f64(),
         args.spp,
         quality,
+        relight,
         std::env::args().collect::<Vec<_>>().join(" "),
     );
     write_json(&args.out.join("stats.json"), &records)?;

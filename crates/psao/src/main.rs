@@ -9,6 +9,7 @@ mod bench_trace;
 mod compare;
 mod corrective;
 mod demo;
+mod demo_relight;
 mod eval;
 mod lpips_weights;
 mod png_io;

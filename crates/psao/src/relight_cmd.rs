@@ -158,8 +158,10 @@ pub fn frame_range(character: &Character, requested: Option<FrameRange>) -> Resu
 }
 
 /// Times of one training split: training frames at `i / FPS` for every `every`-th frame;
-/// validation (ridge choice) and test times half a frame after the training frames at even
-/// and odd positions respectively, so the three sets never share a pose.
+/// validation (ridge choice) times half a frame after the training frames at even positions.
+/// Test times are the frames of `test` when given (training frames inside it are dropped),
+/// otherwise half a frame after the training frames at odd positions; the three sets never
+/// share a pose.
 pub struct Split {
     /// Training times (seconds), in order.
     pub train: Vec<f32>,
@@ -169,25 +171,39 @@ pub struct Split {
     pub test: Vec<f32>,
 }
 
-/// The split of `range` with every `every`-th frame trained on.
-pub fn split(range: FrameRange, every: u32) -> Result<Split> {
+/// The split of `range` with every `every`-th frame trained on and the frames of `test`, if
+/// any, held out for testing.
+pub fn split(range: FrameRange, every: u32, test: Option<FrameRange>) -> Result<Split> {
     if every == 0 {
         bail!("--every must be at least 1");
     }
-    let frames: Vec<u32> = (range.start..range.end).step_by(every as usize).collect();
+    let held_out = |i: &u32| test.is_some_and(|t| (t.start..t.end).contains(i));
+    let frames: Vec<u32> = (range.start..range.end)
+        .step_by(every as usize)
+        .filter(|i| !held_out(i))
+        .collect();
     if frames.len() < 2 {
         bail!(
-            "frames {}..{} with --every {every} give {} training frame(s); at least 2 are needed",
+            "frames {}..{} with --every {every}{} give {} training frame(s); at least 2 are needed",
             range.start,
             range.end,
+            if test.is_some() {
+                " outside the test frames"
+            } else {
+                ""
+            },
             frames.len()
         );
     }
     let half = |i: u32| (i as f32 + 0.5) / FPS;
+    let test = match test {
+        Some(t) => (t.start..t.end).map(|i| i as f32 / FPS).collect(),
+        None => frames.iter().skip(1).step_by(2).map(|&i| half(i)).collect(),
+    };
     Ok(Split {
         train: frames.iter().map(|&i| i as f32 / FPS).collect(),
         validate: frames.iter().step_by(2).map(|&i| half(i)).collect(),
-        test: frames.iter().skip(1).step_by(2).map(|&i| half(i)).collect(),
+        test,
     })
 }
 
@@ -266,7 +282,7 @@ fn run_train(args: &TrainArgs) -> Result<()> {
         bail!("--rays must be at least 1");
     }
     let range = frame_range(c, args.clip.frames)?;
-    let split = split(range, args.every)?;
+    let split = split(range, args.every, None)?;
     let start = Instant::now();
     let (train_set, validate) = gather_split(c, &split, args.rays, args.seed)?;
     let (model, report) = train_model(&loaded.name, &train_set, &validate, args.lobes)?;
@@ -359,4 +375,30 @@ pub fn character_and_model(
     let loaded = load_character(character, clip)?;
     let model = read_model(model, &loaded)?;
     Ok((loaded, model))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn test_frames_are_held_out_of_training_and_validation() {
+        let range = FrameRange { start: 0, end: 20 };
+        let s = split(range, 1, Some(FrameRange { start: 10, end: 13 })).unwrap();
+        let expected: Vec<f32> = [10.0f32, 11.0, 12.0].iter().map(|i| i / FPS).collect();
+        assert_eq!(s.test, expected);
+        assert_eq!(s.train.len(), 17);
+        for t in &s.test {
+            assert!(!s.train.contains(t) && !s.validate.contains(t));
+        }
+        // Without a test range: half-frame times, none of them trained on.
+        let s = split(range, 2, None).unwrap();
+        assert_eq!(s.train.len(), 10);
+        assert!(s
+            .test
+            .iter()
+            .all(|t| !s.train.contains(t) && !s.validate.contains(t)));
+        // A test range covering the whole training range leaves nothing to train on.
+        assert!(split(range, 1, Some(FrameRange { start: 0, end: 19 })).is_err());
+    }
 }

@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use psao_eval::{AoImage, Metrics};
-use psao_prt::lighting::LUMINANCE;
+use psao_prt::lighting::{Radiance, LUMINANCE};
 use psao_prt::model::{model_error, PoseModel};
 use psao_prt::reference::{reference_shading, ReferenceSettings};
 use psao_prt::shade::{Shader, ShadingGeometry, Visibility};
@@ -37,9 +37,14 @@ pub struct EvalArgs {
     /// Train on every K-th frame.
     #[arg(long, default_value_t = 1)]
     pub every: u32,
-    /// Number of test frames (half a frame after training frames, never trained on).
-    #[arg(long, default_value_t = 4)]
-    pub tests: usize,
+    /// Test frames `A..B` (30 fps) of the clip, held out of training and validation
+    /// (default: times half a frame after training frames, never trained on).
+    #[arg(long)]
+    pub test: Option<FrameRange>,
+    /// Number of test frames evaluated, evenly spread over the test times (default: 4, or
+    /// every frame of `--test`).
+    #[arg(long)]
+    pub tests: Option<usize>,
     /// Radiance `.hdr` environment map.
     #[arg(long)]
     pub env: PathBuf,
@@ -54,6 +59,10 @@ pub struct EvalArgs {
     /// Reference samples per vertex.
     #[arg(long, default_value_t = 2048)]
     pub ref_samples: u32,
+    /// Lighting the reference integrates: the full-resolution map, or its order-4 SH
+    /// projection (the run time's lighting, which leaves visibility as the only difference).
+    #[arg(long, value_enum, default_value_t = RefLighting::Full)]
+    pub ref_lighting: RefLighting,
     /// Image size.
     #[arg(long, default_value = "480x480")]
     pub res: Resolution,
@@ -63,6 +72,16 @@ pub struct EvalArgs {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// The lighting of the reference.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RefLighting {
+    /// The environment map at full resolution.
+    Full,
+    /// The order-4 SH projection of the map.
+    Sh,
 }
 
 /// Fit error of one lobe count.
@@ -88,6 +107,10 @@ struct MethodRow {
     psnr: f64,
     ssim: f64,
     flip: f64,
+    /// Smallest PSNR gain over `unshadowed` on any test frame (dB; positive: better on all).
+    worst_psnr_gain: f64,
+    /// Smallest FLIP reduction from `unshadowed` on any test frame (positive: better on all).
+    worst_flip_gain: f64,
 }
 
 /// One method on one test frame.
@@ -111,9 +134,39 @@ struct Report {
     test_times_s: Vec<f32>,
     rays: u32,
     ref_samples: u32,
+    ref_lighting: RefLighting,
     fit_error: Vec<FitError>,
     methods: Vec<MethodRow>,
+    /// A second reference with independent samples against the first (the noise floor).
+    reference_noise: MethodRow,
     frames: Vec<FrameRow>,
+    /// The reseeded reference per test frame.
+    reference_noise_frames: Vec<FrameRow>,
+}
+
+/// The averages of method `name` over the test frames of `rows`, and its worst frame's gain
+/// over `unshadowed` (0 for `unshadowed` itself and for methods with no such frames).
+fn method_row(name: &str, rows: &[FrameRow]) -> MethodRow {
+    let r: Vec<&FrameRow> = rows.iter().filter(|r| r.name == name).collect();
+    let avg = |f: fn(&FrameRow) -> f64| r.iter().map(|x| f(x)).sum::<f64>() / r.len() as f64;
+    let worst = |f: fn(&FrameRow, &FrameRow) -> f64| {
+        r.iter()
+            .filter_map(|x| {
+                rows.iter()
+                    .find(|u| u.name == "unshadowed" && u.time_s == x.time_s)
+                    .map(|u| f(x, u))
+            })
+            .fold(None, |m: Option<f64>, g| Some(m.map_or(g, |m| m.min(g))))
+            .unwrap_or(0.0)
+    };
+    MethodRow {
+        name: name.to_string(),
+        psnr: avg(|x| x.psnr),
+        ssim: avg(|x| x.ssim),
+        flip: avg(|x| x.flip),
+        worst_psnr_gain: worst(|x, u| x.psnr - u.psnr),
+        worst_flip_gain: worst(|x, u| u.flip - x.flip),
+    }
 }
 
 /// Runs `psao relight eval`.
@@ -121,7 +174,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     if args.lobes.is_empty() || args.lobes.iter().any(|l| !(1..=3).contains(l)) {
         bail!("--lobes takes counts among 1, 2 and 3");
     }
-    if args.tests == 0 || args.rays == 0 || args.ref_samples == 0 {
+    if args.tests == Some(0) || args.rays == 0 || args.ref_samples == 0 {
         bail!("--tests, --rays and --ref-samples must be at least 1");
     }
     let loaded = load_character(&args.character, args.clip.as_deref())?;
@@ -130,12 +183,19 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let shader = Shader::new(mode)?;
     let c = &loaded.character;
     let range = frame_range(c, args.train)?;
-    let split = split(range, args.every)?;
+    if let Some(t) = args.test {
+        frame_range(c, Some(t)).context("--test")?;
+    }
+    let split = split(range, args.every, args.test)?;
     if split.test.is_empty() {
         bail!("the training range leaves no test frames");
     }
-    let step = (split.test.len() as f32 / args.tests as f32).max(1.0);
-    let test_times: Vec<f32> = (0..args.tests.min(split.test.len()))
+    let count = args
+        .tests
+        .unwrap_or(if args.test.is_some() { usize::MAX } else { 4 })
+        .min(split.test.len());
+    let step = split.test.len() as f32 / count as f32;
+    let test_times: Vec<f32> = (0..count)
         .map(|k| split.test[(k as f32 * step) as usize])
         .collect();
     std::fs::create_dir_all(&args.out)
@@ -166,36 +226,58 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     }
 
     let lighting = env.project();
+    let radiance: &dyn Radiance = match args.ref_lighting {
+        RefLighting::Full => &env,
+        RefLighting::Sh => &lighting,
+    };
     let (w, h) = (args.res.width, args.res.height);
     let camera = framing_camera(&c.pose(test_times[0]), w, h);
     let mut tracer = SelfTracer::new(c.mesh())?;
     let mut image = VertexImage::new(c);
     let mut exposure = None;
     let mut rows: Vec<FrameRow> = Vec::new();
+    let mut noise_rows: Vec<FrameRow> = Vec::new();
     let mut raw = Vec::new();
     let progress = crate::progress::bar(test_times.len() as u64, "rendering test frames", "frames");
     for (k, (&t, sample)) in test_times.iter().zip(&tests).enumerate() {
         let pose = c.pose(t);
         tracer.set_pose(&pose)?;
-        let reference: Vec<f32> = reference_shading(
-            &tracer,
-            &pose,
-            &env,
-            &ReferenceSettings {
-                mode,
-                eye: camera.position,
-                env_rotation: 0.0,
-                samples: args.ref_samples,
-                seed: args.seed ^ 0x5245_4600 ^ k as u64,
-            },
-        )
-        .into_iter()
-        .flatten()
-        .collect();
+        let reference_with = |seed: u64| -> Vec<f32> {
+            reference_shading(
+                &tracer,
+                &pose,
+                radiance,
+                &ReferenceSettings {
+                    mode,
+                    eye: camera.position,
+                    env_rotation: 0.0,
+                    samples: args.ref_samples,
+                    seed,
+                },
+            )
+            .into_iter()
+            .flatten()
+            .collect()
+        };
+        let reference = reference_with(args.seed ^ 0x5245_4600 ^ k as u64);
+        // The same reference with independent samples: its distance to the first is the
+        // reference's own noise, below which methods cannot be told apart.
+        let reseeded = reference_with(args.seed ^ 0x4e4f_4953_4500 ^ k as u64);
         image.rasterize(&pose, &camera, w, h)?;
         let ref_pixels = image.shade(&reference, 3);
         let exposure = *exposure.get_or_insert_with(|| exposure_for(&luminance(&ref_pixels)));
         let ref_image = to_image(&ref_pixels, w, h, exposure);
+        let m = psao_eval::compare(
+            &ref_image,
+            &to_image(&image.shade(&reseeded, 3), w, h, exposure),
+        )?;
+        noise_rows.push(FrameRow {
+            name: "reference_reseeded".into(),
+            time_s: t,
+            psnr: m.psnr,
+            ssim: m.ssim,
+            flip: m.flip,
+        });
         let geometry = ShadingGeometry {
             positions: &pose.positions,
             frames: &pose.frames,
@@ -288,20 +370,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             }
             v
         });
-    let methods: Vec<MethodRow> = names
-        .iter()
-        .map(|n| {
-            let r: Vec<&FrameRow> = rows.iter().filter(|r| &r.name == n).collect();
-            let avg =
-                |f: fn(&FrameRow) -> f64| r.iter().map(|x| f(x)).sum::<f64>() / r.len() as f64;
-            MethodRow {
-                name: n.clone(),
-                psnr: avg(|x| x.psnr),
-                ssim: avg(|x| x.ssim),
-                flip: avg(|x| x.flip),
-            }
-        })
-        .collect();
+    let methods: Vec<MethodRow> = names.iter().map(|n| method_row(n, &rows)).collect();
+    let reference_noise = method_row("reference_reseeded", &noise_rows);
     let report = Report {
         character: loaded.name.clone(),
         clip: c.clip_name().to_string(),
@@ -312,9 +382,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         test_times_s: test_times.clone(),
         rays: args.rays,
         ref_samples: args.ref_samples,
+        ref_lighting: args.ref_lighting,
         fit_error,
         methods,
+        reference_noise,
         frames: rows,
+        reference_noise_frames: noise_rows,
     };
     let json = serde_json::to_string_pretty(&report)?;
     std::fs::write(args.out.join("report.json"), json).context("cannot write report.json")?;
@@ -325,14 +398,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
 }
 
 /// Per-pixel luminance of interleaved RGB.
-fn luminance(rgb: &[f32]) -> Vec<f32> {
+pub fn luminance(rgb: &[f32]) -> Vec<f32> {
     rgb.chunks(3)
         .map(|p| p.iter().zip(LUMINANCE).map(|(a, b)| a * b).sum())
         .collect()
 }
 
 /// The displayed luminance image compared by the metrics.
-fn to_image(rgb: &[f32], w: u32, h: u32, exposure: f32) -> AoImage {
+pub fn to_image(rgb: &[f32], w: u32, h: u32, exposure: f32) -> AoImage {
     AoImage {
         width: w,
         height: h,
@@ -351,40 +424,49 @@ fn write_pictures(
     h: u32,
     exposure: f32,
 ) -> Result<()> {
-    let to_u8 = |p: &[f32]| -> Vec<u8> {
-        p.iter()
-            .map(|&v| (display(v, exposure) * 255.0).round() as u8)
-            .collect()
-    };
     for (name, p) in pictures {
-        write_rgb_png(&args.out.join(format!("{name}.png")), w, h, to_u8(p))?;
+        write_rgb_png(
+            &args.out.join(format!("{name}.png")),
+            w,
+            h,
+            to_display_bytes(p, exposure),
+        )?;
     }
     let shadowed = pictures
         .iter()
         .find(|(n, _)| n == "lobes2")
         .or_else(|| pictures.iter().find(|(n, _)| n.starts_with("lobes")));
-    let order = ["reference", "unshadowed"];
-    let mut panels: Vec<&Vec<f32>> = Vec::new();
-    if let Some(r) = pictures.iter().find(|(n, _)| n == order[0]) {
-        panels.push(&r.1);
-    }
-    if let Some(s) = shadowed {
-        panels.push(&s.1);
-    }
-    if let Some(u) = pictures.iter().find(|(n, _)| n == order[1]) {
-        panels.push(&u.1);
-    }
+    let find = |name: &str| pictures.iter().find(|(n, _)| n == name);
+    let panels: Vec<&[f32]> = [find("reference"), shadowed, find("unshadowed")]
+        .into_iter()
+        .flatten()
+        .map(|(_, p)| p.as_slice())
+        .collect();
+    let (pw, side) = side_by_side(&panels, w, h, exposure);
+    write_rgb_png(&args.out.join("side_by_side.png"), pw, h, side)
+}
+
+/// RGB `w × h` pictures (linear, interleaved) placed left to right and tone-mapped with
+/// `exposure`: the combined width and its 8-bit pixels.
+pub fn side_by_side(panels: &[&[f32]], w: u32, h: u32, exposure: f32) -> (u32, Vec<u8>) {
     let pw = w as usize * panels.len();
     let mut side = vec![0u8; pw * h as usize * 3];
     for (k, p) in panels.iter().enumerate() {
-        let bytes = to_u8(p);
+        let bytes = to_display_bytes(p, exposure);
         for y in 0..h as usize {
             let src = &bytes[y * w as usize * 3..(y + 1) * w as usize * 3];
             let dst = (y * pw + k * w as usize) * 3;
             side[dst..dst + src.len()].copy_from_slice(src);
         }
     }
-    write_rgb_png(&args.out.join("side_by_side.png"), pw as u32, h, side)
+    (pw as u32, side)
+}
+
+/// Linear values to 8-bit display values.
+fn to_display_bytes(p: &[f32], exposure: f32) -> Vec<u8> {
+    p.iter()
+        .map(|&v| (display(v, exposure) * 255.0).round() as u8)
+        .collect()
 }
 
 fn markdown(r: &Report) -> String {
@@ -419,15 +501,25 @@ fn markdown(r: &Report) -> String {
             f.ms_per_frame
         );
     }
-    s += "\n## Image quality against the reference (mean over test frames)\n\n| method | PSNR dB | SSIM | FLIP |\n|---|---|---|---|\n";
-    for m in &r.methods {
+    s += "\n## Image quality against the reference (mean over test frames)\n\n\
+          The last two columns: the smallest gain over `unshadowed` on any single test frame \
+          (positive: better on every frame). `reference_reseeded` is the reference rendered \
+          again with independent samples (its noise floor).\n\n\
+          | method | PSNR dB | SSIM | FLIP | worst frame: PSNR gain | FLIP gain |\n\
+          |---|---|---|---|---|---|\n";
+    for m in r.methods.iter().chain([&r.reference_noise]) {
+        let gains = if m.name == "unshadowed" || m.name == "reference_reseeded" {
+            "— | —".to_string()
+        } else {
+            format!("{:+.2} dB | {:+.4}", m.worst_psnr_gain, m.worst_flip_gain)
+        };
         s += &format!(
-            "| {} | {:.2} | {:.4} | {:.4} |\n",
+            "| {} | {:.2} | {:.4} | {:.4} | {gains} |\n",
             m.name, m.psnr, m.ssim, m.flip
         );
     }
     s += "\n## Per frame\n\n| time s | method | PSNR dB | SSIM | FLIP |\n|---|---|---|---|---|\n";
-    for f in &r.frames {
+    for f in r.frames.iter().chain(&r.reference_noise_frames) {
         s += &format!(
             "| {:.3} | {} | {:.2} | {:.4} | {:.4} |\n",
             f.time_s, f.name, f.psnr, f.ssim, f.flip

@@ -94,6 +94,7 @@ impl ServerTuning {
             medium: None,
             points_cache: self.points_cache_dir(),
             detail: self.detail.then(psao_client::DetailSettings::default),
+            corrective: None,
         })
     }
 
@@ -136,6 +137,8 @@ pub struct RunArgs {
     /// Also write the summary as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    #[command(flatten)]
+    pub corrective: crate::corrective::split_args::CorrectiveArgs,
 }
 
 /// Summary and per-frame statistics of a run.
@@ -163,6 +166,8 @@ pub struct RunStats {
     pub state_hash: String,
     /// Mean time to encode one update, ms over the server frames.
     pub encode_ms: f64,
+    /// With `--corrective`: hash of the client's final correction state (its sample cache).
+    pub corrective_state_hash: Option<String>,
     /// Per-frame records.
     pub per_frame: Vec<FrameRecord>,
 }
@@ -189,6 +194,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut config = args.tuning.config(args.points, args.server_hz, args.res)?;
     config.medium = input.medium();
+    config.corrective = args.corrective.config()?;
     let mut pipeline = Pipeline::new(&input.scene, &config)?;
     tracing::info!(
         "{} points on {} instances",
@@ -221,6 +227,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
         mbit_s: pipeline.total_bytes as f64 * 8.0 / seconds / 1e6,
         state_hash: format!("{:016x}", pipeline.client().state_hash()),
         encode_ms: mean_encode_ms(&records),
+        corrective_state_hash: pipeline
+            .corrective_client()
+            .map(|c| format!("{:016x}", c.state_hash())),
         per_frame: records,
     };
     let stats_file = args.out.join("stats.json");
@@ -252,7 +261,16 @@ pub fn write_frame_images(
         img.ao.width,
         img.ao.height,
         rgb,
-    )
+    )?;
+    if let Some(corrected) = &img.corrected {
+        write_rgb_png(
+            &dir.join(format!("corrected_{frame:05}.png")),
+            img.ao.width,
+            img.ao.height,
+            psao_client::composite_srgb8(corrected),
+        )?;
+    }
+    Ok(())
 }
 
 /// Writes `value` as pretty JSON.

@@ -52,6 +52,8 @@ pub struct ServeArgs {
     /// Write server statistics as JSON to this file on exit.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    #[command(flatten)]
+    pub corrective: crate::corrective::split_args::CorrectiveArgs,
 }
 
 /// Runs `psao serve`.
@@ -93,10 +95,24 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         max_clients: args.max_clients,
         once: args.once,
         stop_on_ctrl_c: true,
-        scene_glb: psao_net::glb::scene_glb(&input.scene)?,
+        scene_glb: psao_net::glb::scene_glb(&input.scene, &input.paths)?,
         tls,
     };
-    let serve = Serve::bind(server, config)?;
+    let mut serve = Serve::bind(server, config)?;
+    if let Some(c) = args.corrective.config()? {
+        let mut scene = input.scene.clone();
+        scene.freeze();
+        let engine = psao_net::corrective::CorrectionEngine::new(
+            std::sync::Arc::new(scene),
+            args.tuning.backend.unwrap_or_default(),
+            c.ao_spp,
+            args.tuning.seed,
+        )?;
+        serve = serve.with_corrections(psao_net::serve::Corrections {
+            engine: std::sync::Arc::new(engine),
+            samples_per_second: c.samples_per_second,
+        });
+    }
     println!("listening on {}", serve.local_addr());
     let stats = serve.run();
     if let Some(json) = &args.json {

@@ -61,6 +61,8 @@ pub struct ViewArgs {
     /// folder (seed corpus for the fuzz targets).
     #[arg(long, hide = true)]
     pub record: Option<PathBuf>,
+    #[command(flatten)]
+    pub corrective: crate::corrective::split_args::CorrectiveArgs,
 }
 
 /// Runs `psao view`.
@@ -83,6 +85,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         path_offset: args.path_offset,
         drop_at: args.drop_at,
         record: args.record.clone(),
+        corrective: args.corrective.config()?.map(|c| c.client),
     };
     let stats = view(&input.scene, &path, &config, &mut |frame, img| {
         if let Some(out) = &args.out {
@@ -94,6 +97,9 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         "{} frames, {:.2} Mbit/s, {} reconnects, state {}",
         stats.frames, stats.mbit_s, stats.reconnects, stats.state_hash
     );
+    if let Some(h) = &stats.corrective_state_hash {
+        println!("{} correction samples, corrective state {h}", stats.samples);
+    }
     if let Some(json) = &args.json {
         write_json(json, &stats)?;
     }

@@ -98,3 +98,151 @@ fn bench_reports_the_cache_costs() {
     assert!(v["splat_ms"].as_f64().unwrap() >= 0.0);
     assert!(v["drawn"].as_u64().unwrap() > 0);
 }
+
+/// A small room with a chrome ball, a glossy box and a sun, and a 1-second camera path.
+fn split_fixture() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let mut obj = String::new();
+    let quads: [[[f32; 3]; 4]; 3] = [
+        [[-4., 0., -4.], [4., 0., -4.], [4., 0., 4.], [-4., 0., 4.]],
+        [[-4., 0., -4.], [-4., 3., -4.], [4., 3., -4.], [4., 0., -4.]],
+        [[-4., 0., -4.], [-4., 0., 4.], [-4., 3., 4.], [-4., 3., -4.]],
+    ];
+    for (i, q) in quads.iter().enumerate() {
+        for v in q {
+            obj += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+        }
+        let b = i * 4 + 1;
+        obj += &format!("f {} {} {}\nf {} {} {}\n", b, b + 1, b + 2, b, b + 2, b + 3);
+    }
+    std::fs::write(dir.path().join("room.obj"), obj).unwrap();
+    let scene = "ao_radius = 0.6\n\
+        camera_paths = [\"path.toml\"]\n\
+        [[asset]]\nfile = \"room.obj\"\n\
+        [[asset]]\nfile = \"builtin:sphere\"\ntranslation = [-0.6, 0.5, 0.0]\n\
+        [[asset]]\nfile = \"builtin:box\"\ntranslation = [0.9, 0.0, -0.5]\nscale = 0.8\n\
+        [[material]]\nname = \"sphere\"\npreset = \"chrome\"\n\
+        [[material]]\nname = \"box\"\npreset = \"glossy\"\n\
+        [[light]]\nkind = \"sun\"\ndirection = [0.35, 1.0, 0.6]\npower = 2.0\n";
+    std::fs::write(dir.path().join("scene.toml"), scene).unwrap();
+    let path = "name = \"orbit\"\nfov_y_deg = 60.0\n\
+        [[key]]\ntime = 0.0\nposition = [2.5, 1.5, 2.5]\nlook_at = [0.0, 0.5, 0.0]\n\
+        [[key]]\ntime = 1.0\nposition = [-1.5, 1.5, 3.0]\nlook_at = [0.0, 0.5, 0.0]\n";
+    std::fs::write(dir.path().join("path.toml"), path).unwrap();
+    dir
+}
+
+/// Server settings of the split test (`run` and `serve`).
+const SPLIT_SERVER: &[&str] = &[
+    "--points",
+    "64",
+    "--ray-budget",
+    "20000",
+    "--no-points-cache",
+    "--corrective",
+    "--samples-per-second",
+    "3000",
+    "--corrective-ao-spp",
+    "2",
+];
+
+/// Client settings of the split test (`run` and `view`).
+const SPLIT_CLIENT: &[&str] = &["--corrective", "--analyze-every", "3"];
+
+/// A child process killed on drop (a failing client must not leave its server waiting).
+struct Child(std::process::Child);
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn serve_and_view_with_corrections_end_in_the_same_state_as_run() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let frames = "12";
+    // In process: server and client through the encoder.
+    let run_out = fx.path().join("run");
+    let o = psao(
+        &[
+            &[
+                "run", "--scene", scene, "--res", "64x36", "--frames", "0..12",
+            ],
+            SPLIT_SERVER,
+            &["--analyze-every", "3"],
+            &["--server-hz", "30", "--out", run_out.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let run = json(&run_out.join("stats.json"));
+    let received: u64 = run["per_frame"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["samples"].as_u64().unwrap())
+        .sum();
+    // 3000 samples per second: at most 50 per 60 Hz frame, and some did arrive.
+    assert!(received > 50 && received <= 12 * 50, "{received} samples");
+    let run_hash = run["corrective_state_hash"].as_str().unwrap().to_string();
+    assert!(run_out.join("corrected_00011.png").is_file());
+
+    // Over a connection, lockstep.
+    let mut server = Child(
+        std::process::Command::new(common::BIN)
+            .args([
+                "--log",
+                "warn",
+                "serve",
+                "--scene",
+                scene,
+                "--listen",
+                "127.0.0.1:0",
+            ])
+            .args(SPLIT_SERVER)
+            .args(["--hz", "30", "--lockstep", "--once"])
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(server.0.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .unwrap()
+        .to_string();
+    let view_json = fx.path().join("view.json");
+    let o = psao(
+        &[
+            &[
+                "view",
+                "--connect",
+                &addr,
+                "--scene",
+                scene,
+                "--res",
+                "64x36",
+                "--frames",
+                frames,
+            ],
+            SPLIT_CLIENT,
+            &["--json", view_json.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(server.0.wait().unwrap().success());
+    let view = json(&view_json);
+    assert_eq!(view["samples"].as_u64().unwrap(), received);
+    assert_eq!(view["corrective_state_hash"].as_str().unwrap(), run_hash);
+    assert_eq!(view["state_hash"], run["state_hash"]);
+}

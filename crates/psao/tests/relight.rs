@@ -124,8 +124,10 @@ fn train_render_eval_and_bench_on_the_fox() {
         "24",
         "--ref-samples",
         "32",
-        "--tests",
-        "1",
+        "--test",
+        "6..8",
+        "--mode",
+        "translucent",
         "--res",
         "48x48",
         "--out",
@@ -133,6 +135,18 @@ fn train_render_eval_and_bench_on_the_fox() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let report = json(&eval.join("report.json"));
+    // Frames 6 and 7 are tested (and so not trained on); the reference's noise floor is there.
+    let times: Vec<f64> = report["test_times_s"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_f64().unwrap())
+        .collect();
+    assert_eq!(times.len(), 2);
+    assert!((times[0] - 6.0 / 30.0).abs() < 1e-6 && (times[1] - 7.0 / 30.0).abs() < 1e-6);
+    assert_eq!(report["train_frames"].as_u64(), Some(6));
+    assert!(report["mode"].as_str().unwrap().contains("Translucent"));
+    assert!(report["reference_noise"]["psnr"].as_f64().unwrap() > 0.0);
     let fit = report["fit_error"].as_array().unwrap();
     assert_eq!(fit.len(), 2);
     assert!(fit.iter().all(|f| f["mean"].as_f64().unwrap() > 0.0));

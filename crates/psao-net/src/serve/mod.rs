@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use psao_delta::Codec;
-use psao_server::{ClientId, Server, View};
+use psao_server::{ClientId, Server, StepStats, View};
 use psao_wire::{
     capabilities, encode_frame, Bye, Delta, ErrorCode, ErrorMsg, Message, SceneTime, Welcome,
     MAX_CLIENT_FRAME, PROTOCOL_VERSION,
@@ -23,6 +23,10 @@ use rayon::prelude::*;
 use serde::Serialize;
 use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot, Semaphore};
+
+mod corrective;
+
+pub use corrective::Corrections;
 
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
@@ -85,6 +89,8 @@ pub struct ClientStats {
     pub coalesced: u64,
     /// Server frames stepped while the client was connected.
     pub frames: u64,
+    /// Correction samples sent.
+    pub samples: u64,
 }
 
 /// What `psao serve --json` writes.
@@ -125,6 +131,33 @@ pub struct ServeStats {
     pub clients: Vec<ClientStats>,
 }
 
+/// How a [`Serve`] advances its [`Server`] by one server frame: [`LocalStep`] traces in
+/// this process (`psao serve`); an edge applies what trace nodes published
+/// ([`crate::scale::edge`]).
+pub trait Stepper: Send {
+    /// One server frame for the union of the clients' `views` at scene time `seconds`.
+    fn step(
+        &mut self,
+        server: &mut Server,
+        views: &[View],
+        seconds: f32,
+    ) -> Result<StepStats, NetError>;
+}
+
+/// Tracing in this process: [`Server::step_at`].
+pub struct LocalStep;
+
+impl Stepper for LocalStep {
+    fn step(
+        &mut self,
+        server: &mut Server,
+        views: &[View],
+        seconds: f32,
+    ) -> Result<StepStats, NetError> {
+        server.step_at(views, seconds).map_err(NetError::from)
+    }
+}
+
 /// A connection's request to join, answered with its session.
 struct Join {
     capabilities: u32,
@@ -137,6 +170,7 @@ enum Event {
     Join(Join),
     Camera(u32, psao_wire::CameraMsg),
     Ack(u32, u64),
+    Regions(u32, psao_wire::RegionsMsg),
     Leave(u32),
 }
 
@@ -151,6 +185,8 @@ struct Session {
     pending: Option<u32>,
     unacked: VecDeque<u64>,
     stats: ClientStats,
+    /// Corrective splatting state, when both ends want it.
+    corrective: Option<crate::corrective::RemoteCorrections>,
 }
 
 /// A bound server: listening, not yet stepping.
@@ -161,6 +197,8 @@ pub struct Serve {
     listener: TcpListener,
     local: SocketAddr,
     stop: Arc<AtomicBool>,
+    stepper: Box<dyn Stepper>,
+    corrections: Option<Corrections>,
 }
 
 impl Serve {
@@ -191,7 +229,15 @@ impl Serve {
             listener,
             local,
             stop: Arc::new(AtomicBool::new(false)),
+            stepper: Box::new(LocalStep),
+            corrections: None,
         })
+    }
+
+    /// Step with `stepper` instead of tracing in this process ([`LocalStep`]).
+    pub fn with_stepper(mut self, stepper: Box<dyn Stepper>) -> Self {
+        self.stepper = stepper;
+        self
     }
 
     /// The address actually listened on (resolves port 0).
@@ -214,6 +260,8 @@ impl Serve {
             listener,
             local,
             stop,
+            stepper,
+            corrections,
         } = self;
         let scheme = if config.tls.is_some() {
             "TLS: https, wss and raw frames"
@@ -242,6 +290,7 @@ impl Serve {
         }
         let sim = Simulation {
             server,
+            stepper,
             codec: config.codec.clone(),
             scene: config.scene_name.clone(),
             hz: config.hz,
@@ -265,6 +314,7 @@ impl Serve {
             unsent: None,
             hash_ms: 0.0,
             health,
+            corrections,
         };
         let stats = sim.run();
         rt.shutdown_timeout(Duration::from_millis(500));
@@ -492,6 +542,7 @@ async fn read_loop(
         let event = match message {
             Message::Camera(c) => Event::Camera(id, c),
             Message::Ack(a) => Event::Ack(id, a.frame),
+            Message::Regions(r) => Event::Regions(id, r),
             Message::Bye(_) => return Ok(()),
             other => {
                 return Err(ReadError::Io(format!(
@@ -513,6 +564,7 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 /// The simulation thread's state.
 struct Simulation {
     server: Server,
+    stepper: Box<dyn Stepper>,
     codec: String,
     scene: String,
     hz: u32,
@@ -542,6 +594,8 @@ struct Simulation {
     unsent: Option<FrameUpdates>,
     /// What `/health` reports.
     health: Arc<Health>,
+    /// Corrective splatting, when served.
+    corrections: Option<Corrections>,
 }
 
 impl Simulation {
@@ -578,6 +632,7 @@ impl Simulation {
                 let tick = round * u64::from(self.hz) / u64::from(CLIENT_HZ);
                 let seconds = round as f64 / f64::from(CLIENT_HZ);
                 round += 1;
+                self.corrections(CLIENT_HZ, true);
                 if last_tick != Some(tick) {
                     last_tick = Some(tick);
                     self.frame(seconds, true);
@@ -596,6 +651,7 @@ impl Simulation {
                 }
                 next += period;
                 self.drain_events();
+                self.corrections(self.hz, false);
                 let seconds = (self.server.frame() + 1) as f64 / f64::from(self.hz);
                 self.frame(seconds, false);
             }
@@ -627,6 +683,9 @@ impl Simulation {
                 if let Some(s) = self.sessions.get_mut(&id) {
                     s.view = Some(view_of(&cam));
                     s.pending = Some(cam.frame);
+                    if let Some(c) = &mut s.corrective {
+                        c.camera(&cam);
+                    }
                 }
             }
             Event::Ack(id, frame) => {
@@ -634,6 +693,11 @@ impl Simulation {
                     while s.unacked.front().is_some_and(|&f| f <= frame) {
                         s.unacked.pop_front();
                     }
+                }
+            }
+            Event::Regions(id, regions) => {
+                if let Some(s) = self.sessions.get_mut(&id) {
+                    corrective::regions(s, &regions);
                 }
             }
             Event::Leave(id) => {
@@ -706,6 +770,7 @@ impl Simulation {
                     id: id.0,
                     ..Default::default()
                 },
+                corrective: corrective::session_state(self.corrections.as_ref(), join.capabilities),
             },
         );
         self.health
@@ -727,8 +792,9 @@ impl Simulation {
         }
         let previous = self.unsent.take();
         let (server, sessions, rt) = (&mut self.server, &mut self.sessions, &self.rt);
+        let stepper = &mut self.stepper;
         let (step, sent) = rayon::join(
-            || server.step_at(&views, seconds as f32),
+            || stepper.step(server, &views, seconds as f32),
             || previous.map(|u| send_updates(sessions, u, false, rt)),
         );
         if let Some(sent) = sent {

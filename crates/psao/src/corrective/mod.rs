@@ -5,6 +5,7 @@ mod eval;
 mod frame;
 mod metrics;
 mod plot;
+pub mod split_args;
 
 use anyhow::Result;
 

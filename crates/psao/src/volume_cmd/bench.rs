@@ -2,7 +2,6 @@
 //! ones), one row per volume and mode, the worst ratio of each mode last.
 
 use anyhow::{Context, Result};
-use psao_net::cpu_time::cpu_seconds;
 use psao_volume::render::{self, DenseGrid};
 use psao_volume::{
     BrickFormat, Camera, GridClass, Image, Procedural, RenderMode, RenderSettings, SparseGrid,
@@ -22,6 +21,7 @@ struct Row {
     bricks: usize,
     names: [&'static str; 2],
     wall: [f64; 2],
+    cpu: [f64; 2],
     /// Speed of the fast path over the reference (wall, CPU).
     ratio: (f64, f64),
     target: f64,
@@ -34,6 +34,18 @@ struct Pair {
     wall: [f64; 2],
     cpu: [f64; 2],
     images: Vec<Image>,
+}
+
+/// CPU seconds used so far by all threads of this process, from the per-thread scheduler
+/// statistics (`/proc/self/task/*/schedstat`, nanoseconds; `/proc/self/stat` counts 10 ms
+/// ticks, too coarse for renders of tens of milliseconds). `None` where it is not available.
+fn cpu_seconds() -> Option<f64> {
+    let mut ns = 0u64;
+    for task in std::fs::read_dir("/proc/self/task").ok()? {
+        let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
+        ns += stat.split_whitespace().next()?.parse::<u64>().ok()?;
+    }
+    Some(ns as f64 * 1e-9)
 }
 
 type Job<'a> = Box<dyn Fn() -> Result<Image> + 'a>;
@@ -51,8 +63,11 @@ fn race(reps: u32, jobs: [Job; 2]) -> Result<Pair> {
             let (t, c) = (Instant::now(), cpu_seconds());
             let img = jobs[k]()?;
             p.wall[k] = p.wall[k].min(t.elapsed().as_secs_f64());
+            // A thread that ended meanwhile takes its time along: no figure then.
             if let (Some(a), Some(b)) = (c, cpu_seconds()) {
-                p.cpu[k] = p.cpu[k].min(b - a);
+                if b >= a {
+                    p.cpu[k] = p.cpu[k].min(b - a);
+                }
             }
             if rep == 0 {
                 p.images.push(img);
@@ -86,6 +101,7 @@ fn bench_volume(label: &str, grid: &SparseGrid, w: u32, h: u32, reps: u32) -> Re
         bricks,
         names: ["f32", "bc7"],
         wall: p.wall,
+        cpu: p.cpu,
         ratio: (p.wall[0] / p.wall[1], p.cpu[0] / p.cpu[1]),
         target: FOG_TARGET,
         diff: p.images[0].mean_abs_diff(&p.images[1]),
@@ -106,6 +122,7 @@ fn bench_volume(label: &str, grid: &SparseGrid, w: u32, h: u32, reps: u32) -> Re
             bricks,
             names: ["HDDA", "dense"],
             wall: p.wall,
+            cpu: p.cpu,
             ratio: (p.wall[1] / p.wall[0], p.cpu[1] / p.cpu[0]),
             target: HDDA_TARGET,
             diff: p.images[0].mean_abs_diff(&p.images[1]),
@@ -125,8 +142,8 @@ pub enum Input {
 /// Runs the benchmark over `inputs` and prints the table.
 pub fn run(inputs: &[Input], w: u32, h: u32, reps: u32) -> Result<()> {
     let mut rows = Vec::new();
-    println!("| volume | mode | bricks | A | A ms | B | B ms | speed wall | speed CPU | target | image mean abs diff |");
-    println!("|---|---|---:|---|---:|---|---:|---:|---:|---:|---:|");
+    println!("| volume | mode | bricks | A | A ms | A CPU ms | B | B ms | B CPU ms | speed wall | speed CPU | target | image mean abs diff |");
+    println!("|---|---|---:|---|---:|---:|---|---:|---:|---:|---:|---:|---:|");
     for input in inputs {
         let (label, grid) = match input {
             Input::File(f) => (
@@ -142,14 +159,16 @@ pub fn run(inputs: &[Input], w: u32, h: u32, reps: u32) -> Result<()> {
         };
         for r in bench_volume(&label, &grid, w, h, reps)? {
             println!(
-                "| {} | {} | {} | {} | {:.1} | {} | {:.1} | {:.2}x | {:.2}x | {:.1}x | {:.4} |",
+                "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {:.1} | {:.1} | {:.2}x | {:.2}x | {:.1}x | {:.4} |",
                 r.volume,
                 r.mode,
                 r.bricks,
                 r.names[0],
                 r.wall[0] * 1e3,
+                r.cpu[0] * 1e3,
                 r.names[1],
                 r.wall[1] * 1e3,
+                r.cpu[1] * 1e3,
                 r.ratio.0,
                 r.ratio.1,
                 r.target,
@@ -175,6 +194,13 @@ pub fn run(inputs: &[Input], w: u32, h: u32, reps: u32) -> Result<()> {
                     "missed"
                 }
             );
+        }
+        if let Some(r) = rows
+            .iter()
+            .filter(|r| r.mode == mode)
+            .min_by(|a, b| a.ratio.1.total_cmp(&b.ratio.1))
+        {
+            println!("worst {mode}: {:.2}x CPU on {}", r.ratio.1, r.volume);
         }
     }
     Ok(())

@@ -1,0 +1,593 @@
+//! A trace node (`psao trace-node`): steps the whole scene's selection each server frame,
+//! traces the points of the partitions it holds, and publishes their new records as one
+//! batch per held partition into the records stream. Partitions are held by leases in a
+//! key-value bucket; a node adopts partitions whose lease expired (docs/SCALE-OUT.md).
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use async_nats::jetstream::kv;
+use futures_util::StreamExt;
+use psao_server::{Partition, PointRecord, Server, View};
+use serde::Serialize;
+use tokio::sync::mpsc;
+
+use super::wire::{Batch, ViewSet};
+use super::{connect, records_stream, Names, LEASE_CHECK, LEASE_TTL};
+use crate::cpu_time::cpu_seconds;
+use crate::NetError;
+
+/// Messages buffered per subscription; more are dropped (and counted).
+const INBOX: usize = 4096;
+/// Frames whose scene time a node remembers.
+const RECENT_FRAMES: usize = 4096;
+
+/// How a trace node runs.
+#[derive(Clone, Debug)]
+pub struct TraceNodeConfig {
+    /// NATS server URL.
+    pub nats: String,
+    /// Scene name (names the subjects, stream and bucket; see [`Names`]).
+    pub scene: String,
+    /// The partition this node starts with.
+    pub partition: Partition,
+    /// Server frames per second of scene time.
+    pub hz: u32,
+    /// Lockstep: step frame `f` once this many edges sent their views for it (their scene
+    /// time is used). `None`: step on the shared clock with the latest views.
+    pub lockstep_edges: Option<usize>,
+    /// Stop after this many server frames.
+    pub frames: Option<u64>,
+    /// This node's name in the leases.
+    pub node_id: String,
+}
+
+/// A partition adopted from a node that stopped refreshing its lease.
+#[derive(Clone, Debug, Serialize)]
+pub struct Adoption {
+    /// The partition.
+    pub partition: u32,
+    /// This node's server frame when it adopted it.
+    pub frame: u64,
+    /// Seconds from the last batch of the partition seen to the adoption.
+    pub after_s: f64,
+    /// Points restarted from their published AO.
+    pub points: usize,
+}
+
+/// What a trace node did (`psao trace-node --json`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct TraceNodeStats {
+    /// Server frames stepped.
+    pub frames: u64,
+    /// Rays traced by this node.
+    pub rays: u64,
+    /// Mean wall time of a step, ms.
+    pub mean_step_ms: f64,
+    /// Mean wall time of the step's selection, tracing and accumulation, ms.
+    pub mean_trace_ms: f64,
+    /// Rays per second of step time.
+    pub rays_per_s: f64,
+    /// CPU time of the process per server frame, ms.
+    pub cpu_ms: f64,
+    /// Records published, and the bytes of their batches.
+    pub records: u64,
+    pub batch_bytes: u64,
+    /// Messages that did not parse (or named points that do not exist): dropped.
+    pub malformed: u64,
+    /// Messages dropped because the inbox was full.
+    pub dropped: u64,
+    /// Partitions held at the end.
+    pub partitions: Vec<u32>,
+    /// Partitions adopted from dead nodes.
+    pub adopted: Vec<Adoption>,
+}
+
+/// Counters the subscription tasks share with the node.
+#[derive(Default)]
+struct Counters {
+    malformed: AtomicU64,
+    dropped: AtomicU64,
+}
+
+/// The leases this node holds: partition → revision of its key.
+struct Leases {
+    kv: kv::Store,
+    node: String,
+    held: BTreeMap<u32, u64>,
+    count: u32,
+}
+
+fn lease_key(k: u32) -> String {
+    format!("p{k}")
+}
+
+impl Leases {
+    /// Take the lease of partition `k` when nobody holds it.
+    async fn try_take(&mut self, k: u32) -> bool {
+        match self.kv.create(lease_key(k), self.node.clone().into()).await {
+            Ok(revision) => {
+                self.held.insert(k, revision);
+                true
+            }
+            Err(_) => false,
+        }
+    }
+
+    /// Refresh every held lease; errors when one was lost (another node holds it now).
+    async fn refresh(&mut self) -> Result<(), NetError> {
+        for (k, revision) in self.held.iter_mut() {
+            match self
+                .kv
+                .update(lease_key(*k), self.node.clone().into(), *revision)
+                .await
+            {
+                Ok(r) => *revision = r,
+                Err(e) => {
+                    return Err(NetError::Nats(format!(
+                        "lost the lease of partition {k} ({e}): another node traces it now"
+                    )))
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Take every partition whose lease is free; returns them.
+    async fn adopt_free(&mut self) -> Vec<u32> {
+        let mut adopted = Vec::new();
+        for k in 0..self.count {
+            if !self.held.contains_key(&k) && self.try_take(k).await {
+                adopted.push(k);
+            }
+        }
+        adopted
+    }
+}
+
+/// The leases bucket of `names`, created when missing.
+async fn leases_bucket(
+    js: &async_nats::jetstream::Context,
+    names: &Names,
+) -> Result<kv::Store, NetError> {
+    if let Ok(store) = js.get_key_value(names.leases()).await {
+        return Ok(store);
+    }
+    js.create_key_value(kv::Config {
+        bucket: names.leases(),
+        history: 1,
+        max_age: LEASE_TTL,
+        ..Default::default()
+    })
+    .await
+    .map_err(|e| NetError::Nats(format!("cannot open bucket {}: {e}", names.leases())))
+}
+
+/// The shared clock's epoch (Unix ms) kept in the bucket: the first node's start. The
+/// epoch key is refreshed by whoever holds partition 0, so it outlives the lease TTL.
+async fn shared_epoch(store: &kv::Store) -> Result<u64, NetError> {
+    let now = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64);
+    let _ = store.create("epoch", now.to_string().into()).await;
+    let value = store
+        .get("epoch")
+        .await
+        .map_err(|e| NetError::Nats(format!("cannot read the clock's epoch: {e}")))?;
+    Ok(value
+        .and_then(|v| std::str::from_utf8(&v).ok()?.parse().ok())
+        .unwrap_or(now))
+}
+
+/// What the node's loop keeps between frames.
+struct Node {
+    server: Server,
+    config: TraceNodeConfig,
+    rt: tokio::runtime::Runtime,
+    js: async_nats::jetstream::Context,
+    names: Names,
+    leases: Leases,
+    views: mpsc::Receiver<(String, ViewSet)>,
+    batches: mpsc::Receiver<Batch>,
+    counters: Arc<Counters>,
+    /// Lockstep: view sets by frame and edge. Clocked: the latest of each edge.
+    pending_views: BTreeMap<u64, BTreeMap<String, Vec<View>>>,
+    latest_views: BTreeMap<String, (u64, Vec<View>)>,
+    /// Lockstep: the scene time of frames whose views are pending.
+    pending_seconds: BTreeMap<u64, f64>,
+    /// Scene time of this node's recent frames (for the batches of adopted partitions).
+    recent_seconds: BTreeMap<u64, f64>,
+    /// Per partition: the last frame a batch was seen for it, and when.
+    last_seen: BTreeMap<u32, (u64, Instant)>,
+    last_upkeep: Instant,
+    stats: TraceNodeStats,
+}
+
+/// Runs a trace node until `stop` is set (also by Ctrl-C) or its frames are done.
+pub fn run(
+    server: Server,
+    config: TraceNodeConfig,
+    stop: Arc<AtomicBool>,
+) -> Result<TraceNodeStats, NetError> {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .map_err(NetError::io("cannot start the async runtime"))?;
+    let stop_signal = stop.clone();
+    rt.spawn(async move {
+        if tokio::signal::ctrl_c().await.is_ok() {
+            tracing::info!("Ctrl-C: stopping");
+            stop_signal.store(true, Ordering::SeqCst);
+        }
+    });
+    let names = Names::new(&config.scene);
+    let client = rt.block_on(connect(&config.nats))?;
+    let js = async_nats::jetstream::new(client.clone());
+    rt.block_on(records_stream(&js, &names))?;
+    let store = rt.block_on(leases_bucket(&js, &names))?;
+    let counters = Arc::new(Counters::default());
+    let views = rt.block_on(subscribe(
+        &client,
+        names.views_wildcard(),
+        counters.clone(),
+        |subject, payload| {
+            let edge = subject.rsplit('.').next().unwrap_or("").to_string();
+            ViewSet::decode(payload).ok().map(|v| (edge, v))
+        },
+    ))?;
+    let batches = rt.block_on(subscribe(
+        &client,
+        names.records_wildcard(),
+        counters.clone(),
+        |_, payload| Batch::decode(payload).ok(),
+    ))?;
+    let partition = config.partition;
+    let mut leases = Leases {
+        kv: store,
+        node: config.node_id.clone(),
+        held: BTreeMap::new(),
+        count: partition.count,
+    };
+    let mut waited = false;
+    while !rt.block_on(leases.try_take(partition.index)) {
+        if !waited {
+            tracing::info!("partition {partition} is leased by another node: waiting");
+            waited = true;
+        }
+        if stop.load(Ordering::SeqCst) {
+            return Ok(TraceNodeStats::default());
+        }
+        std::thread::sleep(LEASE_CHECK);
+    }
+    let mut server = server;
+    let owners = server.owners(partition.count);
+    server.hold_partitions(owners, &[partition.index]);
+    tracing::info!("tracing partition {partition} as {}", config.node_id);
+    let mut node = Node {
+        server,
+        config,
+        rt,
+        js,
+        names,
+        leases,
+        views,
+        batches,
+        counters,
+        pending_views: BTreeMap::new(),
+        latest_views: BTreeMap::new(),
+        pending_seconds: BTreeMap::new(),
+        recent_seconds: BTreeMap::new(),
+        last_seen: BTreeMap::new(),
+        last_upkeep: Instant::now(),
+        stats: TraceNodeStats::default(),
+    };
+    node.run(&stop)
+}
+
+/// Subscribes to `subject`, forwarding what `parse` accepts (counting what it refuses).
+async fn subscribe<T: Send + 'static>(
+    client: &async_nats::Client,
+    subject: String,
+    counters: Arc<Counters>,
+    parse: impl Fn(&str, &[u8]) -> Option<T> + Send + 'static,
+) -> Result<mpsc::Receiver<T>, NetError> {
+    let mut sub = client
+        .subscribe(subject.clone())
+        .await
+        .map_err(|e| NetError::Nats(format!("cannot subscribe to {subject}: {e}")))?;
+    let (tx, rx) = mpsc::channel(INBOX);
+    tokio::spawn(async move {
+        while let Some(m) = sub.next().await {
+            match parse(m.subject.as_str(), &m.payload) {
+                Some(item) => {
+                    if tx.try_send(item).is_err() {
+                        if tx.is_closed() {
+                            return;
+                        }
+                        counters.dropped.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                None => {
+                    tracing::debug!("malformed message on {}", m.subject);
+                    counters.malformed.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    });
+    Ok(rx)
+}
+
+impl Node {
+    fn run(&mut self, stop: &AtomicBool) -> Result<TraceNodeStats, NetError> {
+        let cpu_start = cpu_seconds();
+        let (mut step_ms, mut trace_ms) = (0.0, 0.0);
+        let clock = match self.config.lockstep_edges {
+            Some(_) => None,
+            None => Some(self.clock_origin()?),
+        };
+        loop {
+            if stop.load(Ordering::SeqCst)
+                || self.config.frames.is_some_and(|n| self.server.frame() >= n)
+            {
+                break;
+            }
+            let frame = self.server.frame() + 1;
+            let Some((views, seconds)) = self.views_for(frame, clock, stop)? else {
+                break;
+            };
+            self.note_batches();
+            let step = self.server.step_at(&views, seconds as f32)?;
+            step_ms += step.ms;
+            trace_ms += step.trace_ms;
+            self.stats.rays += step.rays;
+            self.recent_seconds.insert(frame, seconds);
+            if self.recent_seconds.len() > RECENT_FRAMES {
+                self.recent_seconds.pop_first();
+            }
+            let records = self.server.take_records();
+            self.publish(frame, seconds, records)?;
+            self.upkeep(false)?;
+        }
+        let frames = self.server.frame();
+        let n = (frames.max(1)) as f64;
+        self.stats.frames = frames;
+        self.stats.mean_step_ms = step_ms / n;
+        self.stats.mean_trace_ms = trace_ms / n;
+        self.stats.rays_per_s = self.stats.rays as f64 / (step_ms / 1e3).max(1e-9);
+        if let (Some(a), Some(b)) = (cpu_start, cpu_seconds()) {
+            self.stats.cpu_ms = (b - a) * 1e3 / n;
+        }
+        self.stats.malformed = self.counters.malformed.load(Ordering::Relaxed);
+        self.stats.dropped = self.counters.dropped.load(Ordering::Relaxed);
+        self.stats.partitions = self.server.held_partitions();
+        // Let the leases expire for the other nodes at once.
+        let held: Vec<u32> = self.leases.held.keys().copied().collect();
+        for k in held {
+            let _ = self.rt.block_on(self.leases.kv.purge(lease_key(k)));
+        }
+        Ok(std::mem::take(&mut self.stats))
+    }
+
+    /// The instant of frame 0 on the shared clock.
+    fn clock_origin(&mut self) -> Result<Instant, NetError> {
+        let epoch_ms = self.rt.block_on(shared_epoch(&self.leases.kv))?;
+        let now_ms = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
+        let behind = Duration::from_millis(now_ms.saturating_sub(epoch_ms));
+        Ok(Instant::now()
+            .checked_sub(behind)
+            .unwrap_or_else(Instant::now))
+    }
+
+    /// The views and scene time of `frame` (lockstep: once every edge sent them; clocked:
+    /// at the frame's time on the shared clock). `None` when stopped while waiting.
+    fn views_for(
+        &mut self,
+        frame: u64,
+        clock: Option<Instant>,
+        stop: &AtomicBool,
+    ) -> Result<Option<(Vec<View>, f64)>, NetError> {
+        let hz = f64::from(self.config.hz.max(1));
+        loop {
+            if stop.load(Ordering::SeqCst) {
+                return Ok(None);
+            }
+            while let Ok((edge, set)) = self.views.try_recv() {
+                match clock {
+                    None if set.frame >= frame => {
+                        self.pending_views
+                            .entry(set.frame)
+                            .or_default()
+                            .insert(edge, set.views);
+                        if set.frame == frame {
+                            self.pending_seconds.insert(frame, set.seconds);
+                        }
+                    }
+                    None => {}
+                    Some(_) => {
+                        self.latest_views.insert(edge, (set.frame, set.views));
+                    }
+                }
+            }
+            match clock {
+                None => {
+                    let want = self.config.lockstep_edges.unwrap_or(1);
+                    if self
+                        .pending_views
+                        .get(&frame)
+                        .is_some_and(|e| e.len() >= want)
+                    {
+                        let edges = self.pending_views.remove(&frame).unwrap_or_default();
+                        let seconds = self.pending_seconds.remove(&frame).unwrap_or(0.0);
+                        return Ok(Some((union(edges.into_values()), seconds)));
+                    }
+                }
+                Some(origin) => {
+                    let due = origin + Duration::from_secs_f64(frame as f64 / hz);
+                    if Instant::now() >= due {
+                        // Views of edges silent for 2 s of frames are forgotten.
+                        let horizon = frame.saturating_sub(2 * self.config.hz as u64);
+                        self.latest_views.retain(|_, (f, _)| *f >= horizon);
+                        let views = union(self.latest_views.values().map(|(_, v)| v.clone()));
+                        return Ok(Some((views, frame as f64 / hz)));
+                    }
+                }
+            }
+            self.upkeep(false)?;
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// Take in the other partitions' batches: their records become this node's published
+    /// state (to adopt from), and their frames are noted.
+    fn note_batches(&mut self) {
+        while let Ok(batch) = self.batches.try_recv() {
+            let seen = self
+                .last_seen
+                .entry(batch.partition)
+                .or_insert((0, Instant::now()));
+            if batch.frame >= seen.0 {
+                *seen = (batch.frame, Instant::now());
+            }
+            if self.leases.held.contains_key(&batch.partition) {
+                continue;
+            }
+            if self.server.note_records(&batch.records).is_err() {
+                self.counters.malformed.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Publish this frame's records, one batch per held partition, and wait for the stream
+    /// to store them.
+    fn publish(
+        &mut self,
+        frame: u64,
+        seconds: f64,
+        records: Vec<PointRecord>,
+    ) -> Result<(), NetError> {
+        let owners = self
+            .server
+            .partition_owners()
+            .expect("a trace node holds partitions")
+            .clone();
+        let mut per: BTreeMap<u32, Vec<PointRecord>> =
+            self.leases.held.keys().map(|&k| (k, Vec::new())).collect();
+        for r in records {
+            per.entry(owners.owner(r.instance, r.index))
+                .or_default()
+                .push(r);
+        }
+        let batches: Vec<Batch> = per
+            .into_iter()
+            .map(|(partition, records)| Batch {
+                partition,
+                partitions: owners.count(),
+                frame,
+                seconds,
+                records,
+            })
+            .collect();
+        self.send(&batches)
+    }
+
+    /// Publish `batches` into the stream and wait for their acknowledgements.
+    fn send(&mut self, batches: &[Batch]) -> Result<(), NetError> {
+        let (js, names) = (&self.js, &self.names);
+        let mut bytes = 0u64;
+        let mut records = 0u64;
+        let result = self.rt.block_on(async {
+            let mut acks = Vec::with_capacity(batches.len());
+            for b in batches {
+                let payload = b.encode();
+                bytes += payload.len() as u64;
+                records += b.records.len() as u64;
+                let ack = js
+                    .publish(names.records(b.partition), payload.into())
+                    .await
+                    .map_err(|e| NetError::Nats(format!("cannot publish a batch: {e}")))?;
+                acks.push(ack);
+            }
+            for ack in acks {
+                ack.await
+                    .map_err(|e| NetError::Nats(format!("batch not stored: {e}")))?;
+            }
+            Ok::<(), NetError>(())
+        });
+        self.stats.batch_bytes += bytes;
+        self.stats.records += records;
+        result
+    }
+
+    /// Every [`LEASE_CHECK`] (or now with `force`): refresh the held leases, and adopt free
+    /// partitions, restarting their points from the published state and publishing empty
+    /// batches for the frames their dead node did not.
+    fn upkeep(&mut self, force: bool) -> Result<(), NetError> {
+        if !force && self.last_upkeep.elapsed() < LEASE_CHECK {
+            return Ok(());
+        }
+        self.last_upkeep = Instant::now();
+        self.rt.block_on(self.leases.refresh())?;
+        if self.leases.held.contains_key(&0) {
+            // Keep the clock's epoch alive past the bucket's TTL.
+            if let Ok(Some(epoch)) = self.rt.block_on(self.leases.kv.get("epoch")) {
+                let _ = self.rt.block_on(self.leases.kv.put("epoch", epoch));
+            }
+        }
+        let adopted = self.rt.block_on(self.leases.adopt_free());
+        if adopted.is_empty() {
+            return Ok(());
+        }
+        self.note_batches();
+        let frame = self.server.frame();
+        for k in adopted {
+            let (last, at) = self
+                .last_seen
+                .get(&k)
+                .copied()
+                .unwrap_or((0, Instant::now()));
+            let points = self.server.adopt_partition(k);
+            tracing::warn!(
+                "adopted partition {k} at frame {frame} ({points} points, {:.2} s after its last batch)",
+                at.elapsed().as_secs_f64()
+            );
+            self.stats.adopted.push(Adoption {
+                partition: k,
+                frame,
+                after_s: at.elapsed().as_secs_f64(),
+                points,
+            });
+            let owners_count = self.server.partition_owners().map_or(1, |o| o.count());
+            let fill: Vec<Batch> = (last + 1..=frame)
+                .map(|f| Batch {
+                    partition: k,
+                    partitions: owners_count,
+                    frame: f,
+                    seconds: self
+                        .recent_seconds
+                        .get(&f)
+                        .copied()
+                        .unwrap_or(f as f64 / f64::from(self.config.hz.max(1))),
+                    records: Vec::new(),
+                })
+                .collect();
+            self.send(&fill)?;
+        }
+        Ok(())
+    }
+}
+
+/// The distinct views of several edges, in the order given.
+fn union(sets: impl Iterator<Item = Vec<View>>) -> Vec<View> {
+    let mut out: Vec<View> = Vec::new();
+    for v in sets.flatten() {
+        if !out.contains(&v) {
+            out.push(v);
+        }
+    }
+    out
+}

@@ -1,0 +1,339 @@
+//! The payloads trace nodes and edges exchange through NATS (docs/SCALE-OUT.md): record
+//! batches and view sets, little-endian binary with a magic and a version. Decoding checks
+//! every length against the message before allocating, so a malformed message is an error,
+//! never a panic or a huge allocation.
+
+use glam::Vec3;
+use psao_scene::Camera;
+use psao_server::{PointRecord, View};
+
+/// Magic of a record batch.
+const BATCH_MAGIC: &[u8; 4] = b"PSRB";
+/// Magic of a view set.
+const VIEWS_MAGIC: &[u8; 4] = b"PSVW";
+/// Version of both payloads.
+const VERSION: u8 = 1;
+/// Bytes of a batch before its records, and of one record.
+const BATCH_HEADER: usize = 4 + 1 + 4 + 4 + 8 + 8 + 4;
+const RECORD_BYTES: usize = 12;
+/// Bytes of a view set before its views, and of one view.
+const VIEWS_HEADER: usize = 4 + 1 + 8 + 8 + 4;
+const VIEW_BYTES: usize = 13 * 4;
+/// Most views in one view set (an edge sends the union of its viewers' views).
+pub const MAX_VIEWS: usize = 4096;
+
+/// One server frame's records of one partition.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Batch {
+    /// The partition that published them, and the number of partitions.
+    pub partition: u32,
+    pub partitions: u32,
+    /// Server frame (1 for the first step).
+    pub frame: u64,
+    /// Scene time of the frame, seconds.
+    pub seconds: f64,
+    /// The points published, in (instance, index) order.
+    pub records: Vec<PointRecord>,
+}
+
+/// The views an edge's viewers had for one server frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewSet {
+    /// The server frame they are for.
+    pub frame: u64,
+    /// Its scene time, seconds.
+    pub seconds: f64,
+    /// The distinct views.
+    pub views: Vec<View>,
+}
+
+/// Why a payload was refused.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("malformed {what}: {reason}")]
+pub struct PayloadError {
+    what: &'static str,
+    reason: String,
+}
+
+fn fail(what: &'static str, reason: impl Into<String>) -> PayloadError {
+    PayloadError {
+        what,
+        reason: reason.into(),
+    }
+}
+
+/// Reads little-endian fields from a byte slice.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    what: &'static str,
+}
+
+impl Reader<'_> {
+    fn take<const N: usize>(&mut self) -> Result<[u8; N], PayloadError> {
+        if self.bytes.len() < N {
+            return Err(fail(self.what, "truncated"));
+        }
+        let (head, rest) = self.bytes.split_at(N);
+        self.bytes = rest;
+        Ok(head.try_into().expect("N bytes"))
+    }
+    fn u32(&mut self) -> Result<u32, PayloadError> {
+        self.take().map(u32::from_le_bytes)
+    }
+    fn u64(&mut self) -> Result<u64, PayloadError> {
+        self.take().map(u64::from_le_bytes)
+    }
+    fn f64(&mut self) -> Result<f64, PayloadError> {
+        self.take().map(f64::from_le_bytes)
+    }
+    fn f32(&mut self) -> Result<f32, PayloadError> {
+        self.take().map(f32::from_le_bytes)
+    }
+    fn vec3(&mut self) -> Result<Vec3, PayloadError> {
+        Ok(Vec3::new(self.f32()?, self.f32()?, self.f32()?))
+    }
+    /// The magic and version, checked.
+    fn header(&mut self, magic: &[u8; 4]) -> Result<(), PayloadError> {
+        if &self.take::<4>()? != magic {
+            return Err(fail(self.what, "wrong magic"));
+        }
+        let [version] = self.take::<1>()?;
+        if version != VERSION {
+            return Err(fail(self.what, format!("version {version}, not {VERSION}")));
+        }
+        Ok(())
+    }
+    /// A count of items of `size` bytes that must fill the rest exactly.
+    fn count(&mut self, size: usize, max: usize) -> Result<usize, PayloadError> {
+        let n = self.u32()? as usize;
+        if n > max || n.checked_mul(size) != Some(self.bytes.len()) {
+            return Err(fail(
+                self.what,
+                format!(
+                    "{n} items do not fit its {} remaining bytes",
+                    self.bytes.len()
+                ),
+            ));
+        }
+        Ok(n)
+    }
+}
+
+impl Batch {
+    /// The payload.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(BATCH_HEADER + self.records.len() * RECORD_BYTES);
+        out.extend_from_slice(BATCH_MAGIC);
+        out.push(VERSION);
+        out.extend_from_slice(&self.partition.to_le_bytes());
+        out.extend_from_slice(&self.partitions.to_le_bytes());
+        out.extend_from_slice(&self.frame.to_le_bytes());
+        out.extend_from_slice(&self.seconds.to_le_bytes());
+        out.extend_from_slice(&(self.records.len() as u32).to_le_bytes());
+        for r in &self.records {
+            for v in [r.instance, r.index, r.bits] {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        out
+    }
+
+    /// Decode a payload; refuses a partition outside its count and non-finite times.
+    pub fn decode(bytes: &[u8]) -> Result<Batch, PayloadError> {
+        let mut r = Reader {
+            bytes,
+            what: "record batch",
+        };
+        r.header(BATCH_MAGIC)?;
+        let (partition, partitions) = (r.u32()?, r.u32()?);
+        if partitions == 0 || partition >= partitions {
+            return Err(fail(
+                r.what,
+                format!("partition {partition} of {partitions}"),
+            ));
+        }
+        let (frame, seconds) = (r.u64()?, r.f64()?);
+        if !seconds.is_finite() {
+            return Err(fail(r.what, "non-finite scene time"));
+        }
+        let n = r.count(RECORD_BYTES, usize::MAX)?;
+        let mut records = Vec::with_capacity(n);
+        for _ in 0..n {
+            records.push(PointRecord {
+                instance: r.u32()?,
+                index: r.u32()?,
+                bits: r.u32()?,
+            });
+        }
+        Ok(Batch {
+            partition,
+            partitions,
+            frame,
+            seconds,
+            records,
+        })
+    }
+}
+
+impl ViewSet {
+    /// The payload.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(VIEWS_HEADER + self.views.len() * VIEW_BYTES);
+        out.extend_from_slice(VIEWS_MAGIC);
+        out.push(VERSION);
+        out.extend_from_slice(&self.frame.to_le_bytes());
+        out.extend_from_slice(&self.seconds.to_le_bytes());
+        out.extend_from_slice(&(self.views.len() as u32).to_le_bytes());
+        for v in &self.views {
+            let c = &v.camera;
+            let floats = [c.position, c.target, c.up]
+                .into_iter()
+                .flat_map(|p| p.to_array())
+                .chain([c.fov_y, c.near, c.far, v.aspect]);
+            for f in floats {
+                out.extend_from_slice(&f.to_le_bytes());
+            }
+        }
+        out
+    }
+
+    /// Decode a payload; refuses more than [`MAX_VIEWS`] views and non-finite numbers.
+    pub fn decode(bytes: &[u8]) -> Result<ViewSet, PayloadError> {
+        let mut r = Reader {
+            bytes,
+            what: "view set",
+        };
+        r.header(VIEWS_MAGIC)?;
+        let (frame, seconds) = (r.u64()?, r.f64()?);
+        let n = r.count(VIEW_BYTES, MAX_VIEWS)?;
+        let mut views = Vec::with_capacity(n);
+        for _ in 0..n {
+            let (position, target, up) = (r.vec3()?, r.vec3()?, r.vec3()?);
+            let (fov_y, near, far, aspect) = (r.f32()?, r.f32()?, r.f32()?, r.f32()?);
+            let finite = [position, target, up].iter().all(|v| v.is_finite())
+                && [fov_y, near, far, aspect].iter().all(|f| f.is_finite());
+            if !finite {
+                return Err(fail(r.what, "non-finite view"));
+            }
+            views.push(View {
+                camera: Camera {
+                    position,
+                    target,
+                    up,
+                    fov_y,
+                    near,
+                    far,
+                },
+                aspect,
+            });
+        }
+        if !seconds.is_finite() {
+            return Err(fail(r.what, "non-finite scene time"));
+        }
+        Ok(ViewSet {
+            frame,
+            seconds,
+            views,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn batch() -> Batch {
+        Batch {
+            partition: 1,
+            partitions: 3,
+            frame: 42,
+            seconds: 1.4,
+            records: (0..5)
+                .map(|i| PointRecord {
+                    instance: i / 2,
+                    index: i * 7,
+                    bits: 0xdead_0000 + i,
+                })
+                .collect(),
+        }
+    }
+
+    fn views() -> ViewSet {
+        let v = |x: f32| View {
+            camera: Camera::look_at(Vec3::new(x, 1.0, 2.0), Vec3::ZERO, 55.0),
+            aspect: 1.5,
+        };
+        ViewSet {
+            frame: 9,
+            seconds: 0.3,
+            views: vec![v(1.0), v(-2.5)],
+        }
+    }
+
+    #[test]
+    fn payloads_round_trip() {
+        let b = batch();
+        assert_eq!(Batch::decode(&b.encode()), Ok(b));
+        let v = views();
+        assert_eq!(ViewSet::decode(&v.encode()), Ok(v));
+        let empty = Batch {
+            records: Vec::new(),
+            ..batch()
+        };
+        assert_eq!(Batch::decode(&empty.encode()), Ok(empty));
+    }
+
+    #[test]
+    fn every_truncation_and_corruption_is_an_error() {
+        let (b, v) = (batch().encode(), views().encode());
+        for bytes in [&b, &v] {
+            for n in 0..bytes.len() {
+                assert!(Batch::decode(&bytes[..n]).is_err());
+                assert!(ViewSet::decode(&bytes[..n]).is_err());
+            }
+        }
+        let mut wrong = b.clone();
+        wrong[0] = b'X';
+        assert!(Batch::decode(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("magic"));
+        let mut wrong = b.clone();
+        wrong[4] = 9;
+        assert!(Batch::decode(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("version"));
+        let mut wrong = b.clone();
+        wrong[5..9].copy_from_slice(&3u32.to_le_bytes());
+        assert!(Batch::decode(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("partition"));
+        // A count claiming 2^32-1 records: refused before allocating.
+        let mut huge = b.clone();
+        huge[BATCH_HEADER - 4..BATCH_HEADER].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(Batch::decode(&huge)
+            .unwrap_err()
+            .to_string()
+            .contains("do not fit"));
+        let mut extra = b.clone();
+        extra.push(0);
+        assert!(Batch::decode(&extra).is_err());
+        let mut nan = v.clone();
+        nan[VIEWS_HEADER..VIEWS_HEADER + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(ViewSet::decode(&nan)
+            .unwrap_err()
+            .to_string()
+            .contains("non-finite"));
+    }
+
+    #[test]
+    fn the_largest_view_set_is_accepted_and_one_more_refused() {
+        let mut v = views();
+        v.views = vec![v.views[0]; MAX_VIEWS];
+        assert_eq!(ViewSet::decode(&v.encode()).unwrap().views.len(), MAX_VIEWS);
+        v.views.push(v.views[0]);
+        assert!(ViewSet::decode(&v.encode()).is_err());
+    }
+}

@@ -1,0 +1,51 @@
+//! The `--corrective` options of `psao run`, `psao serve` and `psao view` (corrective
+//! splatting over the split, `crates/psao-net/src/corrective.rs`).
+
+use anyhow::{bail, Result};
+use psao_net::corrective::{
+    CorrectiveClientConfig, CorrectiveConfig, DEFAULT_ANALYZE_EVERY, DEFAULT_SAMPLES_PER_SECOND,
+};
+
+/// Corrective-splatting options.
+#[derive(clap::Args, Debug, Clone)]
+pub struct CorrectiveArgs {
+    /// Corrective splatting: the client sends the regions and priorities of its frames, the
+    /// server traces correction samples and streams them with the AO updates.
+    #[arg(long)]
+    pub corrective: bool,
+    /// Server: correction samples per second per client.
+    #[arg(long, default_value_t = DEFAULT_SAMPLES_PER_SECOND)]
+    pub samples_per_second: u32,
+    /// Client: frames between analyses of its frame (18 = 0.3 s at 60 Hz).
+    #[arg(long, default_value_t = DEFAULT_ANALYZE_EVERY)]
+    pub analyze_every: u32,
+    /// Server: AO rays per diffuse point the correction rays reach.
+    #[arg(long, default_value_t = 8)]
+    pub corrective_ao_spp: u32,
+}
+
+impl CorrectiveArgs {
+    /// The settings, when `--corrective` is given.
+    pub fn config(&self) -> Result<Option<CorrectiveConfig>> {
+        if !self.corrective {
+            return Ok(None);
+        }
+        if self.analyze_every == 0 {
+            bail!("--analyze-every must be at least 1");
+        }
+        if self.samples_per_second > 10_000_000 {
+            bail!(
+                "--samples-per-second {} is absurd (at most 10 000 000)",
+                self.samples_per_second
+            );
+        }
+        Ok(Some(CorrectiveConfig {
+            samples_per_second: self.samples_per_second,
+            ao_spp: self.corrective_ao_spp.clamp(1, 1024),
+            client: CorrectiveClientConfig {
+                analyze_every: self.analyze_every,
+                ..CorrectiveClientConfig::default()
+            },
+        }))
+    }
+}
