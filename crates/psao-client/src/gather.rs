@@ -9,7 +9,7 @@
 
 use glam::{IVec3, Vec3};
 use psao_points::pack::{is_valid, normal_code, normal_table, unpack_ao};
-use psao_points::{InstanceGrid, ReconstructParams, CELL_POINTS};
+use psao_points::{InstanceGrid, LinearFit, ReconstructParams, CELL_POINTS};
 
 /// Most points a 2×2×2 block can hold.
 const MAX_POINTS: usize = 8 * CELL_POINTS;
@@ -83,7 +83,19 @@ impl Neighbourhood {
             ao_sum += w * ao;
         }
         if w_sum > 0.0 {
-            ao_sum / w_sum
+            match params.linear_ridge {
+                Some(ridge) => {
+                    // The same points, in the same order, as `reconstruct_ao` adds.
+                    let mut fit = LinearFit::new(n);
+                    for i in (0..self.count).filter(|&i| weight[i] > 0.0) {
+                        let delta = Vec3::new(px[i], py[i], pz[i]) - p;
+                        fit.add(weight[i], delta, self.ao[i]);
+                    }
+                    fit.solve(ridge * layout.poisson_radius)
+                        .unwrap_or(ao_sum / w_sum)
+                }
+                None => ao_sum / w_sum,
+            }
         } else if params.nearest_fallback {
             self.nearest(p, n, plane, params)
                 .or_else(|| ring_nearest(grid, base, p, n, plane, params))

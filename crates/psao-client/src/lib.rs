@@ -10,6 +10,7 @@
 #![warn(missing_docs)]
 
 mod composite;
+mod detail;
 mod error;
 mod gather;
 mod hash;
@@ -17,6 +18,7 @@ mod reconstruct;
 mod state;
 
 pub use composite::{composite, composite_srgb8, encode_srgb, Shading, SKY_GREY};
+pub use detail::{apply_detail, DetailSettings};
 pub use error::ClientError;
 pub use hash::state_hash_of;
 pub use reconstruct::{reconstruct, reconstruct_into, ReconstructSettings};

@@ -27,6 +27,8 @@ pub struct ReconstructSettings {
     pub normal_exponent: i32,
     /// Nearest-point fallback for holes ([`ReconstructParams::nearest_fallback`]).
     pub nearest_fallback: bool,
+    /// Planar fit instead of the weighted mean ([`ReconstructParams::linear_ridge`]).
+    pub linear_ridge: Option<f32>,
 }
 
 impl Default for ReconstructSettings {
@@ -36,6 +38,7 @@ impl Default for ReconstructSettings {
             plane_tolerance: DEFAULT_PLANE_TOLERANCE,
             normal_exponent: DEFAULT_NORMAL_EXPONENT,
             nearest_fallback: true,
+            linear_ridge: None,
         }
     }
 }
@@ -113,6 +116,7 @@ pub fn reconstruct_into(
         plane_tolerance: settings.plane_tolerance,
         normal_exponent: settings.normal_exponent,
         nearest_fallback: settings.nearest_fallback,
+        linear_ridge: settings.linear_ridge,
         ..ReconstructParams::default()
     };
     // Zipping row slices tolerates inconsistent attribute lengths: missing pixels stay 1.

@@ -225,10 +225,20 @@ fn matches_reconstruct_ao_bitwise() {
             ..defaults
         },
         ReconstructSettings {
+            linear_ridge: Some(0.5),
+            ..defaults
+        },
+        ReconstructSettings {
+            interpolation_factor: 1.3,
+            linear_ridge: Some(0.0),
+            ..defaults
+        },
+        ReconstructSettings {
             interpolation_factor: 1.3,
             plane_tolerance: f32::INFINITY,
             normal_exponent: 0,
             nearest_fallback: false,
+            linear_ridge: None,
         },
     ];
     for settings in variants {
@@ -238,6 +248,7 @@ fn matches_reconstruct_ao_bitwise() {
             plane_tolerance: settings.plane_tolerance,
             normal_exponent: settings.normal_exponent,
             nearest_fallback: settings.nearest_fallback,
+            linear_ridge: settings.linear_ridge,
             ..ReconstructParams::default()
         };
         let ao = reconstruct(&state, &g, &settings);

@@ -4,7 +4,7 @@
 
 use crate::corrective::{CorrectiveClient, CorrectiveConfig, InProcessCorrections};
 use crate::{NetError, Resolution};
-use psao_client::{ClientState, ReconstructSettings, Shading};
+use psao_client::{ClientState, DetailSettings, ReconstructSettings, Shading};
 use psao_delta::Codec;
 use psao_eval::AoImage;
 use psao_raster::{GBuffer, InstancePose, RasterOptions, Rasterizer};
@@ -33,6 +33,9 @@ pub struct PipelineConfig {
     pub medium: Option<Arc<dyn Medium>>,
     /// Folder of stored start points ([`crate::start_cache`]); `None` generates them afresh.
     pub points_cache: Option<std::path::PathBuf>,
+    /// The client's screen-space contact term below the point spacing
+    /// ([`psao_client::apply_detail`]); `None` (the default) leaves it out.
+    pub detail: Option<DetailSettings>,
     /// Corrective splatting ([`crate::corrective`]), when wanted.
     pub corrective: Option<CorrectiveConfig>,
 }
@@ -140,7 +143,7 @@ impl<'a> Pipeline<'a> {
                 .map_err(NetError::codec("the server's codec"))?,
             decoder,
             client,
-            renderer: ClientRenderer::new(scene)?,
+            renderer: ClientRenderer::new(scene)?.with_detail(config.detail),
             server_hz: config.server_hz,
             last_tick: None,
             res: config.res,
@@ -281,6 +284,8 @@ pub struct ClientRenderer {
     rasterizer: Rasterizer,
     /// The client's own animation (posed at client time), for animated scenes.
     animation: Option<(Animator, ScenePose)>,
+    /// The contact term applied after reconstruction, if any.
+    detail: Option<DetailSettings>,
 }
 
 impl ClientRenderer {
@@ -292,7 +297,14 @@ impl ClientRenderer {
             animation: animator
                 .is_dynamic()
                 .then(|| (animator, ScenePose::default())),
+            detail: None,
         })
+    }
+
+    /// The same renderer applying `detail` after reconstruction (`None`: not at all).
+    pub fn with_detail(mut self, detail: Option<DetailSettings>) -> Self {
+        self.detail = detail;
+        self
     }
 
     /// One client frame at client scene time `time`. A static scene is rasterized as stored.
@@ -320,7 +332,10 @@ impl ClientRenderer {
                     .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)?;
             }
         }
-        let ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());
+        let mut ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());
+        if let Some(detail) = &self.detail {
+            psao_client::apply_detail(state, &gbuffer, camera, detail, &mut ao);
+        }
         Ok(ClientFrame {
             ao: AoImage {
                 width: gbuffer.width,

@@ -15,6 +15,7 @@ mod generate;
 mod grid;
 mod key_map;
 mod layout;
+mod linear_fit;
 pub mod pack;
 mod reconstruct;
 mod rng;
@@ -31,9 +32,11 @@ pub use layout::{
     DecodedPoint, GridLayout, BUCKET_ENTRIES, CELLS_PER_AREA, CELL_POINTS, CELL_RADIUS_FACTOR,
     MAX_DIM, TABLE_OVERSIZE,
 };
+pub use linear_fit::LinearFit;
 pub use reconstruct::{
     reconstruct_ao, ReconstructParams, DEFAULT_DIRECTION_THRESHOLD, DEFAULT_INTERPOLATION_FACTOR,
-    DEFAULT_NORMAL_EXPONENT, DEFAULT_NORMAL_THRESHOLD, DEFAULT_PLANE_TOLERANCE,
+    DEFAULT_LINEAR_RIDGE, DEFAULT_NORMAL_EXPONENT, DEFAULT_NORMAL_THRESHOLD,
+    DEFAULT_PLANE_TOLERANCE,
 };
 
 /// Heap bytes a vector holds: its allocated capacity times the element size.

@@ -3,6 +3,7 @@
 use glam::Vec3;
 
 use crate::grid::InstanceGrid;
+use crate::linear_fit::LinearFit;
 use crate::pack::{is_valid, normal_code, normal_table, unpack_ao};
 
 /// Default interpolation factor: reconstruction radius r = 2√2 × the Poisson radius r_max.
@@ -29,6 +30,10 @@ pub const DEFAULT_PLANE_TOLERANCE: f32 = 0.5;
 /// Default exponent of the normal-agreement weight `(n·n_i)^k` (our addition, see
 /// [`reconstruct_ao`]).
 pub const DEFAULT_NORMAL_EXPONENT: i32 = 8;
+/// Ridge of the planar fit, in Poisson radii, when it is chosen
+/// ([`ReconstructParams::linear_ridge`]; off by default: on streamed frames whose points hold
+/// few samples it tilts with their noise and lowers SSIM, see docs/BENCHMARKS.md).
+pub const DEFAULT_LINEAR_RIDGE: f32 = 0.25;
 
 /// Parameters of the reconstruction.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,6 +52,9 @@ pub struct ReconstructParams {
     /// When no point lies within `r`, use the AO of the nearest point of the visited cells
     /// that passes every other test instead of 1 (see [`reconstruct_ao`]).
     pub nearest_fallback: bool,
+    /// `Some(ridge)`: fit a plane through the weighted AO values ([`LinearFit`]) instead of
+    /// taking their weighted mean; `ridge` is in Poisson radii.
+    pub linear_ridge: Option<f32>,
 }
 
 impl Default for ReconstructParams {
@@ -58,6 +66,7 @@ impl Default for ReconstructParams {
             plane_tolerance: DEFAULT_PLANE_TOLERANCE,
             normal_exponent: DEFAULT_NORMAL_EXPONENT,
             nearest_fallback: true,
+            linear_ridge: None,
         }
     }
 }
@@ -85,7 +94,10 @@ impl Default for ReconstructParams {
 /// none, the nearest such point of the ring of cells around it
 /// ([`InstanceGrid::ring_cells`]); and 1 only when there is none: DESIGN's fallback 1 draws
 /// such detail as white gaps (a dark groove breaks into dashes), while the nearest point on
-/// the same surface carries nearly the same occlusion.
+/// the same surface carries nearly the same occlusion. (4) With
+/// [`ReconstructParams::linear_ridge`] set (off by default) the result is not `Σ w·AO_i / Σ w` but
+/// the value at `p` of the plane fitted through the same weighted points ([`LinearFit`]),
+/// which keeps AO gradients steeper than the radius (the foot of a low wall).
 pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &ReconstructParams) -> f32 {
     let layout = grid.layout();
     let r = layout.poisson_radius * params.interpolation_factor;
@@ -111,6 +123,7 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
         true
     };
     let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
+    let mut fit = LinearFit::new(n);
     let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, 1.0f32);
     for (coord, cell) in grid.block_cells(base) {
         for &bits in &cell.points {
@@ -132,6 +145,9 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
             let w = (r - d2.sqrt()) * inv_r * ni.dot(n).powi(params.normal_exponent);
             w_sum += w;
             ao_sum += w * unpack_ao(bits);
+            if params.linear_ridge.is_some() {
+                fit.add(w, delta, unpack_ao(bits));
+            }
         }
     }
     if w_sum == 0.0 && params.nearest_fallback && nearest_d2 == f32::INFINITY {
@@ -146,7 +162,12 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
         }
     }
     if w_sum > 0.0 {
-        ao_sum / w_sum
+        match params.linear_ridge {
+            Some(ridge) => fit
+                .solve(ridge * layout.poisson_radius)
+                .unwrap_or(ao_sum / w_sum),
+            None => ao_sum / w_sum,
+        }
     } else if params.nearest_fallback {
         nearest_ao
     } else {

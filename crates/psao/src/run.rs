@@ -46,6 +46,10 @@ pub struct ServerTuning {
     /// Generate the points afresh and keep none on disk.
     #[arg(long, conflicts_with = "points_cache")]
     pub no_points_cache: bool,
+    /// Apply the client's screen-space contact term below the point spacing
+    /// (`psao_client::apply_detail`, docs/BENCHMARKS.md "Fine detail") after reconstruction.
+    #[arg(long)]
+    pub detail: bool,
 }
 
 /// `--invalidation` values.
@@ -89,6 +93,7 @@ impl ServerTuning {
             res,
             medium: None,
             points_cache: self.points_cache_dir(),
+            detail: self.detail.then(psao_client::DetailSettings::default),
             corrective: None,
         })
     }
