@@ -158,7 +158,7 @@ fn update_json(u: &Update) -> Value {
         "instances": u.instances.iter().map(|d| json!({
             "instance": d.instance,
             "buckets": d.buckets.iter().map(|(b, bk)| json!([b, bk.entries.iter()
-                .map(|e| json!([format!("{:016x}", e.key), e.slot])).collect::<Vec<_>>()]))
+                .map(|&e| { let (key, slot) = (e.key, e.slot); json!([format!("{key:016x}"), slot]) }).collect::<Vec<_>>()]))
                 .collect::<Vec<_>>(),
             "cells": d.cells.iter().map(|(s, c)| json!([s, c.points])).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
