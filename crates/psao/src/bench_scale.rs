@@ -14,7 +14,6 @@ use psao_net::pipeline::CLIENT_HZ;
 use psao_net::scale::edge::{EdgeConfig, EdgeStepper};
 use psao_net::scale::trace_node::TraceNodeStats;
 use psao_net::serve::Stepper;
-use psao_net::start_cache::start_server;
 use psao_net::Resolution;
 use psao_scene::CameraPath;
 use psao_server::{Server, View};
@@ -140,15 +139,7 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             height: 1,
         },
     )?;
-    let make = || {
-        start_server(
-            &input.scene,
-            config.server,
-            input.medium(),
-            config.points_cache.as_deref(),
-        )
-        .context("cannot start the server (point generation or tracer)")
-    };
+    let make = || crate::serve::scene_server(&input, &args.tuning, args.points, args.hz);
     let (serve_rays_per_s, serve_hash) = {
         let mut server = make()?;
         let (mut rays, mut ms) = (0u64, 0.0);

@@ -7,12 +7,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use psao_net::scale::edge::{EdgeConfig, EdgeStats, EdgeStepper};
 use psao_net::scale::trace_node::{self, TraceNodeConfig};
 use psao_net::serve::{Serve, ServeConfig, ServeStats};
-use psao_net::start_cache::start_server;
-use psao_net::Resolution;
 use psao_server::{Partition, Server};
 use serde::Serialize;
 
@@ -46,21 +44,7 @@ impl SceneArgs {
     /// The scene's name, its server, and the scene as binary glTF (for browsers).
     fn server(&self) -> Result<(String, Server, Vec<u8>)> {
         let input = SceneInput::load(&self.scene)?;
-        let tuning = self.tuning.config(
-            self.points,
-            self.hz,
-            Resolution {
-                width: 1,
-                height: 1,
-            },
-        )?;
-        let server = start_server(
-            &input.scene,
-            tuning.server,
-            input.medium(),
-            tuning.points_cache.as_deref(),
-        )
-        .context("cannot start the server (point generation or tracer)")?;
+        let server = crate::serve::scene_server(&input, &self.tuning, self.points, self.hz)?;
         let glb = psao_net::glb::scene_glb(&input.scene, &input.paths)?;
         Ok((input.name, server, glb))
     }

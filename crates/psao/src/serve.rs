@@ -63,21 +63,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         _ => None,
     };
     let input = SceneInput::load(&args.scene)?;
-    let tuning = args.tuning.config(
-        args.points,
-        args.hz,
-        Resolution {
-            width: 1,
-            height: 1,
-        },
-    )?;
-    let server = start_server(
-        &input.scene,
-        tuning.server,
-        input.medium(),
-        tuning.points_cache.as_deref(),
-    )
-    .context("cannot start the server (point generation or tracer)")?;
+    let server = scene_server(&input, &args.tuning, args.points, args.hz)?;
     tracing::info!(
         "{} points on {} instances; codec {}",
         server.point_count(),
@@ -119,4 +105,30 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         write_json(json, &stats)?;
     }
     Ok(())
+}
+
+/// A server for `input` with `tuning` at `points` per unit area and `hz` server frames per
+/// second, started from stored start points when `tuning` allows (serving has no image, so
+/// the resolution is 1×1).
+pub(crate) fn scene_server(
+    input: &SceneInput,
+    tuning: &ServerTuning,
+    points: f32,
+    hz: u32,
+) -> Result<psao_server::Server> {
+    let config = tuning.config(
+        points,
+        hz,
+        Resolution {
+            width: 1,
+            height: 1,
+        },
+    )?;
+    start_server(
+        &input.scene,
+        config.server,
+        input.medium(),
+        config.points_cache.as_deref(),
+    )
+    .context("cannot start the server (point generation or tracer)")
 }
