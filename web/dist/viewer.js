@@ -773,14 +773,30 @@
     b.set(a);
     return b;
   }
-  var Received = class {
-    constructor(maxBucketWords, maxPointWords) {
-      this.maxBucketWords = maxBucketWords;
-      this.maxPointWords = maxPointWords;
-      this.lo = new Uint32Array(0);
-      this.hi = new Uint32Array(0);
-      this.slots = new Uint32Array(0);
-      this.points = new Uint32Array(0);
+  var OwnReferences = class {
+    constructor(limit, bucketCounts) {
+      this.limit = limit;
+      this.bucketCounts = bucketCounts;
+      this.isClientState = false;
+      this.received = /* @__PURE__ */ new Map();
+    }
+    clear() {
+      this.received.clear();
+    }
+    referenceOf(instance) {
+      let r = this.received.get(instance);
+      if (!r) {
+        let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
+        if (this.bucketCounts) {
+          if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
+          buckets = this.bucketCounts[instance];
+        }
+        const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
+        const empty = new Uint32Array(0);
+        r = { keyLo: empty, keyHi: empty, slots: empty, points: empty, maxBucketWords: buckets * BUCKET_ENTRIES, maxPointWords: maxPoints };
+        this.received.set(instance, r);
+      }
+      return r;
     }
   };
   function decodeCount(code, old, capacity, at, plane, what) {
@@ -793,17 +809,17 @@
   var CompactDecoder = class {
     /// Most decompressed bytes accepted per update (a client sets it from its instance table),
     /// and the instances' bucket counts when known (indices beyond them are refused; without
-    /// them the reference arrays are bounded by the limit).
-    constructor(limit = MAX_DECODED_BYTES, bucketCounts = null) {
+    /// them the reference arrays are bounded by the limit). With `store` (the client state),
+    /// the references are the client's grids and every update is decoded into them.
+    constructor(limit = MAX_DECODED_BYTES, bucketCounts = null, store = null) {
       this.limit = limit;
-      this.bucketCounts = bucketCounts;
       this.transforms = /* @__PURE__ */ new Map();
-      this.received = /* @__PURE__ */ new Map();
       this.limit = Math.min(limit, MAX_DECODE_LIMIT);
+      this.references = store ?? new OwnReferences(this.limit, bucketCounts);
     }
     clear() {
       this.transforms.clear();
-      this.received.clear();
+      this.references.clear();
     }
     /// Decodes one update. After an error the state is undefined: the session must restart.
     decode(bytes) {
@@ -826,25 +842,6 @@
       if (snapshot) this.clear();
       return this.assemble(layout, s, frame, snapshot);
     }
-    receivedOf(instance) {
-      let r = this.received.get(instance);
-      if (!r) {
-        let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
-        if (this.bucketCounts) {
-          if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
-          buckets = this.bucketCounts[instance];
-        }
-        const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
-        r = new Received(buckets * BUCKET_ENTRIES, maxPoints);
-        if (this.bucketCounts) {
-          r.lo = new Uint32Array(r.maxBucketWords);
-          r.hi = new Uint32Array(r.maxBucketWords);
-          r.slots = new Uint32Array(r.maxBucketWords);
-        }
-        this.received.set(instance, r);
-      }
-      return r;
-    }
     assemble(layout, s, frame, snapshot) {
       const transforms = layout.transforms.map((instance, k) => {
         const old = this.transforms.get(instance) ?? new Uint32Array(TRANSFORM_WORDS);
@@ -859,7 +856,7 @@
       let point = 0;
       const instances = [];
       for (const { instance, buckets: bucketIds, cells: slotIds } of layout.instances) {
-        const r = this.receivedOf(instance);
+        const r = this.references.referenceOf(instance);
         const nb = bucketIds.length;
         const lo = new Uint32Array(nb * BUCKET_ENTRIES);
         const hi = new Uint32Array(nb * BUCKET_ENTRIES);
@@ -868,11 +865,11 @@
           const b = bucketIds[k];
           const base = b * BUCKET_ENTRIES;
           const end = base + BUCKET_ENTRIES;
-          r.lo = grown(r.lo, end, r.maxBucketWords, `bucket ${b}`);
-          r.hi = grown(r.hi, end, r.maxBucketWords, `bucket ${b}`);
+          r.keyLo = grown(r.keyLo, end, r.maxBucketWords, `bucket ${b}`);
+          r.keyHi = grown(r.keyHi, end, r.maxBucketWords, `bucket ${b}`);
           r.slots = grown(r.slots, end, r.maxBucketWords, `bucket ${b}`);
           const code = s.entryCounts[entryCount++];
-          const n = decodeCount(code, usedEntries(r.lo, r.hi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
+          const n = decodeCount(code, usedEntries(r.keyLo, r.keyHi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
           const out = k * BUCKET_ENTRIES;
           for (let i = 0; i < n; i++) {
             const c = s.entryChoices[entry];
@@ -886,8 +883,8 @@
               slot = slotIds[sr];
             } else if (c < RANK_CHOICE) {
               const o = base + (i + c) % BUCKET_ENTRIES;
-              const rLo = r.lo[o];
-              const rHi = r.hi[o];
+              const rLo = r.keyLo[o];
+              const rHi = r.keyHi[o];
               if (rLo !== 0 || rHi !== 0) {
                 const mLo = rLo === 0 ? 4294967295 : rLo - 1;
                 const mHi = rLo === 0 ? rHi - 1 : rHi;
@@ -904,8 +901,8 @@
             hi[out + i] = xLo === 4294967295 ? tHi + 1 : tHi;
             slots[out + i] = slot;
           }
-          r.lo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
-          r.hi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
+          r.keyLo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
+          r.keyHi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
           r.slots.set(slots.subarray(out, out + BUCKET_ENTRIES), base);
         }
         const nc = slotIds.length;
@@ -942,7 +939,7 @@
       if (entry !== s.entryChoices.length || point !== s.pointChoices.length) {
         throw new DeltaError(`${s.entryChoices.length - entry + s.pointChoices.length - point} trailing records`);
       }
-      return { frame, snapshot, transforms, instances };
+      return { frame, snapshot, transforms, instances, inPlace: this.references.isClientState };
     }
   };
   function parseIndex(bytes) {
@@ -1009,8 +1006,10 @@
   var Grid = class {
     constructor(entry) {
       this.entry = entry;
-      /// Cell slots in use (the length `points` covers).
+      /// Cell slots in use (at most the length `points` covers).
       this.slotCount = 0;
+      this.maxBucketWords = entry.bucketCount * BUCKET_ENTRIES;
+      this.maxPointWords = this.maxBucketWords * CELL_POINTS;
       this.keyLo = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
       this.keyHi = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
       this.slots = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
@@ -1021,7 +1020,7 @@
       this.keyLo.fill(0);
       this.keyHi.fill(0);
       this.slots.fill(0);
-      this.points.fill(0, 0, this.slotCount * CELL_POINTS);
+      this.points.fill(0);
       this.slotCount = 0;
     }
     /// Most cell slots the layout allows.
@@ -1032,7 +1031,8 @@
       if (slot < this.slotCount) return;
       this.slotCount = slot + 1;
       if (this.points.length < this.slotCount * CELL_POINTS) {
-        const grown2 = new Uint32Array(Math.max(this.slotCount, 2 * (this.points.length / CELL_POINTS)) * CELL_POINTS);
+        const cells = Math.min(Math.max(this.slotCount, 2 * Math.floor(this.points.length / CELL_POINTS)), Math.max(this.slotCount, this.maxCells()));
+        const grown2 = new Uint32Array(cells * CELL_POINTS);
         grown2.set(this.points);
         this.points = grown2;
       }
@@ -1070,20 +1070,39 @@
   }
   var ClientState = class {
     constructor(table) {
+      this.isClientState = true;
       this.lastFrame = null;
       this.grids = table.map((e) => usable(e) ? new Grid(e) : null);
       this.transforms = table.map(() => null);
     }
-    /// Applies a decoded update after checking all of it (nothing changes on an error).
+    /// Instance `instance`'s grid as the decoder's reference.
+    referenceOf(instance) {
+      if (instance >= this.grids.length) throw new DeltaError(`instance ${instance} out of range (${this.grids.length} instances)`);
+      const g = this.grids[instance];
+      if (!g) throw new DeltaError(`instance ${instance} has no grid`);
+      return g;
+    }
+    /// Empties every grid and forgets the transforms (a snapshot follows).
+    clear() {
+      for (const g of this.grids) g?.clear();
+      this.transforms.fill(null);
+    }
+    /// Applies a decoded update after checking all of it. An update decoded elsewhere changes
+    /// nothing on an error; one decoded into this state (`inPlace`) is already in the grids,
+    /// so after an error the state is undefined and the session must restart.
     apply(u) {
       this.validate(u);
-      if (u.snapshot) {
-        for (const g of this.grids) g?.clear();
-        this.transforms.fill(null);
-      }
+      if (u.snapshot && !u.inPlace) this.clear();
       for (const [instance, t] of u.transforms) this.transforms[instance] = t;
       for (const d of u.instances) {
         const g = this.grids[d.instance];
+        if (u.inPlace) {
+          for (let i = 0; i < d.keyLo.length; i++) {
+            if (d.keyLo[i] !== 0 || d.keyHi[i] !== 0) g.ensureSlot(d.slots[i]);
+          }
+          for (let k = 0; k < d.cellSlots.length; k++) g.ensureSlot(d.cellSlots[k]);
+          continue;
+        }
         for (let k = 0; k < d.bucketIds.length; k++) {
           const base = d.bucketIds[k] * BUCKET_ENTRIES;
           const src = k * BUCKET_ENTRIES;
@@ -1575,7 +1594,8 @@
           this.state = new ClientState(w.instances);
           this.decoder = new CompactDecoder(
             decodeLimit(w.instances),
-            w.instances.map((e) => e.bucketCount)
+            w.instances.map((e) => e.bucketCount),
+            this.state
           );
           this.handler.welcome(w);
           return;
@@ -1670,30 +1690,44 @@
 
   // src/grids.ts
   var TEX_WIDTH = 1024;
-  var MIN_CELLS = 64;
+  var CELL_PAGE = 32;
+  var NO_PAGE = 4294967295;
+  var MAX_POOL_TEXELS = 1 << 28;
   var DataTexture = class {
-    constructor(gl2) {
+    constructor(gl2, channels) {
       this.gl = gl2;
-      /// The texture (immutable storage: a resize makes a new one).
+      this.channels = channels;
+      /// The texture (immutable storage: growing makes a new one).
       this.texture = null;
       this.mirror = new Uint32Array(0);
       this.rows = 0;
       this.dirty = new Uint8Array(0);
       this.anyDirty = false;
+      this.stale = true;
     }
-    /// Resizes to hold `texels` (contents zeroed, all rows dirty).
-    resize(texels) {
-      const gl2 = this.gl;
-      this.rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
-      this.mirror = new Uint32Array(this.rows * TEX_WIDTH * 4);
-      this.dirty = new Uint8Array(this.rows).fill(1);
+    /// Words per texel.
+    get words() {
+      return this.channels;
+    }
+    /// Makes room for `texels` (rows doubling), keeping the contents; `fill` initialises new words.
+    ensure(texels, fill2 = 0) {
+      const rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
+      if (rows <= this.rows) return;
+      const grown2 = Math.max(rows, 2 * this.rows);
+      const mirror = new Uint32Array(grown2 * TEX_WIDTH * this.channels);
+      mirror.set(this.mirror);
+      if (fill2 !== 0) mirror.fill(fill2, this.mirror.length);
+      this.mirror = mirror;
+      this.rows = grown2;
+      this.dirty = new Uint8Array(grown2).fill(1);
       this.anyDirty = true;
-      if (this.texture) gl2.deleteTexture(this.texture);
-      this.texture = gl2.createTexture();
-      gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
-      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
-      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
-      gl2.texStorage2D(gl2.TEXTURE_2D, 1, gl2.RGBA32UI, TEX_WIDTH, this.rows);
+      this.stale = true;
+    }
+    /// Sets every word to `value` (rows kept, all dirty).
+    reset(value) {
+      this.mirror.fill(value);
+      this.dirty.fill(1);
+      this.anyDirty = true;
     }
     /// Marks the rows of texels `first..first + count` for upload.
     touch(first, count) {
@@ -1701,11 +1735,27 @@
       for (let r = Math.floor(first / TEX_WIDTH); r <= last; r++) this.dirty[r] = 1;
       this.anyDirty = true;
     }
-    /// Uploads runs of dirty rows; returns the bytes uploaded.
+    /// Bytes of texture storage.
+    bytes() {
+      return this.mirror.byteLength;
+    }
+    /// (Re)creates the texture when it grew, then uploads runs of dirty rows; returns the
+    /// bytes uploaded.
     upload() {
-      if (!this.anyDirty) return 0;
       const gl2 = this.gl;
+      if (this.stale) {
+        this.stale = false;
+        if (this.texture) gl2.deleteTexture(this.texture);
+        this.texture = gl2.createTexture();
+        gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
+        gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
+        gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
+        gl2.texStorage2D(gl2.TEXTURE_2D, 1, this.channels === 1 ? gl2.R32UI : gl2.RGBA32UI, TEX_WIDTH, this.rows);
+      }
+      if (!this.anyDirty) return 0;
       gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
+      const format = this.channels === 1 ? gl2.RED_INTEGER : gl2.RGBA_INTEGER;
+      const rowWords = TEX_WIDTH * this.channels;
       let bytes = 0;
       for (let r = 0; r < this.rows; ) {
         if (!this.dirty[r]) {
@@ -1714,8 +1764,8 @@
         }
         let end = r;
         while (end < this.rows && this.dirty[end]) this.dirty[end++] = 0;
-        const data = this.mirror.subarray(r * TEX_WIDTH * 4, end * TEX_WIDTH * 4);
-        gl2.texSubImage2D(gl2.TEXTURE_2D, 0, 0, r, TEX_WIDTH, end - r, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, data);
+        const data = this.mirror.subarray(r * rowWords, end * rowWords);
+        gl2.texSubImage2D(gl2.TEXTURE_2D, 0, 0, r, TEX_WIDTH, end - r, format, gl2.UNSIGNED_INT, data);
         bytes += data.byteLength;
         r = end;
       }
@@ -1723,6 +1773,35 @@
       return bytes;
     }
   };
+  var ChunkPool = class {
+    constructor() {
+      this.end = 0;
+      this.free = [[], [], [], []];
+    }
+    /// Forgets every chunk.
+    clear() {
+      this.end = 0;
+      for (const f of this.free) f.length = 0;
+    }
+    /// A chunk of size class `c` (2^c texels); returns its first texel.
+    alloc(c) {
+      const reused = this.free[c].pop();
+      if (reused !== void 0) return reused;
+      const first = this.end;
+      this.end += 1 << c;
+      return first;
+    }
+    release(first, c) {
+      this.free[c].push(first);
+    }
+    /// Texels in use or free (the pool's high-water mark).
+    get texels() {
+      return this.end;
+    }
+  };
+  function sizeClass(count) {
+    return count <= 1 ? 0 : count <= 2 ? 1 : count <= 4 ? 2 : 3;
+  }
   var GridTextures = class {
     constructor(gl2) {
       this.gl = gl2;
@@ -1734,94 +1813,138 @@
       this.rebuilds = 0;
       this.state = null;
       this.stale = true;
-      this.buckets = new DataTexture(gl2);
-      this.cells = new DataTexture(gl2);
+      this.pool = new ChunkPool();
+      this.cellPages = 0;
+      this.directory = new DataTexture(gl2, 1);
+      this.entries = new DataTexture(gl2, 4);
+      this.pageTable = new DataTexture(gl2, 1);
+      this.cells = new DataTexture(gl2, 4);
     }
-    /// Follows a new session's (empty) state.
+    /// Follows a new session's (empty) state: lays out its directory and page table.
     reset(state) {
       this.state = state;
       this.stale = true;
+      let buckets = 0;
+      let pages = 0;
+      this.slots = state.grids.map((g) => {
+        if (!g) return null;
+        const s = { bucketBase: buckets, cellPageBase: pages, maxCells: g.maxCells() };
+        buckets += g.entry.bucketCount;
+        pages += Math.ceil(g.maxCells() / CELL_PAGE);
+        return s;
+      });
+      const maxRows = this.gl.getParameter(this.gl.MAX_TEXTURE_SIZE);
+      const rows = Math.ceil(Math.max(buckets, pages) / TEX_WIDTH);
+      this.problem = rows > maxRows ? `the grids need ${rows} texture rows, this GPU allows ${maxRows}: AO not drawn` : null;
+      if (this.problem) {
+        this.slots = state.grids.map(() => null);
+        return;
+      }
+      this.directory.ensure(buckets);
+      this.pageTable.ensure(pages, NO_PAGE);
     }
     /// Mirrors one applied update (call after `state.apply(u)`).
     apply(u) {
       const state = this.state;
-      if (!state || this.stale || u.snapshot) {
+      if (!state || this.stale || u.snapshot || this.problem) {
         this.stale = true;
         return;
       }
       for (const d of u.instances) {
         const slot = this.slots[d.instance];
         const grid = state.grids[d.instance];
-        if (!slot || !grid || grid.slotCount > slot.cellCapacity) {
-          this.stale = true;
-          return;
-        }
-        const bm = this.buckets.mirror;
-        for (let k = 0; k < d.bucketIds.length; k++) {
-          const first = slot.bucketBase + d.bucketIds[k] * BUCKET_ENTRIES;
-          for (let e = 0; e < BUCKET_ENTRIES; e++) {
-            const o = (first + e) * 4;
-            const src = k * BUCKET_ENTRIES + e;
-            bm[o] = d.keyLo[src];
-            bm[o + 1] = d.keyHi[src];
-            bm[o + 2] = d.slots[src];
-          }
-          this.buckets.touch(first, BUCKET_ENTRIES);
-        }
-        const cm = this.cells.mirror;
-        for (let k = 0; k < d.cellSlots.length; k++) {
-          const first = 2 * (slot.cellBase + d.cellSlots[k]);
-          cm.set(d.points.subarray(k * CELL_POINTS, (k + 1) * CELL_POINTS), first * 4);
-          this.cells.touch(first, 2);
-        }
+        if (!slot || !grid) continue;
+        for (let k = 0; k < d.bucketIds.length; k++) this.setBucket(grid, slot, d.bucketIds[k]);
+        for (let k = 0; k < d.cellSlots.length; k++) this.setCell(grid, slot, d.cellSlots[k]);
       }
     }
     /// Brings the textures up to date (a full rebuild when needed) and binds nothing.
     upload() {
+      if (this.problem) return;
       if (this.stale && this.state) this.rebuild(this.state);
-      this.uploadedBytes += this.buckets.upload() + this.cells.upload();
+      this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload();
+    }
+    /// Bytes of texture storage in use.
+    textureBytes() {
+      return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes();
+    }
+    /// Bucket `b` of `grid` as the state holds it: its used entries into a chunk of the pool.
+    setBucket(grid, slot, b) {
+      const at = slot.bucketBase + b;
+      const dir = this.directory.mirror;
+      const old = dir[at];
+      const oldCount = old & 15;
+      const base = b * BUCKET_ENTRIES;
+      let count = 0;
+      for (let e = 0; e < BUCKET_ENTRIES; e++) if (grid.keyLo[base + e] !== 0 || grid.keyHi[base + e] !== 0) count++;
+      let first = old >>> 4;
+      if (oldCount > 0 && (count === 0 || sizeClass(count) !== sizeClass(oldCount))) {
+        this.pool.release(first, sizeClass(oldCount));
+      }
+      if (count > 0 && (oldCount === 0 || sizeClass(count) !== sizeClass(oldCount))) {
+        first = this.pool.alloc(sizeClass(count));
+        if (this.pool.texels > MAX_POOL_TEXELS) {
+          this.problem = "the bucket entries outgrew the entry pool: AO not drawn";
+          return;
+        }
+        this.entries.ensure(this.pool.texels);
+      }
+      const m = this.entries.mirror;
+      let o = first * 4;
+      for (let e = 0; e < BUCKET_ENTRIES; e++) {
+        const lo = grid.keyLo[base + e];
+        const hi = grid.keyHi[base + e];
+        if (lo === 0 && hi === 0) continue;
+        m[o] = lo;
+        m[o + 1] = hi;
+        m[o + 2] = grid.slots[base + e];
+        o += 4;
+      }
+      if (count > 0) this.entries.touch(first, count);
+      dir[at] = count === 0 ? 0 : (first << 4 | count) >>> 0;
+      this.directory.touch(at, 1);
+    }
+    /// Cell slot `s` of `grid` as the state holds it, into its page (allocated when it first
+    /// holds points).
+    setCell(grid, slot, s) {
+      if (s >= slot.maxCells) return;
+      const at = slot.cellPageBase + Math.floor(s / CELL_PAGE);
+      const table = this.pageTable.mirror;
+      let page = table[at];
+      const src = s * CELL_POINTS;
+      if (page === NO_PAGE) {
+        let any = false;
+        for (let i = 0; i < CELL_POINTS; i++) if (grid.points[src + i] !== 0) any = true;
+        if (!any) return;
+        page = this.cellPages++;
+        table[at] = page;
+        this.pageTable.touch(at, 1);
+        this.cells.ensure(2 * CELL_PAGE * this.cellPages);
+      }
+      const texel = 2 * (page * CELL_PAGE + s % CELL_PAGE);
+      const m = this.cells.mirror;
+      for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = grid.points[src + i] ?? 0;
+      m[texel * 4 + 7] = 0;
+      this.cells.touch(texel, 2);
     }
     rebuild(state) {
       this.stale = false;
       this.rebuilds++;
-      const gl2 = this.gl;
-      const maxRows = gl2.getParameter(gl2.MAX_TEXTURE_SIZE);
-      let bucketTexels = 0;
-      let cellSlots = 0;
-      this.slots = state.grids.map((g) => {
-        if (!g) return null;
-        let capacity = MIN_CELLS;
-        while (capacity < g.slotCount) capacity *= 2;
-        capacity = Math.min(capacity, Math.max(g.maxCells(), g.slotCount));
-        const s = { bucketBase: bucketTexels, cellBase: cellSlots, cellCapacity: capacity };
-        bucketTexels += g.entry.bucketCount * BUCKET_ENTRIES;
-        cellSlots += capacity;
-        return s;
-      });
-      const rows = Math.max(bucketTexels, 2 * cellSlots) / TEX_WIDTH;
-      if (rows > maxRows) {
-        this.problem = `the grids need ${Math.ceil(rows)} texture rows, this GPU allows ${maxRows}: AO not drawn`;
-        this.slots = state.grids.map(() => null);
-        return;
-      }
-      this.problem = null;
-      this.buckets.resize(bucketTexels);
-      this.cells.resize(2 * cellSlots);
-      const bm = this.buckets.mirror;
-      const cm = this.cells.mirror;
+      this.pool.clear();
+      this.cellPages = 0;
+      this.directory.reset(0);
+      this.pageTable.reset(NO_PAGE);
       state.grids.forEach((g, k) => {
         const slot = this.slots[k];
         if (!g || !slot) return;
         const n = g.entry.bucketCount * BUCKET_ENTRIES;
         for (let e = 0; e < n; e++) {
-          const o = (slot.bucketBase + e) * 4;
-          bm[o] = g.keyLo[e];
-          bm[o + 1] = g.keyHi[e];
-          bm[o + 2] = g.slots[e];
+          if (g.keyLo[e] === 0 && g.keyHi[e] === 0) continue;
+          const b = Math.floor(e / BUCKET_ENTRIES);
+          this.setBucket(g, slot, b);
+          e = (b + 1) * BUCKET_ENTRIES - 1;
         }
-        for (let s = 0; s < g.slotCount; s++) {
-          cm.set(g.points.subarray(s * CELL_POINTS, (s + 1) * CELL_POINTS), 8 * (slot.cellBase + s));
-        }
+        for (let s = 0; s < g.slotCount; s++) this.setCell(g, slot, s);
       });
     }
   };
@@ -1906,11 +2029,13 @@ ivec3 u_dims;
 float u_poisson;
 uint u_bucket_mask;
 uint u_bucket_base;
-uint u_cell_base;
+uint u_cell_page_base;
 uint u_cell_capacity;
 uvec2 u_row;   // Dx\xB717 as (low, high) 32-bit halves
 uvec2 u_slice; // Dx\xB7Dy\xB731
-uniform usampler2D u_buckets;
+uniform usampler2D u_directory;  // per bucket: used entries | first pool texel << 4
+uniform usampler2D u_entries;    // (key low, key high, slot, 0) per used entry
+uniform usampler2D u_page_table; // per page of cell slots: its page in u_cells, or NO_PAGE
 uniform usampler2D u_cells;
 uniform highp sampler2D u_normals; // the 256 decoded normal codes
 
@@ -1923,6 +2048,8 @@ uniform int u_exponent;
 uniform bool u_fallback;
 
 const uint WIDTH = ${TEX_WIDTH}u;
+const uint CELL_PAGE = ${CELL_PAGE}u;
+const uint NO_PAGE = ${NO_PAGE}u;
 
 ivec2 at(uint i) { return ivec2(int(i % WIDTH), int(i / WIDTH)); }
 
@@ -1951,9 +2078,11 @@ int find_cell(ivec3 c) {
   uvec3 u = uvec3(c);
   uvec2 id = add64(add64(uvec2(u.x, 0u), mul64(u.y, u_row)), mul64(u.z, u_slice));
   uvec2 key = add64(id, uvec2(1u, 0u));
-  uint first = u_bucket_base + (id.x & u_bucket_mask) * 8u;
-  for (uint e = 0u; e < 8u; e++) {
-    uvec4 t = texelFetch(u_buckets, at(first + e), 0);
+  uint dir = texelFetch(u_directory, at(u_bucket_base + (id.x & u_bucket_mask)), 0).x;
+  uint first = dir >> 4;
+  uint count = dir & 15u;
+  for (uint e = 0u; e < count; e++) {
+    uvec4 t = texelFetch(u_entries, at(first + e), 0);
     if (t.x == key.x && t.y == key.y) return t.z < u_cell_capacity ? int(t.z) : -1;
   }
   return -1;
@@ -1995,7 +2124,9 @@ void cell(ivec3 c, bool weigh) {
   int slot = find_cell(c);
   if (slot < 0) return;
   cells_visited++;
-  uint t = 2u * (u_cell_base + uint(slot));
+  uint page = texelFetch(u_page_table, at(u_cell_page_base + uint(slot) / CELL_PAGE), 0).x;
+  if (page == NO_PAGE) return;
+  uint t = 2u * (page * CELL_PAGE + uint(slot) % CELL_PAGE);
   uvec4 a = texelFetch(u_cells, at(t), 0);
   uvec4 b = texelFetch(u_cells, at(t + 1u), 0);
   vec3 m = vec3(c);
@@ -2019,7 +2150,7 @@ void load_instance(int i) {
   u_dims = ivec3(a.xyz);
   u_bucket_mask = a.w;
   u_bucket_base = b.x;
-  u_cell_base = b.y;
+  u_cell_page_base = b.y;
   u_cell_capacity = b.z;
   u_row = c.xy;
   u_slice = c.zw;
@@ -2340,7 +2471,9 @@ void main() {
       gl2.bindTexture(gl2.TEXTURE_2D, this.instU);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32UI, INST_U, rows, 0, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, instU.length ? instU : new Uint32Array(INST_U * 4));
       const textures = [
-        ["u_buckets", grids2?.buckets.texture ?? this.emptyU],
+        ["u_directory", grids2?.directory.texture ?? this.emptyU],
+        ["u_entries", grids2?.entries.texture ?? this.emptyU],
+        ["u_page_table", grids2?.pageTable.texture ?? this.emptyU],
         ["u_cells", grids2?.cells.texture ?? this.emptyU],
         ["u_normals", this.normals],
         ["u_gposition", this.targets.position],
@@ -2392,8 +2525,8 @@ void main() {
           e.dims[2],
           e.bucketCount - 1,
           slot.bucketBase,
-          slot.cellBase,
-          slot.cellCapacity,
+          slot.cellPageBase,
+          slot.maxCells,
           0,
           Number(row & 0xffffffffn),
           Number(row >> 32n),
@@ -2762,7 +2895,7 @@ void main() {
     status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
     status.uploadedBytes = grids?.uploadedBytes ?? 0;
     status.rebuilds = grids?.rebuilds ?? 0;
-    status.textureBytes = grids ? grids.buckets.mirror.byteLength + grids.cells.mirror.byteLength : 0;
+    status.textureBytes = grids ? grids.textureBytes() : 0;
     const w = session?.welcomeMsg;
     const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
     overlay.textContent = [

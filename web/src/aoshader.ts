@@ -10,7 +10,7 @@
 // sRGB-encoded; or writes AO only, the composite without AO, or the cost (cells and points
 // visited) as exact integers in the red, green and blue bytes.
 
-import { TEX_WIDTH } from "./grids";
+import { CELL_PAGE, NO_PAGE, TEX_WIDTH } from "./grids";
 
 /// Output modes (`u_mode`).
 export const MODE_COMPOSITED = 0;
@@ -99,11 +99,13 @@ ivec3 u_dims;
 float u_poisson;
 uint u_bucket_mask;
 uint u_bucket_base;
-uint u_cell_base;
+uint u_cell_page_base;
 uint u_cell_capacity;
 uvec2 u_row;   // Dx·17 as (low, high) 32-bit halves
 uvec2 u_slice; // Dx·Dy·31
-uniform usampler2D u_buckets;
+uniform usampler2D u_directory;  // per bucket: used entries | first pool texel << 4
+uniform usampler2D u_entries;    // (key low, key high, slot, 0) per used entry
+uniform usampler2D u_page_table; // per page of cell slots: its page in u_cells, or NO_PAGE
 uniform usampler2D u_cells;
 uniform highp sampler2D u_normals; // the 256 decoded normal codes
 
@@ -116,6 +118,8 @@ uniform int u_exponent;
 uniform bool u_fallback;
 
 const uint WIDTH = ${TEX_WIDTH}u;
+const uint CELL_PAGE = ${CELL_PAGE}u;
+const uint NO_PAGE = ${NO_PAGE}u;
 
 ivec2 at(uint i) { return ivec2(int(i % WIDTH), int(i / WIDTH)); }
 
@@ -144,9 +148,11 @@ int find_cell(ivec3 c) {
   uvec3 u = uvec3(c);
   uvec2 id = add64(add64(uvec2(u.x, 0u), mul64(u.y, u_row)), mul64(u.z, u_slice));
   uvec2 key = add64(id, uvec2(1u, 0u));
-  uint first = u_bucket_base + (id.x & u_bucket_mask) * 8u;
-  for (uint e = 0u; e < 8u; e++) {
-    uvec4 t = texelFetch(u_buckets, at(first + e), 0);
+  uint dir = texelFetch(u_directory, at(u_bucket_base + (id.x & u_bucket_mask)), 0).x;
+  uint first = dir >> 4;
+  uint count = dir & 15u;
+  for (uint e = 0u; e < count; e++) {
+    uvec4 t = texelFetch(u_entries, at(first + e), 0);
     if (t.x == key.x && t.y == key.y) return t.z < u_cell_capacity ? int(t.z) : -1;
   }
   return -1;
@@ -188,7 +194,9 @@ void cell(ivec3 c, bool weigh) {
   int slot = find_cell(c);
   if (slot < 0) return;
   cells_visited++;
-  uint t = 2u * (u_cell_base + uint(slot));
+  uint page = texelFetch(u_page_table, at(u_cell_page_base + uint(slot) / CELL_PAGE), 0).x;
+  if (page == NO_PAGE) return;
+  uint t = 2u * (page * CELL_PAGE + uint(slot) % CELL_PAGE);
   uvec4 a = texelFetch(u_cells, at(t), 0);
   uvec4 b = texelFetch(u_cells, at(t + 1u), 0);
   vec3 m = vec3(c);
@@ -212,7 +220,7 @@ void load_instance(int i) {
   u_dims = ivec3(a.xyz);
   u_bucket_mask = a.w;
   u_bucket_base = b.x;
-  u_cell_base = b.y;
+  u_cell_page_base = b.y;
   u_cell_capacity = b.z;
   u_row = c.xy;
   u_slice = c.zw;

@@ -380,7 +380,7 @@ function tick(now: number) {
   status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
   status.uploadedBytes = grids?.uploadedBytes ?? 0;
   status.rebuilds = grids?.rebuilds ?? 0;
-  status.textureBytes = grids ? grids.buckets.mirror.byteLength + grids.cells.mirror.byteLength : 0;
+  status.textureBytes = grids ? grids.textureBytes() : 0;
   const w = session?.welcomeMsg;
   const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
   overlay.textContent = [

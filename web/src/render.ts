@@ -347,7 +347,9 @@ export class SceneRenderer {
     gl.bindTexture(gl.TEXTURE_2D, this.instU);
     gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32UI, INST_U, rows, 0, gl.RGBA_INTEGER, gl.UNSIGNED_INT, instU.length ? instU : new Uint32Array(INST_U * 4));
     const textures: [string, WebGLTexture | null][] = [
-      ["u_buckets", grids?.buckets.texture ?? this.emptyU],
+      ["u_directory", grids?.directory.texture ?? this.emptyU],
+      ["u_entries", grids?.entries.texture ?? this.emptyU],
+      ["u_page_table", grids?.pageTable.texture ?? this.emptyU],
       ["u_cells", grids?.cells.texture ?? this.emptyU],
       ["u_normals", this.normals],
       ["u_gposition", this.targets.position],
@@ -403,7 +405,7 @@ export class SceneRenderer {
     u.set(
       [
         e.dims[0], e.dims[1], e.dims[2], e.bucketCount - 1,
-        slot.bucketBase, slot.cellBase, slot.cellCapacity, 0,
+        slot.bucketBase, slot.cellPageBase, slot.maxCells, 0,
         Number(row & 0xffffffffn), Number(row >> 32n), Number(slice & 0xffffffffn), Number(slice >> 32n),
       ],
       i * INST_U * 4,

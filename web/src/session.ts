@@ -96,9 +96,11 @@ export class Session {
         if (w.codec !== "compact") return this.fail(`the server's codec \`${w.codec}\` is not supported`, true);
         this.welcomeMsg = w;
         this.state = new ClientState(w.instances);
+        // The decoder's reference is the client state: updates are decoded into its grids.
         this.decoder = new CompactDecoder(
           decodeLimit(w.instances),
           w.instances.map((e) => e.bucketCount),
+          this.state,
         );
         this.handler.welcome(w);
         return;
