@@ -883,11 +883,11 @@
               slot = slotIds[sr];
             } else if (c < RANK_CHOICE) {
               const o = base + (i + c) % BUCKET_ENTRIES;
-              const rLo = r.keyLo[o];
-              const rHi = r.keyHi[o];
-              if (rLo !== 0 || rHi !== 0) {
-                const mLo = rLo === 0 ? 4294967295 : rLo - 1;
-                const mHi = rLo === 0 ? rHi - 1 : rHi;
+              const rLo2 = r.keyLo[o];
+              const rHi2 = r.keyHi[o];
+              if (rLo2 !== 0 || rHi2 !== 0) {
+                const mLo = rLo2 === 0 ? 4294967295 : rLo2 - 1;
+                const mHi = rLo2 === 0 ? rHi2 - 1 : rHi2;
                 tLo = (tLo ^ mLo ^ b) >>> 0;
                 tHi = (tHi ^ mHi) >>> 0;
               }
@@ -901,9 +901,14 @@
             hi[out + i] = xLo === 4294967295 ? tHi + 1 : tHi;
             slots[out + i] = slot;
           }
-          r.keyLo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
-          r.keyHi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
-          r.slots.set(slots.subarray(out, out + BUCKET_ENTRIES), base);
+          const rLo = r.keyLo;
+          const rHi = r.keyHi;
+          const rSlots = r.slots;
+          for (let i = 0; i < BUCKET_ENTRIES; i++) {
+            rLo[base + i] = lo[out + i];
+            rHi[base + i] = hi[out + i];
+            rSlots[base + i] = slots[out + i];
+          }
         }
         const nc = slotIds.length;
         const pts = new Uint32Array(nc * CELL_POINTS);
@@ -924,7 +929,7 @@
             const reference = c < CELL_POINTS ? old[base + (i + c) % CELL_POINTS] : k > 0 ? pts[out - CELL_POINTS + c - CELL_POINTS] : EMPTY_CELL[0];
             pts[out + i] = applyPointResidual(residual, reference);
           }
-          old.set(pts.subarray(out, out + CELL_POINTS), base);
+          for (let i = 0; i < CELL_POINTS; i++) old[base + i] = pts[out + i];
         }
         instances.push({
           instance,

@@ -373,9 +373,15 @@ export class CompactDecoder {
           hi[out + i] = xLo === 0xffffffff ? tHi + 1 : tHi;
           slots[out + i] = slot;
         }
-        r.keyLo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
-        r.keyHi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
-        r.slots.set(slots.subarray(out, out + BUCKET_ENTRIES), base);
+        // Copied word by word (a subarray per bucket costs more in allocation than the copy).
+        const rLo = r.keyLo;
+        const rHi = r.keyHi;
+        const rSlots = r.slots;
+        for (let i = 0; i < BUCKET_ENTRIES; i++) {
+          rLo[base + i] = lo[out + i];
+          rHi[base + i] = hi[out + i];
+          rSlots[base + i] = slots[out + i];
+        }
       }
       const nc = slotIds.length;
       const pts = new Uint32Array(nc * CELL_POINTS);
@@ -398,7 +404,7 @@ export class CompactDecoder {
             c < CELL_POINTS ? old[base + ((i + c) % CELL_POINTS)] : k > 0 ? pts[out - CELL_POINTS + c - CELL_POINTS] : EMPTY_CELL[0];
           pts[out + i] = applyPointResidual(residual, reference);
         }
-        old.set(pts.subarray(out, out + CELL_POINTS), base);
+        for (let i = 0; i < CELL_POINTS; i++) old[base + i] = pts[out + i];
       }
       instances.push({
         instance,
