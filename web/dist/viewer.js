@@ -1624,11 +1624,11 @@
           }
           this.ws.send(ackFrame(m.delta.frame));
           this.handler.update(u, size, verified);
-          if (m.delta.clientFrame !== null) this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame);
+          this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame, m.delta.sceneTime);
           return;
         }
         case "scene_time":
-          this.handler.sceneTime?.(m.frame, m.clientFrame);
+          this.handler.sceneTime?.(m.frame, m.clientFrame, m.seconds);
           return;
         case "error": {
           const fatal = m.code === "Token" || m.code === "Version";
@@ -1748,6 +1748,7 @@
     /// bytes uploaded.
     upload() {
       const gl2 = this.gl;
+      if (this.rows === 0) return 0;
       if (this.stale) {
         this.stale = false;
         if (this.texture) gl2.deleteTexture(this.texture);
@@ -1954,6 +1955,239 @@
     }
   };
 
+  // src/skin.ts
+  var JOINT_TEXELS = 7;
+  var Animation = class {
+    constructor(doc, instances, read) {
+      this.clips = [];
+      this.rigs = [];
+      const nodes = doc.nodes ?? [];
+      this.rest = nodes.map((n) => ({ t: n.translation ?? [0, 0, 0], r: n.rotation ?? [0, 0, 0, 1], s: n.scale ?? [1, 1, 1] }));
+      this.parents = nodes.map(() => null);
+      nodes.forEach((n, p) => n.children?.forEach((c) => this.parents[c] = p));
+      this.order = parentsFirst(this.parents);
+      for (const a of (doc.extras?.psao_playing ?? []).map((k) => doc.animations?.[k])) {
+        if (!a) continue;
+        const channels = [];
+        for (const ch of a.channels) {
+          const s = a.samplers[ch.sampler];
+          if (!s || ch.target.node === void 0 || !["translation", "rotation", "scale"].includes(ch.target.path)) continue;
+          channels.push({
+            node: ch.target.node,
+            path: ch.target.path,
+            interpolation: s.interpolation ?? "LINEAR",
+            times: Float32Array.from(read(s.input)),
+            values: Float32Array.from(read(s.output))
+          });
+        }
+        const duration = channels.reduce((d, c) => Math.max(d, c.times.length ? c.times[c.times.length - 1] : 0), 0);
+        this.clips.push({ duration, channels });
+      }
+      this.jointBase = new Int32Array(instances).fill(-1);
+      let base = 0;
+      for (let i = 0; i < Math.min(instances, nodes.length); i++) {
+        const n = nodes[i];
+        const skin = n.skin !== void 0 ? doc.skins?.[n.skin] : void 0;
+        if (!n.extras?.psao_skinned || !skin) continue;
+        const ibm = skin.inverseBindMatrices !== void 0 ? read(skin.inverseBindMatrices) : null;
+        const inverseBind = skin.joints.map(
+          (_, j) => ibm ? Float64Array.from(ibm.subarray(16 * j, 16 * j + 16)) : identity()
+        );
+        this.rigs.push({
+          instance: i,
+          joints: skin.joints,
+          inverseBind,
+          node: n.extras.psao_node ?? null,
+          rest: Float64Array.from(n.matrix ?? identity()),
+          base
+        });
+        this.jointBase[i] = base;
+        base += skin.joints.length;
+      }
+      this.jointCount = base;
+    }
+    /// Whether any instance is skinned.
+    get skinned() {
+      return this.rigs.length > 0;
+    }
+    /// Every rig's joint matrices at scene time `time` (seconds), `JOINT_TEXELS` RGBA texels
+    /// per joint from `jointBase[instance]`.
+    jointTexels(time) {
+      const world = this.worlds(time);
+      const out = new Float32Array(Math.max(1, this.jointCount) * JOINT_TEXELS * 4);
+      for (const rig of this.rigs) {
+        const own = rig.node !== null && world[rig.node] ? world[rig.node] : rig.rest;
+        const toLocal = invertOrIdentity(own);
+        rig.joints.forEach((j, k) => {
+          const m = mul(mul(toLocal, world[j] ?? identity()), rig.inverseBind[k]);
+          const at = (rig.base + k) * JOINT_TEXELS * 4;
+          out.set(m, at);
+          out.set(normalMatrix(m), at + 16);
+        });
+      }
+      return out;
+    }
+    /// World transforms of all nodes at `time` (psao-scene's `node_worlds`, without walkers).
+    worlds(time) {
+      const local = this.rest.map((n) => ({ t: n.t.slice(), r: n.r.slice(), s: n.s.slice() }));
+      for (const clip of this.clips) {
+        const t = clip.duration > 0 ? remEuclid(time, clip.duration) : 0;
+        for (const ch of clip.channels) {
+          const slot = local[ch.node];
+          if (!slot) continue;
+          const v = sample(ch, t);
+          if (ch.path === "rotation") slot.r = v;
+          else if (ch.path === "scale") slot.s = v;
+          else slot.t = v;
+        }
+      }
+      const world = new Array(local.length);
+      for (const n of this.order) {
+        const l = trs(local[n].t, local[n].r, local[n].s);
+        const p = this.parents[n];
+        world[n] = p === null ? l : mul(world[p], l);
+      }
+      return world;
+    }
+  };
+  function remEuclid(a, b) {
+    const r = a % b;
+    return r < 0 ? r + b : r;
+  }
+  function parentsFirst(parents) {
+    const children = parents.map(() => []);
+    parents.forEach((p, i) => p !== null && children[p]?.push(i));
+    const order = parents.flatMap((p, i) => p === null ? [i] : []);
+    for (let k = 0; k < order.length; k++) order.push(...children[order[k]]);
+    return order;
+  }
+  function sample(ch, t) {
+    const w = ch.path === "rotation" ? 4 : 3;
+    const cubic = ch.interpolation === "CUBICSPLINE";
+    const valueAt = (k, part = 1) => {
+      const start = cubic ? (3 * k + part) * w : k * w;
+      return Array.from(ch.values.subarray(start, start + w));
+    };
+    const times = ch.times;
+    let next = 0;
+    while (next < times.length && times[next] <= t) next++;
+    let raw;
+    if (next === 0) raw = valueAt(0);
+    else if (next === times.length) raw = valueAt(times.length - 1);
+    else {
+      const k = next - 1;
+      const dt = times[k + 1] - times[k];
+      const s = (t - times[k]) / dt;
+      if (ch.interpolation === "STEP") raw = valueAt(k);
+      else if (ch.interpolation === "LINEAR") {
+        if (ch.path === "rotation") return normalize(slerp(normalize(valueAt(k)), normalize(valueAt(k + 1)), s));
+        const a = valueAt(k);
+        const b = valueAt(k + 1);
+        raw = a.map((x, i) => x + (b[i] - x) * s);
+      } else {
+        const p0 = valueAt(k);
+        const m0 = valueAt(k, 2);
+        const p1 = valueAt(k + 1);
+        const m1 = valueAt(k + 1, 0);
+        const s2 = s * s;
+        const s3 = s2 * s;
+        raw = p0.map(
+          (_, i) => p0[i] * (2 * s3 - 3 * s2 + 1) + m0[i] * (dt * (s3 - 2 * s2 + s)) + p1[i] * (-2 * s3 + 3 * s2) + m1[i] * (dt * (s3 - s2))
+        );
+      }
+    }
+    if (ch.path !== "rotation") return raw;
+    const len = Math.hypot(...raw);
+    return len > 0 && Number.isFinite(len) ? raw.map((x) => x / len) : [0, 0, 0, 1];
+  }
+  function normalize(q) {
+    const len = Math.hypot(...q);
+    return q.map((x) => x / len);
+  }
+  function slerp(a, b, s) {
+    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+    let e = b;
+    if (dot < 0) {
+      e = b.map((x) => -x);
+      dot = -dot;
+    }
+    if (dot > 1 - 2 ** -23) return normalize(a.map((x, i) => x * (1 - s) + e[i] * s));
+    const theta = acosApprox(dot);
+    const s1 = Math.sin(theta * (1 - s));
+    const s2 = Math.sin(theta * s);
+    const inv = 1 / Math.sin(theta);
+    return a.map((x, i) => (x * s1 + e[i] * s2) * inv);
+  }
+  function acosApprox(v) {
+    const x = Math.abs(v);
+    const root = Math.sqrt(Math.max(1 - x, 0));
+    const r = ((((((-0.0012624911 * x + 667009e-8) * x - 0.017088126) * x + 0.03089188) * x - 0.050174303) * x + 0.08897899) * x - 0.2145988) * x + 1.5707963;
+    return v >= 0 ? r * root : Math.PI - r * root;
+  }
+  function identity() {
+    const m = new Float64Array(16);
+    m[0] = m[5] = m[10] = m[15] = 1;
+    return m;
+  }
+  function trs(t, q, s) {
+    const [x, y, z, w] = q;
+    const m = identity();
+    const cols = [
+      [1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)],
+      [2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)],
+      [2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)]
+    ];
+    for (let c = 0; c < 3; c++) for (let r = 0; r < 3; r++) m[4 * c + r] = cols[c][r] * s[c];
+    m[12] = t[0];
+    m[13] = t[1];
+    m[14] = t[2];
+    return m;
+  }
+  function mul(a, b) {
+    const out = new Float64Array(16);
+    for (let c = 0; c < 4; c++) {
+      for (let r = 0; r < 4; r++) {
+        let s = 0;
+        for (let k = 0; k < 4; k++) s += a[4 * k + r] * b[4 * c + k];
+        out[4 * c + r] = s;
+      }
+    }
+    return out;
+  }
+  function det3(m) {
+    return m[0] * (m[5] * m[10] - m[6] * m[9]) - m[4] * (m[1] * m[10] - m[2] * m[9]) + m[8] * (m[1] * m[6] - m[2] * m[5]);
+  }
+  function inverse3(m) {
+    const det = det3(m);
+    if (!(det !== 0 && Number.isFinite(det))) return null;
+    const [a, b, c, d, e, f, g, h, i] = [m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]];
+    return [
+      (e * i - f * h) / det,
+      (c * h - b * i) / det,
+      (b * f - c * e) / det,
+      (f * g - d * i) / det,
+      (a * i - c * g) / det,
+      (c * d - a * f) / det,
+      (d * h - e * g) / det,
+      (b * g - a * h) / det,
+      (a * e - b * d) / det
+    ];
+  }
+  function invertOrIdentity(m) {
+    const det = det3(m);
+    if (!(m.every(Number.isFinite) && det !== 0 && Math.abs(det) >= 2 ** -126)) return identity();
+    const inv = inverse3(m);
+    const out = identity();
+    for (let c = 0; c < 3; c++) for (let r = 0; r < 3; r++) out[4 * c + r] = inv[3 * c + r];
+    for (let r = 0; r < 3; r++) out[12 + r] = -(inv[r] * m[12] + inv[3 + r] * m[13] + inv[6 + r] * m[14]);
+    return out;
+  }
+  function normalMatrix(m) {
+    const inv = inverse3(m);
+    if (!inv || !inv.every(Number.isFinite)) return [m[0], m[1], m[2], 0, m[4], m[5], m[6], 0, m[8], m[9], m[10], 0];
+    return [inv[0], inv[3], inv[6], 0, inv[1], inv[4], inv[7], 0, inv[2], inv[5], inv[8], 0];
+  }
+
   // src/aoshader.ts
   var MODE_COMPOSITED = 0;
   var MODE_AO = 1;
@@ -1962,16 +2196,44 @@
   var VERTEX = `#version 300 es
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
+layout(location = 2) in uvec4 joints;
+layout(location = 3) in vec4 weights; // renormalised as psao-scene's BindMesh
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 uniform mat3 u_normal_matrix;
+// Skinned instances: their first joint in u_joints (JOINT_TEXELS RGBA32F texels per joint:
+// the joint matrix's columns, then its normal matrix's), or -1.
+uniform int u_joint_base;
+uniform highp sampler2D u_joints;
 out vec3 v_world;
 out vec3 v_normal;
 invariant gl_Position;
 
+vec4 joint_texel(int i) { return texelFetch(u_joints, ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}), 0); }
+
 void main() {
-  vec4 world = u_model * vec4(position, 1.0);
-  v_normal = u_normal_matrix * normal;
+  vec3 p = position;
+  vec3 n = normal;
+  if (u_joint_base >= 0) {
+    // Linear blend skinning in mesh-local space (psao-scene's BindMesh::skin).
+    vec3 sp = vec3(0.0);
+    vec3 sn = vec3(0.0);
+    for (int k = 0; k < 4; k++) {
+      float w = weights[k];
+      if (w > 0.0) {
+        int at = (u_joint_base + int(joints[k])) * ${JOINT_TEXELS};
+        mat4 m = mat4(joint_texel(at), joint_texel(at + 1), joint_texel(at + 2), joint_texel(at + 3));
+        mat3 nm = mat3(joint_texel(at + 4).xyz, joint_texel(at + 5).xyz, joint_texel(at + 6).xyz);
+        sp += w * (m * vec4(p, 1.0)).xyz;
+        sn += w * (nm * n);
+      }
+    }
+    p = sp;
+    float l = length(sn);
+    n = l > 0.0 ? sn / l : n;
+  }
+  vec4 world = u_model * vec4(p, 1.0);
+  v_normal = u_normal_matrix * n;
   v_world = world.xyz;
   gl_Position = u_view_proj * world;
 }`;
@@ -2221,6 +2483,28 @@ void main() {
 }`;
 
   // src/render.ts
+  var COMPONENTS = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
+  function readAccessor(doc, bin, index) {
+    const a = doc.accessors?.[index];
+    const bv = a?.bufferView !== void 0 ? doc.bufferViews?.[a.bufferView] : void 0;
+    if (!a || !bv) throw new Error(`scene.glb: accessor ${index} has no data`);
+    const n = a.count * (COMPONENTS[a.type] ?? 1);
+    const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
+    const Kind = a.componentType === 5126 ? Float32Array : a.componentType === 5123 ? Uint16Array : Uint32Array;
+    const bytes = bin.slice(start, start + n * Kind.BYTES_PER_ELEMENT);
+    if (bytes.length !== n * Kind.BYTES_PER_ELEMENT) throw new Error(`scene.glb: accessor ${index} is truncated`);
+    return new Kind(bytes.buffer);
+  }
+  function renormalisedWeights(w) {
+    const out = new Float32Array(w.length);
+    for (let v = 0; v + 4 <= w.length; v += 4) {
+      const x = [0, 1, 2, 3].map((k) => Number.isFinite(w[v + k]) ? Math.max(w[v + k], 0) : 0);
+      const sum = Math.fround(Math.fround(Math.fround(x[0] + x[1]) + x[2]) + x[3]);
+      if (sum > 0) for (let k = 0; k < 4; k++) out[v + k] = x[k] / sum;
+      else out[v] = 1;
+    }
+    return out;
+  }
   var SETTINGS = {
     factor: Math.fround(2 * Math.SQRT2),
     planeTolerance: 0.5,
@@ -2355,6 +2639,8 @@ void main() {
       this.gl = gl2;
       this.meshes = [];
       this.instances = [];
+      /// The scene's animation (skinned instances), when anything is skinned.
+      this.animation = null;
       /// The scene's camera paths (from the glb's extras).
       this.paths = [];
       if (!gl2.getExtension("EXT_color_buffer_float")) throw new Error("WebGL2 without EXT_color_buffer_float");
@@ -2367,6 +2653,9 @@ void main() {
       this.instU = dataTexture(gl2);
       this.emptyU = dataTexture(gl2);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32UI, 1, 1, 0, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, new Uint32Array(4));
+      this.joints = dataTexture(gl2);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, 1, 1, 0, gl2.RGBA, gl2.FLOAT, new Float32Array(4));
+      gl2.vertexAttribI4ui(2, 0, 0, 0, 0);
       const colours = this.load(glb);
       this.colours = dataTexture(gl2);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, Math.max(1, colours.length / 4), 1, 0, gl2.RGBA, gl2.FLOAT, colours.length ? colours : new Float32Array(4));
@@ -2387,6 +2676,9 @@ void main() {
         const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
         return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
       };
+      const instanceCount = (doc.nodes ?? []).findIndex((n) => n.mesh === void 0 || !n.matrix);
+      const animation = new Animation(doc, instanceCount < 0 ? (doc.nodes ?? []).length : instanceCount, (i) => readAccessor(doc, bin, i));
+      this.animation = animation.skinned ? animation : null;
       const colours = [];
       for (const mesh of doc.meshes ?? []) {
         const prims = [];
@@ -2404,13 +2696,27 @@ void main() {
             gl2.enableVertexAttribArray(loc);
             gl2.vertexAttribPointer(loc, 3, gl2.FLOAT, false, 0, 0);
           }
+          const { JOINTS_0: joints, WEIGHTS_0: weights } = prim.attributes;
+          const skin = joints !== void 0 && weights !== void 0;
+          if (skin) {
+            const jbuf = gl2.createBuffer();
+            gl2.bindBuffer(gl2.ARRAY_BUFFER, jbuf);
+            gl2.bufferData(gl2.ARRAY_BUFFER, Uint16Array.from(readAccessor(doc, bin, joints)), gl2.STATIC_DRAW);
+            gl2.enableVertexAttribArray(2);
+            gl2.vertexAttribIPointer(2, 4, gl2.UNSIGNED_SHORT, 0, 0);
+            const wbuf = gl2.createBuffer();
+            gl2.bindBuffer(gl2.ARRAY_BUFFER, wbuf);
+            gl2.bufferData(gl2.ARRAY_BUFFER, renormalisedWeights(readAccessor(doc, bin, weights)), gl2.STATIC_DRAW);
+            gl2.enableVertexAttribArray(3);
+            gl2.vertexAttribPointer(3, 4, gl2.FLOAT, false, 0, 0);
+          }
           const idx = data(prim.indices);
           const ibo = gl2.createBuffer();
           gl2.bindBuffer(gl2.ELEMENT_ARRAY_BUFFER, ibo);
           gl2.bufferData(gl2.ELEMENT_ARRAY_BUFFER, idx.bytes, gl2.STATIC_DRAW);
           gl2.bindVertexArray(null);
           const c = doc.materials?.[prim.material ?? 0]?.pbrMetallicRoughness?.baseColorFactor ?? [0.8, 0.8, 0.8, 1];
-          prims.push({ vao, count: idx.count, colour: colours.length / 4 });
+          prims.push({ vao, count: idx.count, colour: colours.length / 4, skin });
           colours.push(c[0], c[1], c[2], 1);
         }
         this.meshes.push(prims);
@@ -2442,6 +2748,17 @@ void main() {
       gl2.enable(gl2.DEPTH_TEST);
       gl2.depthFunc(gl2.LESS);
       gl2.useProgram(this.gbuffer.p);
+      const animation = this.animation;
+      gl2.activeTexture(gl2.TEXTURE0);
+      gl2.bindTexture(gl2.TEXTURE_2D, this.joints);
+      if (animation) {
+        const texels = animation.jointTexels(opts.time ?? 0);
+        const rows2 = Math.ceil(texels.length / 4 / TEX_WIDTH);
+        const padded = new Float32Array(rows2 * TEX_WIDTH * 4);
+        padded.set(texels);
+        gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, TEX_WIDTH, rows2, 0, gl2.RGBA, gl2.FLOAT, padded);
+      }
+      gl2.uniform1i(g.u_joints, 0);
       gl2.uniformMatrix4fv(g.u_view_proj, false, viewProj(camera));
       gl2.uniform3fv(g.u_eye, camera.position);
       const model = new Float32Array(16);
@@ -2457,8 +2774,10 @@ void main() {
         gl2.uniformMatrix4fv(g.u_model, false, model);
         gl2.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
         gl2.uniform1f(g.u_instance, i);
+        const jointBase = animation ? animation.jointBase[i] : -1;
         for (const p of this.meshes[inst.mesh] ?? []) {
           gl2.uniform1f(g.u_colour_index, p.colour);
+          gl2.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
           gl2.bindVertexArray(p.vao);
           gl2.drawElements(gl2.TRIANGLES, p.count, gl2.UNSIGNED_INT, 0);
         }
@@ -2666,8 +2985,9 @@ void main() {
           answered = -1;
           sent = -1;
         },
-        sceneTime: (_frame, clientFrame) => {
+        sceneTime: (_frame, clientFrame, seconds) => {
           if (clientFrame !== null) answered = Math.max(answered, clientFrame);
+          serverTime = { seconds, at: performance.now() };
         },
         update: (u, bytes, verified) => {
           grids?.apply(u);
@@ -2713,6 +3033,11 @@ void main() {
   var sent = -1;
   var answered = -1;
   var pathStart = 0;
+  var serverTime = null;
+  function sceneTime(now) {
+    if (lockstep && testFrames !== null) return Math.max(answered, 0) / 60;
+    return serverTime ? serverTime.seconds + (now - serverTime.at) / 1e3 : 0;
+  }
   for (const [id, mode] of [
     ["mode-composited", MODE_COMPOSITED],
     ["mode-ao", MODE_AO],
@@ -2818,7 +3143,8 @@ void main() {
   function measureCost() {
     const cam = status.camera;
     if (!gl || !renderer || !cam) return null;
-    renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale });
+    const time = sceneTime(performance.now());
+    renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale, time });
     const w = gl.drawingBufferWidth;
     const h = gl.drawingBufferHeight;
     const px = new Uint8Array(w * h * 4);
@@ -2837,7 +3163,7 @@ void main() {
       maxCells = Math.max(maxCells, px[i]);
       maxPoints = Math.max(maxPoints, p);
     }
-    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time });
     return {
       width: w,
       height: h,
@@ -2889,7 +3215,7 @@ void main() {
     const drawNow = !(lockstep && testFrames !== null) || answered === testFrames - 1;
     if (cam && renderer && drawNow) {
       grids?.upload();
-      renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+      renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time: sceneTime(now) });
       status.drawn++;
       if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
     }

@@ -11,6 +11,7 @@
 // visited) as exact integers in the red, green and blue bytes.
 
 import { CELL_PAGE, NO_PAGE, TEX_WIDTH } from "./grids";
+import { JOINT_TEXELS } from "./skin";
 
 /// Output modes (`u_mode`).
 export const MODE_COMPOSITED = 0;
@@ -23,16 +24,44 @@ export const MODE_COST = 3;
 export const VERTEX = `#version 300 es
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
+layout(location = 2) in uvec4 joints;
+layout(location = 3) in vec4 weights; // renormalised as psao-scene's BindMesh
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 uniform mat3 u_normal_matrix;
+// Skinned instances: their first joint in u_joints (JOINT_TEXELS RGBA32F texels per joint:
+// the joint matrix's columns, then its normal matrix's), or -1.
+uniform int u_joint_base;
+uniform highp sampler2D u_joints;
 out vec3 v_world;
 out vec3 v_normal;
 invariant gl_Position;
 
+vec4 joint_texel(int i) { return texelFetch(u_joints, ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}), 0); }
+
 void main() {
-  vec4 world = u_model * vec4(position, 1.0);
-  v_normal = u_normal_matrix * normal;
+  vec3 p = position;
+  vec3 n = normal;
+  if (u_joint_base >= 0) {
+    // Linear blend skinning in mesh-local space (psao-scene's BindMesh::skin).
+    vec3 sp = vec3(0.0);
+    vec3 sn = vec3(0.0);
+    for (int k = 0; k < 4; k++) {
+      float w = weights[k];
+      if (w > 0.0) {
+        int at = (u_joint_base + int(joints[k])) * ${JOINT_TEXELS};
+        mat4 m = mat4(joint_texel(at), joint_texel(at + 1), joint_texel(at + 2), joint_texel(at + 3));
+        mat3 nm = mat3(joint_texel(at + 4).xyz, joint_texel(at + 5).xyz, joint_texel(at + 6).xyz);
+        sp += w * (m * vec4(p, 1.0)).xyz;
+        sn += w * (nm * n);
+      }
+    }
+    p = sp;
+    float l = length(sn);
+    n = l > 0.0 ? sn / l : n;
+  }
+  vec4 world = u_model * vec4(p, 1.0);
+  v_normal = u_normal_matrix * n;
   v_world = world.xyz;
   gl_Position = u_view_proj * world;
 }`;

@@ -98,6 +98,7 @@ class DataTexture {
   /// bytes uploaded.
   upload(): number {
     const gl = this.gl;
+    if (this.rows === 0) return 0; // nothing stored yet: no texture (the renderer binds an empty one)
     if (this.stale) {
       this.stale = false;
       if (this.texture) gl.deleteTexture(this.texture);
