@@ -109,8 +109,8 @@ impl InstanceState {
             published: vec![0; n],
             published_slot: vec![NONE; n],
         };
-        let mut members = vec![[NONE; CELL_POINTS]; alloc.cells().len()];
-        let mut slot_ids = vec![0; alloc.cells().len()];
+        let mut members = vec![[NONE; CELL_POINTS]; alloc.slot_count()];
+        let mut slot_ids = vec![0; alloc.slot_count()];
         for (i, loc) in locs.iter().enumerate() {
             if let Some(loc) = loc {
                 p.slot[i] = loc.slot;
@@ -130,7 +130,7 @@ impl InstanceState {
             poisson_radius: points.poisson_radius_local,
             grid: InstanceGrid::new(layout),
             bucket_stamp: vec![0; layout.bucket_count as usize],
-            cell_stamp: vec![0; alloc.cells().len()],
+            cell_stamp: vec![0; alloc.slot_count()],
             alloc,
             slot_ids,
             members,
@@ -225,7 +225,7 @@ impl InstanceState {
         let Ok(loc) = self.alloc.insert(position, normal, 1.0) else {
             return;
         };
-        let cells = self.alloc.cells().len();
+        let cells = self.alloc.slot_count();
         if self.members.len() < cells {
             self.members.resize(cells, [NONE; CELL_POINTS]);
             self.slot_ids.resize(cells, 0);
@@ -276,11 +276,11 @@ impl InstanceState {
     /// (with [`InstanceState::published_cell`]) first.
     pub fn published_bucket(&self, b: usize) -> Bucket {
         let mut bucket = Bucket::default();
-        let cells = self.grid.cells();
-        let entries = self.alloc.buckets()[b]
+        let alloc = self.alloc.bucket(b);
+        let entries = alloc
             .entries
             .iter()
-            .filter(|e| e.key != 0 && cells.get(e.slot as usize).is_some_and(|c| c.points[0] != 0));
+            .filter(|e| e.key != 0 && self.grid.cell(e.slot).points[0] != 0);
         for (dst, e) in bucket.entries.iter_mut().zip(entries) {
             *dst = *e;
         }

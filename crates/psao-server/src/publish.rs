@@ -65,14 +65,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
         .map(|&slot| (slot, view.published_cell(slot)))
         .collect();
     for (slot, cell) in cells {
-        if inst
-            .grid
-            .cells()
-            .get(slot as usize)
-            .copied()
-            .unwrap_or_default()
-            != cell
-        {
+        if *inst.grid.cell(slot) != cell {
             inst.publish_cell(slot, cell, frame);
         }
         dirty_buckets.push(layout.bucket_of(inst.slot_ids[slot as usize]));
@@ -83,7 +76,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     let buckets: Vec<(usize, Bucket)> = dirty_buckets
         .par_iter()
         .map(|&b| (b, view.published_bucket(b)))
-        .filter(|(b, bucket)| view.grid.buckets()[*b] != *bucket)
+        .filter(|(b, bucket)| view.grid.bucket(*b) != *bucket)
         .collect();
     for (b, bucket) in buckets {
         inst.publish_bucket(b, bucket, frame);
@@ -190,19 +183,19 @@ mod tests {
         let bits_b = republish(&s, b, &t).unwrap();
         apply(&mut s, &[(b as u32, bits_b)], 1);
         let bucket = s.layout().bucket_of(s.slot_ids[slot]);
-        assert_eq!(s.grid.cells()[slot].points[..2], [bits_b, 0]);
-        assert_eq!(s.grid.buckets()[bucket].len(), 1);
+        assert_eq!(s.grid.cell(slot as u32).points[..2], [bits_b, 0]);
+        assert_eq!(s.grid.bucket(bucket).len(), 1);
         assert_eq!((s.cell_stamp[slot], s.bucket_stamp[bucket]), (1, 1));
 
         let bits_a = republish(&s, a, &t).unwrap();
         apply(&mut s, &[(a as u32, bits_a)], 2);
         // Members keep their allocation order once both are published.
-        assert_eq!(s.grid.cells()[slot].points[..3], [bits_a, bits_b, 0]);
+        assert_eq!(s.grid.cell(slot as u32).points[..3], [bits_a, bits_b, 0]);
         assert_eq!(s.cell_stamp[slot], 2);
         assert_eq!(s.bucket_stamp[bucket], 1, "bucket unchanged");
         assert_eq!(s.max_stamp, 2);
         // Unpublished cells stay out of the published grid.
-        let published_slots = s.grid.buckets().iter().map(|b| b.len()).sum::<usize>();
+        let published_slots = s.grid.buckets().map(|b| b.len()).sum::<usize>();
         assert_eq!(published_slots, 1);
     }
 }

@@ -336,7 +336,7 @@ mod tests {
     fn same_grids(a: &Server, b: &Server) -> bool {
         (0..a.instance_count()).all(|i| {
             let (x, y) = (a.grid(i).unwrap(), b.grid(i).unwrap());
-            x.cells() == y.cells() && x.buckets() == y.buckets()
+            x.cells().eq(y.cells()) && x.buckets().eq(y.buckets())
         })
     }
 
@@ -379,12 +379,7 @@ mod tests {
         assert!(whole_rays > 0);
         assert_eq!(node_rays, whole_rays, "the nodes share the rays");
         assert!(same_grids(&whole, &replica));
-        assert!(whole
-            .grid(0)
-            .unwrap()
-            .buckets()
-            .iter()
-            .any(|b| !b.is_empty()));
+        assert!(whole.grid(0).unwrap().buckets().any(|b| !b.is_empty()));
     }
 
     #[test]
