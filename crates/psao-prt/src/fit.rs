@@ -23,8 +23,8 @@ use crate::zonal::{ZhLobe, ZH_SCALE};
 /// `l(l+1)δ²/4` of the diagonal; a ridge λ damps that mode below `δ ≈ 2√(λ/(l(l+1)))`
 /// (0.14 rad in band 1 for λ = 10⁻²), so close lobes cannot form a "dipole" of large opposite
 /// coefficients, whose sum a tiny axis error changes a lot: the linear pose model predicts
-/// each lobe separately and could not follow it. With 10⁻⁴ such pairs (coefficients ~7,
-/// axes ~8° apart) carried most of the 2-lobe model's error (docs/RELIGHTING.md).
+/// each lobe separately and could not follow it. With 10⁻⁴ such pairs carried most of the
+/// 2-lobe model's error on the shared characters (docs/RELIGHTING.md).
 const RIDGE: f64 = 1e-2;
 /// Levenberg–Marquardt iterations at most.
 const ITERATIONS: usize = 25;
