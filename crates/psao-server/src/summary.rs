@@ -311,7 +311,7 @@ mod tests {
                 .map(|i| (hash64(i ^ 99) % 40) as u32)
                 .collect(),
             published: vec![0; n],
-            published_slot: vec![NONE; n],
+            published_here: crate::instance::Bits::new(n),
         }
     }
 
