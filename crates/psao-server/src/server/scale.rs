@@ -166,34 +166,22 @@ impl Server {
     ) -> Result<StepStats, ServerError> {
         self.validate_records(records)?;
         let start = std::time::Instant::now();
-        let advanced = self.dynamics.advance(
-            time,
-            &mut self.tracer,
-            &mut self.instances,
-            self.radius,
-            self.radius * self.config.thresholds.ao,
-        )?;
-        self.refresh_summaries(&advanced.restarted, &advanced.moved);
+        let advanced = self.pose(time)?;
         self.frame += 1;
-        let frame = self.frame;
         let mut sorted = records.to_vec();
         sorted.sort_unstable();
-        for run in sorted.chunk_by(|a, b| a.instance == b.instance) {
-            let inst = &mut self.instances[run[0].instance as usize];
-            let updates: Vec<(u32, u32)> = run.iter().map(|r| (r.index, r.bits)).collect();
-            apply(inst, &updates, frame);
-        }
-        for inst in &mut self.instances {
-            if !inst.pending_cells.is_empty() {
-                apply(inst, &[], frame);
-            }
-        }
-        let forget = frame.saturating_sub(self.history_frames);
-        for inst in &mut self.instances {
-            inst.changes.forget_through(forget);
-        }
+        let runs: Vec<(u32, Vec<(u32, u32)>)> = sorted
+            .chunk_by(|a, b| a.instance == b.instance)
+            .map(|run| {
+                (
+                    run[0].instance,
+                    run.iter().map(|r| (r.index, r.bits)).collect(),
+                )
+            })
+            .collect();
+        let published = self.publish_runs(runs);
         Ok(StepStats {
-            published_points: records.len(),
+            published_points: published,
             moved_instances: advanced.stats.moved_instances,
             publish_ms: start.elapsed().as_secs_f64() * 1e3,
             ms: start.elapsed().as_secs_f64() * 1e3,
