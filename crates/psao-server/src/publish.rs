@@ -25,7 +25,7 @@ pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Optio
         unpack_ao(old)
     };
     let bits = layout.pack(inst.slot_coord(slot)?, p.position[i], p.normal[i], ao);
-    if old == 0 || p.published_slot[i] != slot {
+    if old == 0 || !p.published_here.get(i) {
         return Some(bits);
     }
     let step = layout.cell_size / POSITION_STEPS as f32;
@@ -47,12 +47,10 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     for &(i, bits) in updates {
         let i = i as usize;
         let p = &mut inst.points;
-        let old_slot = std::mem::replace(&mut p.published_slot[i], p.slot[i]);
+        // A point that changed cell had its flag cleared and its old cell queued (rehome).
+        p.published_here.set(i, true);
         p.published[i] = bits;
         dirty_cells.push(p.slot[i]);
-        if old_slot != NONE && old_slot != p.slot[i] {
-            dirty_cells.push(old_slot);
-        }
     }
     dirty_cells.par_sort_unstable();
     dirty_cells.dedup();
@@ -160,10 +158,10 @@ mod tests {
         assert!(republish(&s, i, &t).is_some(), "moved 4 steps");
         s.points.position[i] = p;
 
-        let slot = s.points.slot[i];
-        s.points.slot[i] = (slot + 1) % s.members.len() as u32;
+        // What rehoming into another cell does to the flag.
+        s.points.published_here.set(i, false);
         assert!(republish(&s, i, &t).is_some(), "changed cell");
-        s.points.slot[i] = slot;
+        s.points.published_here.set(i, true);
         assert_eq!(republish(&s, i, &t), None);
     }
 

@@ -668,6 +668,7 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::blocks::PointOrder;
     use crate::Invalidation;
     use psao_scene::{Camera, Instance, Material, Mesh};
 
@@ -746,7 +747,11 @@ mod tests {
         for inst in &server.instances {
             let n = inst.points.position.len() as u32;
             assert!(n > 0);
-            assert!(inst.blocks.order.iter().copied().eq(0..n));
+            assert!(inst.blocks.order.range(0..n as usize).eq(0..n));
+            assert!(
+                matches!(inst.blocks.order, PointOrder::Identity(_)),
+                "stored as nothing"
+            );
         }
     }
 

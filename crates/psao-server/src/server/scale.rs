@@ -45,16 +45,24 @@ impl Server {
     /// order). `count` is clamped to 1..=[`crate::partition::MAX_PARTITIONS`].
     pub fn owners(&self, count: u32) -> Owners {
         let count = count.clamp(1, crate::partition::MAX_PARTITIONS);
-        let blocks: Vec<Vec<&[u32]>> = self
+        let owned: Vec<Vec<Vec<u32>>> = self
             .instances
             .iter()
             .map(|inst| {
                 let b = &inst.blocks;
                 b.blocks
                     .iter()
-                    .map(|blk| &b.order[blk.start as usize..blk.end as usize])
+                    .map(|blk| {
+                        b.order
+                            .range(blk.start as usize..blk.end as usize)
+                            .collect()
+                    })
                     .collect()
             })
+            .collect();
+        let blocks: Vec<Vec<&[u32]>> = owned
+            .iter()
+            .map(|inst| inst.iter().map(Vec::as_slice).collect())
             .collect();
         let points: Vec<usize> = self
             .instances
