@@ -1820,6 +1820,7 @@
       this.state = null;
       this.stale = true;
       this.pool = new ChunkPool();
+      /// Pages of cells allocated (0 until the grids hold points).
       this.cellPages = 0;
       this.directory = new DataTexture(gl2, 1);
       this.entries = new DataTexture(gl2, 4);
@@ -2287,6 +2288,7 @@ uniform float u_ambient;
 uniform highp sampler2D u_instf;
 uniform usampler2D u_instu;
 bool u_has_view;
+bool u_has_cells; // false: the grid holds no cell yet (every lookup would miss: AO 1)
 mat4 u_to_local;
 mat3 u_normal_to_local;
 vec3 u_origin;
@@ -2419,12 +2421,15 @@ void load_instance(int i) {
   u_bucket_base = b.x;
   u_cell_page_base = b.y;
   u_cell_capacity = b.z;
+  u_has_cells = b.w != 0u;
   u_row = c.xy;
   u_slice = c.zw;
 }
 
 float reconstruct(vec3 world, vec3 normal) {
-  if (!u_has_view) return 1.0;
+  // Without cells psao-client finds no point in the block nor in the ring: AO 1, decided
+  // here without the 64 lookups (which made every frame cost the most before any points).
+  if (!u_has_view || !u_has_cells) return 1.0;
   P = (u_to_local * vec4(world, 1.0)).xyz;
   vec3 n = u_normal_to_local * normal;
   float l = length(n);
@@ -2851,7 +2856,7 @@ void main() {
           slot.bucketBase,
           slot.cellPageBase,
           slot.maxCells,
-          0,
+          grid.slotCount > 0 ? 1 : 0,
           Number(row & 0xffffffffn),
           Number(row >> 32n),
           Number(slice & 0xffffffffn),
@@ -2954,7 +2959,8 @@ void main() {
     decodeMs: 0,
     uploadedBytes: 0,
     rebuilds: 0,
-    textureBytes: 0
+    textureBytes: 0,
+    milestones: { scene: null, welcome: null, update: null, ao: null }
   };
   window.psao = status;
   var params = new URLSearchParams(location.search);
@@ -2976,6 +2982,8 @@ void main() {
       { url: wsUrl, token, verify, name: "psao browser viewer" },
       {
         welcome: () => {
+          var _a;
+          (_a = status.milestones).welcome ?? (_a.welcome = performance.now());
           status.connected = true;
           status.sessions++;
           status.message = null;
@@ -2990,6 +2998,8 @@ void main() {
           serverTime = { seconds, at: performance.now() };
         },
         update: (u, bytes, verified) => {
+          var _a;
+          (_a = status.milestones).update ?? (_a.update = performance.now());
           grids?.apply(u);
           status.updates++;
           if (verified) status.verified++;
@@ -3217,6 +3227,9 @@ void main() {
       grids?.upload();
       renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time: sceneTime(now) });
       status.drawn++;
+      if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
+        status.milestones.ao = performance.now();
+      }
       if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
     }
     if (now - lastPointCount > 500) {
@@ -3248,6 +3261,7 @@ void main() {
     orbit = sceneBounds(glb);
     if (gl) {
       renderer = new SceneRenderer(gl, glb);
+      status.milestones.scene = performance.now();
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
         if (!path) status.message = `the scene has no camera path named ${pathName}`;

@@ -119,6 +119,7 @@ uniform float u_ambient;
 uniform highp sampler2D u_instf;
 uniform usampler2D u_instu;
 bool u_has_view;
+bool u_has_cells; // false: the grid holds no cell yet (every lookup would miss: AO 1)
 mat4 u_to_local;
 mat3 u_normal_to_local;
 vec3 u_origin;
@@ -251,12 +252,15 @@ void load_instance(int i) {
   u_bucket_base = b.x;
   u_cell_page_base = b.y;
   u_cell_capacity = b.z;
+  u_has_cells = b.w != 0u;
   u_row = c.xy;
   u_slice = c.zw;
 }
 
 float reconstruct(vec3 world, vec3 normal) {
-  if (!u_has_view) return 1.0;
+  // Without cells psao-client finds no point in the block nor in the ring: AO 1, decided
+  // here without the 64 lookups (which made every frame cost the most before any points).
+  if (!u_has_view || !u_has_cells) return 1.0;
   P = (u_to_local * vec4(world, 1.0)).xyz;
   vec3 n = u_normal_to_local * normal;
   float l = length(n);

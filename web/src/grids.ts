@@ -180,7 +180,8 @@ export class GridTextures {
   private state: ClientState | null = null;
   private stale = true;
   private pool = new ChunkPool();
-  private cellPages = 0;
+  /// Pages of cells allocated (0 until the grids hold points).
+  cellPages = 0;
 
   constructor(private gl: WebGL2RenderingContext) {
     this.directory = new DataTexture(gl, 1);

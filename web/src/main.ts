@@ -56,6 +56,9 @@ interface Status {
   /// their size in bytes.
   rebuilds: number;
   textureBytes: number;
+  /// When (performance.now() ms) the scene was loaded, the first welcome and update
+  /// arrived, and the first frame with AO (grids holding points) was drawn; null until then.
+  milestones: { scene: number | null; welcome: number | null; update: number | null; ao: number | null };
 }
 
 const status: Status = {
@@ -83,6 +86,7 @@ const status: Status = {
   uploadedBytes: 0,
   rebuilds: 0,
   textureBytes: 0,
+  milestones: { scene: null, welcome: null, update: null, ao: null },
 };
 (window as unknown as { psao: Status }).psao = status;
 
@@ -110,6 +114,7 @@ function connect() {
     { url: wsUrl, token, verify, name: "psao browser viewer" },
     {
       welcome: () => {
+        status.milestones.welcome ??= performance.now();
         status.connected = true;
         status.sessions++;
         status.message = null;
@@ -125,6 +130,7 @@ function connect() {
         serverTime = { seconds, at: performance.now() };
       },
       update: (u, bytes, verified) => {
+        status.milestones.update ??= performance.now();
         grids?.apply(u);
         status.updates++;
         if (verified) status.verified++;
@@ -383,6 +389,9 @@ function tick(now: number) {
     grids?.upload();
     renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time: sceneTime(now) });
     status.drawn++;
+    if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
+      status.milestones.ao = performance.now();
+    }
     if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
   }
   if (now - lastPointCount > 500) {
@@ -430,6 +439,7 @@ fetch("/scene.glb")
     orbit = sceneBounds(glb);
     if (gl) {
       renderer = new SceneRenderer(gl, glb);
+      status.milestones.scene = performance.now();
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
         if (!path) status.message = `the scene has no camera path named ${pathName}`;

@@ -484,7 +484,7 @@ export class SceneRenderer {
     u.set(
       [
         e.dims[0], e.dims[1], e.dims[2], e.bucketCount - 1,
-        slot.bucketBase, slot.cellPageBase, slot.maxCells, 0,
+        slot.bucketBase, slot.cellPageBase, slot.maxCells, grid.slotCount > 0 ? 1 : 0,
         Number(row & 0xffffffffn), Number(row >> 32n), Number(slice & 0xffffffffn), Number(slice >> 32n),
       ],
       i * INST_U * 4,
