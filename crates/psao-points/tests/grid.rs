@@ -326,3 +326,38 @@ fn bucket_entries_carry_no_padding() {
     assert_eq!(copy.cell_id(), Some(u64::MAX - 1));
     assert_eq!({ copy.slot }, u32::MAX - 7);
 }
+
+#[test]
+fn storage_grows_with_what_is_written_not_with_the_table() {
+    // A table of 2^20 buckets (8 Mi addressable slots): empty, it holds only page tables.
+    let layout = GridLayout::new((Vec3::ZERO, Vec3::splat(100.0)), 0.025, 0.1, 3.0e4).unwrap();
+    assert!(layout.bucket_count >= 1 << 20);
+    let mut grid = InstanceGrid::new(layout);
+    let empty = grid.heap_bytes();
+    assert!(empty <= u64::from(layout.bucket_count) / 4, "{empty} bytes");
+    // One bucket entry and one cell far out in the table cost a page each, not the table.
+    let id = layout.cell_id(UVec3::new(500, 400, 300));
+    let slot = (layout.max_cells() - 1) as u32;
+    let mut bucket = Bucket::default();
+    bucket.entries[3] = BucketEntry::new(id, slot);
+    grid.set_bucket(layout.bucket_of(id), bucket).unwrap();
+    let mut cell = Cell::default();
+    cell.points[0] = grid.layout().pack(
+        UVec3::new(500, 400, 300),
+        grid.layout().cell_min(UVec3::new(500, 400, 300)),
+        Vec3::Z,
+        0.5,
+    );
+    grid.set_cell(slot, cell).unwrap();
+    assert_eq!(grid.bucket(layout.bucket_of(id)), bucket);
+    assert_eq!(grid.find_cell(UVec3::new(500, 400, 300)), Some(slot));
+    assert_eq!(grid.point_count(), 1);
+    // Beyond a page of each, only the cell slots' page table grows (8 bytes per 64 slots up
+    // to the highest one written).
+    let written = grid.heap_bytes() - empty;
+    let page_table = (u64::from(slot) / 64 + 1) * 8;
+    assert!(
+        written < page_table + 8 * 1024,
+        "{written} bytes for one entry and one cell"
+    );
+}
