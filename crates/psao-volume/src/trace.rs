@@ -187,13 +187,10 @@ pub fn level_set_hit(s: &mut Sampler, ray: &IndexRay, t_max: f32) -> Option<f32>
         }
         let (fall, entry) = match vol.level_set_bounds(seg.leaf) {
             Some(lb) => {
-                let fall = (-(lb.slope_min * ray.dir)
-                    .min(lb.slope_max * ray.dir)
-                    .element_sum())
-                .max(0.0);
-                (fall, entry_bound(ray, &seg, lb, fall))
+                let fall = Fall::new(lb, ray.dir);
+                (fall, entry_bound(ray, &seg, lb, &fall))
             }
-            None => (f32::INFINITY, None),
+            None => (Fall::UNBOUNDED, None),
         };
         let mut t = seg.t0 + 0.5 * dt;
         let start = match (bound, entry) {
@@ -201,10 +198,10 @@ pub fn level_set_hit(s: &mut Sampler, ray: &IndexRay, t_max: f32) -> Option<f32>
             (a, b) => a.or(b),
         };
         if let Some(b) = start.filter(|&b| b > 0.0) {
-            let reach = b / fall;
+            let reach = fall.reach(b);
             if seg.t0 + reach >= seg.t1 {
                 // Proven positive through the whole node.
-                let end = b - fall * (seg.t1 - seg.t0);
+                let end = fall.after(b, seg.t1 - seg.t0);
                 prev = Some((seg.t1, end, false));
                 bound = Some(end);
                 return true;
@@ -223,11 +220,16 @@ pub fn level_set_hit(s: &mut Sampler, ray: &IndexRay, t_max: f32) -> Option<f32>
                 }
             }
             prev = Some((t, v, true));
-            if v > 0.0 && v >= fall * (seg.t1 - t) {
-                bound = Some(v - fall * (seg.t1 - t));
+            if v <= 0.0 {
+                t += dt;
+                continue;
+            }
+            let reach = fall.reach(v);
+            if t + reach >= seg.t1 {
+                bound = Some(fall.after(v, seg.t1 - t));
                 return true;
             }
-            t += dt.max(0.8 * v).max(v / fall + 0.5 * dt);
+            t += dt.max(0.8 * v).max(reach + 0.5 * dt);
         }
         // Stepped past the node's end: no bound there.
         bound = None;
@@ -236,9 +238,70 @@ pub fn level_set_hit(s: &mut Sampler, ray: &IndexRay, t_max: f32) -> Option<f32>
     bracket.map(|(a, b)| refine_crossing(s, ray, a, b, dt))
 }
 
+/// How fast a level set's field can fall along a ray inside one L3 node (per unit of the ray
+/// parameter): at most `edge` while it is above `theta` (there it lies in cells touching the
+/// narrow band's clamp, where it turns from the background to linear and falls slower), at
+/// most `all` anywhere.
+#[derive(Clone, Copy, Debug)]
+struct Fall {
+    theta: f32,
+    edge: f32,
+    all: f32,
+}
+
+impl Fall {
+    /// No bounds: the field may fall arbitrarily fast.
+    const UNBOUNDED: Fall = Fall {
+        theta: f32::INFINITY,
+        edge: f32::INFINITY,
+        all: f32::INFINITY,
+    };
+
+    /// The rates of a node with bounds `lb` along index-space direction `dir`.
+    fn new(lb: &LevelSetBounds, dir: Vec3) -> Self {
+        let rate = |lo: Vec3, hi: Vec3| (-(lo * dir).min(hi * dir).element_sum()).max(0.0);
+        let all = rate(lb.slope_min, lb.slope_max);
+        Fall {
+            theta: lb.linear_max.max(0.0),
+            edge: rate(lb.edge_slope_min, lb.edge_slope_max).min(all),
+            all,
+        }
+    }
+
+    /// The least parameter distance in which the field can fall from `b` > 0 to zero.
+    #[inline]
+    fn reach(&self, b: f32) -> f32 {
+        if b > self.theta {
+            let low = if self.theta > 0.0 {
+                self.theta / self.all
+            } else {
+                0.0
+            };
+            (b - self.theta) / self.edge + low
+        } else {
+            b / self.all
+        }
+    }
+
+    /// A lower bound on the field a parameter distance `d` ≥ 0 after a point where it is at
+    /// least `b`.
+    #[inline]
+    fn after(&self, b: f32, d: f32) -> f32 {
+        if b > self.theta {
+            let high = (b - self.theta) / self.edge;
+            if d <= high {
+                return b - self.edge * d;
+            }
+            self.theta - self.all * (d - high)
+        } else {
+            b - self.all * d
+        }
+    }
+}
+
 /// A lower bound on the field where `ray` enters the cell of `seg` (the minimum of the face it
-/// enters through), carried to `seg.t0` at rate `fall`; `None` if the ray starts in the cell.
-fn entry_bound(ray: &IndexRay, seg: &Segment, lb: &LevelSetBounds, fall: f32) -> Option<f32> {
+/// enters through), carried to `seg.t0` at rates `fall`; `None` if the ray starts in the cell.
+fn entry_bound(ray: &IndexRay, seg: &Segment, lb: &LevelSetBounds, fall: &Fall) -> Option<f32> {
     let lo = seg.origin.as_vec3();
     let a = (lo - ray.origin) * ray.inv;
     let b = (lo + Vec3::splat(BRICK as f32) - ray.origin) * ray.inv;
@@ -249,7 +312,7 @@ fn entry_bound(ray: &IndexRay, seg: &Segment, lb: &LevelSetBounds, fall: f32) ->
     }
     let axis = (0..3).find(|&k| near[k] == t_in)?;
     let face = 2 * axis + (ray.dir[axis] < 0.0) as usize;
-    Some(lb.face_min[face] - fall * (seg.t0 - t_in).max(0.0))
+    Some(fall.after(lb.face_min[face], (seg.t0 - t_in).max(0.0)))
 }
 
 /// The zero crossing between `a` (positive; `sampled` false if its value is only a bound) and

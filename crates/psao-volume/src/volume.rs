@@ -46,6 +46,16 @@ pub struct LevelSetBounds {
     pub slope_max: Vec3,
     /// Smallest value on each face of the node's cell: −x, +x, −y, +y, −z, +z.
     pub face_min: [f32; 6],
+    /// The largest corner value of the voxel cells none of whose corners is at (or above) the
+    /// background: where the field exceeds it, the point lies in a cell touching the narrow
+    /// band's clamp (−∞ if every cell does).
+    pub linear_max: f32,
+    /// Per axis, the smallest and largest forward difference of the cells that touch the
+    /// clamp, which bound the field's partial derivatives wherever it exceeds `linear_max`
+    /// (the node's own bounds if no cell touches it).
+    pub edge_slope_min: Vec3,
+    /// See `edge_slope_min`.
+    pub edge_slope_max: Vec3,
 }
 
 /// Marks a missing neighbour in [`Volume`]'s neighbour table.
@@ -395,7 +405,31 @@ fn level_set_bounds(
                 slope_min: Vec3::INFINITY,
                 slope_max: Vec3::NEG_INFINITY,
                 face_min: [f32::INFINITY; 6],
+                linear_max: f32::NEG_INFINITY,
+                edge_slope_min: Vec3::INFINITY,
+                edge_slope_max: Vec3::NEG_INFINITY,
             };
+            // Cells touching the clamp versus the others.
+            for z in 0..8 {
+                for y in 0..8 {
+                    for x in 0..8 {
+                        let at = x + 9 * (y + 9 * z);
+                        let c = [0, 1, 9, 10, 81, 82, 90, 91].map(|o| v[at + o]);
+                        if c.iter().all(|&x| x < background) {
+                            let hi = c.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                            out.linear_max = out.linear_max.max(hi);
+                            continue;
+                        }
+                        for (axis, bit) in [1usize, 2, 4].into_iter().enumerate() {
+                            for k in (0..8).filter(|k| k & bit == 0) {
+                                let diff = c[k | bit] - c[k];
+                                out.edge_slope_min[axis] = out.edge_slope_min[axis].min(diff);
+                                out.edge_slope_max[axis] = out.edge_slope_max[axis].max(diff);
+                            }
+                        }
+                    }
+                }
+            }
             for z in 0..9 {
                 for y in 0..9 {
                     for x in 0..9 {
@@ -416,6 +450,11 @@ fn level_set_bounds(
                         }
                     }
                 }
+            }
+            if out.edge_slope_min.x > out.edge_slope_max.x {
+                // No cell touches the clamp.
+                out.edge_slope_min = out.slope_min;
+                out.edge_slope_max = out.slope_max;
             }
             out
         })

@@ -203,3 +203,59 @@ fn fog_through_a_cache_overflowing_volume_is_that_of_the_plain_sampler() {
     }
     assert!(max_diff <= 1e-5, "one sampler: {max_diff}");
 }
+
+/// The level-set bounds' split at the narrow band's clamp holds: wherever the trilinear field
+/// of a node exceeds `linear_max`, its partial derivatives lie within the clamp cells' slope
+/// bounds (checked by finite differences along each axis at points all over the nodes of the
+/// generated box and torus, both of which have cells where the field turns from clamped to
+/// linear).
+#[test]
+fn level_set_slopes_above_the_linear_part_stay_within_the_clamp_bounds() {
+    use psao_volume::tree::Locate;
+    for kind in [Procedural::Box, Procedural::Torus] {
+        let g = kind.generate(48, 2).unwrap();
+        let vol = Volume::build(&[g], BrickFormat::F32, None).unwrap().0;
+        let mut s = Sampler::new(&vol, 0);
+        let (lo, hi) = vol.index_bounds(0);
+        let (mut checked, mut slower) = (0, 0);
+        let h = 0.05;
+        for z in lo.z * 4..hi.z * 4 - 1 {
+            for y in lo.y * 4..hi.y * 4 - 1 {
+                for x in lo.x * 4..hi.x * 4 - 1 {
+                    let p = Vec3::new(x as f32, y as f32, z as f32) * 0.25 + 0.1;
+                    let Locate::Leaf(i, origin) = vol.tree.locate(0, p.floor().as_ivec3()) else {
+                        continue;
+                    };
+                    let lb = vol.level_set_bounds(i).unwrap();
+                    let v = s.trilinear(p);
+                    for axis in 0..3 {
+                        let q = p + Vec3::AXES[axis] * h;
+                        if q[axis] >= (origin[axis] + 8) as f32 {
+                            continue;
+                        }
+                        let w = s.trilinear(q);
+                        if v.min(w) <= lb.linear_max {
+                            continue;
+                        }
+                        let d = (w - v) / h;
+                        let tol = 1e-3 * vol.background;
+                        assert!(
+                            d >= lb.edge_slope_min[axis] - tol
+                                && d <= lb.edge_slope_max[axis] + tol,
+                            "{kind:?} at {p}: slope {d} outside {}..{}",
+                            lb.edge_slope_min[axis],
+                            lb.edge_slope_max[axis]
+                        );
+                        checked += 1;
+                        slower += (lb.edge_slope_min[axis] > lb.slope_min[axis]) as u32;
+                    }
+                }
+            }
+        }
+        // The split is used (points above the linear part exist) and tightens the bound.
+        assert!(
+            checked > 1000 && slower > 100,
+            "{kind:?}: {checked} {slower}"
+        );
+    }
+}
