@@ -215,7 +215,7 @@ pub fn level_set_hit(s: &mut Sampler, ray: &IndexRay, t_max: f32) -> Option<f32>
             let v = s.trilinear_in(seg.leaf, seg.origin, ray.at(t));
             if let Some((tp, vp, sampled)) = prev {
                 if vp > 0.0 && v <= 0.0 {
-                    bracket = Some(((tp, vp, sampled), (t, v)));
+                    bracket = Some(((tp, vp, sampled), (t, v), (seg.leaf, seg.origin)));
                     return false;
                 }
             }
@@ -235,7 +235,7 @@ pub fn level_set_hit(s: &mut Sampler, ray: &IndexRay, t_max: f32) -> Option<f32>
         bound = None;
         true
     });
-    bracket.map(|(a, b)| refine_crossing(s, ray, a, b, dt))
+    bracket.map(|(a, b, node)| refine_crossing(s, ray, a, b, node, dt))
 }
 
 /// How fast a level set's field can fall along a ray inside one L3 node (per unit of the ray
@@ -318,16 +318,18 @@ fn entry_bound(ray: &IndexRay, seg: &Segment, lb: &LevelSetBounds, fall: &Fall) 
 /// The zero crossing between `a` (positive; `sampled` false if its value is only a bound) and
 /// `b` (not positive) along `ray`: linear interpolation, after up to two regula falsi steps
 /// when `a` is a bound or the bracket is wider than 16 `dt` (steps stop once it is under `dt`).
+/// `(leaf, origin)` is the L3 node of `b`: samples in it skip the tree search.
 fn refine_crossing(
     s: &mut Sampler,
     ray: &IndexRay,
     (mut ta, mut va, sampled): (f32, f32, bool),
     (mut tb, mut vb): (f32, f32),
+    (leaf, origin): (u32, IVec3),
     dt: f32,
 ) -> f32 {
     if !sampled || tb - ta > 16.0 * dt {
         if !sampled {
-            let v = s.trilinear(ray.at(ta));
+            let v = s.trilinear_in(leaf, origin, ray.at(ta));
             if v > 0.0 {
                 va = v;
             }
@@ -337,7 +339,7 @@ fn refine_crossing(
                 break;
             }
             let tm = ta + (tb - ta) * va / (va - vb);
-            let vm = s.trilinear(ray.at(tm));
+            let vm = s.trilinear_in(leaf, origin, ray.at(tm));
             if vm > 0.0 {
                 (ta, va) = (tm, vm);
             } else {
