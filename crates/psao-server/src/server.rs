@@ -267,14 +267,7 @@ impl Server {
             stats: motion,
             moved,
             restarted,
-        } = self.dynamics.advance(
-            time,
-            &mut self.tracer,
-            &mut self.instances,
-            self.radius,
-            self.radius * self.config.thresholds.ao,
-        )?;
-        self.refresh_summaries(&restarted, &moved);
+        } = self.pose(time)?;
         let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         let c = &self.config;
@@ -316,10 +309,6 @@ impl Server {
         }
         self.retain_held(&mut candidates);
         let published = self.publish(&candidates);
-        let forget = self.frame.saturating_sub(self.history_frames);
-        for inst in &mut self.instances {
-            inst.changes.forget_through(forget);
-        }
         let cull_ms = (t_cull - start).as_secs_f64() * 1e3 - animate_ms;
         let trace_ms = (t_trace - t_cull).as_secs_f64() * 1e3;
         let publish_ms = t_trace.elapsed().as_secs_f64() * 1e3;
@@ -349,6 +338,20 @@ impl Server {
         })
     }
 
+    /// Pose the scene at `time` (tracer, instance transforms, skinned points, proximity
+    /// invalidation) and bring the block summaries up to date: the start of every frame.
+    fn pose(&mut self, time: f32) -> Result<crate::dynamics::Advanced, ServerError> {
+        let advanced = self.dynamics.advance(
+            time,
+            &mut self.tracer,
+            &mut self.instances,
+            self.radius,
+            self.radius * self.config.thresholds.ao,
+        )?;
+        self.refresh_summaries(&advanced.restarted, &advanced.moved);
+        Ok(advanced)
+    }
+
     /// Bring the block summaries up to date after posing: the `restarted` points lost their
     /// samples and the `moved` ones may have changed storage.
     fn refresh_summaries(&mut self, restarted: &Restarted, moved: &[(u32, u32)]) {
@@ -370,30 +373,45 @@ impl Server {
         );
     }
 
-    /// Publish the candidate (instance, point) pairs that need it, and refresh the cells and
-    /// buckets points moved out of; returns how many points were published.
+    /// Publish the candidate (instance, point) pairs that need it (see
+    /// [`Server::publish_runs`]); returns how many points were published.
     fn publish(&mut self, candidates: &[(u32, u32)]) -> usize {
         let thresholds = self.config.thresholds;
-        let frame = self.frame;
         // `candidates` is sorted by (instance, index): split it per instance.
         let groups = runs_of(candidates.iter().copied());
         let order: Vec<u32> = groups.iter().map(|g| g.0).collect();
-        let results = per_instance(&mut self.instances, groups, |inst, list| {
-            let updates: Vec<(u32, u32)> = list
-                .par_iter()
+        let updates = per_instance(&mut self.instances, groups, |inst, list| {
+            list.par_iter()
                 .filter_map(|&i| republish(inst, i as usize, &thresholds).map(|b| (i, b)))
-                .collect();
-            (apply(inst, &updates, frame), updates)
+                .collect::<Vec<(u32, u32)>>()
         });
-        let mut published = 0;
-        for (instance, (n, updates)) in order.into_iter().zip(results) {
-            published += n;
-            self.record(instance, &updates);
+        self.publish_runs(order.into_iter().zip(updates).collect())
+    }
+
+    /// Store new published records into the grids, stamped with the current frame: `runs`
+    /// holds (instance, (point, record) pairs), at most one run per instance. Then refresh
+    /// the cells and buckets points moved out of and forget change history older than the
+    /// kept frames. A trace node also keeps the records for [`Server::take_records`].
+    /// Returns how many points were published. The one publishing path of a server step
+    /// and of a replica's ([`Server::step_replica`]).
+    fn publish_runs(&mut self, runs: Vec<(u32, Vec<(u32, u32)>)>) -> usize {
+        let frame = self.frame;
+        for (instance, updates) in &runs {
+            self.record(*instance, updates);
         }
+        let published = per_instance(&mut self.instances, runs, |inst, updates| {
+            apply(inst, updates, frame)
+        })
+        .into_iter()
+        .sum();
         for inst in &mut self.instances {
             if !inst.pending_cells.is_empty() {
                 apply(inst, &[], frame);
             }
+        }
+        let forget = frame.saturating_sub(self.history_frames);
+        for inst in &mut self.instances {
+            inst.changes.forget_through(forget);
         }
         published
     }
@@ -572,19 +590,19 @@ fn runs_of(pairs: impl Iterator<Item = (u32, u32)>) -> Vec<(u32, Vec<u32>)> {
     runs
 }
 
-/// `f` on each instance of `runs` (at most one run per instance) with its point list, in
+/// `f` on each instance of `runs` (at most one run per instance) with its list, in
 /// parallel over the instances; results in the order of `runs`.
-fn per_instance<R: Send>(
+fn per_instance<T: Send, R: Send>(
     instances: &mut [InstanceState],
-    runs: Vec<(u32, Vec<u32>)>,
-    f: impl Fn(&mut InstanceState, &[u32]) -> R + Sync,
+    runs: Vec<(u32, Vec<T>)>,
+    f: impl Fn(&mut InstanceState, &[T]) -> R + Sync,
 ) -> Vec<R> {
     debug_assert!(
         runs.windows(2).all(|w| w[0].0 != w[1].0),
         "one run per instance"
     );
     let mut free: Vec<Option<&mut InstanceState>> = instances.iter_mut().map(Some).collect();
-    let jobs: Vec<(&mut InstanceState, Vec<u32>)> = runs
+    let jobs: Vec<(&mut InstanceState, Vec<T>)> = runs
         .into_iter()
         .filter_map(|(i, list)| Some((free.get_mut(i as usize)?.take()?, list)))
         .collect();
@@ -604,13 +622,9 @@ fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> Instan
                 buckets: changed
                     .buckets
                     .iter()
-                    .map(|&b| (b, grid.buckets()[b as usize]))
+                    .map(|&b| (b, grid.bucket(b as usize)))
                     .collect(),
-                cells: changed
-                    .cells
-                    .iter()
-                    .map(|&s| (s, grid.cells()[s as usize]))
-                    .collect(),
+                cells: changed.cells.iter().map(|&s| (s, *grid.cell(s))).collect(),
             }
         }
         _ => scan_delta(index, inst, snapshot, since),
@@ -622,7 +636,6 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
     let grid = &inst.grid;
     let buckets = grid
         .buckets()
-        .iter()
         .enumerate()
         .filter(|&(b, bucket)| {
             if snapshot {
@@ -631,11 +644,10 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
                 inst.bucket_stamp[b] > since
             }
         })
-        .map(|(b, bucket)| (b as u32, *bucket))
+        .map(|(b, bucket)| (b as u32, bucket))
         .collect();
     let cells = grid
         .cells()
-        .iter()
         .enumerate()
         .filter(|&(s, cell)| {
             if snapshot {
@@ -656,6 +668,7 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::blocks::PointOrder;
     use crate::Invalidation;
     use psao_scene::{Camera, Instance, Material, Mesh};
 
@@ -734,7 +747,11 @@ mod tests {
         for inst in &server.instances {
             let n = inst.points.position.len() as u32;
             assert!(n > 0);
-            assert!(inst.blocks.order.iter().copied().eq(0..n));
+            assert!(inst.blocks.order.range(0..n as usize).eq(0..n));
+            assert!(
+                matches!(inst.blocks.order, PointOrder::Identity(_)),
+                "stored as nothing"
+            );
         }
     }
 
@@ -792,8 +809,8 @@ mod tests {
                 apply(mirror, &update);
                 for (i, grid) in mirror.iter().enumerate() {
                     let server_grid = server.grid(i).unwrap();
-                    assert_eq!(grid.buckets(), server_grid.buckets());
-                    assert_eq!(grid.cells(), server_grid.cells());
+                    assert!(grid.buckets().eq(server_grid.buckets()));
+                    assert!(grid.cells().eq(server_grid.cells()));
                 }
             }
         }

@@ -2,7 +2,8 @@
 //! `nats-server -js` started here, and an edge in this process following a camera path in
 //! lockstep (docs/SCALE-OUT.md). Reports each node's rays per second of step time against
 //! the one-process server's, the bytes through NATS per server frame against the bytes one
-//! viewer receives, and the time a dead node's partition takes to be adopted.
+//! viewer receives, the bytes a late edge reads to join against the whole history's, and
+//! the time a dead node's partition takes to be adopted.
 
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -40,6 +41,9 @@ pub struct BenchScaleArgs {
     /// Server frames per run.
     #[arg(long, default_value_t = 60)]
     pub frames: u64,
+    /// The trace nodes publish a snapshot every this many frames.
+    #[arg(long, default_value_t = 64)]
+    pub snapshot_every: u64,
     /// Trace-node counts to run, comma separated.
     #[arg(long, default_value = "1,2,4", value_delimiter = ',')]
     pub nodes: Vec<u32>,
@@ -71,6 +75,13 @@ pub struct ScaleRow {
     pub viewer_bytes_per_frame: f64,
     /// Whether the edge's final grids hash like the one-process server's.
     pub same_state: bool,
+    /// Bytes of every batch in the records stream at the end (the history).
+    pub history_bytes: u64,
+    /// Bytes a late edge read to join after the run (snapshots and the batches after
+    /// them), the frame it started from, and whether it ended with the same grids.
+    pub late_join_bytes: u64,
+    pub late_join_frame: u64,
+    pub late_same_state: bool,
 }
 
 /// What `psao bench scale` reports.
@@ -171,6 +182,8 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             .collect::<Result<_>>()?;
         let rays_per_s: Vec<f64> = stats.iter().map(|s| s.rays_per_s).collect();
         let frames = args.frames as f64;
+        let mut late = make()?;
+        let (late_join_bytes, late_join_frame) = late_join(&url, &input.name, &mut late)?;
         let row = ScaleRow {
             nodes: n,
             sum_rays_per_s: rays_per_s.iter().sum(),
@@ -180,6 +193,10 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             nats_bytes_per_frame: nats_bytes as f64 / frames,
             viewer_bytes_per_frame: viewer_bytes as f64 / frames,
             same_state: state_hash(&replica) == serve_hash,
+            history_bytes: nats_bytes,
+            late_join_bytes,
+            late_join_frame,
+            late_same_state: state_hash(&late) == state_hash(&replica),
         };
         tracing::info!("{n} nodes: {row:?}");
         runs.push(row);
@@ -236,13 +253,14 @@ fn follow(
     replica: &mut Server,
     mut kill: Option<(u64, Proc)>,
 ) -> Result<(u64, u64)> {
-    let mut edge = EdgeStepper::connect(EdgeConfig {
+    let config = EdgeConfig {
         nats: url.to_string(),
         scene: scene.to_string(),
         edge_id: "bench".into(),
         lockstep: true,
         frame_timeout: Duration::from_secs(300),
-    })?;
+    };
+    let mut edge = EdgeStepper::connect(config, replica)?;
     let client = replica.add_client();
     let mut codec = psao_delta::codec_by_name(&args.tuning.codec)?;
     let mut viewer_bytes = 0u64;
@@ -254,6 +272,22 @@ fn follow(
         viewer_bytes += codec.encode(&replica.update_for(client)).len() as u64;
     }
     Ok((viewer_bytes, edge.counters().snapshot().batch_bytes))
+}
+
+/// A clocked edge joining after the run: the bytes it read to catch up (snapshots and
+/// batches) and the frame it started from.
+fn late_join(url: &str, scene: &str, replica: &mut Server) -> Result<(u64, u64)> {
+    let config = EdgeConfig {
+        nats: url.to_string(),
+        scene: scene.to_string(),
+        edge_id: "late".into(),
+        lockstep: false,
+        frame_timeout: Duration::from_secs(30),
+    };
+    let mut edge = EdgeStepper::connect(config, replica)?;
+    edge.catch_up(replica, Duration::from_secs(2))?;
+    let c = edge.counters().snapshot();
+    Ok((c.snapshot_bytes + c.batch_bytes, c.snapshot_frame))
 }
 
 fn seconds(frame: u64, hz: u32) -> f32 {
@@ -326,6 +360,7 @@ fn trace_node(args: &BenchScaleArgs, url: &str, k: u32, n: u32, json: &Path) -> 
     c.args(["--rays-per-point", &args.tuning.rays_per_point.to_string()]);
     c.args(["--max-samples", &args.tuning.max_samples.to_string()]);
     c.args(["--seed", &args.tuning.seed.to_string()]);
+    c.args(["--snapshot-every", &args.snapshot_every.to_string()]);
     if let Some(b) = &args.tuning.backend {
         c.args(["--backend", &format!("{b:?}").to_lowercase()]);
     }

@@ -68,6 +68,10 @@ pub struct TraceNodeArgs {
     /// This node's name in the partition leases (default: trace-PID).
     #[arg(long)]
     pub node_id: Option<String>,
+    /// Publish a snapshot of the held partitions every this many frames (0: never); a
+    /// joining edge starts from the latest one instead of the whole history.
+    #[arg(long, default_value_t = 64)]
+    pub snapshot_every: u64,
     /// Write the node's statistics as JSON to this file on exit.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -87,6 +91,7 @@ pub fn run_trace_node(args: &TraceNodeArgs) -> Result<()> {
             .node_id
             .clone()
             .unwrap_or_else(|| format!("trace-{}", std::process::id())),
+        snapshot_every: args.snapshot_every,
     };
     println!("trace node {} ready", args.partition);
     let stop = Arc::new(AtomicBool::new(false));
@@ -154,16 +159,19 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
         args.frame_timeout.is_finite() && args.frame_timeout > 0.0,
         "--frame-timeout must be a positive number of seconds"
     );
-    let mut stepper = EdgeStepper::connect(EdgeConfig {
-        nats: args.scene.nats.clone(),
-        scene: scene.clone(),
-        edge_id: args
-            .edge_id
-            .clone()
-            .unwrap_or_else(|| format!("edge-{}", std::process::id())),
-        lockstep: args.lockstep,
-        frame_timeout: Duration::from_secs_f64(args.frame_timeout),
-    })?;
+    let mut stepper = EdgeStepper::connect(
+        EdgeConfig {
+            nats: args.scene.nats.clone(),
+            scene: scene.clone(),
+            edge_id: args
+                .edge_id
+                .clone()
+                .unwrap_or_else(|| format!("edge-{}", std::process::id())),
+            lockstep: args.lockstep,
+            frame_timeout: Duration::from_secs_f64(args.frame_timeout),
+        },
+        &mut server,
+    )?;
     if !args.lockstep {
         let frames = stepper.catch_up(&mut server, Duration::from_secs(1))?;
         tracing::info!("caught up {frames} frames from the records stream");

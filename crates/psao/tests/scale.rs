@@ -94,6 +94,12 @@ fn nats(dir: &Path) -> Option<(Proc, String)> {
         return None;
     }
     let port = free_port();
+    Some((nats_on(dir, port), format!("nats://127.0.0.1:{port}")))
+}
+
+/// A `nats-server -js` on `port` keeping its streams under `dir/js`, once it accepts
+/// connections.
+fn nats_on(dir: &Path, port: u16) -> Proc {
     let child = Command::new("nats-server")
         .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
         .arg(dir.join("js"))
@@ -106,7 +112,7 @@ fn nats(dir: &Path) -> Option<(Proc, String)> {
         assert!(Instant::now() < end, "nats-server did not start");
         std::thread::sleep(Duration::from_millis(20));
     }
-    Some((Proc(child), format!("nats://127.0.0.1:{port}")))
+    Proc(child)
 }
 
 /// `psao <role> --scene SCENE <SERVER> <extra>`, its stdout's first line awaited.
@@ -135,6 +141,18 @@ fn addr(line: &str) -> String {
 
 /// A `psao view` of `frames` frames writing its statistics to `out`.
 fn view(connect: &str, scene: &str, path: &str, frames: u32, out: &Path) -> Child {
+    view_with(connect, scene, path, frames, out, &[])
+}
+
+/// [`view`] with `extra` arguments.
+fn view_with(
+    connect: &str,
+    scene: &str,
+    path: &str,
+    frames: u32,
+    out: &Path,
+    extra: &[&str],
+) -> Child {
     Command::new(BIN)
         .args([
             "--log",
@@ -153,6 +171,7 @@ fn view(connect: &str, scene: &str, path: &str, frames: u32, out: &Path) -> Chil
             "--res",
             "32x24",
         ])
+        .args(extra)
         .arg("--json")
         .arg(out)
         .stdout(Stdio::null())
@@ -232,6 +251,8 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
                     &partition,
                     "--lockstep-edges",
                     "2",
+                    "--snapshot-every",
+                    "3",
                 ],
             );
             assert!(line.starts_with("trace node"), "{line}");
@@ -285,7 +306,8 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
         n.interrupt(20);
     }
 
-    // A late edge (clocked) replays the stream: the same state as the lockstep edges.
+    // A late edge (clocked) starts from the latest snapshot and reads only the batches
+    // after it: the same state as the lockstep edges.
     let (late, line) = start(
         "edge",
         &scene,
@@ -304,6 +326,15 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
     let mut late = late;
     late.wait(20);
     assert_eq!(edge_hash("late.json"), edge_hash("e0.json"));
+    let (late, e0) = (json(&out("late.json")), json(&out("e0.json")));
+    let started = late["edge"]["snapshot_frame"].as_u64().unwrap();
+    assert!(started >= 3 && started.is_multiple_of(3), "{late}");
+    assert!(
+        late["edge"]["snapshot_bytes"].as_u64().unwrap() > 0,
+        "{late}"
+    );
+    let (read, all) = (&late["edge"]["batches"], &e0["edge"]["batches"]);
+    assert!(read.as_u64() < all.as_u64(), "{read} of {all} batches read");
     assert_eq!(view_hashes(&[out("lv.json")]), vec![edge_hash("e0.json")]);
 }
 
@@ -360,4 +391,101 @@ fn a_dead_trace_node_and_a_dead_edge_are_survived() {
     assert_eq!(adoption["partition"], 1, "{t0}");
     let after = adoption["after_s"].as_f64().unwrap();
     assert!(after <= 5.0, "partition taken over after {after} s");
+}
+
+#[test]
+fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((nats_server, url)) = nats(dir.path()) else {
+        return;
+    };
+    let port: u16 = url.rsplit(':').next().unwrap().parse().unwrap();
+    let (scene, path) = fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+    // Simulated latency makes each lockstep round last 30 ms: the path takes a few seconds.
+    const STEPS: u32 = 60;
+    let slow = ["--latency-ms", "30"];
+
+    let (serve, line) = start(
+        "serve",
+        &scene,
+        &[
+            "--listen",
+            "127.0.0.1:0",
+            "--lockstep",
+            "--wait-clients",
+            "2",
+            "--once",
+        ],
+    );
+    let at = addr(&line);
+    let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("s{i}.json"))).collect();
+    let views: Vec<Child> = files
+        .iter()
+        .map(|f| view_with(&at, &scene, &path, STEPS, f, &slow))
+        .collect();
+    views.into_iter().for_each(finished);
+    let mut serve = serve;
+    serve.wait(20);
+    let alone = view_hashes(&files);
+
+    let nodes: Vec<Proc> = (0..2)
+        .map(|k| {
+            let partition = format!("{k}/2");
+            let args = ["--nats", &url, "--partition", &partition];
+            let mut args = args.to_vec();
+            args.extend(["--lockstep-edges", "2"]);
+            start("trace-node", &scene, &args).0
+        })
+        .collect();
+    let edges: Vec<(Proc, String)> = (0..2)
+        .map(|e| {
+            let json = out(&format!("e{e}.json"));
+            let id = format!("e{e}");
+            let (p, line) = start(
+                "edge",
+                &scene,
+                &[
+                    "--nats",
+                    &url,
+                    "--listen",
+                    "127.0.0.1:0",
+                    "--lockstep",
+                    "--once",
+                    "--edge-id",
+                    &id,
+                    "--json",
+                    json.to_str().unwrap(),
+                ],
+            );
+            (p, addr(&line))
+        })
+        .collect();
+    let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("v{i}.json"))).collect();
+    let views: Vec<Child> = files
+        .iter()
+        .enumerate()
+        .map(|(i, f)| view_with(&edges[i].1, &scene, &path, STEPS, f, &slow))
+        .collect();
+    // Mid-path: the NATS server dies and comes back on the same port and store.
+    std::thread::sleep(Duration::from_millis(700));
+    drop(nats_server);
+    std::thread::sleep(Duration::from_millis(500));
+    let _nats_again = nats_on(dir.path(), port);
+    views.into_iter().for_each(finished);
+    for (mut p, _) in edges {
+        p.wait(30);
+    }
+    assert_eq!(view_hashes(&files), alone, "the state of psao serve alone");
+    for e in ["e0.json", "e1.json"] {
+        let s = json(&out(e));
+        assert_eq!(s["state_hash"].as_str(), Some(alone[0].as_str()), "{s}");
+        assert_eq!(s["edge"]["malformed"], 0, "{s}");
+        assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
+        // Every server frame applied, none skipped: one per two client frames at --hz 30.
+        assert_eq!(s["edge"]["frames"], STEPS / 2, "{s}");
+    }
+    for n in nodes {
+        n.interrupt(20);
+    }
 }

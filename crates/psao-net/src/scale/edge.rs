@@ -1,7 +1,8 @@
-//! An edge (`psao edge`): reads every partition's record batches from the records stream
-//! (from its first message: the snapshot, then the live frames), rebuilds the whole
-//! published state in a replica [`Server`] ([`Server::step_replica`]), and serves viewers
-//! with [`crate::serve`], publishing their views for the trace nodes.
+//! An edge (`psao edge`): starts from the latest frame every partition has a snapshot of
+//! (or from the first frame), then reads every partition's record batches that follow from
+//! the records stream, rebuilds the whole published state in a replica [`Server`]
+//! ([`Server::restore_replica`], [`Server::step_replica`]), and serves viewers with
+//! [`crate::serve`], publishing their views for the trace nodes.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -12,10 +13,10 @@ use async_nats::jetstream::consumer::{pull, DeliverPolicy};
 use futures_util::StreamExt;
 use psao_server::{PointRecord, Server, StepStats, View};
 use serde::Serialize;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, Notify};
 
-use super::wire::{Batch, ViewSet};
-use super::{connect, records_stream, Names};
+use super::wire::{Batch, Snapshot, ViewSet};
+use super::{connect, records_stream, snapshot_stream, Names};
 use crate::serve::Stepper;
 use crate::NetError;
 
@@ -24,6 +25,8 @@ const INBOX: usize = 1024;
 /// Frames an edge keeps incomplete before it refuses more (a partition that never
 /// publishes again would otherwise grow this without bound).
 pub const MAX_PENDING_FRAMES: usize = 1 << 16;
+/// Longest wait for the next snapshot chunk while joining.
+const SNAPSHOT_WAIT: Duration = Duration::from_secs(10);
 /// How long a lockstep edge waits for a frame's batches before publishing its views again.
 const VIEWS_AGAIN: Duration = Duration::from_secs(1);
 
@@ -51,6 +54,8 @@ pub struct EdgeCounters {
     duplicates: AtomicU64,
     sequence_gaps: AtomicU64,
     frames: AtomicU64,
+    snapshot_bytes: AtomicU64,
+    snapshot_frame: AtomicU64,
 }
 
 /// [`EdgeCounters`] at one moment (`psao edge --json` writes it beside the serve figures).
@@ -68,6 +73,10 @@ pub struct EdgeStats {
     pub sequence_gaps: u64,
     /// Server frames applied.
     pub frames: u64,
+    /// Bytes of the snapshot chunks read when the edge joined.
+    pub snapshot_bytes: u64,
+    /// The frame the edge started from (0: no complete snapshot, the stream from its start).
+    pub snapshot_frame: u64,
 }
 
 impl EdgeCounters {
@@ -81,6 +90,8 @@ impl EdgeCounters {
             duplicates: get(&self.duplicates),
             sequence_gaps: get(&self.sequence_gaps),
             frames: get(&self.frames),
+            snapshot_bytes: get(&self.snapshot_bytes),
+            snapshot_frame: get(&self.snapshot_frame),
         }
     }
 }
@@ -153,6 +164,63 @@ impl Assembler {
     }
 }
 
+/// Where a joining edge starts: the latest frame every partition's every chunk has a
+/// snapshot of.
+#[derive(Debug, PartialEq)]
+pub struct Start {
+    /// The frame and its scene time.
+    pub frame: u64,
+    pub seconds: f64,
+    /// The records stream's first message to read (later batches of every partition).
+    pub sequence: u64,
+    /// Every partition's records at `frame`.
+    pub records: Vec<PointRecord>,
+}
+
+/// The latest frame of `snapshots` at which every partition (of one partition count) has
+/// every chunk, as a [`Start`]; `None` when no frame is complete.
+pub fn complete_snapshot(snapshots: Vec<Snapshot>) -> Option<Start> {
+    let mut frames: BTreeMap<u64, Vec<Snapshot>> = BTreeMap::new();
+    for s in snapshots {
+        frames.entry(s.frame).or_default().push(s);
+    }
+    frames.into_iter().rev().find_map(|(frame, chunks)| {
+        let n = chunks[0].partitions;
+        // partition -> (its chunk count, the chunks present)
+        let mut parts: BTreeMap<u32, (u32, BTreeSet<u32>)> = BTreeMap::new();
+        for c in &chunks {
+            let part = parts
+                .entry(c.partition)
+                .or_insert((c.chunks, BTreeSet::new()));
+            if c.partitions != n || part.0 != c.chunks {
+                return None;
+            }
+            part.1.insert(c.chunk);
+        }
+        let complete =
+            parts.len() == n as usize && parts.values().all(|(m, have)| have.len() == *m as usize);
+        if !complete {
+            return None;
+        }
+        let sequence = chunks.iter().map(|c| c.sequence).min()? + 1;
+        let seconds = chunks[0].seconds;
+        let mut seen = BTreeSet::new();
+        let mut records = Vec::new();
+        for c in chunks {
+            // A chunk stored twice (a retried publish) counts once.
+            if seen.insert((c.partition, c.chunk)) {
+                records.extend(c.records);
+            }
+        }
+        Some(Start {
+            frame,
+            seconds,
+            sequence,
+            records,
+        })
+    })
+}
+
 /// The [`Stepper`] of an edge.
 pub struct EdgeStepper {
     config: EdgeConfig,
@@ -161,15 +229,18 @@ pub struct EdgeStepper {
     names: Names,
     /// The stream's batches with their sequence numbers.
     batches: mpsc::Receiver<(u64, Batch)>,
-    /// The stream's last sequence number when the edge connected.
+    /// The stream's last sequence number when the edge connected, and the first one read.
     backlog: u64,
+    first: u64,
     assembler: Assembler,
     counters: Arc<EdgeCounters>,
 }
 
 impl EdgeStepper {
-    /// Connects and starts reading the records stream from its first message.
-    pub fn connect(config: EdgeConfig) -> Result<Self, NetError> {
+    /// Connects; starts `server` (a fresh replica) from the latest frame every partition
+    /// has a snapshot of when there is one ([`complete_snapshot`]) and reads the records
+    /// stream after it, else from the stream's first message.
+    pub fn connect(config: EdgeConfig, server: &mut Server) -> Result<Self, NetError> {
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .enable_all()
@@ -177,27 +248,41 @@ impl EdgeStepper {
             .map_err(NetError::io("cannot start the async runtime"))?;
         let names = Names::new(&config.scene);
         let counters = Arc::new(EdgeCounters::default());
-        let (client, batches, backlog) = rt.block_on(async {
-            let client = connect(&config.nats).await?;
+        let (client, batches, backlog, start) = rt.block_on(async {
+            let connected = Arc::new(Notify::new());
+            let client = connect(&config.nats, connected.clone()).await?;
             let js = async_nats::jetstream::new(client.clone());
             let stream = records_stream(&js, &names).await?;
+            let start = complete_snapshot(read_snapshots(&js, &names, &counters).await?);
             let backlog = stream.cached_info().state.last_sequence;
-            let consumer = stream
-                .create_consumer(pull::OrderedConfig {
-                    deliver_policy: DeliverPolicy::All,
-                    filter_subject: names.records_wildcard(),
-                    ..Default::default()
-                })
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?;
-            let messages = consumer
-                .messages()
+            let first = start.as_ref().map_or(1, |s| s.sequence);
+            let messages = ordered_from(&stream, &names, first)
                 .await
                 .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?;
             let (tx, rx) = mpsc::channel(INBOX);
-            tokio::spawn(read_stream(messages, tx, counters.clone()));
-            Ok::<_, NetError>((client, rx, backlog))
+            let reader = StreamReader {
+                stream,
+                names: names.clone(),
+                connected,
+                tx,
+                counters: counters.clone(),
+            };
+            tokio::spawn(reader.run(messages, first));
+            Ok::<_, NetError>((client, rx, backlog, start))
         })?;
+        let mut first = 1;
+        if let Some(start) = start {
+            server.restore_replica(start.frame, start.seconds as f32, &start.records)?;
+            tracing::info!(
+                "started from the snapshots of frame {} ({} records)",
+                start.frame,
+                start.records.len()
+            );
+            counters
+                .snapshot_frame
+                .store(start.frame, Ordering::Relaxed);
+            first = start.sequence;
+        }
         Ok(Self {
             config,
             rt,
@@ -205,6 +290,7 @@ impl EdgeStepper {
             names,
             batches,
             backlog,
+            first,
             assembler: Assembler::default(),
             counters,
         })
@@ -220,6 +306,9 @@ impl EdgeStepper {
     /// applied.
     pub fn catch_up(&mut self, server: &mut Server, quiet: Duration) -> Result<u64, NetError> {
         let start = server.frame();
+        if self.backlog < self.first {
+            return Ok(0);
+        }
         loop {
             let got = self
                 .rt
@@ -276,69 +365,178 @@ impl EdgeStepper {
     }
 }
 
-/// Forwards the stream's batches, checking that sequence numbers follow one another.
-async fn read_stream(
-    mut messages: pull::Ordered,
-    tx: mpsc::Sender<(u64, Batch)>,
-    counters: Arc<EdgeCounters>,
-) {
-    let mut last: Option<u64> = None;
-    while let Some(message) = messages.next().await {
-        let message = match message {
-            Ok(m) => m,
-            Err(e) => {
-                tracing::warn!("records stream: {e}");
+/// Every chunk in the snapshots stream (the last few of each subject); chunks that do not
+/// parse are counted and dropped.
+async fn read_snapshots(
+    js: &async_nats::jetstream::Context,
+    names: &Names,
+    counters: &EdgeCounters,
+) -> Result<Vec<Snapshot>, NetError> {
+    let failed =
+        |e: &dyn std::fmt::Display| NetError::Nats(format!("cannot read the snapshots: {e}"));
+    let mut stream = snapshot_stream(js, names).await?;
+    let last = stream
+        .info()
+        .await
+        .map_err(|e| failed(&e))?
+        .state
+        .last_sequence;
+    let mut snapshots = Vec::new();
+    if last == 0 {
+        return Ok(snapshots);
+    }
+    let mut messages = stream
+        .create_consumer(pull::OrderedConfig {
+            deliver_policy: DeliverPolicy::All,
+            ..Default::default()
+        })
+        .await
+        .map_err(|e| failed(&e))?
+        .messages()
+        .await
+        .map_err(|e| failed(&e))?;
+    loop {
+        let next = tokio::time::timeout(SNAPSHOT_WAIT, messages.next())
+            .await
+            .map_err(|_| failed(&"nothing arrived for 10 s"))?;
+        let message = match next {
+            Some(Ok(m)) => m,
+            Some(Err(e)) => {
+                tracing::warn!("snapshots stream: {e}");
                 continue;
             }
+            None => break,
         };
-        let mut seq = 0;
-        if let Ok(info) = message.info() {
-            seq = info.stream_sequence;
-            if let Some(prev) = last {
-                if seq <= prev {
-                    counters.duplicates.fetch_add(1, Ordering::Relaxed);
-                    continue;
-                }
-                if seq != prev + 1 {
-                    tracing::warn!("records stream jumped from {prev} to {seq}");
-                    counters.sequence_gaps.fetch_add(1, Ordering::Relaxed);
-                }
-            }
-            last = Some(seq);
-        }
-        counters.batches.fetch_add(1, Ordering::Relaxed);
         counters
-            .bytes
+            .snapshot_bytes
             .fetch_add(message.payload.len() as u64, Ordering::Relaxed);
-        match Batch::decode(&message.payload) {
-            Ok(batch) => {
-                if tx.send((seq, batch)).await.is_err() {
-                    return;
-                }
-            }
+        match Snapshot::decode(&message.payload) {
+            Ok(s) => snapshots.push(s),
             Err(e) => {
                 tracing::debug!("{e}");
                 counters.malformed.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if message.info().map_or(true, |i| i.stream_sequence >= last) {
+            break;
+        }
+    }
+    Ok(snapshots)
+}
+
+/// An ordered consumer of the records stream from sequence number `first`.
+async fn ordered_from(
+    stream: &async_nats::jetstream::stream::Stream,
+    names: &Names,
+    first: u64,
+) -> Result<pull::Ordered, String> {
+    stream
+        .create_consumer(pull::OrderedConfig {
+            deliver_policy: DeliverPolicy::ByStartSequence {
+                start_sequence: first,
+            },
+            filter_subject: names.records_wildcard(),
+            ..Default::default()
+        })
+        .await
+        .map_err(|e| e.to_string())?
+        .messages()
+        .await
+        .map_err(|e| e.to_string())
+}
+
+/// Forwards the records stream's batches to the edge, checking that sequence numbers
+/// follow one another. The consumer lives in the NATS server, which forgets it when it
+/// restarts: at every reconnection, and when the consumer fails, a new one resumes after
+/// the last sequence number received.
+struct StreamReader {
+    stream: async_nats::jetstream::stream::Stream,
+    names: Names,
+    connected: Arc<Notify>,
+    tx: mpsc::Sender<(u64, Batch)>,
+    counters: Arc<EdgeCounters>,
+}
+
+impl StreamReader {
+    async fn run(self, mut messages: pull::Ordered, first: u64) {
+        let mut last: Option<u64> = first.checked_sub(1).filter(|&l| l > 0);
+        loop {
+            let message = tokio::select! {
+                m = messages.next() => m,
+                () = self.connected.notified() => {
+                    tracing::info!("reconnected: reading the records stream again");
+                    None
+                }
+            };
+            let message = match message {
+                Some(Ok(m)) => m,
+                failed => {
+                    if let Some(Err(e)) = failed {
+                        tracing::warn!("records stream: {e}");
+                    }
+                    let resume = last.map_or(1, |l| l + 1);
+                    messages = loop {
+                        match ordered_from(&self.stream, &self.names, resume).await {
+                            Ok(m) => break m,
+                            Err(e) => {
+                                tracing::warn!("cannot read the records stream again: {e}");
+                                tokio::time::sleep(VIEWS_AGAIN).await;
+                            }
+                        }
+                    };
+                    continue;
+                }
+            };
+            let mut seq = 0;
+            if let Ok(info) = message.info() {
+                seq = info.stream_sequence;
+                if let Some(prev) = last {
+                    if seq <= prev {
+                        self.counters.duplicates.fetch_add(1, Ordering::Relaxed);
+                        continue;
+                    }
+                    if seq != prev + 1 {
+                        tracing::warn!("records stream jumped from {prev} to {seq}");
+                        self.counters.sequence_gaps.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                last = Some(seq);
+            }
+            self.counters.batches.fetch_add(1, Ordering::Relaxed);
+            self.counters
+                .bytes
+                .fetch_add(message.payload.len() as u64, Ordering::Relaxed);
+            match Batch::decode(&message.payload) {
+                Ok(batch) => {
+                    if self.tx.send((seq, batch)).await.is_err() {
+                        return;
+                    }
+                }
+                Err(e) => {
+                    tracing::debug!("{e}");
+                    self.counters.malformed.fetch_add(1, Ordering::Relaxed);
+                }
             }
         }
     }
 }
 
 impl EdgeStepper {
-    /// Publish a view set on this edge's subject.
-    fn publish_views(&mut self, payload: &[u8]) -> Result<(), NetError> {
+    /// Publish a view set on this edge's subject. Views are sent again and again, so one
+    /// that cannot be sent (the NATS server is away) is only logged; the wait is bounded.
+    fn publish_views(&mut self, payload: &[u8]) {
         let subject = self.names.views(&self.config.edge_id);
         let payload = bytes::Bytes::copy_from_slice(payload);
-        self.rt.block_on(async {
-            self.client
-                .publish(subject, payload)
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))?;
-            self.client
-                .flush()
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot publish views: {e}")))
-        })
+        let sent = self.rt.block_on(async {
+            let send = async {
+                self.client.publish(subject, payload).await.ok()?;
+                self.client.flush().await.ok()
+            };
+            tokio::time::timeout(VIEWS_AGAIN, send).await.ok().flatten()
+        });
+        if sent.is_none() {
+            tracing::warn!("cannot publish views: is the NATS server away?");
+        }
     }
 }
 
@@ -359,7 +557,7 @@ impl Stepper for EdgeStepper {
             views: views.to_vec(),
         };
         let payload = set.encode();
-        self.publish_views(&payload)?;
+        self.publish_views(&payload);
         if !self.config.lockstep {
             while let Ok((_, batch)) = self.batches.try_recv() {
                 self.add(batch, server);
@@ -386,7 +584,7 @@ impl Stepper for EdgeStepper {
                 Ok(Some((_, batch))) => self.add(batch, server),
                 Ok(None) => return Err(NetError::Nats("the records stream ended".into())),
                 // A trace node that subscribed late missed them: say them again.
-                Err(_) => self.publish_views(&payload)?,
+                Err(_) => self.publish_views(&payload),
             }
         }
     }
@@ -431,6 +629,52 @@ mod tests {
         assert!(!a.ready(2));
         assert_eq!(a.add(batch(0, 2, 5), 1), Added::Kept);
         assert!(a.ready(2));
+    }
+
+    fn chunk(partition: u32, chunk: u32, frame: u64) -> Snapshot {
+        Snapshot {
+            partition,
+            partitions: 2,
+            chunk,
+            chunks: 2,
+            frame,
+            seconds: frame as f64 / 30.0,
+            sequence: frame * 10 + u64::from(partition),
+            records: vec![PointRecord {
+                instance: partition,
+                index: chunk,
+                bits: frame as u32,
+            }],
+        }
+    }
+
+    #[test]
+    fn a_joining_edge_starts_from_the_latest_complete_snapshot_frame() {
+        assert_eq!(complete_snapshot(Vec::new()), None);
+        // Frame 8 misses chunk 1 of partition 1: frame 4 is the latest complete one.
+        let mut chunks = vec![chunk(0, 0, 8), chunk(0, 1, 8), chunk(1, 0, 8)];
+        chunks.extend([
+            chunk(0, 0, 4),
+            chunk(0, 1, 4),
+            chunk(1, 0, 4),
+            chunk(1, 1, 4),
+        ]);
+        chunks.push(chunk(1, 1, 4));
+        let start = complete_snapshot(chunks.clone()).unwrap();
+        assert_eq!((start.frame, start.sequence), (4, 41));
+        assert_eq!(start.seconds, 4.0 / 30.0);
+        assert_eq!(start.records.len(), 4, "a chunk stored twice counts once");
+        chunks.push(chunk(1, 1, 8));
+        assert_eq!(complete_snapshot(chunks.clone()).unwrap().frame, 8);
+        // Chunks of another partition count do not complete a frame.
+        let other = Snapshot {
+            partitions: 3,
+            ..chunk(2, 0, 12)
+        };
+        let mut mixed = vec![chunk(0, 0, 12), chunk(0, 1, 12), other];
+        mixed.extend([chunk(1, 0, 12), chunk(1, 1, 12)]);
+        mixed.extend(chunks);
+        assert_eq!(complete_snapshot(mixed).unwrap().frame, 8);
     }
 
     #[test]

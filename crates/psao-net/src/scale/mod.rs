@@ -10,19 +10,38 @@ pub mod wire;
 
 pub use names::{scene_id, Names};
 
+use std::sync::Arc;
 use std::time::Duration;
+
+use tokio::sync::Notify;
 
 use crate::NetError;
 
 /// How long a partition's lease lives without being refreshed.
 pub const LEASE_TTL: Duration = Duration::from_secs(3);
+/// Frames of batches the records stream keeps per partition; older ones are dropped (a
+/// joining edge starts from the snapshots, which are much more recent).
+pub const RECORD_FRAMES: i64 = 1024;
+/// Snapshot frames kept per chunk: a joining edge needs one frame that every chunk has.
+const SNAPSHOT_FRAMES: i64 = 2;
 /// How often a trace node refreshes its leases and looks for partitions without one.
 pub const LEASE_CHECK: Duration = Duration::from_millis(500);
 
-/// Connects to the NATS server at `url` (clients reconnect by themselves after a restart).
-async fn connect(url: &str) -> Result<async_nats::Client, NetError> {
+/// Connects to the NATS server at `url`. Clients reconnect by themselves after a restart;
+/// `connected` is notified at every (re)connection, for what the NATS server may have
+/// forgotten meanwhile (consumers).
+async fn connect(url: &str, connected: Arc<Notify>) -> Result<async_nats::Client, NetError> {
     async_nats::ConnectOptions::new()
         .connection_timeout(Duration::from_secs(5))
+        .event_callback(move |event| {
+            let connected = connected.clone();
+            async move {
+                tracing::info!("NATS: {event}");
+                if matches!(event, async_nats::Event::Connected) {
+                    connected.notify_one();
+                }
+            }
+        })
         .connect(url)
         .await
         .map_err(|e| NetError::Nats(format!("cannot connect to {url}: {e}")))
@@ -36,9 +55,28 @@ async fn records_stream(
     js.get_or_create_stream(async_nats::jetstream::stream::Config {
         name: names.stream(),
         subjects: vec![names.records_wildcard()],
+        max_messages_per_subject: RECORD_FRAMES,
         storage: async_nats::jetstream::stream::StorageType::File,
         ..Default::default()
     })
     .await
     .map_err(|e| NetError::Nats(format!("cannot open stream {}: {e}", names.stream())))
+}
+
+/// The snapshots stream of `names` (the last [`SNAPSHOT_FRAMES`] chunks of each subject),
+/// created when missing.
+async fn snapshot_stream(
+    js: &async_nats::jetstream::Context,
+    names: &Names,
+) -> Result<async_nats::jetstream::stream::Stream, NetError> {
+    let name = names.snapshot_stream();
+    js.get_or_create_stream(async_nats::jetstream::stream::Config {
+        name: name.clone(),
+        subjects: vec![names.snapshots_wildcard()],
+        max_messages_per_subject: SNAPSHOT_FRAMES,
+        storage: async_nats::jetstream::stream::StorageType::File,
+        ..Default::default()
+    })
+    .await
+    .map_err(|e| NetError::Nats(format!("cannot open stream {name}: {e}")))
 }

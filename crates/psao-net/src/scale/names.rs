@@ -42,6 +42,16 @@ impl Names {
         format!("psao.{}.rec.*", self.id)
     }
 
+    /// Snapshot chunk `c` of partition `k`.
+    pub fn snapshot(&self, k: u32, c: u32) -> String {
+        format!("psao.{}.snap.{k}.{c}", self.id)
+    }
+
+    /// Every snapshot chunk.
+    pub fn snapshots_wildcard(&self) -> String {
+        format!("psao.{}.snap.>", self.id)
+    }
+
     /// View sets of edge `edge`.
     pub fn views(&self, edge: &str) -> String {
         format!("psao.{}.views.{}", self.id, scene_id(edge))
@@ -55,6 +65,11 @@ impl Names {
     /// The JetStream stream keeping the record batches.
     pub fn stream(&self) -> String {
         format!("PSAO_{}", self.id)
+    }
+
+    /// The JetStream stream keeping the latest snapshot chunks.
+    pub fn snapshot_stream(&self) -> String {
+        format!("PSAO_{}_SNAP", self.id)
     }
 
     /// The key-value bucket of the partition leases and the clock's epoch.
@@ -76,6 +91,8 @@ mod tests {
         assert_eq!(n.records(3), "psao.room_obj.rec.3");
         assert_eq!(n.views("edge 1"), "psao.room_obj.views.edge_1");
         assert_eq!(n.stream(), "PSAO_room_obj");
+        assert_eq!(n.snapshot(2, 5), "psao.room_obj.snap.2.5");
+        assert_eq!(n.snapshot_stream(), "PSAO_room_obj_SNAP");
         assert_eq!(n.leases(), "psao_room_obj_leases");
     }
 }

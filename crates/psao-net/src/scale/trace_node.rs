@@ -14,8 +14,8 @@ use psao_server::{Partition, PointRecord, Server, View};
 use serde::{Deserialize, Serialize};
 use tokio::sync::mpsc;
 
-use super::wire::{Batch, ViewSet};
-use super::{connect, records_stream, Names, LEASE_CHECK, LEASE_TTL};
+use super::wire::{Batch, Snapshot, ViewSet, CHUNK_POINTS};
+use super::{connect, records_stream, snapshot_stream, Names, LEASE_CHECK, LEASE_TTL};
 use crate::cpu_time::cpu_seconds;
 use crate::NetError;
 
@@ -23,6 +23,11 @@ use crate::NetError;
 const INBOX: usize = 4096;
 /// Frames whose scene time a node remembers.
 const RECENT_FRAMES: usize = 4096;
+/// How long a trace node keeps retrying to store a batch while the NATS server is away
+/// (a restart) before it gives up with an error.
+const OUTAGE: Duration = Duration::from_secs(60);
+/// Pause between attempts to store a batch.
+const RETRY: Duration = Duration::from_millis(200);
 
 /// How a trace node runs.
 #[derive(Clone, Debug)]
@@ -42,6 +47,8 @@ pub struct TraceNodeConfig {
     pub frames: Option<u64>,
     /// This node's name in the leases.
     pub node_id: String,
+    /// Publish a snapshot of every held partition every this many frames (0: never).
+    pub snapshot_every: u64,
 }
 
 /// A partition adopted from a node that stopped refreshing its lease.
@@ -75,6 +82,8 @@ pub struct TraceNodeStats {
     /// Records published, and the bytes of their batches.
     pub records: u64,
     pub batch_bytes: u64,
+    /// Bytes of the snapshot chunks published.
+    pub snapshot_bytes: u64,
     /// Messages that did not parse (or named points that do not exist): dropped.
     pub malformed: u64,
     /// Messages dropped because the inbox was full.
@@ -116,23 +125,40 @@ impl Leases {
         }
     }
 
-    /// Refresh every held lease; errors when one was lost (another node holds it now).
-    async fn refresh(&mut self) -> Result<(), NetError> {
+    /// Refresh every held lease. A refresh that fails is settled by the key's holder: this
+    /// node (an answer lost in a NATS restart: its revision is taken), nobody (the key
+    /// expired while the NATS server was away: it is created again) or another node (an
+    /// error: that node traces the partition now). Returns false when the NATS server
+    /// could not be asked (try again later).
+    async fn refresh(&mut self) -> Result<bool, NetError> {
+        let mut reached = true;
         for (k, revision) in self.held.iter_mut() {
-            match self
-                .kv
-                .update(lease_key(*k), self.node.clone().into(), *revision)
-                .await
-            {
-                Ok(r) => *revision = r,
-                Err(e) => {
+            let key = lease_key(*k);
+            let mine = self.node.as_bytes();
+            if let Ok(r) = self.kv.update(&key, mine.to_vec().into(), *revision).await {
+                *revision = r;
+                continue;
+            }
+            match self.kv.entry(key.clone()).await {
+                Err(_) => reached = false,
+                Ok(Some(e)) if e.operation == kv::Operation::Put && e.value != mine => {
                     return Err(NetError::Nats(format!(
-                        "lost the lease of partition {k} ({e}): another node traces it now"
+                        "lost the lease of partition {k}: node {} traces it now",
+                        String::from_utf8_lossy(&e.value)
                     )))
                 }
+                Ok(Some(e)) if e.operation == kv::Operation::Put => *revision = e.revision,
+                _ => match self.kv.create(&key, mine.to_vec().into()).await {
+                    Ok(r) => {
+                        tracing::info!("lease of partition {k} taken again");
+                        *revision = r;
+                    }
+                    // Taken in between (the next refresh says by whom) or not delivered.
+                    Err(_) => reached = false,
+                },
             }
         }
-        Ok(())
+        Ok(reached)
     }
 
     /// Take every partition of `candidates` whose lease is free; returns them.
@@ -166,7 +192,8 @@ async fn leases_bucket(
         deny_delete: true,
         allow_direct: true,
         discard: stream::DiscardPolicy::New,
-        storage: stream::StorageType::Memory,
+        // On disk, so that leases survive a restart of the NATS server.
+        storage: stream::StorageType::File,
         ..Default::default()
     })
     .await
@@ -214,6 +241,9 @@ struct Node {
     /// Per partition: the last frame a batch was seen for it, and when.
     last_seen: BTreeMap<u32, (u64, Instant)>,
     last_upkeep: Instant,
+    /// No partition is adopted before this: after the NATS server was away, the other
+    /// nodes get a lease's lifetime to refresh theirs.
+    adopt_after: Instant,
     stats: TraceNodeStats,
 }
 
@@ -236,9 +266,10 @@ pub fn run(
         }
     });
     let names = Names::new(&config.scene);
-    let client = rt.block_on(connect(&config.nats))?;
+    let client = rt.block_on(connect(&config.nats, Arc::default()))?;
     let js = async_nats::jetstream::new(client.clone());
     rt.block_on(records_stream(&js, &names))?;
+    rt.block_on(snapshot_stream(&js, &names))?;
     let store = rt.block_on(leases_bucket(&js, &names))?;
     let counters = Arc::new(Counters::default());
     let views = rt.block_on(subscribe(
@@ -294,6 +325,7 @@ pub fn run(
         recent_seconds: BTreeMap::new(),
         last_seen: BTreeMap::new(),
         last_upkeep: Instant::now(),
+        adopt_after: Instant::now(),
         stats: TraceNodeStats::default(),
     };
     node.run(&stop)
@@ -475,7 +507,7 @@ impl Node {
     }
 
     /// Publish this frame's records, one batch per held partition, and wait for the stream
-    /// to store them.
+    /// to store them; on snapshot frames, then publish every held partition's snapshot.
     fn publish(
         &mut self,
         frame: u64,
@@ -504,35 +536,87 @@ impl Node {
                 records,
             })
             .collect();
-        self.send(&batches)
+        let sequences = self.send(&batches)?;
+        let every = self.config.snapshot_every;
+        if every > 0 && frame.is_multiple_of(every) {
+            for (b, sequence) in batches.iter().zip(sequences) {
+                self.snapshot(b.partition, frame, seconds, sequence)?;
+            }
+        }
+        Ok(())
     }
 
-    /// Publish `batches` into the stream and wait for their acknowledgements.
-    fn send(&mut self, batches: &[Batch]) -> Result<(), NetError> {
-        let (js, names) = (&self.js, &self.names);
-        let mut bytes = 0u64;
-        let mut records = 0u64;
-        let result = self.rt.block_on(async {
-            let mut acks = Vec::with_capacity(batches.len());
-            for b in batches {
-                let payload = b.encode();
-                bytes += payload.len() as u64;
-                records += b.records.len() as u64;
-                let ack = js
-                    .publish(names.records(b.partition), payload.into())
-                    .await
-                    .map_err(|e| NetError::Nats(format!("cannot publish a batch: {e}")))?;
-                acks.push(ack);
+    /// Publish the snapshot of partition `k` at `frame`, whose batch has stream sequence
+    /// number `sequence`, chunk by chunk.
+    fn snapshot(
+        &mut self,
+        k: u32,
+        frame: u64,
+        seconds: f64,
+        sequence: u64,
+    ) -> Result<(), NetError> {
+        let chunks = self.server.partition_records(k, CHUNK_POINTS);
+        let partitions = self.server.partition_owners().map_or(1, |o| o.count());
+        let count = chunks.len() as u32;
+        let messages: Vec<(String, String, bytes::Bytes)> = chunks
+            .into_iter()
+            .enumerate()
+            .map(|(c, records)| {
+                let chunk = Snapshot {
+                    partition: k,
+                    partitions,
+                    chunk: c as u32,
+                    chunks: count,
+                    frame,
+                    seconds,
+                    sequence,
+                    records,
+                };
+                let id = format!("{}.snap.{k}.{c}.{frame}", self.config.node_id);
+                (self.names.snapshot(k, c as u32), id, chunk.encode().into())
+            })
+            .collect();
+        self.store_retrying(&messages)?;
+        self.stats.snapshot_bytes += messages.iter().map(|m| m.2.len() as u64).sum::<u64>();
+        Ok(())
+    }
+
+    /// Publish `batches` into the records stream ([`Node::store_retrying`]); returns their
+    /// stream sequence numbers.
+    fn send(&mut self, batches: &[Batch]) -> Result<Vec<u64>, NetError> {
+        let messages: Vec<(String, String, bytes::Bytes)> = batches
+            .iter()
+            .map(|b| {
+                let id = format!("{}.{}.{}", self.config.node_id, b.partition, b.frame);
+                (self.names.records(b.partition), id, b.encode().into())
+            })
+            .collect();
+        let sequences = self.store_retrying(&messages)?;
+        self.stats.batch_bytes += messages.iter().map(|m| m.2.len() as u64).sum::<u64>();
+        self.stats.records += batches.iter().map(|b| b.records.len() as u64).sum::<u64>();
+        Ok(sequences)
+    }
+
+    /// Publish `messages` (subject, message id, payload) and wait for the streams to store
+    /// them, retrying for up to [`OUTAGE`] while the NATS server is away; the message ids
+    /// make a stream store a retried message once. Returns their stream sequence numbers.
+    fn store_retrying(
+        &mut self,
+        messages: &[(String, String, bytes::Bytes)],
+    ) -> Result<Vec<u64>, NetError> {
+        let deadline = Instant::now() + OUTAGE;
+        loop {
+            match self.rt.block_on(store(&self.js, messages)) {
+                Ok(sequences) => return Ok(sequences),
+                Err(e) if Instant::now() < deadline => {
+                    tracing::warn!("{e}: retrying");
+                    // The other nodes may miss refreshing their leases meanwhile.
+                    self.adopt_after = Instant::now() + LEASE_TTL;
+                    std::thread::sleep(RETRY);
+                }
+                Err(e) => return Err(e),
             }
-            for ack in acks {
-                ack.await
-                    .map_err(|e| NetError::Nats(format!("batch not stored: {e}")))?;
-            }
-            Ok::<(), NetError>(())
-        });
-        self.stats.batch_bytes += bytes;
-        self.stats.records += records;
-        result
+        }
     }
 
     /// Every [`LEASE_CHECK`] (or now with `force`): refresh the held leases, and adopt free
@@ -543,7 +627,14 @@ impl Node {
             return Ok(());
         }
         self.last_upkeep = Instant::now();
-        self.rt.block_on(self.leases.refresh())?;
+        if !self.rt.block_on(self.leases.refresh())? {
+            tracing::warn!("cannot refresh the leases: is the NATS server away?");
+            self.adopt_after = Instant::now() + LEASE_TTL;
+            return Ok(());
+        }
+        if Instant::now() < self.adopt_after {
+            return Ok(());
+        }
         if self.leases.held.contains_key(&0) {
             // Keep the clock's epoch alive past the bucket's TTL.
             if let Ok(Some(epoch)) = self.rt.block_on(self.leases.kv.get("epoch")) {
@@ -594,6 +685,32 @@ impl Node {
         }
         Ok(())
     }
+}
+
+/// Publish `messages` (subject, message id, payload) and wait for the streams to store
+/// them; returns their stream sequence numbers.
+async fn store(
+    js: &async_nats::jetstream::Context,
+    messages: &[(String, String, bytes::Bytes)],
+) -> Result<Vec<u64>, NetError> {
+    use async_nats::jetstream::context::Publish;
+    let mut acks = Vec::with_capacity(messages.len());
+    for (subject, id, payload) in messages {
+        let message = Publish::build().payload(payload.clone()).message_id(id);
+        let ack = js
+            .send_publish(subject.clone(), message)
+            .await
+            .map_err(|e| NetError::Nats(format!("cannot publish to {subject}: {e}")))?;
+        acks.push(ack);
+    }
+    let mut sequences = Vec::with_capacity(acks.len());
+    for ack in acks {
+        let ack = ack
+            .await
+            .map_err(|e| NetError::Nats(format!("message not stored: {e}")))?;
+        sequences.push(ack.sequence);
+    }
+    Ok(sequences)
 }
 
 /// The distinct views of several edges, in the order given.

@@ -1,5 +1,5 @@
 //! The payloads trace nodes and edges exchange through NATS (docs/SCALE-OUT.md): record
-//! batches and view sets, little-endian binary with a magic and a version. Decoding checks
+//! batches, snapshot chunks and view sets, little-endian binary with a magic and a version. Decoding checks
 //! every length against the message before allocating, so a malformed message is an error,
 //! never a panic or a huge allocation.
 
@@ -11,11 +11,18 @@ use psao_server::{PointRecord, View};
 const BATCH_MAGIC: &[u8; 4] = b"PSRB";
 /// Magic of a view set.
 const VIEWS_MAGIC: &[u8; 4] = b"PSVW";
-/// Version of both payloads.
+/// Magic of a snapshot chunk.
+const SNAPSHOT_MAGIC: &[u8; 4] = b"PSSN";
+/// Version of every payload.
 const VERSION: u8 = 1;
 /// Bytes of a batch before its records, and of one record.
 const BATCH_HEADER: usize = 4 + 1 + 4 + 4 + 8 + 8 + 4;
 const RECORD_BYTES: usize = 12;
+/// Bytes of a snapshot chunk before its records.
+const SNAPSHOT_HEADER: usize = 4 + 1 + 4 * 4 + 8 + 8 + 8 + 4;
+/// Most points in one snapshot chunk: 12 bytes each, so a chunk stays under NATS's default
+/// 1 MiB payload limit.
+pub const CHUNK_POINTS: usize = 65536;
 /// Bytes of a view set before its views, and of one view.
 const VIEWS_HEADER: usize = 4 + 1 + 8 + 8 + 4;
 const VIEW_BYTES: usize = 13 * 4;
@@ -33,6 +40,27 @@ pub struct Batch {
     /// Scene time of the frame, seconds.
     pub seconds: f64,
     /// The points published, in (instance, index) order.
+    pub records: Vec<PointRecord>,
+}
+
+/// One chunk of the published records of a partition's points at one server frame: a
+/// joining edge starts from every partition's chunks instead of the whole history.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Snapshot {
+    /// The partition, and the number of partitions.
+    pub partition: u32,
+    pub partitions: u32,
+    /// This chunk, and the partition's number of chunks (see [`CHUNK_POINTS`]).
+    pub chunk: u32,
+    pub chunks: u32,
+    /// The server frame the records are the state of, and its scene time, seconds.
+    pub frame: u64,
+    pub seconds: f64,
+    /// Records-stream sequence number of the partition's batch of `frame`: the partition's
+    /// later batches follow it.
+    pub sequence: u64,
+    /// The published records of the chunk's points (stored ones only), in (instance,
+    /// index) order.
     pub records: Vec<PointRecord>,
 }
 
@@ -119,6 +147,85 @@ impl Reader<'_> {
     }
 }
 
+/// Appends a record count and the records.
+fn put_records(out: &mut Vec<u8>, records: &[PointRecord]) {
+    out.extend_from_slice(&(records.len() as u32).to_le_bytes());
+    for r in records {
+        for v in [r.instance, r.index, r.bits] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+}
+
+impl Reader<'_> {
+    /// A record count (at most `max`) and the records, filling the rest exactly.
+    fn records(&mut self, max: usize) -> Result<Vec<PointRecord>, PayloadError> {
+        let n = self.count(RECORD_BYTES, max)?;
+        let mut records = Vec::with_capacity(n);
+        for _ in 0..n {
+            records.push(PointRecord {
+                instance: self.u32()?,
+                index: self.u32()?,
+                bits: self.u32()?,
+            });
+        }
+        Ok(records)
+    }
+}
+
+impl Snapshot {
+    /// The payload.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(SNAPSHOT_HEADER + self.records.len() * RECORD_BYTES);
+        out.extend_from_slice(SNAPSHOT_MAGIC);
+        out.push(VERSION);
+        for v in [self.partition, self.partitions, self.chunk, self.chunks] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&self.frame.to_le_bytes());
+        out.extend_from_slice(&self.seconds.to_le_bytes());
+        out.extend_from_slice(&self.sequence.to_le_bytes());
+        put_records(&mut out, &self.records);
+        out
+    }
+
+    /// Decode a payload; refuses a partition or chunk outside its count, more than
+    /// [`CHUNK_POINTS`] records and non-finite times.
+    pub fn decode(bytes: &[u8]) -> Result<Snapshot, PayloadError> {
+        let mut r = Reader {
+            bytes,
+            what: "snapshot chunk",
+        };
+        r.header(SNAPSHOT_MAGIC)?;
+        let (partition, partitions) = (r.u32()?, r.u32()?);
+        if partitions == 0 || partition >= partitions {
+            return Err(fail(
+                r.what,
+                format!("partition {partition} of {partitions}"),
+            ));
+        }
+        let (chunk, chunks) = (r.u32()?, r.u32()?);
+        if chunk >= chunks {
+            return Err(fail(r.what, format!("chunk {chunk} of {chunks}")));
+        }
+        let (frame, seconds, sequence) = (r.u64()?, r.f64()?, r.u64()?);
+        if !seconds.is_finite() {
+            return Err(fail(r.what, "non-finite scene time"));
+        }
+        let records = r.records(CHUNK_POINTS)?;
+        Ok(Snapshot {
+            partition,
+            partitions,
+            chunk,
+            chunks,
+            frame,
+            seconds,
+            sequence,
+            records,
+        })
+    }
+}
+
 impl Batch {
     /// The payload.
     pub fn encode(&self) -> Vec<u8> {
@@ -129,12 +236,7 @@ impl Batch {
         out.extend_from_slice(&self.partitions.to_le_bytes());
         out.extend_from_slice(&self.frame.to_le_bytes());
         out.extend_from_slice(&self.seconds.to_le_bytes());
-        out.extend_from_slice(&(self.records.len() as u32).to_le_bytes());
-        for r in &self.records {
-            for v in [r.instance, r.index, r.bits] {
-                out.extend_from_slice(&v.to_le_bytes());
-            }
-        }
+        put_records(&mut out, &self.records);
         out
     }
 
@@ -156,15 +258,7 @@ impl Batch {
         if !seconds.is_finite() {
             return Err(fail(r.what, "non-finite scene time"));
         }
-        let n = r.count(RECORD_BYTES, usize::MAX)?;
-        let mut records = Vec::with_capacity(n);
-        for _ in 0..n {
-            records.push(PointRecord {
-                instance: r.u32()?,
-                index: r.u32()?,
-                bits: r.u32()?,
-            });
-        }
+        let records = r.records(usize::MAX)?;
         Ok(Batch {
             partition,
             partitions,
@@ -258,6 +352,20 @@ mod tests {
         }
     }
 
+    fn snapshot() -> Snapshot {
+        let b = batch();
+        Snapshot {
+            partition: 2,
+            partitions: 3,
+            chunk: 1,
+            chunks: 4,
+            frame: 64,
+            seconds: 2.1,
+            sequence: 190,
+            records: b.records,
+        }
+    }
+
     fn views() -> ViewSet {
         let v = |x: f32| View {
             camera: Camera::look_at(Vec3::new(x, 1.0, 2.0), Vec3::ZERO, 55.0),
@@ -281,17 +389,26 @@ mod tests {
             ..batch()
         };
         assert_eq!(Batch::decode(&empty.encode()), Ok(empty));
+        let s = snapshot();
+        assert_eq!(Snapshot::decode(&s.encode()), Ok(s));
     }
 
     #[test]
     fn every_truncation_and_corruption_is_an_error() {
-        let (b, v) = (batch().encode(), views().encode());
-        for bytes in [&b, &v] {
+        let (b, v, s) = (batch().encode(), views().encode(), snapshot().encode());
+        for bytes in [&b, &v, &s] {
             for n in 0..bytes.len() {
                 assert!(Batch::decode(&bytes[..n]).is_err());
                 assert!(ViewSet::decode(&bytes[..n]).is_err());
+                assert!(Snapshot::decode(&bytes[..n]).is_err());
             }
         }
+        let mut wrong = s.clone();
+        wrong[13..17].copy_from_slice(&4u32.to_le_bytes());
+        assert!(Snapshot::decode(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("chunk 4 of 4"));
         let mut wrong = b.clone();
         wrong[0] = b'X';
         assert!(Batch::decode(&wrong)
@@ -326,6 +443,20 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("non-finite"));
+    }
+
+    #[test]
+    fn the_largest_snapshot_chunk_is_accepted_and_one_more_record_refused() {
+        let mut s = snapshot();
+        s.records = vec![s.records[0]; CHUNK_POINTS];
+        let bytes = s.encode();
+        assert!(bytes.len() < 1 << 20, "under NATS's default payload limit");
+        assert_eq!(
+            Snapshot::decode(&bytes).unwrap().records.len(),
+            CHUNK_POINTS
+        );
+        s.records.push(s.records[0]);
+        assert!(Snapshot::decode(&s.encode()).is_err());
     }
 
     #[test]

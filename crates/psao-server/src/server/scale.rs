@@ -45,16 +45,24 @@ impl Server {
     /// order). `count` is clamped to 1..=[`crate::partition::MAX_PARTITIONS`].
     pub fn owners(&self, count: u32) -> Owners {
         let count = count.clamp(1, crate::partition::MAX_PARTITIONS);
-        let blocks: Vec<Vec<&[u32]>> = self
+        let owned: Vec<Vec<Vec<u32>>> = self
             .instances
             .iter()
             .map(|inst| {
                 let b = &inst.blocks;
                 b.blocks
                     .iter()
-                    .map(|blk| &b.order[blk.start as usize..blk.end as usize])
+                    .map(|blk| {
+                        b.order
+                            .range(blk.start as usize..blk.end as usize)
+                            .collect()
+                    })
                     .collect()
             })
+            .collect();
+        let blocks: Vec<Vec<&[u32]>> = owned
+            .iter()
+            .map(|inst| inst.iter().map(Vec::as_slice).collect())
             .collect();
         let points: Vec<usize> = self
             .instances
@@ -158,39 +166,71 @@ impl Server {
     ) -> Result<StepStats, ServerError> {
         self.validate_records(records)?;
         let start = std::time::Instant::now();
-        let advanced = self.dynamics.advance(
-            time,
-            &mut self.tracer,
-            &mut self.instances,
-            self.radius,
-            self.radius * self.config.thresholds.ao,
-        )?;
-        self.refresh_summaries(&advanced.restarted, &advanced.moved);
+        let advanced = self.pose(time)?;
         self.frame += 1;
-        let frame = self.frame;
-        let mut sorted = records.to_vec();
-        sorted.sort_unstable();
-        for run in sorted.chunk_by(|a, b| a.instance == b.instance) {
-            let inst = &mut self.instances[run[0].instance as usize];
-            let updates: Vec<(u32, u32)> = run.iter().map(|r| (r.index, r.bits)).collect();
-            apply(inst, &updates, frame);
-        }
-        for inst in &mut self.instances {
-            if !inst.pending_cells.is_empty() {
-                apply(inst, &[], frame);
-            }
-        }
-        let forget = frame.saturating_sub(self.history_frames);
-        for inst in &mut self.instances {
-            inst.changes.forget_through(forget);
-        }
+        let published = self.publish_runs(runs(records));
         Ok(StepStats {
-            published_points: records.len(),
+            published_points: published,
             moved_instances: advanced.stats.moved_instances,
             publish_ms: start.elapsed().as_secs_f64() * 1e3,
             ms: start.elapsed().as_secs_f64() * 1e3,
             ..StepStats::default()
         })
+    }
+
+    /// The published records of partition `k`'s stored points, in (instance, index)
+    /// order, cut into chunks of `chunk_points` of the partition's points each (published or
+    /// not, so a chunk names the same points every time): a trace node's snapshot of the
+    /// partition. Empty when this server holds no partitions.
+    pub fn partition_records(&self, k: u32, chunk_points: usize) -> Vec<Vec<PointRecord>> {
+        let Some(held) = &self.held else {
+            return Vec::new();
+        };
+        let chunk_points = chunk_points.max(1);
+        let mut chunks: Vec<Vec<PointRecord>> = Vec::new();
+        let mut ordinal = 0usize;
+        for (i, inst) in self.instances.iter().enumerate() {
+            let p = &inst.points;
+            for j in 0..p.position.len() {
+                if held.owners.owner(i as u32, j as u32) != k {
+                    continue;
+                }
+                if ordinal.is_multiple_of(chunk_points) {
+                    chunks.push(Vec::new());
+                }
+                ordinal += 1;
+                if p.published[j] != 0 && p.slot[j] != NONE {
+                    chunks.last_mut().expect("pushed above").push(PointRecord {
+                        instance: i as u32,
+                        index: j as u32,
+                        bits: p.published[j],
+                    });
+                }
+            }
+        }
+        chunks
+    }
+
+    /// Start a fresh replica at server frame `frame` (scene time `time`) from the published
+    /// `records` of every point at that frame (the snapshots of every partition): pose the
+    /// scene, publish them, and continue with [`Server::step_replica`] for `frame + 1`.
+    /// Refuses a replica that stepped already, and malformed records.
+    pub fn restore_replica(
+        &mut self,
+        frame: u64,
+        time: f32,
+        records: &[PointRecord],
+    ) -> Result<usize, ServerError> {
+        if self.frame != 0 {
+            return Err(ServerError::Records(format!(
+                "a snapshot restores a fresh replica, not one at frame {}",
+                self.frame
+            )));
+        }
+        self.validate_records(records)?;
+        self.pose(time)?;
+        self.frame = frame;
+        Ok(self.publish_runs(runs(records)))
     }
 
     /// Refuses records naming a point that does not exist or is not stored, zero records,
@@ -279,6 +319,21 @@ impl Server {
     }
 }
 
+/// `records` sorted and grouped per instance as (point, record) pairs.
+fn runs(records: &[PointRecord]) -> Vec<(u32, Vec<(u32, u32)>)> {
+    let mut sorted = records.to_vec();
+    sorted.sort_unstable();
+    sorted
+        .chunk_by(|a, b| a.instance == b.instance)
+        .map(|run| {
+            (
+                run[0].instance,
+                run.iter().map(|r| (r.index, r.bits)).collect(),
+            )
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -348,7 +403,7 @@ mod tests {
     fn same_grids(a: &Server, b: &Server) -> bool {
         (0..a.instance_count()).all(|i| {
             let (x, y) = (a.grid(i).unwrap(), b.grid(i).unwrap());
-            x.cells() == y.cells() && x.buckets() == y.buckets()
+            x.cells().eq(y.cells()) && x.buckets().eq(y.buckets())
         })
     }
 
@@ -391,12 +446,7 @@ mod tests {
         assert!(whole_rays > 0);
         assert_eq!(node_rays, whole_rays, "the nodes share the rays");
         assert!(same_grids(&whole, &replica));
-        assert!(whole
-            .grid(0)
-            .unwrap()
-            .buckets()
-            .iter()
-            .any(|b| !b.is_empty()));
+        assert!(whole.grid(0).unwrap().buckets().any(|b| !b.is_empty()));
     }
 
     #[test]
@@ -445,6 +495,53 @@ mod tests {
         }
         // The replica shows what the survivor published for both partitions.
         assert!(same_grids(&survivor, &replica));
+    }
+
+    #[test]
+    fn a_replica_restored_from_snapshots_equals_one_that_saw_every_frame() {
+        let scene = scene();
+        let probe = Server::new(&scene, config()).unwrap();
+        let owners = probe.owners(2);
+        let mut nodes: Vec<Server> = (0..2)
+            .map(|k| {
+                let mut s = Server::new(&scene, config()).unwrap();
+                s.hold_partitions(owners.clone(), &[k]);
+                s
+            })
+            .collect();
+        let mut full = Server::new(&scene, config()).unwrap();
+        let mut late = Server::new(&scene, config()).unwrap();
+        let step = |nodes: &mut Vec<Server>, frame: u32| {
+            let mut all = Vec::new();
+            for node in nodes.iter_mut() {
+                node.step_at(&[view(frame)], 0.0).unwrap();
+                all.extend(node.take_records());
+            }
+            all
+        };
+        for frame in 0..8u32 {
+            full.step_replica(0.0, &step(&mut nodes, frame)).unwrap();
+        }
+        // Chunks of 5 points: each partition's points split over several chunks.
+        let chunks: Vec<Vec<PointRecord>> = (0..2)
+            .flat_map(|k| nodes[k as usize].partition_records(k, 5))
+            .collect();
+        let per = owners.points_per_partition();
+        assert_eq!(chunks.len() as u64, per[0].div_ceil(5) + per[1].div_ceil(5));
+        assert!(chunks.iter().all(|c| c.len() <= 5));
+        let records = chunks.concat();
+        assert!(!records.is_empty());
+        late.restore_replica(8, 0.0, &records).unwrap();
+        assert!(same_grids(&full, &late), "restored at frame 8");
+        let e = late.restore_replica(8, 0.0, &records).unwrap_err();
+        assert!(e.to_string().contains("fresh replica"), "{e}");
+        for frame in 8..12u32 {
+            let records = step(&mut nodes, frame);
+            full.step_replica(0.0, &records).unwrap();
+            late.step_replica(0.0, &records).unwrap();
+        }
+        assert_eq!(late.frame(), full.frame());
+        assert!(same_grids(&full, &late), "and after the live frames");
     }
 
     #[test]
