@@ -27,7 +27,7 @@ for (let round = 0; round < ROUNDS; round++) {
     const m = decodeFrame(frame);
     if (m.kind === "welcome") {
       state = new ClientState(m.welcome.instances);
-      decoder = new CompactDecoder(decodeLimit(m.welcome.instances), m.welcome.instances.map((e) => e.bucketCount));
+      decoder = new CompactDecoder(decodeLimit(m.welcome.instances), m.welcome.instances.map((e) => e.bucketCount), state);
     } else if ((m.kind === "delta" || m.kind === "snapshot") && state && decoder) {
       const t = performance.now();
       state.apply(decoder.decode(m.delta.payload));

@@ -773,14 +773,30 @@
     b.set(a);
     return b;
   }
-  var Received = class {
-    constructor(maxBucketWords, maxPointWords) {
-      this.maxBucketWords = maxBucketWords;
-      this.maxPointWords = maxPointWords;
-      this.lo = new Uint32Array(0);
-      this.hi = new Uint32Array(0);
-      this.slots = new Uint32Array(0);
-      this.points = new Uint32Array(0);
+  var OwnReferences = class {
+    constructor(limit, bucketCounts) {
+      this.limit = limit;
+      this.bucketCounts = bucketCounts;
+      this.isClientState = false;
+      this.received = /* @__PURE__ */ new Map();
+    }
+    clear() {
+      this.received.clear();
+    }
+    referenceOf(instance) {
+      let r = this.received.get(instance);
+      if (!r) {
+        let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
+        if (this.bucketCounts) {
+          if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
+          buckets = this.bucketCounts[instance];
+        }
+        const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
+        const empty = new Uint32Array(0);
+        r = { keyLo: empty, keyHi: empty, slots: empty, points: empty, maxBucketWords: buckets * BUCKET_ENTRIES, maxPointWords: maxPoints };
+        this.received.set(instance, r);
+      }
+      return r;
     }
   };
   function decodeCount(code, old, capacity, at, plane, what) {
@@ -793,17 +809,17 @@
   var CompactDecoder = class {
     /// Most decompressed bytes accepted per update (a client sets it from its instance table),
     /// and the instances' bucket counts when known (indices beyond them are refused; without
-    /// them the reference arrays are bounded by the limit).
-    constructor(limit = MAX_DECODED_BYTES, bucketCounts = null) {
+    /// them the reference arrays are bounded by the limit). With `store` (the client state),
+    /// the references are the client's grids and every update is decoded into them.
+    constructor(limit = MAX_DECODED_BYTES, bucketCounts = null, store = null) {
       this.limit = limit;
-      this.bucketCounts = bucketCounts;
       this.transforms = /* @__PURE__ */ new Map();
-      this.received = /* @__PURE__ */ new Map();
       this.limit = Math.min(limit, MAX_DECODE_LIMIT);
+      this.references = store ?? new OwnReferences(this.limit, bucketCounts);
     }
     clear() {
       this.transforms.clear();
-      this.received.clear();
+      this.references.clear();
     }
     /// Decodes one update. After an error the state is undefined: the session must restart.
     decode(bytes) {
@@ -826,25 +842,6 @@
       if (snapshot) this.clear();
       return this.assemble(layout, s, frame, snapshot);
     }
-    receivedOf(instance) {
-      let r = this.received.get(instance);
-      if (!r) {
-        let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
-        if (this.bucketCounts) {
-          if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
-          buckets = this.bucketCounts[instance];
-        }
-        const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
-        r = new Received(buckets * BUCKET_ENTRIES, maxPoints);
-        if (this.bucketCounts) {
-          r.lo = new Uint32Array(r.maxBucketWords);
-          r.hi = new Uint32Array(r.maxBucketWords);
-          r.slots = new Uint32Array(r.maxBucketWords);
-        }
-        this.received.set(instance, r);
-      }
-      return r;
-    }
     assemble(layout, s, frame, snapshot) {
       const transforms = layout.transforms.map((instance, k) => {
         const old = this.transforms.get(instance) ?? new Uint32Array(TRANSFORM_WORDS);
@@ -859,7 +856,7 @@
       let point = 0;
       const instances = [];
       for (const { instance, buckets: bucketIds, cells: slotIds } of layout.instances) {
-        const r = this.receivedOf(instance);
+        const r = this.references.referenceOf(instance);
         const nb = bucketIds.length;
         const lo = new Uint32Array(nb * BUCKET_ENTRIES);
         const hi = new Uint32Array(nb * BUCKET_ENTRIES);
@@ -868,11 +865,11 @@
           const b = bucketIds[k];
           const base = b * BUCKET_ENTRIES;
           const end = base + BUCKET_ENTRIES;
-          r.lo = grown(r.lo, end, r.maxBucketWords, `bucket ${b}`);
-          r.hi = grown(r.hi, end, r.maxBucketWords, `bucket ${b}`);
+          r.keyLo = grown(r.keyLo, end, r.maxBucketWords, `bucket ${b}`);
+          r.keyHi = grown(r.keyHi, end, r.maxBucketWords, `bucket ${b}`);
           r.slots = grown(r.slots, end, r.maxBucketWords, `bucket ${b}`);
           const code = s.entryCounts[entryCount++];
-          const n = decodeCount(code, usedEntries(r.lo, r.hi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
+          const n = decodeCount(code, usedEntries(r.keyLo, r.keyHi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
           const out = k * BUCKET_ENTRIES;
           for (let i = 0; i < n; i++) {
             const c = s.entryChoices[entry];
@@ -886,11 +883,11 @@
               slot = slotIds[sr];
             } else if (c < RANK_CHOICE) {
               const o = base + (i + c) % BUCKET_ENTRIES;
-              const rLo = r.lo[o];
-              const rHi = r.hi[o];
-              if (rLo !== 0 || rHi !== 0) {
-                const mLo = rLo === 0 ? 4294967295 : rLo - 1;
-                const mHi = rLo === 0 ? rHi - 1 : rHi;
+              const rLo2 = r.keyLo[o];
+              const rHi2 = r.keyHi[o];
+              if (rLo2 !== 0 || rHi2 !== 0) {
+                const mLo = rLo2 === 0 ? 4294967295 : rLo2 - 1;
+                const mHi = rLo2 === 0 ? rHi2 - 1 : rHi2;
                 tLo = (tLo ^ mLo ^ b) >>> 0;
                 tHi = (tHi ^ mHi) >>> 0;
               }
@@ -904,9 +901,14 @@
             hi[out + i] = xLo === 4294967295 ? tHi + 1 : tHi;
             slots[out + i] = slot;
           }
-          r.lo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
-          r.hi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
-          r.slots.set(slots.subarray(out, out + BUCKET_ENTRIES), base);
+          const rLo = r.keyLo;
+          const rHi = r.keyHi;
+          const rSlots = r.slots;
+          for (let i = 0; i < BUCKET_ENTRIES; i++) {
+            rLo[base + i] = lo[out + i];
+            rHi[base + i] = hi[out + i];
+            rSlots[base + i] = slots[out + i];
+          }
         }
         const nc = slotIds.length;
         const pts = new Uint32Array(nc * CELL_POINTS);
@@ -927,7 +929,7 @@
             const reference = c < CELL_POINTS ? old[base + (i + c) % CELL_POINTS] : k > 0 ? pts[out - CELL_POINTS + c - CELL_POINTS] : EMPTY_CELL[0];
             pts[out + i] = applyPointResidual(residual, reference);
           }
-          old.set(pts.subarray(out, out + CELL_POINTS), base);
+          for (let i = 0; i < CELL_POINTS; i++) old[base + i] = pts[out + i];
         }
         instances.push({
           instance,
@@ -942,7 +944,7 @@
       if (entry !== s.entryChoices.length || point !== s.pointChoices.length) {
         throw new DeltaError(`${s.entryChoices.length - entry + s.pointChoices.length - point} trailing records`);
       }
-      return { frame, snapshot, transforms, instances };
+      return { frame, snapshot, transforms, instances, inPlace: this.references.isClientState };
     }
   };
   function parseIndex(bytes) {
@@ -1009,8 +1011,10 @@
   var Grid = class {
     constructor(entry) {
       this.entry = entry;
-      /// Cell slots in use (the length `points` covers).
+      /// Cell slots in use (at most the length `points` covers).
       this.slotCount = 0;
+      this.maxBucketWords = entry.bucketCount * BUCKET_ENTRIES;
+      this.maxPointWords = this.maxBucketWords * CELL_POINTS;
       this.keyLo = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
       this.keyHi = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
       this.slots = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
@@ -1021,7 +1025,7 @@
       this.keyLo.fill(0);
       this.keyHi.fill(0);
       this.slots.fill(0);
-      this.points.fill(0, 0, this.slotCount * CELL_POINTS);
+      this.points.fill(0);
       this.slotCount = 0;
     }
     /// Most cell slots the layout allows.
@@ -1032,7 +1036,8 @@
       if (slot < this.slotCount) return;
       this.slotCount = slot + 1;
       if (this.points.length < this.slotCount * CELL_POINTS) {
-        const grown2 = new Uint32Array(Math.max(this.slotCount, 2 * (this.points.length / CELL_POINTS)) * CELL_POINTS);
+        const cells = Math.min(Math.max(this.slotCount, 2 * Math.floor(this.points.length / CELL_POINTS)), Math.max(this.slotCount, this.maxCells()));
+        const grown2 = new Uint32Array(cells * CELL_POINTS);
         grown2.set(this.points);
         this.points = grown2;
       }
@@ -1070,20 +1075,39 @@
   }
   var ClientState = class {
     constructor(table) {
+      this.isClientState = true;
       this.lastFrame = null;
       this.grids = table.map((e) => usable(e) ? new Grid(e) : null);
       this.transforms = table.map(() => null);
     }
-    /// Applies a decoded update after checking all of it (nothing changes on an error).
+    /// Instance `instance`'s grid as the decoder's reference.
+    referenceOf(instance) {
+      if (instance >= this.grids.length) throw new DeltaError(`instance ${instance} out of range (${this.grids.length} instances)`);
+      const g = this.grids[instance];
+      if (!g) throw new DeltaError(`instance ${instance} has no grid`);
+      return g;
+    }
+    /// Empties every grid and forgets the transforms (a snapshot follows).
+    clear() {
+      for (const g of this.grids) g?.clear();
+      this.transforms.fill(null);
+    }
+    /// Applies a decoded update after checking all of it. An update decoded elsewhere changes
+    /// nothing on an error; one decoded into this state (`inPlace`) is already in the grids,
+    /// so after an error the state is undefined and the session must restart.
     apply(u) {
       this.validate(u);
-      if (u.snapshot) {
-        for (const g of this.grids) g?.clear();
-        this.transforms.fill(null);
-      }
+      if (u.snapshot && !u.inPlace) this.clear();
       for (const [instance, t] of u.transforms) this.transforms[instance] = t;
       for (const d of u.instances) {
         const g = this.grids[d.instance];
+        if (u.inPlace) {
+          for (let i = 0; i < d.keyLo.length; i++) {
+            if (d.keyLo[i] !== 0 || d.keyHi[i] !== 0) g.ensureSlot(d.slots[i]);
+          }
+          for (let k = 0; k < d.cellSlots.length; k++) g.ensureSlot(d.cellSlots[k]);
+          continue;
+        }
         for (let k = 0; k < d.bucketIds.length; k++) {
           const base = d.bucketIds[k] * BUCKET_ENTRIES;
           const src = k * BUCKET_ENTRIES;
@@ -1575,7 +1599,8 @@
           this.state = new ClientState(w.instances);
           this.decoder = new CompactDecoder(
             decodeLimit(w.instances),
-            w.instances.map((e) => e.bucketCount)
+            w.instances.map((e) => e.bucketCount),
+            this.state
           );
           this.handler.welcome(w);
           return;
@@ -1599,11 +1624,11 @@
           }
           this.ws.send(ackFrame(m.delta.frame));
           this.handler.update(u, size, verified);
-          if (m.delta.clientFrame !== null) this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame);
+          this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame, m.delta.sceneTime);
           return;
         }
         case "scene_time":
-          this.handler.sceneTime?.(m.frame, m.clientFrame);
+          this.handler.sceneTime?.(m.frame, m.clientFrame, m.seconds);
           return;
         case "error": {
           const fatal = m.code === "Token" || m.code === "Version";
@@ -1670,30 +1695,44 @@
 
   // src/grids.ts
   var TEX_WIDTH = 1024;
-  var MIN_CELLS = 64;
+  var CELL_PAGE = 32;
+  var NO_PAGE = 4294967295;
+  var MAX_POOL_TEXELS = 1 << 28;
   var DataTexture = class {
-    constructor(gl2) {
+    constructor(gl2, channels) {
       this.gl = gl2;
-      /// The texture (immutable storage: a resize makes a new one).
+      this.channels = channels;
+      /// The texture (immutable storage: growing makes a new one).
       this.texture = null;
       this.mirror = new Uint32Array(0);
       this.rows = 0;
       this.dirty = new Uint8Array(0);
       this.anyDirty = false;
+      this.stale = true;
     }
-    /// Resizes to hold `texels` (contents zeroed, all rows dirty).
-    resize(texels) {
-      const gl2 = this.gl;
-      this.rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
-      this.mirror = new Uint32Array(this.rows * TEX_WIDTH * 4);
-      this.dirty = new Uint8Array(this.rows).fill(1);
+    /// Words per texel.
+    get words() {
+      return this.channels;
+    }
+    /// Makes room for `texels` (rows doubling), keeping the contents; `fill` initialises new words.
+    ensure(texels, fill2 = 0) {
+      const rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
+      if (rows <= this.rows) return;
+      const grown2 = Math.max(rows, 2 * this.rows);
+      const mirror = new Uint32Array(grown2 * TEX_WIDTH * this.channels);
+      mirror.set(this.mirror);
+      if (fill2 !== 0) mirror.fill(fill2, this.mirror.length);
+      this.mirror = mirror;
+      this.rows = grown2;
+      this.dirty = new Uint8Array(grown2).fill(1);
       this.anyDirty = true;
-      if (this.texture) gl2.deleteTexture(this.texture);
-      this.texture = gl2.createTexture();
-      gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
-      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
-      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
-      gl2.texStorage2D(gl2.TEXTURE_2D, 1, gl2.RGBA32UI, TEX_WIDTH, this.rows);
+      this.stale = true;
+    }
+    /// Sets every word to `value` (rows kept, all dirty).
+    reset(value) {
+      this.mirror.fill(value);
+      this.dirty.fill(1);
+      this.anyDirty = true;
     }
     /// Marks the rows of texels `first..first + count` for upload.
     touch(first, count) {
@@ -1701,11 +1740,28 @@
       for (let r = Math.floor(first / TEX_WIDTH); r <= last; r++) this.dirty[r] = 1;
       this.anyDirty = true;
     }
-    /// Uploads runs of dirty rows; returns the bytes uploaded.
+    /// Bytes of texture storage.
+    bytes() {
+      return this.mirror.byteLength;
+    }
+    /// (Re)creates the texture when it grew, then uploads runs of dirty rows; returns the
+    /// bytes uploaded.
     upload() {
-      if (!this.anyDirty) return 0;
       const gl2 = this.gl;
+      if (this.rows === 0) return 0;
+      if (this.stale) {
+        this.stale = false;
+        if (this.texture) gl2.deleteTexture(this.texture);
+        this.texture = gl2.createTexture();
+        gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
+        gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
+        gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
+        gl2.texStorage2D(gl2.TEXTURE_2D, 1, this.channels === 1 ? gl2.R32UI : gl2.RGBA32UI, TEX_WIDTH, this.rows);
+      }
+      if (!this.anyDirty) return 0;
       gl2.bindTexture(gl2.TEXTURE_2D, this.texture);
+      const format = this.channels === 1 ? gl2.RED_INTEGER : gl2.RGBA_INTEGER;
+      const rowWords = TEX_WIDTH * this.channels;
       let bytes = 0;
       for (let r = 0; r < this.rows; ) {
         if (!this.dirty[r]) {
@@ -1714,8 +1770,8 @@
         }
         let end = r;
         while (end < this.rows && this.dirty[end]) this.dirty[end++] = 0;
-        const data = this.mirror.subarray(r * TEX_WIDTH * 4, end * TEX_WIDTH * 4);
-        gl2.texSubImage2D(gl2.TEXTURE_2D, 0, 0, r, TEX_WIDTH, end - r, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, data);
+        const data = this.mirror.subarray(r * rowWords, end * rowWords);
+        gl2.texSubImage2D(gl2.TEXTURE_2D, 0, 0, r, TEX_WIDTH, end - r, format, gl2.UNSIGNED_INT, data);
         bytes += data.byteLength;
         r = end;
       }
@@ -1723,6 +1779,35 @@
       return bytes;
     }
   };
+  var ChunkPool = class {
+    constructor() {
+      this.end = 0;
+      this.free = [[], [], [], []];
+    }
+    /// Forgets every chunk.
+    clear() {
+      this.end = 0;
+      for (const f of this.free) f.length = 0;
+    }
+    /// A chunk of size class `c` (2^c texels); returns its first texel.
+    alloc(c) {
+      const reused = this.free[c].pop();
+      if (reused !== void 0) return reused;
+      const first = this.end;
+      this.end += 1 << c;
+      return first;
+    }
+    release(first, c) {
+      this.free[c].push(first);
+    }
+    /// Texels in use or free (the pool's high-water mark).
+    get texels() {
+      return this.end;
+    }
+  };
+  function sizeClass(count) {
+    return count <= 1 ? 0 : count <= 2 ? 1 : count <= 4 ? 2 : 3;
+  }
   var GridTextures = class {
     constructor(gl2) {
       this.gl = gl2;
@@ -1734,97 +1819,375 @@
       this.rebuilds = 0;
       this.state = null;
       this.stale = true;
-      this.buckets = new DataTexture(gl2);
-      this.cells = new DataTexture(gl2);
+      this.pool = new ChunkPool();
+      /// Pages of cells allocated (0 until the grids hold points).
+      this.cellPages = 0;
+      this.directory = new DataTexture(gl2, 1);
+      this.entries = new DataTexture(gl2, 4);
+      this.pageTable = new DataTexture(gl2, 1);
+      this.cells = new DataTexture(gl2, 4);
     }
-    /// Follows a new session's (empty) state.
+    /// Follows a new session's (empty) state: lays out its directory and page table.
     reset(state) {
       this.state = state;
       this.stale = true;
+      let buckets = 0;
+      let pages = 0;
+      this.slots = state.grids.map((g) => {
+        if (!g) return null;
+        const s = { bucketBase: buckets, cellPageBase: pages, maxCells: g.maxCells() };
+        buckets += g.entry.bucketCount;
+        pages += Math.ceil(g.maxCells() / CELL_PAGE);
+        return s;
+      });
+      const maxRows = this.gl.getParameter(this.gl.MAX_TEXTURE_SIZE);
+      const rows = Math.ceil(Math.max(buckets, pages) / TEX_WIDTH);
+      this.problem = rows > maxRows ? `the grids need ${rows} texture rows, this GPU allows ${maxRows}: AO not drawn` : null;
+      if (this.problem) {
+        this.slots = state.grids.map(() => null);
+        return;
+      }
+      this.directory.ensure(buckets);
+      this.pageTable.ensure(pages, NO_PAGE);
     }
     /// Mirrors one applied update (call after `state.apply(u)`).
     apply(u) {
       const state = this.state;
-      if (!state || this.stale || u.snapshot) {
+      if (!state || this.stale || u.snapshot || this.problem) {
         this.stale = true;
         return;
       }
       for (const d of u.instances) {
         const slot = this.slots[d.instance];
         const grid = state.grids[d.instance];
-        if (!slot || !grid || grid.slotCount > slot.cellCapacity) {
-          this.stale = true;
-          return;
-        }
-        const bm = this.buckets.mirror;
-        for (let k = 0; k < d.bucketIds.length; k++) {
-          const first = slot.bucketBase + d.bucketIds[k] * BUCKET_ENTRIES;
-          for (let e = 0; e < BUCKET_ENTRIES; e++) {
-            const o = (first + e) * 4;
-            const src = k * BUCKET_ENTRIES + e;
-            bm[o] = d.keyLo[src];
-            bm[o + 1] = d.keyHi[src];
-            bm[o + 2] = d.slots[src];
-          }
-          this.buckets.touch(first, BUCKET_ENTRIES);
-        }
-        const cm = this.cells.mirror;
-        for (let k = 0; k < d.cellSlots.length; k++) {
-          const first = 2 * (slot.cellBase + d.cellSlots[k]);
-          cm.set(d.points.subarray(k * CELL_POINTS, (k + 1) * CELL_POINTS), first * 4);
-          this.cells.touch(first, 2);
-        }
+        if (!slot || !grid) continue;
+        for (let k = 0; k < d.bucketIds.length; k++) this.setBucket(grid, slot, d.bucketIds[k]);
+        for (let k = 0; k < d.cellSlots.length; k++) this.setCell(grid, slot, d.cellSlots[k]);
       }
     }
     /// Brings the textures up to date (a full rebuild when needed) and binds nothing.
     upload() {
+      if (this.problem) return;
       if (this.stale && this.state) this.rebuild(this.state);
-      this.uploadedBytes += this.buckets.upload() + this.cells.upload();
+      this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload();
+    }
+    /// Bytes of texture storage in use.
+    textureBytes() {
+      return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes();
+    }
+    /// Bucket `b` of `grid` as the state holds it: its used entries into a chunk of the pool.
+    setBucket(grid, slot, b) {
+      const at = slot.bucketBase + b;
+      const dir = this.directory.mirror;
+      const old = dir[at];
+      const oldCount = old & 15;
+      const base = b * BUCKET_ENTRIES;
+      let count = 0;
+      for (let e = 0; e < BUCKET_ENTRIES; e++) if (grid.keyLo[base + e] !== 0 || grid.keyHi[base + e] !== 0) count++;
+      let first = old >>> 4;
+      if (oldCount > 0 && (count === 0 || sizeClass(count) !== sizeClass(oldCount))) {
+        this.pool.release(first, sizeClass(oldCount));
+      }
+      if (count > 0 && (oldCount === 0 || sizeClass(count) !== sizeClass(oldCount))) {
+        first = this.pool.alloc(sizeClass(count));
+        if (this.pool.texels > MAX_POOL_TEXELS) {
+          this.problem = "the bucket entries outgrew the entry pool: AO not drawn";
+          return;
+        }
+        this.entries.ensure(this.pool.texels);
+      }
+      const m = this.entries.mirror;
+      let o = first * 4;
+      for (let e = 0; e < BUCKET_ENTRIES; e++) {
+        const lo = grid.keyLo[base + e];
+        const hi = grid.keyHi[base + e];
+        if (lo === 0 && hi === 0) continue;
+        m[o] = lo;
+        m[o + 1] = hi;
+        m[o + 2] = grid.slots[base + e];
+        o += 4;
+      }
+      if (count > 0) this.entries.touch(first, count);
+      dir[at] = count === 0 ? 0 : (first << 4 | count) >>> 0;
+      this.directory.touch(at, 1);
+    }
+    /// Cell slot `s` of `grid` as the state holds it, into its page (allocated when it first
+    /// holds points).
+    setCell(grid, slot, s) {
+      if (s >= slot.maxCells) return;
+      const at = slot.cellPageBase + Math.floor(s / CELL_PAGE);
+      const table = this.pageTable.mirror;
+      let page = table[at];
+      const src = s * CELL_POINTS;
+      if (page === NO_PAGE) {
+        let any = false;
+        for (let i = 0; i < CELL_POINTS; i++) if (grid.points[src + i] !== 0) any = true;
+        if (!any) return;
+        page = this.cellPages++;
+        table[at] = page;
+        this.pageTable.touch(at, 1);
+        this.cells.ensure(2 * CELL_PAGE * this.cellPages);
+      }
+      const texel = 2 * (page * CELL_PAGE + s % CELL_PAGE);
+      const m = this.cells.mirror;
+      for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = grid.points[src + i] ?? 0;
+      m[texel * 4 + 7] = 0;
+      this.cells.touch(texel, 2);
     }
     rebuild(state) {
       this.stale = false;
       this.rebuilds++;
-      const gl2 = this.gl;
-      const maxRows = gl2.getParameter(gl2.MAX_TEXTURE_SIZE);
-      let bucketTexels = 0;
-      let cellSlots = 0;
-      this.slots = state.grids.map((g) => {
-        if (!g) return null;
-        let capacity = MIN_CELLS;
-        while (capacity < g.slotCount) capacity *= 2;
-        capacity = Math.min(capacity, Math.max(g.maxCells(), g.slotCount));
-        const s = { bucketBase: bucketTexels, cellBase: cellSlots, cellCapacity: capacity };
-        bucketTexels += g.entry.bucketCount * BUCKET_ENTRIES;
-        cellSlots += capacity;
-        return s;
-      });
-      const rows = Math.max(bucketTexels, 2 * cellSlots) / TEX_WIDTH;
-      if (rows > maxRows) {
-        this.problem = `the grids need ${Math.ceil(rows)} texture rows, this GPU allows ${maxRows}: AO not drawn`;
-        this.slots = state.grids.map(() => null);
-        return;
-      }
-      this.problem = null;
-      this.buckets.resize(bucketTexels);
-      this.cells.resize(2 * cellSlots);
-      const bm = this.buckets.mirror;
-      const cm = this.cells.mirror;
+      this.pool.clear();
+      this.cellPages = 0;
+      this.directory.reset(0);
+      this.pageTable.reset(NO_PAGE);
       state.grids.forEach((g, k) => {
         const slot = this.slots[k];
         if (!g || !slot) return;
         const n = g.entry.bucketCount * BUCKET_ENTRIES;
         for (let e = 0; e < n; e++) {
-          const o = (slot.bucketBase + e) * 4;
-          bm[o] = g.keyLo[e];
-          bm[o + 1] = g.keyHi[e];
-          bm[o + 2] = g.slots[e];
+          if (g.keyLo[e] === 0 && g.keyHi[e] === 0) continue;
+          const b = Math.floor(e / BUCKET_ENTRIES);
+          this.setBucket(g, slot, b);
+          e = (b + 1) * BUCKET_ENTRIES - 1;
         }
-        for (let s = 0; s < g.slotCount; s++) {
-          cm.set(g.points.subarray(s * CELL_POINTS, (s + 1) * CELL_POINTS), 8 * (slot.cellBase + s));
-        }
+        for (let s = 0; s < g.slotCount; s++) this.setCell(g, slot, s);
       });
     }
   };
+
+  // src/skin.ts
+  var JOINT_TEXELS = 7;
+  var Animation = class {
+    constructor(doc, instances, read) {
+      this.clips = [];
+      this.rigs = [];
+      const nodes = doc.nodes ?? [];
+      this.rest = nodes.map((n) => ({ t: n.translation ?? [0, 0, 0], r: n.rotation ?? [0, 0, 0, 1], s: n.scale ?? [1, 1, 1] }));
+      this.parents = nodes.map(() => null);
+      nodes.forEach((n, p) => n.children?.forEach((c) => this.parents[c] = p));
+      this.order = parentsFirst(this.parents);
+      for (const a of (doc.extras?.psao_playing ?? []).map((k) => doc.animations?.[k])) {
+        if (!a) continue;
+        const channels = [];
+        for (const ch of a.channels) {
+          const s = a.samplers[ch.sampler];
+          if (!s || ch.target.node === void 0 || !["translation", "rotation", "scale"].includes(ch.target.path)) continue;
+          channels.push({
+            node: ch.target.node,
+            path: ch.target.path,
+            interpolation: s.interpolation ?? "LINEAR",
+            times: Float32Array.from(read(s.input)),
+            values: Float32Array.from(read(s.output))
+          });
+        }
+        const duration = channels.reduce((d, c) => Math.max(d, c.times.length ? c.times[c.times.length - 1] : 0), 0);
+        this.clips.push({ duration, channels });
+      }
+      this.jointBase = new Int32Array(instances).fill(-1);
+      let base = 0;
+      for (let i = 0; i < Math.min(instances, nodes.length); i++) {
+        const n = nodes[i];
+        const skin = n.skin !== void 0 ? doc.skins?.[n.skin] : void 0;
+        if (!n.extras?.psao_skinned || !skin) continue;
+        const ibm = skin.inverseBindMatrices !== void 0 ? read(skin.inverseBindMatrices) : null;
+        const inverseBind = skin.joints.map(
+          (_, j) => ibm ? Float64Array.from(ibm.subarray(16 * j, 16 * j + 16)) : identity()
+        );
+        this.rigs.push({
+          instance: i,
+          joints: skin.joints,
+          inverseBind,
+          node: n.extras.psao_node ?? null,
+          rest: Float64Array.from(n.matrix ?? identity()),
+          base
+        });
+        this.jointBase[i] = base;
+        base += skin.joints.length;
+      }
+      this.jointCount = base;
+    }
+    /// Whether any instance is skinned.
+    get skinned() {
+      return this.rigs.length > 0;
+    }
+    /// Every rig's joint matrices at scene time `time` (seconds), `JOINT_TEXELS` RGBA texels
+    /// per joint from `jointBase[instance]`.
+    jointTexels(time) {
+      const world = this.worlds(time);
+      const out = new Float32Array(Math.max(1, this.jointCount) * JOINT_TEXELS * 4);
+      for (const rig of this.rigs) {
+        const own = rig.node !== null && world[rig.node] ? world[rig.node] : rig.rest;
+        const toLocal = invertOrIdentity(own);
+        rig.joints.forEach((j, k) => {
+          const m = mul(mul(toLocal, world[j] ?? identity()), rig.inverseBind[k]);
+          const at = (rig.base + k) * JOINT_TEXELS * 4;
+          out.set(m, at);
+          out.set(normalMatrix(m), at + 16);
+        });
+      }
+      return out;
+    }
+    /// World transforms of all nodes at `time` (psao-scene's `node_worlds`, without walkers).
+    worlds(time) {
+      const local = this.rest.map((n) => ({ t: n.t.slice(), r: n.r.slice(), s: n.s.slice() }));
+      for (const clip of this.clips) {
+        const t = clip.duration > 0 ? remEuclid(time, clip.duration) : 0;
+        for (const ch of clip.channels) {
+          const slot = local[ch.node];
+          if (!slot) continue;
+          const v = sample(ch, t);
+          if (ch.path === "rotation") slot.r = v;
+          else if (ch.path === "scale") slot.s = v;
+          else slot.t = v;
+        }
+      }
+      const world = new Array(local.length);
+      for (const n of this.order) {
+        const l = trs(local[n].t, local[n].r, local[n].s);
+        const p = this.parents[n];
+        world[n] = p === null ? l : mul(world[p], l);
+      }
+      return world;
+    }
+  };
+  function remEuclid(a, b) {
+    const r = a % b;
+    return r < 0 ? r + b : r;
+  }
+  function parentsFirst(parents) {
+    const children = parents.map(() => []);
+    parents.forEach((p, i) => p !== null && children[p]?.push(i));
+    const order = parents.flatMap((p, i) => p === null ? [i] : []);
+    for (let k = 0; k < order.length; k++) order.push(...children[order[k]]);
+    return order;
+  }
+  function sample(ch, t) {
+    const w = ch.path === "rotation" ? 4 : 3;
+    const cubic = ch.interpolation === "CUBICSPLINE";
+    const valueAt = (k, part = 1) => {
+      const start = cubic ? (3 * k + part) * w : k * w;
+      return Array.from(ch.values.subarray(start, start + w));
+    };
+    const times = ch.times;
+    let next = 0;
+    while (next < times.length && times[next] <= t) next++;
+    let raw;
+    if (next === 0) raw = valueAt(0);
+    else if (next === times.length) raw = valueAt(times.length - 1);
+    else {
+      const k = next - 1;
+      const dt = times[k + 1] - times[k];
+      const s = (t - times[k]) / dt;
+      if (ch.interpolation === "STEP") raw = valueAt(k);
+      else if (ch.interpolation === "LINEAR") {
+        if (ch.path === "rotation") return normalize(slerp(normalize(valueAt(k)), normalize(valueAt(k + 1)), s));
+        const a = valueAt(k);
+        const b = valueAt(k + 1);
+        raw = a.map((x, i) => x + (b[i] - x) * s);
+      } else {
+        const p0 = valueAt(k);
+        const m0 = valueAt(k, 2);
+        const p1 = valueAt(k + 1);
+        const m1 = valueAt(k + 1, 0);
+        const s2 = s * s;
+        const s3 = s2 * s;
+        raw = p0.map(
+          (_, i) => p0[i] * (2 * s3 - 3 * s2 + 1) + m0[i] * (dt * (s3 - 2 * s2 + s)) + p1[i] * (-2 * s3 + 3 * s2) + m1[i] * (dt * (s3 - s2))
+        );
+      }
+    }
+    if (ch.path !== "rotation") return raw;
+    const len = Math.hypot(...raw);
+    return len > 0 && Number.isFinite(len) ? raw.map((x) => x / len) : [0, 0, 0, 1];
+  }
+  function normalize(q) {
+    const len = Math.hypot(...q);
+    return q.map((x) => x / len);
+  }
+  function slerp(a, b, s) {
+    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+    let e = b;
+    if (dot < 0) {
+      e = b.map((x) => -x);
+      dot = -dot;
+    }
+    if (dot > 1 - 2 ** -23) return normalize(a.map((x, i) => x * (1 - s) + e[i] * s));
+    const theta = acosApprox(dot);
+    const s1 = Math.sin(theta * (1 - s));
+    const s2 = Math.sin(theta * s);
+    const inv = 1 / Math.sin(theta);
+    return a.map((x, i) => (x * s1 + e[i] * s2) * inv);
+  }
+  function acosApprox(v) {
+    const x = Math.abs(v);
+    const root = Math.sqrt(Math.max(1 - x, 0));
+    const r = ((((((-0.0012624911 * x + 667009e-8) * x - 0.017088126) * x + 0.03089188) * x - 0.050174303) * x + 0.08897899) * x - 0.2145988) * x + 1.5707963;
+    return v >= 0 ? r * root : Math.PI - r * root;
+  }
+  function identity() {
+    const m = new Float64Array(16);
+    m[0] = m[5] = m[10] = m[15] = 1;
+    return m;
+  }
+  function trs(t, q, s) {
+    const [x, y, z, w] = q;
+    const m = identity();
+    const cols = [
+      [1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)],
+      [2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)],
+      [2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)]
+    ];
+    for (let c = 0; c < 3; c++) for (let r = 0; r < 3; r++) m[4 * c + r] = cols[c][r] * s[c];
+    m[12] = t[0];
+    m[13] = t[1];
+    m[14] = t[2];
+    return m;
+  }
+  function mul(a, b) {
+    const out = new Float64Array(16);
+    for (let c = 0; c < 4; c++) {
+      for (let r = 0; r < 4; r++) {
+        let s = 0;
+        for (let k = 0; k < 4; k++) s += a[4 * k + r] * b[4 * c + k];
+        out[4 * c + r] = s;
+      }
+    }
+    return out;
+  }
+  function det3(m) {
+    return m[0] * (m[5] * m[10] - m[6] * m[9]) - m[4] * (m[1] * m[10] - m[2] * m[9]) + m[8] * (m[1] * m[6] - m[2] * m[5]);
+  }
+  function inverse3(m) {
+    const det = det3(m);
+    if (!(det !== 0 && Number.isFinite(det))) return null;
+    const [a, b, c, d, e, f, g, h, i] = [m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]];
+    return [
+      (e * i - f * h) / det,
+      (c * h - b * i) / det,
+      (b * f - c * e) / det,
+      (f * g - d * i) / det,
+      (a * i - c * g) / det,
+      (c * d - a * f) / det,
+      (d * h - e * g) / det,
+      (b * g - a * h) / det,
+      (a * e - b * d) / det
+    ];
+  }
+  function invertOrIdentity(m) {
+    const det = det3(m);
+    if (!(m.every(Number.isFinite) && det !== 0 && Math.abs(det) >= 2 ** -126)) return identity();
+    const inv = inverse3(m);
+    const out = identity();
+    for (let c = 0; c < 3; c++) for (let r = 0; r < 3; r++) out[4 * c + r] = inv[3 * c + r];
+    for (let r = 0; r < 3; r++) out[12 + r] = -(inv[r] * m[12] + inv[3 + r] * m[13] + inv[6 + r] * m[14]);
+    return out;
+  }
+  function normalMatrix(m) {
+    const inv = inverse3(m);
+    if (!inv || !inv.every(Number.isFinite)) return [m[0], m[1], m[2], 0, m[4], m[5], m[6], 0, m[8], m[9], m[10], 0];
+    return [inv[0], inv[3], inv[6], 0, inv[1], inv[4], inv[7], 0, inv[2], inv[5], inv[8], 0];
+  }
 
   // src/aoshader.ts
   var MODE_COMPOSITED = 0;
@@ -1834,16 +2197,44 @@
   var VERTEX = `#version 300 es
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
+layout(location = 2) in uvec4 joints;
+layout(location = 3) in vec4 weights; // renormalised as psao-scene's BindMesh
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 uniform mat3 u_normal_matrix;
+// Skinned instances: their first joint in u_joints (JOINT_TEXELS RGBA32F texels per joint:
+// the joint matrix's columns, then its normal matrix's), or -1.
+uniform int u_joint_base;
+uniform highp sampler2D u_joints;
 out vec3 v_world;
 out vec3 v_normal;
 invariant gl_Position;
 
+vec4 joint_texel(int i) { return texelFetch(u_joints, ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}), 0); }
+
 void main() {
-  vec4 world = u_model * vec4(position, 1.0);
-  v_normal = u_normal_matrix * normal;
+  vec3 p = position;
+  vec3 n = normal;
+  if (u_joint_base >= 0) {
+    // Linear blend skinning in mesh-local space (psao-scene's BindMesh::skin).
+    vec3 sp = vec3(0.0);
+    vec3 sn = vec3(0.0);
+    for (int k = 0; k < 4; k++) {
+      float w = weights[k];
+      if (w > 0.0) {
+        int at = (u_joint_base + int(joints[k])) * ${JOINT_TEXELS};
+        mat4 m = mat4(joint_texel(at), joint_texel(at + 1), joint_texel(at + 2), joint_texel(at + 3));
+        mat3 nm = mat3(joint_texel(at + 4).xyz, joint_texel(at + 5).xyz, joint_texel(at + 6).xyz);
+        sp += w * (m * vec4(p, 1.0)).xyz;
+        sn += w * (nm * n);
+      }
+    }
+    p = sp;
+    float l = length(sn);
+    n = l > 0.0 ? sn / l : n;
+  }
+  vec4 world = u_model * vec4(p, 1.0);
+  v_normal = u_normal_matrix * n;
   v_world = world.xyz;
   gl_Position = u_view_proj * world;
 }`;
@@ -1897,6 +2288,7 @@ uniform float u_ambient;
 uniform highp sampler2D u_instf;
 uniform usampler2D u_instu;
 bool u_has_view;
+bool u_has_cells; // false: the grid holds no cell yet (every lookup would miss: AO 1)
 mat4 u_to_local;
 mat3 u_normal_to_local;
 vec3 u_origin;
@@ -1906,11 +2298,13 @@ ivec3 u_dims;
 float u_poisson;
 uint u_bucket_mask;
 uint u_bucket_base;
-uint u_cell_base;
+uint u_cell_page_base;
 uint u_cell_capacity;
 uvec2 u_row;   // Dx\xB717 as (low, high) 32-bit halves
 uvec2 u_slice; // Dx\xB7Dy\xB731
-uniform usampler2D u_buckets;
+uniform usampler2D u_directory;  // per bucket: used entries | first pool texel << 4
+uniform usampler2D u_entries;    // (key low, key high, slot, 0) per used entry
+uniform usampler2D u_page_table; // per page of cell slots: its page in u_cells, or NO_PAGE
 uniform usampler2D u_cells;
 uniform highp sampler2D u_normals; // the 256 decoded normal codes
 
@@ -1923,6 +2317,8 @@ uniform int u_exponent;
 uniform bool u_fallback;
 
 const uint WIDTH = ${TEX_WIDTH}u;
+const uint CELL_PAGE = ${CELL_PAGE}u;
+const uint NO_PAGE = ${NO_PAGE}u;
 
 ivec2 at(uint i) { return ivec2(int(i % WIDTH), int(i / WIDTH)); }
 
@@ -1951,9 +2347,11 @@ int find_cell(ivec3 c) {
   uvec3 u = uvec3(c);
   uvec2 id = add64(add64(uvec2(u.x, 0u), mul64(u.y, u_row)), mul64(u.z, u_slice));
   uvec2 key = add64(id, uvec2(1u, 0u));
-  uint first = u_bucket_base + (id.x & u_bucket_mask) * 8u;
-  for (uint e = 0u; e < 8u; e++) {
-    uvec4 t = texelFetch(u_buckets, at(first + e), 0);
+  uint dir = texelFetch(u_directory, at(u_bucket_base + (id.x & u_bucket_mask)), 0).x;
+  uint first = dir >> 4;
+  uint count = dir & 15u;
+  for (uint e = 0u; e < count; e++) {
+    uvec4 t = texelFetch(u_entries, at(first + e), 0);
     if (t.x == key.x && t.y == key.y) return t.z < u_cell_capacity ? int(t.z) : -1;
   }
   return -1;
@@ -1995,7 +2393,9 @@ void cell(ivec3 c, bool weigh) {
   int slot = find_cell(c);
   if (slot < 0) return;
   cells_visited++;
-  uint t = 2u * (u_cell_base + uint(slot));
+  uint page = texelFetch(u_page_table, at(u_cell_page_base + uint(slot) / CELL_PAGE), 0).x;
+  if (page == NO_PAGE) return;
+  uint t = 2u * (page * CELL_PAGE + uint(slot) % CELL_PAGE);
   uvec4 a = texelFetch(u_cells, at(t), 0);
   uvec4 b = texelFetch(u_cells, at(t + 1u), 0);
   vec3 m = vec3(c);
@@ -2019,14 +2419,17 @@ void load_instance(int i) {
   u_dims = ivec3(a.xyz);
   u_bucket_mask = a.w;
   u_bucket_base = b.x;
-  u_cell_base = b.y;
+  u_cell_page_base = b.y;
   u_cell_capacity = b.z;
+  u_has_cells = b.w != 0u;
   u_row = c.xy;
   u_slice = c.zw;
 }
 
 float reconstruct(vec3 world, vec3 normal) {
-  if (!u_has_view) return 1.0;
+  // Without cells psao-client finds no point in the block nor in the ring: AO 1, decided
+  // here without the 64 lookups (which made every frame cost the most before any points).
+  if (!u_has_view || !u_has_cells) return 1.0;
   P = (u_to_local * vec4(world, 1.0)).xyz;
   vec3 n = u_normal_to_local * normal;
   float l = length(n);
@@ -2085,6 +2488,28 @@ void main() {
 }`;
 
   // src/render.ts
+  var COMPONENTS = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
+  function readAccessor(doc, bin, index) {
+    const a = doc.accessors?.[index];
+    const bv = a?.bufferView !== void 0 ? doc.bufferViews?.[a.bufferView] : void 0;
+    if (!a || !bv) throw new Error(`scene.glb: accessor ${index} has no data`);
+    const n = a.count * (COMPONENTS[a.type] ?? 1);
+    const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
+    const Kind = a.componentType === 5126 ? Float32Array : a.componentType === 5123 ? Uint16Array : Uint32Array;
+    const bytes = bin.slice(start, start + n * Kind.BYTES_PER_ELEMENT);
+    if (bytes.length !== n * Kind.BYTES_PER_ELEMENT) throw new Error(`scene.glb: accessor ${index} is truncated`);
+    return new Kind(bytes.buffer);
+  }
+  function renormalisedWeights(w) {
+    const out = new Float32Array(w.length);
+    for (let v = 0; v + 4 <= w.length; v += 4) {
+      const x = [0, 1, 2, 3].map((k) => Number.isFinite(w[v + k]) ? Math.max(w[v + k], 0) : 0);
+      const sum = Math.fround(Math.fround(Math.fround(x[0] + x[1]) + x[2]) + x[3]);
+      if (sum > 0) for (let k = 0; k < 4; k++) out[v + k] = x[k] / sum;
+      else out[v] = 1;
+    }
+    return out;
+  }
   var SETTINGS = {
     factor: Math.fround(2 * Math.SQRT2),
     planeTolerance: 0.5,
@@ -2219,6 +2644,8 @@ void main() {
       this.gl = gl2;
       this.meshes = [];
       this.instances = [];
+      /// The scene's animation (skinned instances), when anything is skinned.
+      this.animation = null;
       /// The scene's camera paths (from the glb's extras).
       this.paths = [];
       if (!gl2.getExtension("EXT_color_buffer_float")) throw new Error("WebGL2 without EXT_color_buffer_float");
@@ -2231,6 +2658,9 @@ void main() {
       this.instU = dataTexture(gl2);
       this.emptyU = dataTexture(gl2);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32UI, 1, 1, 0, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, new Uint32Array(4));
+      this.joints = dataTexture(gl2);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, 1, 1, 0, gl2.RGBA, gl2.FLOAT, new Float32Array(4));
+      gl2.vertexAttribI4ui(2, 0, 0, 0, 0);
       const colours = this.load(glb);
       this.colours = dataTexture(gl2);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, Math.max(1, colours.length / 4), 1, 0, gl2.RGBA, gl2.FLOAT, colours.length ? colours : new Float32Array(4));
@@ -2251,6 +2681,9 @@ void main() {
         const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
         return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
       };
+      const instanceCount = (doc.nodes ?? []).findIndex((n) => n.mesh === void 0 || !n.matrix);
+      const animation = new Animation(doc, instanceCount < 0 ? (doc.nodes ?? []).length : instanceCount, (i) => readAccessor(doc, bin, i));
+      this.animation = animation.skinned ? animation : null;
       const colours = [];
       for (const mesh of doc.meshes ?? []) {
         const prims = [];
@@ -2268,13 +2701,27 @@ void main() {
             gl2.enableVertexAttribArray(loc);
             gl2.vertexAttribPointer(loc, 3, gl2.FLOAT, false, 0, 0);
           }
+          const { JOINTS_0: joints, WEIGHTS_0: weights } = prim.attributes;
+          const skin = joints !== void 0 && weights !== void 0;
+          if (skin) {
+            const jbuf = gl2.createBuffer();
+            gl2.bindBuffer(gl2.ARRAY_BUFFER, jbuf);
+            gl2.bufferData(gl2.ARRAY_BUFFER, Uint16Array.from(readAccessor(doc, bin, joints)), gl2.STATIC_DRAW);
+            gl2.enableVertexAttribArray(2);
+            gl2.vertexAttribIPointer(2, 4, gl2.UNSIGNED_SHORT, 0, 0);
+            const wbuf = gl2.createBuffer();
+            gl2.bindBuffer(gl2.ARRAY_BUFFER, wbuf);
+            gl2.bufferData(gl2.ARRAY_BUFFER, renormalisedWeights(readAccessor(doc, bin, weights)), gl2.STATIC_DRAW);
+            gl2.enableVertexAttribArray(3);
+            gl2.vertexAttribPointer(3, 4, gl2.FLOAT, false, 0, 0);
+          }
           const idx = data(prim.indices);
           const ibo = gl2.createBuffer();
           gl2.bindBuffer(gl2.ELEMENT_ARRAY_BUFFER, ibo);
           gl2.bufferData(gl2.ELEMENT_ARRAY_BUFFER, idx.bytes, gl2.STATIC_DRAW);
           gl2.bindVertexArray(null);
           const c = doc.materials?.[prim.material ?? 0]?.pbrMetallicRoughness?.baseColorFactor ?? [0.8, 0.8, 0.8, 1];
-          prims.push({ vao, count: idx.count, colour: colours.length / 4 });
+          prims.push({ vao, count: idx.count, colour: colours.length / 4, skin });
           colours.push(c[0], c[1], c[2], 1);
         }
         this.meshes.push(prims);
@@ -2306,6 +2753,17 @@ void main() {
       gl2.enable(gl2.DEPTH_TEST);
       gl2.depthFunc(gl2.LESS);
       gl2.useProgram(this.gbuffer.p);
+      const animation = this.animation;
+      gl2.activeTexture(gl2.TEXTURE0);
+      gl2.bindTexture(gl2.TEXTURE_2D, this.joints);
+      if (animation) {
+        const texels = animation.jointTexels(opts.time ?? 0);
+        const rows2 = Math.ceil(texels.length / 4 / TEX_WIDTH);
+        const padded = new Float32Array(rows2 * TEX_WIDTH * 4);
+        padded.set(texels);
+        gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, TEX_WIDTH, rows2, 0, gl2.RGBA, gl2.FLOAT, padded);
+      }
+      gl2.uniform1i(g.u_joints, 0);
       gl2.uniformMatrix4fv(g.u_view_proj, false, viewProj(camera));
       gl2.uniform3fv(g.u_eye, camera.position);
       const model = new Float32Array(16);
@@ -2321,8 +2779,10 @@ void main() {
         gl2.uniformMatrix4fv(g.u_model, false, model);
         gl2.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
         gl2.uniform1f(g.u_instance, i);
+        const jointBase = animation ? animation.jointBase[i] : -1;
         for (const p of this.meshes[inst.mesh] ?? []) {
           gl2.uniform1f(g.u_colour_index, p.colour);
+          gl2.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
           gl2.bindVertexArray(p.vao);
           gl2.drawElements(gl2.TRIANGLES, p.count, gl2.UNSIGNED_INT, 0);
         }
@@ -2340,7 +2800,9 @@ void main() {
       gl2.bindTexture(gl2.TEXTURE_2D, this.instU);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32UI, INST_U, rows, 0, gl2.RGBA_INTEGER, gl2.UNSIGNED_INT, instU.length ? instU : new Uint32Array(INST_U * 4));
       const textures = [
-        ["u_buckets", grids2?.buckets.texture ?? this.emptyU],
+        ["u_directory", grids2?.directory.texture ?? this.emptyU],
+        ["u_entries", grids2?.entries.texture ?? this.emptyU],
+        ["u_page_table", grids2?.pageTable.texture ?? this.emptyU],
         ["u_cells", grids2?.cells.texture ?? this.emptyU],
         ["u_normals", this.normals],
         ["u_gposition", this.targets.position],
@@ -2392,9 +2854,9 @@ void main() {
           e.dims[2],
           e.bucketCount - 1,
           slot.bucketBase,
-          slot.cellBase,
-          slot.cellCapacity,
-          0,
+          slot.cellPageBase,
+          slot.maxCells,
+          grid.slotCount > 0 ? 1 : 0,
           Number(row & 0xffffffffn),
           Number(row >> 32n),
           Number(slice & 0xffffffffn),
@@ -2497,7 +2959,8 @@ void main() {
     decodeMs: 0,
     uploadedBytes: 0,
     rebuilds: 0,
-    textureBytes: 0
+    textureBytes: 0,
+    milestones: { scene: null, welcome: null, update: null, ao: null }
   };
   window.psao = status;
   var params = new URLSearchParams(location.search);
@@ -2519,6 +2982,8 @@ void main() {
       { url: wsUrl, token, verify, name: "psao browser viewer" },
       {
         welcome: () => {
+          var _a;
+          (_a = status.milestones).welcome ?? (_a.welcome = performance.now());
           status.connected = true;
           status.sessions++;
           status.message = null;
@@ -2528,10 +2993,13 @@ void main() {
           answered = -1;
           sent = -1;
         },
-        sceneTime: (_frame, clientFrame) => {
+        sceneTime: (_frame, clientFrame, seconds) => {
           if (clientFrame !== null) answered = Math.max(answered, clientFrame);
+          serverTime = { seconds, at: performance.now() };
         },
         update: (u, bytes, verified) => {
+          var _a;
+          (_a = status.milestones).update ?? (_a.update = performance.now());
           grids?.apply(u);
           status.updates++;
           if (verified) status.verified++;
@@ -2575,6 +3043,11 @@ void main() {
   var sent = -1;
   var answered = -1;
   var pathStart = 0;
+  var serverTime = null;
+  function sceneTime(now) {
+    if (lockstep && testFrames !== null) return Math.max(answered, 0) / 60;
+    return serverTime ? serverTime.seconds + (now - serverTime.at) / 1e3 : 0;
+  }
   for (const [id, mode] of [
     ["mode-composited", MODE_COMPOSITED],
     ["mode-ao", MODE_AO],
@@ -2680,7 +3153,8 @@ void main() {
   function measureCost() {
     const cam = status.camera;
     if (!gl || !renderer || !cam) return null;
-    renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale });
+    const time = sceneTime(performance.now());
+    renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale, time });
     const w = gl.drawingBufferWidth;
     const h = gl.drawingBufferHeight;
     const px = new Uint8Array(w * h * 4);
@@ -2699,7 +3173,7 @@ void main() {
       maxCells = Math.max(maxCells, px[i]);
       maxPoints = Math.max(maxPoints, p);
     }
-    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time });
     return {
       width: w,
       height: h,
@@ -2751,8 +3225,11 @@ void main() {
     const drawNow = !(lockstep && testFrames !== null) || answered === testFrames - 1;
     if (cam && renderer && drawNow) {
       grids?.upload();
-      renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+      renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time: sceneTime(now) });
       status.drawn++;
+      if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
+        status.milestones.ao = performance.now();
+      }
       if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
     }
     if (now - lastPointCount > 500) {
@@ -2762,7 +3239,7 @@ void main() {
     status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
     status.uploadedBytes = grids?.uploadedBytes ?? 0;
     status.rebuilds = grids?.rebuilds ?? 0;
-    status.textureBytes = grids ? grids.buckets.mirror.byteLength + grids.cells.mirror.byteLength : 0;
+    status.textureBytes = grids ? grids.textureBytes() : 0;
     const w = session?.welcomeMsg;
     const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
     overlay.textContent = [
@@ -2784,6 +3261,7 @@ void main() {
     orbit = sceneBounds(glb);
     if (gl) {
       renderer = new SceneRenderer(gl, glb);
+      status.milestones.scene = performance.now();
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
         if (!path) status.message = `the scene has no camera path named ${pathName}`;

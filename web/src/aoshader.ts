@@ -10,7 +10,8 @@
 // sRGB-encoded; or writes AO only, the composite without AO, or the cost (cells and points
 // visited) as exact integers in the red, green and blue bytes.
 
-import { TEX_WIDTH } from "./grids";
+import { CELL_PAGE, NO_PAGE, TEX_WIDTH } from "./grids";
+import { JOINT_TEXELS } from "./skin";
 
 /// Output modes (`u_mode`).
 export const MODE_COMPOSITED = 0;
@@ -23,16 +24,44 @@ export const MODE_COST = 3;
 export const VERTEX = `#version 300 es
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
+layout(location = 2) in uvec4 joints;
+layout(location = 3) in vec4 weights; // renormalised as psao-scene's BindMesh
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 uniform mat3 u_normal_matrix;
+// Skinned instances: their first joint in u_joints (JOINT_TEXELS RGBA32F texels per joint:
+// the joint matrix's columns, then its normal matrix's), or -1.
+uniform int u_joint_base;
+uniform highp sampler2D u_joints;
 out vec3 v_world;
 out vec3 v_normal;
 invariant gl_Position;
 
+vec4 joint_texel(int i) { return texelFetch(u_joints, ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}), 0); }
+
 void main() {
-  vec4 world = u_model * vec4(position, 1.0);
-  v_normal = u_normal_matrix * normal;
+  vec3 p = position;
+  vec3 n = normal;
+  if (u_joint_base >= 0) {
+    // Linear blend skinning in mesh-local space (psao-scene's BindMesh::skin).
+    vec3 sp = vec3(0.0);
+    vec3 sn = vec3(0.0);
+    for (int k = 0; k < 4; k++) {
+      float w = weights[k];
+      if (w > 0.0) {
+        int at = (u_joint_base + int(joints[k])) * ${JOINT_TEXELS};
+        mat4 m = mat4(joint_texel(at), joint_texel(at + 1), joint_texel(at + 2), joint_texel(at + 3));
+        mat3 nm = mat3(joint_texel(at + 4).xyz, joint_texel(at + 5).xyz, joint_texel(at + 6).xyz);
+        sp += w * (m * vec4(p, 1.0)).xyz;
+        sn += w * (nm * n);
+      }
+    }
+    p = sp;
+    float l = length(sn);
+    n = l > 0.0 ? sn / l : n;
+  }
+  vec4 world = u_model * vec4(p, 1.0);
+  v_normal = u_normal_matrix * n;
   v_world = world.xyz;
   gl_Position = u_view_proj * world;
 }`;
@@ -90,6 +119,7 @@ uniform float u_ambient;
 uniform highp sampler2D u_instf;
 uniform usampler2D u_instu;
 bool u_has_view;
+bool u_has_cells; // false: the grid holds no cell yet (every lookup would miss: AO 1)
 mat4 u_to_local;
 mat3 u_normal_to_local;
 vec3 u_origin;
@@ -99,11 +129,13 @@ ivec3 u_dims;
 float u_poisson;
 uint u_bucket_mask;
 uint u_bucket_base;
-uint u_cell_base;
+uint u_cell_page_base;
 uint u_cell_capacity;
 uvec2 u_row;   // Dx·17 as (low, high) 32-bit halves
 uvec2 u_slice; // Dx·Dy·31
-uniform usampler2D u_buckets;
+uniform usampler2D u_directory;  // per bucket: used entries | first pool texel << 4
+uniform usampler2D u_entries;    // (key low, key high, slot, 0) per used entry
+uniform usampler2D u_page_table; // per page of cell slots: its page in u_cells, or NO_PAGE
 uniform usampler2D u_cells;
 uniform highp sampler2D u_normals; // the 256 decoded normal codes
 
@@ -116,6 +148,8 @@ uniform int u_exponent;
 uniform bool u_fallback;
 
 const uint WIDTH = ${TEX_WIDTH}u;
+const uint CELL_PAGE = ${CELL_PAGE}u;
+const uint NO_PAGE = ${NO_PAGE}u;
 
 ivec2 at(uint i) { return ivec2(int(i % WIDTH), int(i / WIDTH)); }
 
@@ -144,9 +178,11 @@ int find_cell(ivec3 c) {
   uvec3 u = uvec3(c);
   uvec2 id = add64(add64(uvec2(u.x, 0u), mul64(u.y, u_row)), mul64(u.z, u_slice));
   uvec2 key = add64(id, uvec2(1u, 0u));
-  uint first = u_bucket_base + (id.x & u_bucket_mask) * 8u;
-  for (uint e = 0u; e < 8u; e++) {
-    uvec4 t = texelFetch(u_buckets, at(first + e), 0);
+  uint dir = texelFetch(u_directory, at(u_bucket_base + (id.x & u_bucket_mask)), 0).x;
+  uint first = dir >> 4;
+  uint count = dir & 15u;
+  for (uint e = 0u; e < count; e++) {
+    uvec4 t = texelFetch(u_entries, at(first + e), 0);
     if (t.x == key.x && t.y == key.y) return t.z < u_cell_capacity ? int(t.z) : -1;
   }
   return -1;
@@ -188,7 +224,9 @@ void cell(ivec3 c, bool weigh) {
   int slot = find_cell(c);
   if (slot < 0) return;
   cells_visited++;
-  uint t = 2u * (u_cell_base + uint(slot));
+  uint page = texelFetch(u_page_table, at(u_cell_page_base + uint(slot) / CELL_PAGE), 0).x;
+  if (page == NO_PAGE) return;
+  uint t = 2u * (page * CELL_PAGE + uint(slot) % CELL_PAGE);
   uvec4 a = texelFetch(u_cells, at(t), 0);
   uvec4 b = texelFetch(u_cells, at(t + 1u), 0);
   vec3 m = vec3(c);
@@ -212,14 +250,17 @@ void load_instance(int i) {
   u_dims = ivec3(a.xyz);
   u_bucket_mask = a.w;
   u_bucket_base = b.x;
-  u_cell_base = b.y;
+  u_cell_page_base = b.y;
   u_cell_capacity = b.z;
+  u_has_cells = b.w != 0u;
   u_row = c.xy;
   u_slice = c.zw;
 }
 
 float reconstruct(vec3 world, vec3 normal) {
-  if (!u_has_view) return 1.0;
+  // Without cells psao-client finds no point in the block nor in the ring: AO 1, decided
+  // here without the 64 lookups (which made every frame cost the most before any points).
+  if (!u_has_view || !u_has_cells) return 1.0;
   P = (u_to_local * vec4(world, 1.0)).xyz;
   vec3 n = u_normal_to_local * normal;
   float l = length(n);

@@ -58,6 +58,10 @@ export interface Update {
   /// Instance and its Affine3A as 12 floats (matrix columns x, y, z, then translation).
   transforms: [number, Float32Array][];
   instances: InstanceDelta[];
+  /// Whether its buckets and cells are already in the client state it was decoded against
+  /// (a decoder given the state as its `ReferenceStore`); `ClientState.apply` then only
+  /// checks them and takes the transforms and slot counts.
+  inPlace: boolean;
 }
 
 /// The decompressed size a zstd frame header records, or an error when it records none
@@ -203,17 +207,55 @@ function grown(a: Uint32Array, words: number, max: number, what: string): Uint32
   return b;
 }
 
-/// What the decoder last received for one instance: its buckets' entries and its cells, in
-/// flat arrays indexed like the grid (bucket b at 8b, cell slot s at 7s), grown on demand.
-class Received {
-  lo: Uint32Array = new Uint32Array(0);
-  hi: Uint32Array = new Uint32Array(0);
-  slots: Uint32Array = new Uint32Array(0);
-  points: Uint32Array = new Uint32Array(0);
+/// What the decoder last received for one instance, its reference: the buckets' entries
+/// (`keyLo`, `keyHi`, `slots`: bucket b at 8b) and the cells (`points`: slot s at 7s) in flat
+/// arrays indexed like the grid, which the decoder grows on demand up to the two bounds.
+export interface Reference {
+  keyLo: Uint32Array;
+  keyHi: Uint32Array;
+  slots: Uint32Array;
+  points: Uint32Array;
+  readonly maxBucketWords: number;
+  readonly maxPointWords: number;
+}
+
+/// Where the decoder keeps its references: its own (`OwnReferences`), or the client state
+/// itself (`ClientState`), so that the grids exist once and updates are decoded into them.
+export interface ReferenceStore {
+  /// Instance `instance`'s reference (a `DeltaError` when there is none).
+  referenceOf(instance: number): Reference;
+  /// Forgets everything (a snapshot follows).
+  clear(): void;
+  /// Whether decoding writes into the client state (`Update.inPlace`).
+  readonly isClientState: boolean;
+}
+
+/// The decoder's own references, kept in a map until a snapshot clears them.
+class OwnReferences implements ReferenceStore {
+  readonly isClientState = false;
+  private received = new Map<number, Reference>();
   constructor(
-    readonly maxBucketWords: number,
-    readonly maxPointWords: number,
+    private limit: number,
+    private bucketCounts: number[] | null,
   ) {}
+  clear() {
+    this.received.clear();
+  }
+  referenceOf(instance: number): Reference {
+    let r = this.received.get(instance);
+    if (!r) {
+      let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
+      if (this.bucketCounts) {
+        if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
+        buckets = this.bucketCounts[instance];
+      }
+      const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
+      const empty = new Uint32Array(0);
+      r = { keyLo: empty, keyHi: empty, slots: empty, points: empty, maxBucketWords: buckets * BUCKET_ENTRIES, maxPointWords: maxPoints };
+      this.received.set(instance, r);
+    }
+    return r;
+  }
 }
 
 function decodeCount(code: number, old: number, capacity: number, at: number, plane: number, what: string): number {
@@ -228,21 +270,24 @@ const EMPTY_CELL = new Uint32Array(CELL_POINTS);
 /// The decoder: its reference state lives between updates of one session.
 export class CompactDecoder {
   private transforms = new Map<number, Uint32Array>();
-  private received = new Map<number, Received>();
+  private references: ReferenceStore;
 
   /// Most decompressed bytes accepted per update (a client sets it from its instance table),
   /// and the instances' bucket counts when known (indices beyond them are refused; without
-  /// them the reference arrays are bounded by the limit).
+  /// them the reference arrays are bounded by the limit). With `store` (the client state),
+  /// the references are the client's grids and every update is decoded into them.
   constructor(
     private limit = MAX_DECODED_BYTES,
-    private bucketCounts: number[] | null = null,
+    bucketCounts: number[] | null = null,
+    store: ReferenceStore | null = null,
   ) {
     this.limit = Math.min(limit, MAX_DECODE_LIMIT);
+    this.references = store ?? new OwnReferences(this.limit, bucketCounts);
   }
 
   private clear() {
     this.transforms.clear();
-    this.received.clear();
+    this.references.clear();
   }
 
   /// Decodes one update. After an error the state is undefined: the session must restart.
@@ -267,27 +312,6 @@ export class CompactDecoder {
     return this.assemble(layout, s, frame, snapshot);
   }
 
-  private receivedOf(instance: number): Received {
-    let r = this.received.get(instance);
-    if (!r) {
-      let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
-      if (this.bucketCounts) {
-        if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
-        buckets = this.bucketCounts[instance];
-      }
-      const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
-      r = new Received(buckets * BUCKET_ENTRIES, maxPoints);
-      if (this.bucketCounts) {
-        // Known sizes: every bucket at once (as the client's grid), no growing.
-        r.lo = new Uint32Array(r.maxBucketWords);
-        r.hi = new Uint32Array(r.maxBucketWords);
-        r.slots = new Uint32Array(r.maxBucketWords);
-      }
-      this.received.set(instance, r);
-    }
-    return r;
-  }
-
   private assemble(layout: IndexLayout, s: Sections, frame: bigint, snapshot: boolean): Update {
     const transforms: [number, Float32Array][] = layout.transforms.map((instance, k) => {
       const old = this.transforms.get(instance) ?? new Uint32Array(TRANSFORM_WORDS);
@@ -302,7 +326,7 @@ export class CompactDecoder {
     let point = 0;
     const instances: InstanceDelta[] = [];
     for (const { instance, buckets: bucketIds, cells: slotIds } of layout.instances) {
-      const r = this.receivedOf(instance);
+      const r = this.references.referenceOf(instance);
       const nb = bucketIds.length;
       const lo = new Uint32Array(nb * BUCKET_ENTRIES);
       const hi = new Uint32Array(nb * BUCKET_ENTRIES);
@@ -311,11 +335,11 @@ export class CompactDecoder {
         const b = bucketIds[k];
         const base = b * BUCKET_ENTRIES;
         const end = base + BUCKET_ENTRIES;
-        r.lo = grown(r.lo, end, r.maxBucketWords, `bucket ${b}`);
-        r.hi = grown(r.hi, end, r.maxBucketWords, `bucket ${b}`);
+        r.keyLo = grown(r.keyLo, end, r.maxBucketWords, `bucket ${b}`);
+        r.keyHi = grown(r.keyHi, end, r.maxBucketWords, `bucket ${b}`);
         r.slots = grown(r.slots, end, r.maxBucketWords, `bucket ${b}`);
         const code = s.entryCounts[entryCount++];
-        const n = decodeCount(code, usedEntries(r.lo, r.hi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
+        const n = decodeCount(code, usedEntries(r.keyLo, r.keyHi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
         const out = k * BUCKET_ENTRIES;
         for (let i = 0; i < n; i++) {
           const c = s.entryChoices[entry];
@@ -330,8 +354,8 @@ export class CompactDecoder {
           } else if (c < RANK_CHOICE) {
             // XOR with the reference's `(key − 1) XOR b` (0 for an empty entry).
             const o = base + ((i + c) % BUCKET_ENTRIES);
-            const rLo = r.lo[o];
-            const rHi = r.hi[o];
+            const rLo = r.keyLo[o];
+            const rHi = r.keyHi[o];
             if (rLo !== 0 || rHi !== 0) {
               const mLo = rLo === 0 ? 0xffffffff : rLo - 1;
               const mHi = rLo === 0 ? rHi - 1 : rHi;
@@ -349,9 +373,15 @@ export class CompactDecoder {
           hi[out + i] = xLo === 0xffffffff ? tHi + 1 : tHi;
           slots[out + i] = slot;
         }
-        r.lo.set(lo.subarray(out, out + BUCKET_ENTRIES), base);
-        r.hi.set(hi.subarray(out, out + BUCKET_ENTRIES), base);
-        r.slots.set(slots.subarray(out, out + BUCKET_ENTRIES), base);
+        // Copied word by word (a subarray per bucket costs more in allocation than the copy).
+        const rLo = r.keyLo;
+        const rHi = r.keyHi;
+        const rSlots = r.slots;
+        for (let i = 0; i < BUCKET_ENTRIES; i++) {
+          rLo[base + i] = lo[out + i];
+          rHi[base + i] = hi[out + i];
+          rSlots[base + i] = slots[out + i];
+        }
       }
       const nc = slotIds.length;
       const pts = new Uint32Array(nc * CELL_POINTS);
@@ -374,7 +404,7 @@ export class CompactDecoder {
             c < CELL_POINTS ? old[base + ((i + c) % CELL_POINTS)] : k > 0 ? pts[out - CELL_POINTS + c - CELL_POINTS] : EMPTY_CELL[0];
           pts[out + i] = applyPointResidual(residual, reference);
         }
-        old.set(pts.subarray(out, out + CELL_POINTS), base);
+        for (let i = 0; i < CELL_POINTS; i++) old[base + i] = pts[out + i];
       }
       instances.push({
         instance,
@@ -389,7 +419,7 @@ export class CompactDecoder {
     if (entry !== s.entryChoices.length || point !== s.pointChoices.length) {
       throw new DeltaError(`${s.entryChoices.length - entry + s.pointChoices.length - point} trailing records`);
     }
-    return { frame, snapshot, transforms, instances };
+    return { frame, snapshot, transforms, instances, inPlace: this.references.isClientState };
   }
 }
 

@@ -1,55 +1,85 @@
-// The client's grids on the GPU: every instance's hash buckets and cells in two RGBA32UI data
-// textures, kept equal to the client state (`state.ts`) by writing each update's changed
-// buckets and cells into a CPU mirror and uploading only the texture rows they touched
-// (texSubImage2D). The AO fragment shader (`aoshader.ts`) reads them with texelFetch.
-//
-// Layout (`TEX_WIDTH` texels per row, texel index i at (i % TEX_WIDTH, i / TEX_WIDTH)):
-// * buckets: one texel per bucket entry, (key low, key high, cell slot, 0); instance k's
-//   bucket b entry e is texel `bucketBase[k] + 8·b + e`.
-// * cells: two texels per cell slot, points 0–3 and 4–6 (the eighth word is 0); instance k's
-//   slot s is texels `2·(cellBase[k] + s)` and the next. Each instance reserves a power of
-//   two of slots (at least its highest slot + 1); when one outgrows its reserve, the layout
-//   is recomputed and everything re-uploaded from the state.
+// The client's grids on the GPU, sparse: only the buckets that hold entries and the pages of
+// cell slots that hold points take texture memory (the grids' hash tables are sized for every
+// cell of an instance, four times over, while a viewer receives the cells it sees). Kept
+// equal to the client state (`state.ts`) by re-reading each update's changed buckets and cells
+// from it; only the texture rows they touched are uploaded (texSubImage2D). The AO fragment
+// shader (`aoshader.ts`) reads four textures with texelFetch (texel index i at
+// (i % TEX_WIDTH, i / TEX_WIDTH)):
+// * bucket directory (R32UI): one texel per bucket of every instance, instance k's bucket b
+//   at `bucketBase[k] + b`: `count | first << 4`, the bucket's used entries (0–8) and where
+//   they start in the entry pool.
+// * entry pool (RGBA32UI): (key low, key high, cell slot, 0) per used entry, in chunks of 1,
+//   2, 4 or 8 entries (the count rounded up to a power of two; freed chunks are reused).
+// * cell page table (R32UI): one texel per page of `CELL_PAGE` cell slots of every instance,
+//   instance k's page p at `cellPageBase[k] + p`: the page's index in the cell pool, or
+//   `NO_PAGE` (no points there yet).
+// * cell pool (RGBA32UI): two texels per cell slot of each allocated page, points 0–3 and
+//   4–6 (the eighth word is 0): slot s of page q is texels `2·(CELL_PAGE·q + s % CELL_PAGE)`.
+// A snapshot empties the pools and rebuilds everything from the state.
 
 import { BUCKET_ENTRIES, CELL_POINTS, type Update } from "./compact";
-import type { ClientState } from "./state";
+import type { ClientState, Grid } from "./state";
 
 /// Texels per texture row.
 export const TEX_WIDTH = 1024;
-/// Smallest cell reserve per instance.
-const MIN_CELLS = 64;
+/// Cell slots per page of the cell pool.
+export const CELL_PAGE = 32;
+/// A cell page without storage.
+export const NO_PAGE = 0xffffffff;
+/// Most texels the entry pool can address (28 bits of a directory word).
+const MAX_POOL_TEXELS = 1 << 28;
 
 /// Where one instance's grid lives in the textures.
 export interface GridSlot {
+  /// Its first bucket in the directory.
   bucketBase: number;
-  cellBase: number;
-  cellCapacity: number;
+  /// Its first page in the cell page table.
+  cellPageBase: number;
+  /// Cell slots its layout allows (larger slots are never looked up).
+  maxCells: number;
 }
 
-/// One RGBA32UI texture with its CPU mirror and dirty rows.
+/// One R32UI or RGBA32UI texture with its CPU mirror and dirty rows; it grows (doubling its
+/// rows, contents kept) on demand.
 class DataTexture {
-  /// The texture (immutable storage: a resize makes a new one).
+  /// The texture (immutable storage: growing makes a new one).
   texture: WebGLTexture | null = null;
   mirror = new Uint32Array(0);
   rows = 0;
   private dirty = new Uint8Array(0);
   private anyDirty = false;
+  private stale = true;
 
-  constructor(private gl: WebGL2RenderingContext) {}
+  constructor(
+    private gl: WebGL2RenderingContext,
+    private channels: 1 | 4,
+  ) {}
 
-  /// Resizes to hold `texels` (contents zeroed, all rows dirty).
-  resize(texels: number) {
-    const gl = this.gl;
-    this.rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
-    this.mirror = new Uint32Array(this.rows * TEX_WIDTH * 4);
-    this.dirty = new Uint8Array(this.rows).fill(1);
+  /// Words per texel.
+  get words(): number {
+    return this.channels;
+  }
+
+  /// Makes room for `texels` (rows doubling), keeping the contents; `fill` initialises new words.
+  ensure(texels: number, fill = 0) {
+    const rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
+    if (rows <= this.rows) return;
+    const grown = Math.max(rows, 2 * this.rows);
+    const mirror = new Uint32Array(grown * TEX_WIDTH * this.channels);
+    mirror.set(this.mirror);
+    if (fill !== 0) mirror.fill(fill, this.mirror.length);
+    this.mirror = mirror;
+    this.rows = grown;
+    this.dirty = new Uint8Array(grown).fill(1);
     this.anyDirty = true;
-    if (this.texture) gl.deleteTexture(this.texture);
-    this.texture = gl.createTexture()!;
-    gl.bindTexture(gl.TEXTURE_2D, this.texture);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
-    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32UI, TEX_WIDTH, this.rows);
+    this.stale = true;
+  }
+
+  /// Sets every word to `value` (rows kept, all dirty).
+  reset(value: number) {
+    this.mirror.fill(value);
+    this.dirty.fill(1);
+    this.anyDirty = true;
   }
 
   /// Marks the rows of texels `first..first + count` for upload.
@@ -59,11 +89,29 @@ class DataTexture {
     this.anyDirty = true;
   }
 
-  /// Uploads runs of dirty rows; returns the bytes uploaded.
+  /// Bytes of texture storage.
+  bytes(): number {
+    return this.mirror.byteLength;
+  }
+
+  /// (Re)creates the texture when it grew, then uploads runs of dirty rows; returns the
+  /// bytes uploaded.
   upload(): number {
-    if (!this.anyDirty) return 0;
     const gl = this.gl;
+    if (this.rows === 0) return 0; // nothing stored yet: no texture (the renderer binds an empty one)
+    if (this.stale) {
+      this.stale = false;
+      if (this.texture) gl.deleteTexture(this.texture);
+      this.texture = gl.createTexture()!;
+      gl.bindTexture(gl.TEXTURE_2D, this.texture);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+      gl.texStorage2D(gl.TEXTURE_2D, 1, this.channels === 1 ? gl.R32UI : gl.RGBA32UI, TEX_WIDTH, this.rows);
+    }
+    if (!this.anyDirty) return 0;
     gl.bindTexture(gl.TEXTURE_2D, this.texture);
+    const format = this.channels === 1 ? gl.RED_INTEGER : gl.RGBA_INTEGER;
+    const rowWords = TEX_WIDTH * this.channels;
     let bytes = 0;
     for (let r = 0; r < this.rows; ) {
       if (!this.dirty[r]) {
@@ -72,8 +120,8 @@ class DataTexture {
       }
       let end = r;
       while (end < this.rows && this.dirty[end]) this.dirty[end++] = 0;
-      const data = this.mirror.subarray(r * TEX_WIDTH * 4, end * TEX_WIDTH * 4);
-      gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, r, TEX_WIDTH, end - r, gl.RGBA_INTEGER, gl.UNSIGNED_INT, data);
+      const data = this.mirror.subarray(r * rowWords, end * rowWords);
+      gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, r, TEX_WIDTH, end - r, format, gl.UNSIGNED_INT, data);
       bytes += data.byteLength;
       r = end;
     }
@@ -82,9 +130,46 @@ class DataTexture {
   }
 }
 
+/// Chunks of 1, 2, 4 and 8 texels in one growing pool, with a free list per size.
+class ChunkPool {
+  private end = 0;
+  private free: number[][] = [[], [], [], []];
+
+  /// Forgets every chunk.
+  clear() {
+    this.end = 0;
+    for (const f of this.free) f.length = 0;
+  }
+
+  /// A chunk of size class `c` (2^c texels); returns its first texel.
+  alloc(c: number): number {
+    const reused = this.free[c].pop();
+    if (reused !== undefined) return reused;
+    const first = this.end;
+    this.end += 1 << c;
+    return first;
+  }
+
+  release(first: number, c: number) {
+    this.free[c].push(first);
+  }
+
+  /// Texels in use or free (the pool's high-water mark).
+  get texels(): number {
+    return this.end;
+  }
+}
+
+/// Size class of a chunk holding `count` (1–8) entries.
+function sizeClass(count: number): number {
+  return count <= 1 ? 0 : count <= 2 ? 1 : count <= 4 ? 2 : 3;
+}
+
 /// The grids of one session in GPU textures.
 export class GridTextures {
-  readonly buckets: DataTexture;
+  readonly directory: DataTexture;
+  readonly entries: DataTexture;
+  readonly pageTable: DataTexture;
   readonly cells: DataTexture;
   slots: (GridSlot | null)[] = [];
   /// Why AO cannot be drawn (textures too large), or null.
@@ -94,100 +179,148 @@ export class GridTextures {
   rebuilds = 0;
   private state: ClientState | null = null;
   private stale = true;
+  private pool = new ChunkPool();
+  /// Pages of cells allocated (0 until the grids hold points).
+  cellPages = 0;
 
   constructor(private gl: WebGL2RenderingContext) {
-    this.buckets = new DataTexture(gl);
-    this.cells = new DataTexture(gl);
+    this.directory = new DataTexture(gl, 1);
+    this.entries = new DataTexture(gl, 4);
+    this.pageTable = new DataTexture(gl, 1);
+    this.cells = new DataTexture(gl, 4);
   }
 
-  /// Follows a new session's (empty) state.
+  /// Follows a new session's (empty) state: lays out its directory and page table.
   reset(state: ClientState) {
     this.state = state;
     this.stale = true;
+    let buckets = 0;
+    let pages = 0;
+    this.slots = state.grids.map((g) => {
+      if (!g) return null;
+      const s = { bucketBase: buckets, cellPageBase: pages, maxCells: g.maxCells() };
+      buckets += g.entry.bucketCount;
+      pages += Math.ceil(g.maxCells() / CELL_PAGE);
+      return s;
+    });
+    const maxRows = this.gl.getParameter(this.gl.MAX_TEXTURE_SIZE) as number;
+    const rows = Math.ceil(Math.max(buckets, pages) / TEX_WIDTH);
+    this.problem = rows > maxRows ? `the grids need ${rows} texture rows, this GPU allows ${maxRows}: AO not drawn` : null;
+    if (this.problem) {
+      this.slots = state.grids.map(() => null);
+      return;
+    }
+    this.directory.ensure(buckets);
+    this.pageTable.ensure(pages, NO_PAGE);
   }
 
   /// Mirrors one applied update (call after `state.apply(u)`).
   apply(u: Update) {
     const state = this.state;
-    if (!state || this.stale || u.snapshot) {
+    if (!state || this.stale || u.snapshot || this.problem) {
       this.stale = true;
       return;
     }
     for (const d of u.instances) {
       const slot = this.slots[d.instance];
       const grid = state.grids[d.instance];
-      if (!slot || !grid || grid.slotCount > slot.cellCapacity) {
-        this.stale = true;
-        return;
-      }
-      const bm = this.buckets.mirror;
-      for (let k = 0; k < d.bucketIds.length; k++) {
-        const first = slot.bucketBase + d.bucketIds[k] * BUCKET_ENTRIES;
-        for (let e = 0; e < BUCKET_ENTRIES; e++) {
-          const o = (first + e) * 4;
-          const src = k * BUCKET_ENTRIES + e;
-          bm[o] = d.keyLo[src];
-          bm[o + 1] = d.keyHi[src];
-          bm[o + 2] = d.slots[src];
-        }
-        this.buckets.touch(first, BUCKET_ENTRIES);
-      }
-      const cm = this.cells.mirror;
-      for (let k = 0; k < d.cellSlots.length; k++) {
-        const first = 2 * (slot.cellBase + d.cellSlots[k]);
-        cm.set(d.points.subarray(k * CELL_POINTS, (k + 1) * CELL_POINTS), first * 4);
-        this.cells.touch(first, 2);
-      }
+      if (!slot || !grid) continue;
+      for (let k = 0; k < d.bucketIds.length; k++) this.setBucket(grid, slot, d.bucketIds[k]);
+      for (let k = 0; k < d.cellSlots.length; k++) this.setCell(grid, slot, d.cellSlots[k]);
     }
   }
 
   /// Brings the textures up to date (a full rebuild when needed) and binds nothing.
   upload() {
+    if (this.problem) return;
     if (this.stale && this.state) this.rebuild(this.state);
-    this.uploadedBytes += this.buckets.upload() + this.cells.upload();
+    this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload();
+  }
+
+  /// Bytes of texture storage in use.
+  textureBytes(): number {
+    return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes();
+  }
+
+  /// Bucket `b` of `grid` as the state holds it: its used entries into a chunk of the pool.
+  private setBucket(grid: Grid, slot: GridSlot, b: number) {
+    const at = slot.bucketBase + b;
+    const dir = this.directory.mirror;
+    const old = dir[at];
+    const oldCount = old & 15;
+    const base = b * BUCKET_ENTRIES;
+    let count = 0;
+    for (let e = 0; e < BUCKET_ENTRIES; e++) if (grid.keyLo[base + e] !== 0 || grid.keyHi[base + e] !== 0) count++;
+    let first = old >>> 4;
+    if (oldCount > 0 && (count === 0 || sizeClass(count) !== sizeClass(oldCount))) {
+      this.pool.release(first, sizeClass(oldCount));
+    }
+    if (count > 0 && (oldCount === 0 || sizeClass(count) !== sizeClass(oldCount))) {
+      first = this.pool.alloc(sizeClass(count));
+      if (this.pool.texels > MAX_POOL_TEXELS) {
+        this.problem = "the bucket entries outgrew the entry pool: AO not drawn";
+        return;
+      }
+      this.entries.ensure(this.pool.texels);
+    }
+    const m = this.entries.mirror;
+    let o = first * 4;
+    for (let e = 0; e < BUCKET_ENTRIES; e++) {
+      const lo = grid.keyLo[base + e];
+      const hi = grid.keyHi[base + e];
+      if (lo === 0 && hi === 0) continue;
+      m[o] = lo;
+      m[o + 1] = hi;
+      m[o + 2] = grid.slots[base + e];
+      o += 4;
+    }
+    if (count > 0) this.entries.touch(first, count);
+    dir[at] = count === 0 ? 0 : ((first << 4) | count) >>> 0;
+    this.directory.touch(at, 1);
+  }
+
+  /// Cell slot `s` of `grid` as the state holds it, into its page (allocated when it first
+  /// holds points).
+  private setCell(grid: Grid, slot: GridSlot, s: number) {
+    if (s >= slot.maxCells) return;
+    const at = slot.cellPageBase + Math.floor(s / CELL_PAGE);
+    const table = this.pageTable.mirror;
+    let page = table[at];
+    const src = s * CELL_POINTS;
+    if (page === NO_PAGE) {
+      let any = false;
+      for (let i = 0; i < CELL_POINTS; i++) if (grid.points[src + i] !== 0) any = true;
+      if (!any) return;
+      page = this.cellPages++;
+      table[at] = page;
+      this.pageTable.touch(at, 1);
+      this.cells.ensure(2 * CELL_PAGE * this.cellPages);
+    }
+    const texel = 2 * (page * CELL_PAGE + (s % CELL_PAGE));
+    const m = this.cells.mirror;
+    for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = grid.points[src + i] ?? 0;
+    m[texel * 4 + 7] = 0;
+    this.cells.touch(texel, 2);
   }
 
   private rebuild(state: ClientState) {
     this.stale = false;
     this.rebuilds++;
-    const gl = this.gl;
-    const maxRows = gl.getParameter(gl.MAX_TEXTURE_SIZE) as number;
-    let bucketTexels = 0;
-    let cellSlots = 0;
-    this.slots = state.grids.map((g) => {
-      if (!g) return null;
-      let capacity = MIN_CELLS;
-      while (capacity < g.slotCount) capacity *= 2;
-      capacity = Math.min(capacity, Math.max(g.maxCells(), g.slotCount));
-      const s = { bucketBase: bucketTexels, cellBase: cellSlots, cellCapacity: capacity };
-      bucketTexels += g.entry.bucketCount * BUCKET_ENTRIES;
-      cellSlots += capacity;
-      return s;
-    });
-    const rows = Math.max(bucketTexels, 2 * cellSlots) / TEX_WIDTH;
-    if (rows > maxRows) {
-      this.problem = `the grids need ${Math.ceil(rows)} texture rows, this GPU allows ${maxRows}: AO not drawn`;
-      this.slots = state.grids.map(() => null);
-      return;
-    }
-    this.problem = null;
-    this.buckets.resize(bucketTexels);
-    this.cells.resize(2 * cellSlots);
-    const bm = this.buckets.mirror;
-    const cm = this.cells.mirror;
+    this.pool.clear();
+    this.cellPages = 0;
+    this.directory.reset(0);
+    this.pageTable.reset(NO_PAGE);
     state.grids.forEach((g, k) => {
       const slot = this.slots[k];
       if (!g || !slot) return;
       const n = g.entry.bucketCount * BUCKET_ENTRIES;
       for (let e = 0; e < n; e++) {
-        const o = (slot.bucketBase + e) * 4;
-        bm[o] = g.keyLo[e];
-        bm[o + 1] = g.keyHi[e];
-        bm[o + 2] = g.slots[e];
+        if (g.keyLo[e] === 0 && g.keyHi[e] === 0) continue;
+        const b = Math.floor(e / BUCKET_ENTRIES);
+        this.setBucket(g, slot, b);
+        e = (b + 1) * BUCKET_ENTRIES - 1;
       }
-      for (let s = 0; s < g.slotCount; s++) {
-        cm.set(g.points.subarray(s * CELL_POINTS, (s + 1) * CELL_POINTS), 8 * (slot.cellBase + s));
-      }
+      for (let s = 0; s < g.slotCount; s++) this.setCell(g, slot, s);
     });
   }
 }

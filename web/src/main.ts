@@ -56,6 +56,9 @@ interface Status {
   /// their size in bytes.
   rebuilds: number;
   textureBytes: number;
+  /// When (performance.now() ms) the scene was loaded, the first welcome and update
+  /// arrived, and the first frame with AO (grids holding points) was drawn; null until then.
+  milestones: { scene: number | null; welcome: number | null; update: number | null; ao: number | null };
 }
 
 const status: Status = {
@@ -83,6 +86,7 @@ const status: Status = {
   uploadedBytes: 0,
   rebuilds: 0,
   textureBytes: 0,
+  milestones: { scene: null, welcome: null, update: null, ao: null },
 };
 (window as unknown as { psao: Status }).psao = status;
 
@@ -110,6 +114,7 @@ function connect() {
     { url: wsUrl, token, verify, name: "psao browser viewer" },
     {
       welcome: () => {
+        status.milestones.welcome ??= performance.now();
         status.connected = true;
         status.sessions++;
         status.message = null;
@@ -120,10 +125,12 @@ function connect() {
         answered = -1;
         sent = -1;
       },
-      sceneTime: (_frame, clientFrame) => {
+      sceneTime: (_frame, clientFrame, seconds) => {
         if (clientFrame !== null) answered = Math.max(answered, clientFrame);
+        serverTime = { seconds, at: performance.now() };
       },
       update: (u, bytes, verified) => {
+        status.milestones.update ??= performance.now();
         grids?.apply(u);
         status.updates++;
         if (verified) status.verified++;
@@ -172,6 +179,16 @@ let pathFrame = 0;
 let sent = -1;
 let answered = -1;
 let pathStart = 0;
+/// The server's latest scene time and when it arrived (skinned instances are posed at it,
+/// advanced by the wall time since).
+let serverTime: { seconds: number; at: number } | null = null;
+
+/// The scene time to pose skinned instances at: in lockstep test runs the client clock of
+/// the drawn path frame (frame / 60 s, as `psao view`), else the server's.
+function sceneTime(now: number): number {
+  if (lockstep && testFrames !== null) return Math.max(answered, 0) / 60;
+  return serverTime ? serverTime.seconds + (now - serverTime.at) / 1000 : 0;
+}
 
 for (const [id, mode] of [
   ["mode-composited", MODE_COMPOSITED],
@@ -291,7 +308,8 @@ function currentCamera(now: number): { cam: Camera | null; send: boolean } {
 function measureCost() {
   const cam = status.camera;
   if (!gl || !renderer || !cam) return null;
-  renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale });
+  const time = sceneTime(performance.now());
+  renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale, time });
   const w = gl.drawingBufferWidth;
   const h = gl.drawingBufferHeight;
   const px = new Uint8Array(w * h * 4);
@@ -310,7 +328,7 @@ function measureCost() {
     maxCells = Math.max(maxCells, px[i]);
     maxPoints = Math.max(maxPoints, p);
   }
-  renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+  renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time });
   return {
     width: w,
     height: h,
@@ -369,8 +387,11 @@ function tick(now: number) {
   const drawNow = !(lockstep && testFrames !== null) || answered === testFrames - 1;
   if (cam && renderer && drawNow) {
     grids?.upload();
-    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale });
+    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time: sceneTime(now) });
     status.drawn++;
+    if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
+      status.milestones.ao = performance.now();
+    }
     if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
   }
   if (now - lastPointCount > 500) {
@@ -380,7 +401,7 @@ function tick(now: number) {
   status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
   status.uploadedBytes = grids?.uploadedBytes ?? 0;
   status.rebuilds = grids?.rebuilds ?? 0;
-  status.textureBytes = grids ? grids.buckets.mirror.byteLength + grids.cells.mirror.byteLength : 0;
+  status.textureBytes = grids ? grids.textureBytes() : 0;
   const w = session?.welcomeMsg;
   const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
   overlay.textContent = [
@@ -418,6 +439,7 @@ fetch("/scene.glb")
     orbit = sceneBounds(glb);
     if (gl) {
       renderer = new SceneRenderer(gl, glb);
+      status.milestones.scene = performance.now();
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
         if (!path) status.message = `the scene has no camera path named ${pathName}`;

@@ -6,7 +6,8 @@
 // does (`aoshader.ts`).
 
 import { FRAGMENT, FULLSCREEN, GBUFFER, VERTEX } from "./aoshader";
-import type { GridTextures } from "./grids";
+import { TEX_WIDTH, type GridTextures } from "./grids";
+import { Animation, JOINT_TEXELS, type AnimationDoc } from "./skin";
 import type { ClientState } from "./state";
 import type { Camera } from "./wire";
 
@@ -15,15 +16,51 @@ interface Primitive {
   count: number;
   /// Index of its base colour in the colour texture.
   colour: number;
+  /// Whether it carries joints and weights (skinned when its instance is).
+  skin: boolean;
 }
 
-interface GltfDoc {
-  nodes?: { mesh?: number; matrix?: number[] }[];
-  meshes?: { primitives: { attributes: { POSITION?: number; NORMAL?: number }; indices?: number; material?: number }[] }[];
+type GltfDoc = AnimationDoc & {
+  meshes?: {
+    primitives: {
+      attributes: { POSITION?: number; NORMAL?: number; JOINTS_0?: number; WEIGHTS_0?: number };
+      indices?: number;
+      material?: number;
+    }[];
+  }[];
   materials?: { pbrMetallicRoughness?: { baseColorFactor?: number[] } }[];
   accessors?: { bufferView?: number; byteOffset?: number; count: number; componentType: number; type: string }[];
   bufferViews?: { byteOffset?: number; byteLength: number }[];
   extras?: { psao_camera_paths?: CameraPathDoc[] };
+};
+
+const COMPONENTS: Record<string, number> = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
+
+/// Accessor `index` of `doc` over `bin` as a typed array of its component type (float,
+/// unsigned short or unsigned int, as `psao serve` writes them), copied (aligned).
+function readAccessor(doc: GltfDoc, bin: Uint8Array, index: number): Float32Array | Uint16Array | Uint32Array {
+  const a = doc.accessors?.[index];
+  const bv = a?.bufferView !== undefined ? doc.bufferViews?.[a.bufferView] : undefined;
+  if (!a || !bv) throw new Error(`scene.glb: accessor ${index} has no data`);
+  const n = a.count * (COMPONENTS[a.type] ?? 1);
+  const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
+  const Kind = a.componentType === 5126 ? Float32Array : a.componentType === 5123 ? Uint16Array : Uint32Array;
+  const bytes = bin.slice(start, start + n * Kind.BYTES_PER_ELEMENT);
+  if (bytes.length !== n * Kind.BYTES_PER_ELEMENT) throw new Error(`scene.glb: accessor ${index} is truncated`);
+  return new Kind(bytes.buffer);
+}
+
+/// psao-scene's skinning weights: clamped to ≥ 0 (non-finite: 0) and renormalised to sum to
+/// 1, all-zero sets weighting the first joint alone.
+function renormalisedWeights(w: Float32Array | Uint16Array | Uint32Array): Float32Array {
+  const out = new Float32Array(w.length);
+  for (let v = 0; v + 4 <= w.length; v += 4) {
+    const x = [0, 1, 2, 3].map((k) => (Number.isFinite(w[v + k]) ? Math.max(w[v + k], 0) : 0));
+    const sum = Math.fround(Math.fround(Math.fround(x[0] + x[1]) + x[2]) + x[3]);
+    if (sum > 0) for (let k = 0; k < 4; k++) out[v + k] = x[k] / sum;
+    else out[v] = 1;
+  }
+  return out;
 }
 
 /// A camera path of the scene, one camera per 60 Hz frame: position, target, up, vertical
@@ -127,6 +164,8 @@ export interface DrawOptions {
   grids: GridTextures | null;
   /// G-buffer samples per canvas pixel and axis (odd; default 1).
   scale?: number;
+  /// Scene time (seconds) at which skinned instances are posed (default 0).
+  time?: number;
 }
 
 /// A G-buffer: world position + instance, shading normal + colour index (RGBA32F each) and
@@ -215,6 +254,9 @@ export class SceneRenderer {
   private instF: WebGLTexture;
   private instU: WebGLTexture;
   private emptyU: WebGLTexture;
+  private joints: WebGLTexture;
+  /// The scene's animation (skinned instances), when anything is skinned.
+  animation: Animation | null = null;
   /// The scene's camera paths (from the glb's extras).
   paths: CameraPathDoc[] = [];
 
@@ -232,6 +274,11 @@ export class SceneRenderer {
     this.instU = dataTexture(gl);
     this.emptyU = dataTexture(gl);
     gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32UI, 1, 1, 0, gl.RGBA_INTEGER, gl.UNSIGNED_INT, new Uint32Array(4));
+    this.joints = dataTexture(gl);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, 1, 1, 0, gl.RGBA, gl.FLOAT, new Float32Array(4));
+    // Unskinned primitives leave the joints attribute disabled: its generic value must be
+    // unsigned like the shader's input, or WebGL refuses the draw.
+    gl.vertexAttribI4ui(2, 0, 0, 0, 0);
     const colours = this.load(glb);
     this.colours = dataTexture(gl);
     gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, Math.max(1, colours.length / 4), 1, 0, gl.RGBA, gl.FLOAT, colours.length ? colours : new Float32Array(4));
@@ -253,6 +300,9 @@ export class SceneRenderer {
       const start = (bv.byteOffset ?? 0) + (a.byteOffset ?? 0);
       return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
     };
+    const instanceCount = (doc.nodes ?? []).findIndex((n) => n.mesh === undefined || !n.matrix);
+    const animation = new Animation(doc, instanceCount < 0 ? (doc.nodes ?? []).length : instanceCount, (i) => readAccessor(doc, bin, i));
+    this.animation = animation.skinned ? animation : null;
     const colours: number[] = [];
     for (const mesh of doc.meshes ?? []) {
       const prims: Primitive[] = [];
@@ -270,13 +320,27 @@ export class SceneRenderer {
           gl.enableVertexAttribArray(loc);
           gl.vertexAttribPointer(loc, 3, gl.FLOAT, false, 0, 0);
         }
+        const { JOINTS_0: joints, WEIGHTS_0: weights } = prim.attributes;
+        const skin = joints !== undefined && weights !== undefined;
+        if (skin) {
+          const jbuf = gl.createBuffer();
+          gl.bindBuffer(gl.ARRAY_BUFFER, jbuf);
+          gl.bufferData(gl.ARRAY_BUFFER, Uint16Array.from(readAccessor(doc, bin, joints)), gl.STATIC_DRAW);
+          gl.enableVertexAttribArray(2);
+          gl.vertexAttribIPointer(2, 4, gl.UNSIGNED_SHORT, 0, 0);
+          const wbuf = gl.createBuffer();
+          gl.bindBuffer(gl.ARRAY_BUFFER, wbuf);
+          gl.bufferData(gl.ARRAY_BUFFER, renormalisedWeights(readAccessor(doc, bin, weights)), gl.STATIC_DRAW);
+          gl.enableVertexAttribArray(3);
+          gl.vertexAttribPointer(3, 4, gl.FLOAT, false, 0, 0);
+        }
         const idx = data(prim.indices);
         const ibo = gl.createBuffer();
         gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, ibo);
         gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, idx.bytes, gl.STATIC_DRAW);
         gl.bindVertexArray(null);
         const c = doc.materials?.[prim.material ?? 0]?.pbrMetallicRoughness?.baseColorFactor ?? [0.8, 0.8, 0.8, 1];
-        prims.push({ vao, count: idx.count, colour: colours.length / 4 });
+        prims.push({ vao, count: idx.count, colour: colours.length / 4, skin });
         colours.push(c[0], c[1], c[2], 1);
       }
       this.meshes.push(prims);
@@ -311,6 +375,19 @@ export class SceneRenderer {
     gl.enable(gl.DEPTH_TEST);
     gl.depthFunc(gl.LESS);
     gl.useProgram(this.gbuffer.p);
+    const animation = this.animation;
+    // The joint matrices at the scene time (a float texture stays bound for the sampler
+    // also without skinned instances).
+    gl.activeTexture(gl.TEXTURE0);
+    gl.bindTexture(gl.TEXTURE_2D, this.joints);
+    if (animation) {
+      const texels = animation.jointTexels(opts.time ?? 0);
+      const rows = Math.ceil(texels.length / 4 / TEX_WIDTH);
+      const padded = new Float32Array(rows * TEX_WIDTH * 4);
+      padded.set(texels);
+      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, TEX_WIDTH, rows, 0, gl.RGBA, gl.FLOAT, padded);
+    }
+    gl.uniform1i(g.u_joints, 0);
     gl.uniformMatrix4fv(g.u_view_proj, false, viewProj(camera));
     gl.uniform3fv(g.u_eye, camera.position);
     const model = new Float32Array(16);
@@ -326,8 +403,10 @@ export class SceneRenderer {
       gl.uniformMatrix4fv(g.u_model, false, model);
       gl.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
       gl.uniform1f(g.u_instance, i);
+      const jointBase = animation ? animation.jointBase[i] : -1;
       for (const p of this.meshes[inst.mesh] ?? []) {
         gl.uniform1f(g.u_colour_index, p.colour);
+        gl.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
         gl.bindVertexArray(p.vao);
         gl.drawElements(gl.TRIANGLES, p.count, gl.UNSIGNED_INT, 0);
       }
@@ -347,7 +426,9 @@ export class SceneRenderer {
     gl.bindTexture(gl.TEXTURE_2D, this.instU);
     gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32UI, INST_U, rows, 0, gl.RGBA_INTEGER, gl.UNSIGNED_INT, instU.length ? instU : new Uint32Array(INST_U * 4));
     const textures: [string, WebGLTexture | null][] = [
-      ["u_buckets", grids?.buckets.texture ?? this.emptyU],
+      ["u_directory", grids?.directory.texture ?? this.emptyU],
+      ["u_entries", grids?.entries.texture ?? this.emptyU],
+      ["u_page_table", grids?.pageTable.texture ?? this.emptyU],
       ["u_cells", grids?.cells.texture ?? this.emptyU],
       ["u_normals", this.normals],
       ["u_gposition", this.targets.position],
@@ -403,7 +484,7 @@ export class SceneRenderer {
     u.set(
       [
         e.dims[0], e.dims[1], e.dims[2], e.bucketCount - 1,
-        slot.bucketBase, slot.cellBase, slot.cellCapacity, 0,
+        slot.bucketBase, slot.cellPageBase, slot.maxCells, grid.slotCount > 0 ? 1 : 0,
         Number(row & 0xffffffffn), Number(row >> 32n), Number(slice & 0xffffffffn), Number(slice >> 32n),
       ],
       i * INST_U * 4,

@@ -33,7 +33,9 @@ export interface SessionHandler {
   welcome(w: Welcome): void;
   /// An update was applied; `verified` is whether it carried the server's hash (it matched).
   update(u: Update, frameBytes: number, verified: boolean): void;
-  sceneTime?(frame: number, clientFrame: number | null): void;
+  /// The server's frame and scene time (seconds) with every update and scene-time message;
+  /// `clientFrame` is the lockstep client frame answered, if any.
+  sceneTime?(frame: number, clientFrame: number | null, seconds: number): void;
   /// The session ended: `fatal` when reconnecting cannot help (wrong token or version).
   closed(reason: string, fatal: boolean): void;
 }
@@ -96,9 +98,11 @@ export class Session {
         if (w.codec !== "compact") return this.fail(`the server's codec \`${w.codec}\` is not supported`, true);
         this.welcomeMsg = w;
         this.state = new ClientState(w.instances);
+        // The decoder's reference is the client state: updates are decoded into its grids.
         this.decoder = new CompactDecoder(
           decodeLimit(w.instances),
           w.instances.map((e) => e.bucketCount),
+          this.state,
         );
         this.handler.welcome(w);
         return;
@@ -122,11 +126,11 @@ export class Session {
         }
         this.ws.send(ackFrame(m.delta.frame));
         this.handler.update(u, size, verified);
-        if (m.delta.clientFrame !== null) this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame);
+        this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame, m.delta.sceneTime);
         return;
       }
       case "scene_time":
-        this.handler.sceneTime?.(m.frame, m.clientFrame);
+        this.handler.sceneTime?.(m.frame, m.clientFrame, m.seconds);
         return;
       case "error": {
         const fatal = m.code === "Token" || m.code === "Version";

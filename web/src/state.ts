@@ -2,7 +2,7 @@
 // state hash (crates/psao-client/src/hash.rs), computed the same way so that the browser's
 // hash equals psao-client's and the server's for the same state.
 
-import { BUCKET_ENTRIES, CELL_POINTS, VALID_BIT, type Update } from "./compact";
+import { BUCKET_ENTRIES, CELL_POINTS, DeltaError, VALID_BIT, type Reference, type ReferenceStore, type Update } from "./compact";
 import type { InstanceEntry } from "./wire";
 
 /// Largest grid side (psao-points' MAX_DIM).
@@ -12,17 +12,23 @@ const MAX_DIM = 1 << 21;
 export class ApplyError extends Error {}
 
 /// One instance's grid: buckets (keys and slots, 8 per bucket) and cells (7 points each).
-export class Grid {
+/// It is also the `compact` decoder's reference for the instance (one copy of the grids).
+export class Grid implements Reference {
   /// Keys (cell id + 1, 0 = empty) as low and high 32-bit halves.
-  readonly keyLo: Uint32Array;
-  readonly keyHi: Uint32Array;
-  readonly slots: Uint32Array;
-  /// Points, 7 per cell slot; grows with the highest slot touched.
+  keyLo: Uint32Array;
+  keyHi: Uint32Array;
+  slots: Uint32Array;
+  /// Points, 7 per cell slot; grows with the highest slot touched (the decoder may grow it
+  /// further before `ClientState.apply` counts the slots).
   points: Uint32Array;
-  /// Cell slots in use (the length `points` covers).
+  /// Cell slots in use (at most the length `points` covers).
   slotCount = 0;
+  readonly maxBucketWords: number;
+  readonly maxPointWords: number;
 
   constructor(readonly entry: InstanceEntry) {
+    this.maxBucketWords = entry.bucketCount * BUCKET_ENTRIES;
+    this.maxPointWords = this.maxBucketWords * CELL_POINTS;
     this.keyLo = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
     this.keyHi = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
     this.slots = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
@@ -34,7 +40,7 @@ export class Grid {
     this.keyLo.fill(0);
     this.keyHi.fill(0);
     this.slots.fill(0);
-    this.points.fill(0, 0, this.slotCount * CELL_POINTS);
+    this.points.fill(0);
     this.slotCount = 0;
   }
 
@@ -47,7 +53,8 @@ export class Grid {
     if (slot < this.slotCount) return;
     this.slotCount = slot + 1;
     if (this.points.length < this.slotCount * CELL_POINTS) {
-      const grown = new Uint32Array(Math.max(this.slotCount, 2 * (this.points.length / CELL_POINTS)) * CELL_POINTS);
+      const cells = Math.min(Math.max(this.slotCount, 2 * Math.floor(this.points.length / CELL_POINTS)), Math.max(this.slotCount, this.maxCells()));
+      const grown = new Uint32Array(cells * CELL_POINTS);
       grown.set(this.points);
       this.points = grown;
     }
@@ -98,8 +105,10 @@ function usable(e: InstanceEntry): boolean {
   );
 }
 
-/// The mirror of every instance's grid and latest transform.
-export class ClientState {
+/// The mirror of every instance's grid and latest transform; the `compact` decoder's
+/// reference store when given to it (updates are then decoded into the grids).
+export class ClientState implements ReferenceStore {
+  readonly isClientState = true;
   readonly grids: (Grid | null)[];
   readonly transforms: (Float32Array | null)[];
   lastFrame: bigint | null = null;
@@ -109,16 +118,36 @@ export class ClientState {
     this.transforms = table.map(() => null);
   }
 
-  /// Applies a decoded update after checking all of it (nothing changes on an error).
+  /// Instance `instance`'s grid as the decoder's reference.
+  referenceOf(instance: number): Reference {
+    if (instance >= this.grids.length) throw new DeltaError(`instance ${instance} out of range (${this.grids.length} instances)`);
+    const g = this.grids[instance];
+    if (!g) throw new DeltaError(`instance ${instance} has no grid`);
+    return g;
+  }
+
+  /// Empties every grid and forgets the transforms (a snapshot follows).
+  clear() {
+    for (const g of this.grids) g?.clear();
+    this.transforms.fill(null);
+  }
+
+  /// Applies a decoded update after checking all of it. An update decoded elsewhere changes
+  /// nothing on an error; one decoded into this state (`inPlace`) is already in the grids,
+  /// so after an error the state is undefined and the session must restart.
   apply(u: Update) {
     this.validate(u);
-    if (u.snapshot) {
-      for (const g of this.grids) g?.clear();
-      this.transforms.fill(null);
-    }
+    if (u.snapshot && !u.inPlace) this.clear();
     for (const [instance, t] of u.transforms) this.transforms[instance] = t;
     for (const d of u.instances) {
       const g = this.grids[d.instance]!;
+      if (u.inPlace) {
+        for (let i = 0; i < d.keyLo.length; i++) {
+          if (d.keyLo[i] !== 0 || d.keyHi[i] !== 0) g.ensureSlot(d.slots[i]);
+        }
+        for (let k = 0; k < d.cellSlots.length; k++) g.ensureSlot(d.cellSlots[k]);
+        continue;
+      }
       for (let k = 0; k < d.bucketIds.length; k++) {
         const base = d.bucketIds[k] * BUCKET_ENTRIES;
         const src = k * BUCKET_ENTRIES;

@@ -246,3 +246,159 @@ test("in chromium the AO-only view of a lockstep run matches psao view's (≥ 40
     else rmSync(dir, { recursive: true, force: true });
   }
 });
+
+/// A tiny skinned scene written by the test: a 4 m ground square and a 0.1 × 1.2 × 1 m plate
+/// on two joints (the root, and one 0.2 m up that carries the upper 1 m), whose clip turns
+/// the upper joint 165° about Z in 1 s, so that at 0.48 s the plate's upper part lies nearly
+/// flat 0.2–0.4 m over the ground and darkens it; a scene file (AO radius 0.5 m) and a
+/// fixed camera path looking at it. Returns the scene file.
+function writeSkinnedScene(dir: string): string {
+  const positions: number[] = [];
+  const normals: number[] = [];
+  const joints: number[] = [];
+  const weights: number[] = [];
+  const indices: number[] = [];
+  const vertex = (p: number[], n: number[], upper: number) => {
+    positions.push(...p);
+    normals.push(...n);
+    joints.push(0, 1, 0, 0);
+    weights.push(1 - upper, upper, 0, 0);
+    return positions.length / 3 - 1;
+  };
+  // Ground: mesh 0.
+  const g = [[-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2]].map((p) => vertex(p, [0, 1, 0], 0));
+  indices.push(g[0], g[2], g[1], g[0], g[3], g[2]);
+  const groundVertices = 4;
+  const groundIndices = 6;
+  // Plate: rings every 0.2 m, each side face with its own vertices (flat normals).
+  const hx = 0.05;
+  const hz = 0.5;
+  const levels = [0, 0.2, 0.4, 0.6, 0.8, 1.0, 1.2];
+  const weight = (y: number) => (y < 0.2 ? 0 : y > 0.2 ? 1 : 0.5);
+  const sides: [number[], number[], number[]][] = [
+    [[hx, 0, -hz], [hx, 0, hz], [1, 0, 0]],
+    [[hx, 0, hz], [-hx, 0, hz], [0, 0, 1]],
+    [[-hx, 0, hz], [-hx, 0, -hz], [-1, 0, 0]],
+    [[-hx, 0, -hz], [hx, 0, -hz], [0, 0, -1]],
+  ];
+  for (const [a, b, n] of sides) {
+    const ring = levels.map((y) => [vertex([a[0], y, a[2]], n, weight(y)), vertex([b[0], y, b[2]], n, weight(y))]);
+    for (let k = 0; k + 1 < ring.length; k++) {
+      const [p, q] = ring[k];
+      const [r, s] = ring[k + 1];
+      indices.push(p, q, s, p, s, r);
+    }
+  }
+  const top = [[hx, 1.2, -hz], [-hx, 1.2, -hz], [-hx, 1.2, hz], [hx, 1.2, hz]].map((p) => vertex(p, [0, 1, 0], 1));
+  indices.push(top[0], top[1], top[2], top[0], top[2], top[3]);
+  const barVertices = positions.length / 3 - groundVertices;
+  // Buffer: positions, normals, weights, inverse binds, key times, key rotations (floats),
+  // then joints (u16) and indices (u32).
+  const views: { byteOffset: number; byteLength: number }[] = [];
+  const accessors: Record<string, unknown>[] = [];
+  const chunks: Buffer[] = [];
+  let at = 0;
+  const add = (bytes: Buffer, accessor: Record<string, unknown>) => {
+    views.push({ byteOffset: at, byteLength: bytes.length });
+    chunks.push(bytes);
+    at += bytes.length;
+    accessors.push({ bufferView: views.length - 1, ...accessor });
+    return accessors.length - 1;
+  };
+  const floats = (v: number[]) => Buffer.from(new Float32Array(v).buffer);
+  const sub = <T>(a: T[], from: number, count: number, width: number) => a.slice(from * width, (from + count) * width);
+  const range = (v: number[], n: number) => {
+    const min = [0, 1, 2].map((k) => Math.min(...v.filter((_, i) => i % 3 === k)));
+    const max = [0, 1, 2].map((k) => Math.max(...v.filter((_, i) => i % 3 === k)));
+    return { count: n, min, max };
+  };
+  const gPos = add(floats(sub(positions, 0, groundVertices, 3)), { componentType: 5126, type: "VEC3", ...range(sub(positions, 0, groundVertices, 3), groundVertices) });
+  const gNrm = add(floats(sub(normals, 0, groundVertices, 3)), { componentType: 5126, type: "VEC3", count: groundVertices });
+  const bPos = add(floats(sub(positions, groundVertices, barVertices, 3)), { componentType: 5126, type: "VEC3", ...range(sub(positions, groundVertices, barVertices, 3), barVertices) });
+  const bNrm = add(floats(sub(normals, groundVertices, barVertices, 3)), { componentType: 5126, type: "VEC3", count: barVertices });
+  const bWgt = add(floats(sub(weights, groundVertices, barVertices, 4)), { componentType: 5126, type: "VEC4", count: barVertices });
+  const ibm = add(floats([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, -0.2, 0, 1]), { componentType: 5126, type: "MAT4", count: 2 });
+  const times = add(floats([0, 1]), { componentType: 5126, type: "SCALAR", count: 2, min: [0], max: [1] });
+  const half = ((165 / 180) * Math.PI) / 2;
+  const rots = add(floats([0, 0, 0, 1, 0, 0, Math.sin(half), Math.cos(half)]), { componentType: 5126, type: "VEC4", count: 2 });
+  const bJnt = add(Buffer.from(new Uint16Array(sub(joints, groundVertices, barVertices, 4)).buffer), { componentType: 5123, type: "VEC4", count: barVertices });
+  const gIdx = add(Buffer.from(new Uint32Array(indices.slice(0, groundIndices)).buffer), { componentType: 5125, type: "SCALAR", count: groundIndices });
+  const bIdx = add(Buffer.from(new Uint32Array(indices.slice(groundIndices).map((i) => i - groundVertices)).buffer), { componentType: 5125, type: "SCALAR", count: indices.length - groundIndices });
+  writeFileSync(join(dir, "skinned.bin"), Buffer.concat(chunks));
+  const gltf = {
+    asset: { version: "2.0" },
+    scene: 0,
+    scenes: [{ nodes: [0, 2, 3] }],
+    nodes: [
+      { name: "root joint", children: [1] },
+      { name: "upper joint", translation: [0, 0.2, 0] },
+      { name: "bar", mesh: 1, skin: 0 },
+      { name: "ground", mesh: 0 },
+    ],
+    meshes: [
+      { primitives: [{ attributes: { POSITION: gPos, NORMAL: gNrm }, indices: gIdx, material: 0 }] },
+      { primitives: [{ attributes: { POSITION: bPos, NORMAL: bNrm, JOINTS_0: bJnt, WEIGHTS_0: bWgt }, indices: bIdx, material: 1 }] },
+    ],
+    materials: [
+      { pbrMetallicRoughness: { baseColorFactor: [0.7, 0.7, 0.7, 1] } },
+      { pbrMetallicRoughness: { baseColorFactor: [0.8, 0.3, 0.2, 1] } },
+    ],
+    skins: [{ joints: [0, 1], inverseBindMatrices: ibm }],
+    animations: [{ name: "bend", samplers: [{ input: times, output: rots, interpolation: "LINEAR" }], channels: [{ sampler: 0, target: { node: 1, path: "rotation" } }] }],
+    buffers: [{ uri: "skinned.bin", byteLength: at }],
+    bufferViews: views.map((v) => ({ buffer: 0, ...v })),
+    accessors,
+  };
+  writeFileSync(join(dir, "skinned.gltf"), JSON.stringify(gltf));
+  const key = (time: number) => `[[key]]\ntime = ${time}\nposition = [0.0, 2.2, 3.0]\nlook_at = [-0.3, 0.3, 0.0]\n`;
+  writeFileSync(join(dir, "path.toml"), `name = "skin_test"\nfov_y_deg = 60.0\n\n${key(0)}\n${key(2)}`);
+  writeFileSync(join(dir, "scene.toml"), `ao_radius = 0.5\ncamera_paths = ["path.toml"]\n\n[[asset]]\nfile = "skinned.gltf"\n`);
+  return join(dir, "scene.toml");
+}
+
+/// Frames of the skinned comparison: at frame 29 (0.48 s) the plate's upper part has turned 80°.
+const SKIN_FRAMES = 30;
+
+test("in chromium a skinned character moves as in psao view (AO-only ≥ 40 dB where the rest pose is not)", { timeout: 180_000 }, async () => {
+  const dir = mkdtempSync(join(tmpdir(), "psao-skin-"));
+  const scene = writeSkinnedScene(dir);
+  const server = ["--scene", scene, "--lockstep"];
+  const frame = `ao_${String(SKIN_FRAMES - 1).padStart(5, "0")}.png`;
+  try {
+    // psao view's frames, posed (the reference) and in the rest pose (what a viewer that does
+    // not skin would draw), each against its own server…
+    for (const [out, extra] of [["posed", []], ["rest", ["--static"]]] as const) {
+      const cpu = await serve("127.0.0.1:0", server);
+      try {
+        const args = ["view", "--scene", scene, "--connect", cpu.addr, "--frames", `${SKIN_FRAMES}`, "--res", AO_RES, "--out", join(dir, out), ...extra];
+        if (out === "posed") args.push("--json", join(dir, "view.json"));
+        assert.equal(await run(args), 0);
+      } finally {
+        cpu.child.kill();
+      }
+    }
+    const viewHash = JSON.parse(readFileSync(join(dir, "view.json"), "utf8")).state_hash as string;
+    // …and the browser's.
+    const gpu = await serve("127.0.0.1:0", server);
+    const page = await browser.newPage();
+    try {
+      await page.goto(`http://${gpu.addr}/?verify=1&path=skin_test&frames=${SKIN_FRAMES}&lockstep=1&res=${AO_RES}&mode=ao&scale=${AO_SCALE}`);
+      const s = await until(page, "the last lockstep frame", (s) => (s as Status & { done: boolean }).done, 120_000);
+      assert.equal(s.mismatches, 0);
+      assert.equal((s as Status & { hash: string }).hash, viewHash, "the browser's state hash differs from psao view's");
+      const ours = join(dir, "browser_ao.png");
+      await savePng(page, ours);
+      const posed = JSON.parse(await output(["compare", join(dir, "posed", frame), ours, "--json"]));
+      const rest = JSON.parse(await output(["compare", join(dir, "rest", frame), ours, "--json"]));
+      console.log(`skinned AO-only ${AO_RES} frame ${SKIN_FRAMES - 1}: PSNR ${posed.psnr.toFixed(2)} dB against psao view, ${rest.psnr.toFixed(2)} dB against its rest pose`);
+      assert.ok(posed.psnr >= 40, `PSNR ${posed.psnr} dB < 40 dB`);
+      assert.ok(rest.psnr < 40, `the rest pose is as close (${rest.psnr} dB): the test does not see the motion`);
+    } finally {
+      await page.close();
+      gpu.child.kill();
+    }
+  } finally {
+    if (process.env.PSAO_KEEP) console.log(`images in ${dir}`);
+    else rmSync(dir, { recursive: true, force: true });
+  }
+});

@@ -49,21 +49,19 @@ where
             h.word(NO_GRID);
             continue;
         };
-        let buckets = grid.buckets();
-        h.word(buckets.len() as u64);
-        for bucket in buckets {
-            for e in &compact_bucket(bucket).entries {
+        h.word(grid.bucket_count() as u64);
+        for bucket in grid.buckets() {
+            for e in &compact_bucket(&bucket).entries {
                 h.word(e.key);
                 h.word(u64::from(e.slot));
             }
         }
-        let cells = grid.cells();
-        let used = cells
-            .iter()
-            .rposition(|c| c.count() > 0)
+        let used = (0..grid.slot_count() as u32)
+            .rev()
+            .find(|&s| grid.cell(s).count() > 0)
             .map_or(0, |last| last + 1);
-        h.word(used as u64);
-        for cell in &cells[..used] {
+        h.word(u64::from(used));
+        for cell in grid.cells().take(used as usize) {
             let words = compact_cell(cell).points;
             for pair in words.chunks(2) {
                 let hi = pair.get(1).map_or(0, |&w| u64::from(w) << 32);

@@ -131,7 +131,6 @@ fn hash_tracks_a_single_point() {
     let grid = &s.grids[0];
     let (slot, cell) = grid
         .cells()
-        .iter()
         .enumerate()
         .find(|(_, c)| c.count() > 2)
         .unwrap();

@@ -12,3 +12,4 @@ pub mod session;
 pub mod splat;
 pub mod sqrt5;
 pub mod trace;
+pub mod workers;

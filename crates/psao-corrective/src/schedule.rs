@@ -101,7 +101,8 @@ impl RegionQueue {
     /// A new analysis. After a camera change every region restarts at level 1 with its
     /// priority; otherwise queued regions keep their level and position, take the new
     /// priority (decayed by their level), and only objects not queued yet are added at level 1
-    /// — objects whose regions were finished are not resubmitted.
+    /// — objects whose regions were finished are not resubmitted. Either way, objects the
+    /// analysis no longer lists (gone from view, or moving) leave the queue.
     pub fn submit(&mut self, regions: &[ObjectRegion], camera_changed: bool, finished: &[u32]) {
         if camera_changed {
             self.heap = regions
@@ -117,6 +118,7 @@ impl RegionQueue {
             return;
         }
         let mut entries: Vec<Entry> = std::mem::take(&mut self.heap).into_vec();
+        entries.retain(|e| regions.iter().any(|r| r.id == e.object));
         for r in regions {
             if let Some(e) = entries.iter_mut().find(|e| e.object == r.id) {
                 e.priority = r.priority * (1.0 - self.decay).powi(e.level as i32 - 1);
@@ -252,6 +254,10 @@ mod tests {
             .map(|(j, _)| j.object)
             .collect();
         assert!(rest.iter().all(|&o| o == 2));
+        // An object the analysis no longer lists leaves the queue.
+        q.submit(&[region(1, 1.0, A), region(2, 0.5, B)], true, &[]);
+        q.submit(&[region(2, 0.5, B)], false, &[]);
+        assert!(std::iter::from_fn(|| q.take(u64::MAX)).all(|(j, _)| j.object == 2));
         // A camera change restarts everything at level 1.
         q.submit(&[region(1, 1.0, A)], true, &[1]);
         assert_eq!(q.take(u64::MAX).unwrap().0.level, 1);

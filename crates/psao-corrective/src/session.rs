@@ -7,7 +7,7 @@
 
 use crate::attention::ObjectRegion;
 use crate::cache::{AgingStats, CacheConfig, CacheError, SampleCache};
-use crate::schedule::RegionQueue;
+use crate::schedule::{Job, RegionQueue};
 use crate::screen::ScreenView;
 use crate::splat::{Sample, SplatTarget};
 use crate::sqrt5::Hierarchy;
@@ -63,6 +63,29 @@ impl Planner {
         self.analyzed_age = Some(camera_age);
     }
 
+    /// True when the queue holds work.
+    pub fn has_work(&self) -> bool {
+        !self.queue.is_empty()
+    }
+
+    /// The next job of at most `max_len` positions (the remainder stays queued); a job that
+    /// ends its region's last level marks the object finished.
+    pub fn take_job(&mut self, max_len: u64) -> Option<Job> {
+        let (job, done) = self.queue.take(max_len)?;
+        if done {
+            self.finished.push(job.object);
+        }
+        Some(job)
+    }
+
+    /// The pixel positions of `job`, in iteration order.
+    pub fn positions(&self, job: &Job) -> Vec<(i32, i32)> {
+        self.hierarchy
+            .level_samples(job.level, job.rect)
+            .map(|s| s.iter_from(job.start).take(job.len as usize).collect())
+            .unwrap_or_default()
+    }
+
     /// Positions to trace: jobs in priority order until `budget` positions satisfy `on_object`
     /// (`(x, y, object)` → whether the pixel shows the object), the queue runs dry, or more
     /// than `examine` positions were looked at (checked between jobs).
@@ -75,16 +98,10 @@ impl Planner {
         let mut out = Vec::with_capacity(budget);
         let mut examined = 0usize;
         while out.len() < budget && examined <= examine {
-            let Some((job, done)) = self.queue.take((budget - out.len()) as u64) else {
+            let Some(job) = self.take_job((budget - out.len()) as u64) else {
                 break;
             };
-            if done {
-                self.finished.push(job.object);
-            }
-            let Ok(samples) = self.hierarchy.level_samples(job.level, job.rect) else {
-                continue;
-            };
-            for (x, y) in samples.iter_from(job.start).take(job.len as usize) {
+            for (x, y) in self.positions(&job) {
                 examined += 1;
                 if on_object(x, y, job.object) {
                     out.push(Planned {

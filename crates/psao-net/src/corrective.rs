@@ -11,9 +11,9 @@
 
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{Affine3A, Vec3};
 use psao_client::Shading;
-use psao_corrective::attention::{analyze, DEFAULT_SALIENCY_WEIGHT};
+use psao_corrective::attention::{analyze, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
 use psao_corrective::base::{object_ids, TracedAoShade};
 use psao_corrective::cache::{CacheConfig, SampleCache};
 use psao_corrective::saliency::{saliency, RgbImage};
@@ -24,13 +24,14 @@ use psao_corrective::splat::{Sample, SplatTarget};
 use psao_corrective::sqrt5::{Hierarchy, PixelRect};
 use psao_corrective::trace::{CorrectionTracer, TraceSettings};
 use psao_raster::GBuffer;
-use psao_scene::{Camera, Scene};
+use psao_scene::{Animator, Camera, Motion, Scene, ScenePose};
 use psao_trace::ao::hash64;
 use psao_trace::{Backend, GeometryMode, Tracer};
 use psao_wire::{CameraMsg, Message, Region, RegionsMsg, SampleMsg, SamplesMsg, MAX_SAMPLES};
 use rayon::prelude::*;
 
 use crate::convert::view_of;
+use crate::pipeline::CLIENT_HZ;
 use crate::NetError;
 
 /// Default sample budget per client and second (the paper: 10 000–50 000 per second on 2–6
@@ -83,7 +84,7 @@ impl CorrectionEngine {
 
     /// Runs `f` with the correction tracer (diffuse surfaces shaded as the client shades
     /// them, AO traced with the DESIGN §2 estimator).
-    fn with_tracer<R>(&self, f: impl FnOnce(&CorrectionTracer<'_>) -> R) -> R {
+    pub(crate) fn with_tracer<R>(&self, f: impl FnOnce(&CorrectionTracer<'_>) -> R) -> R {
         let shade = TracedAoShade {
             tracer: &self.occlusion,
             shading: Shading::default(),
@@ -133,32 +134,10 @@ impl RemoteCorrections {
         let fresh =
             !matches!(&self.planner, Some((_, w, h)) if (*w, *h) == (msg.width, msg.height));
         if fresh {
-            let hierarchy = hierarchy_for(msg.width, msg.height);
-            self.planner = Some((
-                Planner::new(hierarchy, DEFAULT_JOB_SIZE, DEFAULT_DECAY),
-                msg.width,
-                msg.height,
-            ));
+            self.planner = Some((new_planner(msg.width, msg.height), msg.width, msg.height));
         }
-        let regions: Vec<_> = msg
-            .regions
-            .iter()
-            .map(|r| psao_corrective::attention::ObjectRegion {
-                id: r.object,
-                rect: PixelRect {
-                    x0: r.x0 as i32,
-                    y0: r.y0 as i32,
-                    x1: r.x1 as i32,
-                    y1: r.y1 as i32,
-                },
-                pixels: 0,
-                saliency: 0.0,
-                importance: 0.0,
-                priority: r.priority,
-            })
-            .collect();
         if let Some((planner, _, _)) = &mut self.planner {
-            planner.analyze(&regions, self.camera_age);
+            planner.analyze(&object_regions(msg), self.camera_age);
         }
     }
 
@@ -174,10 +153,7 @@ impl RemoteCorrections {
     /// The budget of the next tick of a clock at `hz` ticks per second (the ticks' budgets
     /// add up to exactly `samples_per_second` per second).
     pub fn next_budget(&mut self, hz: u32) -> usize {
-        let (rate, hz) = (u64::from(self.samples_per_second), u64::from(hz.max(1)));
-        let t = self.ticks;
-        self.ticks += 1;
-        (((t + 1) * rate / hz - t * rate / hz) as usize).min(MAX_SAMPLES)
+        budget_of_tick(self.samples_per_second, hz, &mut self.ticks)
     }
 
     /// Plan and trace up to `budget` samples for the current camera (in parallel); `None`
@@ -218,6 +194,45 @@ impl RemoteCorrections {
     }
 }
 
+/// The budget of tick `*ticks` (then counted) of a clock at `hz` ticks per second for
+/// `samples_per_second` (the ticks of a second add up to exactly the rate), at most
+/// [`MAX_SAMPLES`].
+pub(crate) fn budget_of_tick(samples_per_second: u32, hz: u32, ticks: &mut u64) -> usize {
+    let (rate, hz) = (u64::from(samples_per_second), u64::from(hz.max(1)));
+    let t = *ticks;
+    *ticks += 1;
+    (((t + 1) * rate / hz - t * rate / hz) as usize).min(MAX_SAMPLES)
+}
+
+/// The server's region queue for a client's `width × height` frames.
+pub(crate) fn new_planner(width: u32, height: u32) -> Planner {
+    Planner::new(
+        hierarchy_for(width, height),
+        DEFAULT_JOB_SIZE,
+        DEFAULT_DECAY,
+    )
+}
+
+/// The regions of a (validated) analysis as the planner takes them.
+pub(crate) fn object_regions(msg: &RegionsMsg) -> Vec<ObjectRegion> {
+    msg.regions
+        .iter()
+        .map(|r| ObjectRegion {
+            id: r.object,
+            rect: PixelRect {
+                x0: r.x0 as i32,
+                y0: r.y0 as i32,
+                x1: r.x1 as i32,
+                y1: r.y1 as i32,
+            },
+            pixels: 0,
+            saliency: 0.0,
+            importance: 0.0,
+            priority: r.priority,
+        })
+        .collect()
+}
+
 /// The wire form of a sample.
 pub fn sample_msg(s: &Sample) -> SampleMsg {
     SampleMsg {
@@ -254,19 +269,82 @@ pub struct CorrectedFrame {
     pub image: Vec<[f32; 3]>,
     /// Samples drawn.
     pub drawn: usize,
+    /// Cached samples dropped because their object moved into this frame.
+    pub dropped: usize,
     /// A new analysis to send with the next camera, when one was due.
     pub regions: Option<RegionsMsg>,
 }
 
-/// The client's correction state: the sample cache and the analysis of its frames.
+/// Which objects move, from the client's own animation of its scene at its frame times.
+struct MotionWatch {
+    animator: Animator,
+    pose: ScenePose,
+    /// Instance transforms at the last frame looked at.
+    last: Vec<Affine3A>,
+    /// That frame.
+    frame: Option<u32>,
+    /// Object ids (instance + 1), ascending, that moved into that frame.
+    moving: Vec<u32>,
+}
+
+impl MotionWatch {
+    /// A watch over `scene`'s animation; `None` for a static scene (or one whose animation
+    /// cannot play, which the client's renderer reports).
+    fn new(scene: &Scene) -> Option<Self> {
+        let animator = Animator::new(scene).ok()?;
+        animator.is_dynamic().then(|| Self {
+            animator,
+            pose: ScenePose::default(),
+            last: Vec::new(),
+            frame: None,
+            moving: Vec::new(),
+        })
+    }
+
+    /// Look at client frame `frame` (at `frame / 60` s): an object moves when its transform
+    /// differs from the previous frame's, or when it deforms (skinned). The same frame twice
+    /// changes nothing.
+    fn look(&mut self, frame: u32) {
+        if self.frame == Some(frame) {
+            return;
+        }
+        self.animator
+            .pose_into(frame as f32 / CLIENT_HZ as f32, &mut self.pose);
+        let motion = self.animator.motion();
+        self.moving = (0..self.pose.transforms.len())
+            .filter(|&i| {
+                motion.get(i) == Some(&Motion::Skinned)
+                    || self
+                        .last
+                        .get(i)
+                        .is_some_and(|t| *t != self.pose.transforms[i])
+            })
+            .map(|i| i as u32 + 1)
+            .collect();
+        self.last.clone_from(&self.pose.transforms);
+        self.frame = Some(frame);
+    }
+
+    fn is_moving(&self, object: u32) -> bool {
+        self.moving.binary_search(&object).is_ok()
+    }
+}
+
+/// The client's correction state: the sample cache and the analysis of its frames. Objects
+/// that move are left out: their cached samples are dropped when they move, samples for them
+/// are not stored while they move, and the analysis does not ask for them.
 pub struct CorrectiveClient {
     config: CorrectiveClientConfig,
     width: u32,
     height: u32,
     cache: SampleCache,
     camera: Option<Camera>,
+    /// The scene's motion, once a frame was seen (`None` inside: a static scene).
+    motion: Option<Option<MotionWatch>>,
     /// Samples received so far.
     pub samples_received: u64,
+    /// Samples received for moving objects and not stored.
+    pub samples_discarded: u64,
 }
 
 impl CorrectiveClient {
@@ -285,7 +363,9 @@ impl CorrectiveClient {
             height,
             cache,
             camera: None,
+            motion: None,
             samples_received: 0,
+            samples_discarded: 0,
         })
     }
 
@@ -299,11 +379,14 @@ impl CorrectiveClient {
         self.camera = Some(camera);
     }
 
-    /// Store the server's samples; a level the client's hierarchy lacks is an error.
+    /// Store the server's samples (except those of objects moving at the last frame); a level
+    /// the client's hierarchy lacks is an error.
     pub fn receive(&mut self, msg: &SamplesMsg) -> Result<(), NetError> {
+        let moving = |object| matches!(&self.motion, Some(Some(m)) if m.is_moving(object));
         let samples: Vec<Sample> = msg
             .samples
             .iter()
+            .filter(|s| !moving(s.object))
             .map(|s| Sample {
                 position: Vec3::from_array(s.position),
                 normal: Vec3::from_array(s.normal),
@@ -318,6 +401,7 @@ impl CorrectiveClient {
             .insert(&samples)
             .map_err(|e| NetError::Protocol(format!("bad samples from the server: {e}")))?;
         self.samples_received += samples.len() as u64;
+        self.samples_discarded += (msg.samples.len() - samples.len()) as u64;
         Ok(())
     }
 
@@ -327,15 +411,25 @@ impl CorrectiveClient {
     }
 
     /// Correct client frame `frame` (its G-buffer and AO, rasterized with the camera last
-    /// given to [`Self::camera`]): splat the cache over it, and analyse the result when an
-    /// analysis is due.
+    /// given to [`Self::camera`], at `frame / 60` s): drop the cached samples of objects that
+    /// moved into it, splat the cache over it, and analyse the result when an analysis is due
+    /// (moving objects left out).
     pub fn frame(
-        &self,
+        &mut self,
         scene: &Scene,
         frame: u32,
         gbuffer: &GBuffer,
         ao: &[f32],
     ) -> CorrectedFrame {
+        let motion = self.motion.get_or_insert_with(|| MotionWatch::new(scene));
+        let mut dropped = 0;
+        if let Some(m) = motion {
+            m.look(frame);
+            if !m.moving.is_empty() {
+                dropped = self.cache.drop_objects(|o| m.is_moving(o));
+            }
+        }
+        let motion = motion.as_ref();
         let mut image = psao_client::composite(scene, gbuffer, ao, &Shading::default());
         let ids = object_ids(scene, gbuffer);
         let mut written = vec![false; image.len()];
@@ -365,6 +459,7 @@ impl CorrectiveClient {
                 height: gbuffer.height,
                 regions: regions
                     .iter()
+                    .filter(|r| !motion.is_some_and(|m| m.is_moving(r.id)))
                     .take(psao_wire::MAX_REGIONS)
                     .map(|r| Region {
                         object: r.id,
@@ -380,6 +475,7 @@ impl CorrectiveClient {
         CorrectedFrame {
             image,
             drawn,
+            dropped,
             regions,
         }
     }
@@ -505,7 +601,7 @@ impl InProcessCorrections {
             self.remote.camera(&c);
             self.client.camera(&c);
         }
-        let budget = self.remote.next_budget(crate::pipeline::CLIENT_HZ);
+        let budget = self.remote.next_budget(CLIENT_HZ);
         if let Some(samples) = self.remote.trace(&self.engine, budget, Some(camera.frame)) {
             let (m, size) = over_the_wire(&Message::Samples(samples), psao_wire::MAX_SERVER_FRAME)?;
             out.bytes += size;
@@ -546,6 +642,91 @@ mod tests {
             let total: usize = (0..hz).map(|_| r.next_budget(hz)).sum();
             assert_eq!(total, rate as usize, "rate {rate} at {hz} Hz");
         }
+    }
+
+    /// A chrome ball that holds still for 0.5 s, moves for 0.5 s and holds still for 1 s
+    /// (then loops), and a glossy box that never moves.
+    fn animated_scene() -> Scene {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.toml");
+        std::fs::write(
+            &path,
+            "[[asset]]\nfile = \"builtin:sphere\"\n\
+             keys = { times = [0, 0.5, 1, 2], translation = [[-0.6, 0.5, 0], [-0.6, 0.5, 0], [-0.2, 0.5, 0], [-0.2, 0.5, 0]] }\n\
+             [[asset]]\nfile = \"builtin:box\"\ntranslation = [0.9, 0.0, -0.5]\nscale = 0.8\n\
+             [[material]]\nname = \"sphere\"\npreset = \"chrome\"\n\
+             [[material]]\nname = \"box\"\npreset = \"glossy\"\n",
+        )
+        .unwrap();
+        psao_scene::scene_file::load(&path).unwrap().scene
+    }
+
+    #[test]
+    fn samples_of_moving_objects_are_dropped_and_not_asked_for() {
+        let scene = animated_scene();
+        let motion = Animator::new(&scene).unwrap().motion().to_vec();
+        let ball = motion.iter().position(|&m| m == Motion::Rigid).unwrap() as u32 + 1;
+        let (w, h) = (64, 36);
+        let camera = Camera::look_at(Vec3::new(0.0, 1.5, 3.5), Vec3::new(0.0, 0.4, 0.0), 60.0);
+        let gbuffer =
+            psao_raster::rasterize(&scene, &camera, &psao_raster::RasterOptions::new(w, h));
+        let ao = vec![1.0; (w * h) as usize];
+        let config = CorrectiveClientConfig {
+            analyze_every: 1,
+            ..Default::default()
+        };
+        let mut client = CorrectiveClient::new(w, h, config).unwrap();
+        let sample = |object| SampleMsg {
+            object,
+            level: 1,
+            position: [0.0, 0.5, 0.0],
+            normal: [0.0, 0.0, 1.0],
+            ndotv: 0.9,
+            color: [0.5; 3],
+        };
+        let samples = |objects: &[u32]| SamplesMsg {
+            client_frame: None,
+            camera_age: 0,
+            samples: objects.iter().map(|&o| sample(o)).collect(),
+        };
+        let frame = |client: &mut CorrectiveClient, f: u32| {
+            client.camera(&crate::convert::camera_msg(f, &camera, w as f32 / h as f32));
+            let c = client.frame(&scene, f, &gbuffer, &ao);
+            let asked: Vec<u32> = c
+                .regions
+                .unwrap()
+                .regions
+                .iter()
+                .map(|r| r.object)
+                .collect();
+            (c.dropped, asked)
+        };
+        let count = |client: &CorrectiveClient, object| {
+            (1..=hierarchy_for(w, h).levels())
+                .flat_map(|l| client.cache().level(l))
+                .filter(|s| s.object == object)
+                .count()
+        };
+        let (dropped, asked) = frame(&mut client, 0);
+        assert_eq!(dropped, 0);
+        assert_eq!(asked.len(), 2, "both objects in view: {asked:?}");
+        assert!(asked.contains(&ball));
+        let other = *asked.iter().find(|&&o| o != ball).unwrap();
+        client.receive(&samples(&[ball, other, ball])).unwrap();
+        // Frame 20 (0.33 s): nothing moved, nothing dropped.
+        assert_eq!(frame(&mut client, 20), (0, asked.clone()));
+        assert_eq!((count(&client, ball), count(&client, other)), (2, 1));
+        // Frame 45 (0.75 s): the ball moves. Its samples go, it is not asked for, and new
+        // samples of it are not stored.
+        assert_eq!(frame(&mut client, 45), (2, vec![other]));
+        client.receive(&samples(&[ball, other])).unwrap();
+        assert_eq!((count(&client, ball), count(&client, other)), (0, 2));
+        assert_eq!((client.samples_received, client.samples_discarded), (4, 1));
+        // Frame 80 (1.33 s): it moved since frame 45; frame 90: it rests again.
+        assert_eq!(frame(&mut client, 80).1, vec![other]);
+        assert_eq!(frame(&mut client, 90), (0, asked));
+        client.receive(&samples(&[ball])).unwrap();
+        assert_eq!(count(&client, ball), 1);
     }
 
     #[test]

@@ -8,6 +8,12 @@
 //! sidedness. Walkers (procedural motion) have no glTF form: their instances move by the
 //! transforms the server sends.
 //!
+//! What psao-scene's `Animator` needs beyond glTF rides in `extras`: the document's
+//! `psao_playing` lists the animations that play (each looping over its own duration), and an
+//! instance node that deforms by skinning (`Motion::Skinned`) carries `psao_skinned: true`
+//! and `psao_node`, the node whose world transform is the instance's own (joint matrices are
+//! taken relative to it), or null for an instance at its stored transform.
+//!
 //! The scene's camera paths ride along in the document's `extras.psao_camera_paths`, sampled
 //! at the 60 Hz of `psao view` (one camera per path frame: position, target, up, vertical
 //! FOV, near, far), so the browser follows a path by name with exactly the cameras the CPU
@@ -22,7 +28,7 @@ use std::borrow::Cow;
 
 use glam::Mat4;
 use psao_scene::path::CameraPath;
-use psao_scene::{AlphaMode, AnimatedProperty, Interpolation, Scene};
+use psao_scene::{AlphaMode, AnimatedProperty, Interpolation, Motion, Scene};
 use serde_json::{json, Value};
 
 use crate::NetError;
@@ -180,6 +186,7 @@ pub fn scene_glb(scene: &Scene, paths: &[CameraPath]) -> Result<Vec<u8>, NetErro
         })
         .collect();
     let offset = scene.instances.len();
+    let motion = scene.instance_motion()?;
     let mut nodes: Vec<Value> = scene
         .instances
         .iter()
@@ -192,6 +199,12 @@ pub fn scene_glb(scene: &Scene, paths: &[CameraPath]) -> Result<Vec<u8>, NetErro
             });
             if let Some(s) = inst.skin {
                 n["skin"] = json!(s);
+            }
+            if motion[i] == Motion::Skinned {
+                n["extras"] = json!({
+                    "psao_skinned": true,
+                    "psao_node": inst.node.map(|k| offset + k),
+                });
             }
             n
         })
@@ -299,9 +312,9 @@ pub fn scene_glb(scene: &Scene, paths: &[CameraPath]) -> Result<Vec<u8>, NetErro
     if !animations.is_empty() {
         doc["animations"] = json!(animations);
     }
+    doc["extras"] = json!({ "psao_playing": scene.playing });
     if !paths.is_empty() {
-        doc["extras"] =
-            json!({ "psao_camera_paths": paths.iter().map(path_json).collect::<Vec<_>>() });
+        doc["extras"]["psao_camera_paths"] = json!(paths.iter().map(path_json).collect::<Vec<_>>());
     }
     let json = serde_json::to_vec(&doc).map_err(|e| NetError::Protocol(e.to_string()))?;
     let glb = gltf::binary::Glb {

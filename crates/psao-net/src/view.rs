@@ -222,7 +222,7 @@ pub fn view(
             // The client's clock: frame / 60 s (equal to the server's in lockstep).
             let time = frame as f32 / CLIENT_HZ as f32;
             let mut img = renderer.render(scene, &client.state, &camera, args.res, time)?;
-            if let Some(c) = &client.corrective {
+            if let Some(c) = &mut client.corrective {
                 let corrected = c.frame(scene, frame, &img.gbuffer, &img.ao.data);
                 client.regions = corrected.regions;
                 img.corrected = Some(corrected.image);

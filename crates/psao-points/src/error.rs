@@ -89,6 +89,12 @@ pub enum PointsError {
         /// The offending key (cell id + 1).
         key: u64,
     },
+    /// A grid's bucket table would hold more entries than it can index.
+    #[error("bucket table full: at most {max} entries")]
+    TooManyEntries {
+        /// Most entries a table holds.
+        max: usize,
+    },
     /// A point location that does not hold a point.
     #[error("no point at cell slot {slot}, index {index}")]
     NoSuchPoint {

@@ -1,8 +1,8 @@
 //! Per-instance storage: hash buckets → cells → packed points (DESIGN §3 "Grid", paper §3.2).
 //!
-//! Storage is two flat arrays so that a delta is simply "these bucket indices and these cell
-//! slots changed": `buckets[i]` holds up to [`BUCKET_ENTRIES`] (cell key, cell slot) pairs and
-//! `cells[slot]` up to [`CELL_POINTS`] packed 32-bit points. Empty entries are all-zero words
+//! Storage is addressed as two arrays so that a delta is simply "these bucket indices and these
+//! cell slots changed": bucket `i` holds up to [`BUCKET_ENTRIES`] (cell key, cell slot) pairs
+//! and cell `slot` up to [`CELL_POINTS`] packed 32-bit points (both stored sparsely). Empty entries are all-zero words
 //! (key 0, invalid bit clear), so fresh storage is zeroed memory and entries can sit anywhere
 //! in a bucket or cell (lookups check every entry; locations of points stay stable).
 
@@ -12,6 +12,7 @@ use crate::error::PointsError;
 use crate::generate::InstancePoints;
 use crate::layout::{DecodedPoint, GridLayout, BUCKET_ENTRIES, CELL_POINTS};
 use crate::pack::is_valid;
+use crate::paged::{BucketTable, Paged};
 
 /// One hash-bucket entry: which cell lives in which slot. Packed to 4-byte alignment so an
 /// entry takes 12 bytes, not 16: bucket tables are the largest part of a grid (server and
@@ -86,15 +87,25 @@ pub struct PointLoc {
     pub index: u8,
 }
 
+/// Read for absent cells.
+static EMPTY_CELL: Cell = Cell {
+    points: [0; CELL_POINTS],
+};
+
 /// The hash grid of one instance. The server builds and updates it; a client creates an empty
 /// one from the layout ([`InstanceGrid::new`]) and applies received buckets and cells with
 /// [`InstanceGrid::set_bucket`] / [`InstanceGrid::set_cell`].
-#[derive(Clone, Debug, PartialEq)]
+///
+/// Storage is sparse (see [`crate::paged`]): bucket `i` and cell slot `s` are addressable for
+/// every `i < bucket_count()` and `s < max_cells()`, but only written entries and pages of
+/// written cells take memory; the rest read as empty.
+#[derive(Clone, Debug)]
 pub struct InstanceGrid {
     layout: GridLayout,
-    buckets: Vec<Bucket>,
-    cells: Vec<Cell>,
-    /// Key of the cell in each slot (0 when the slot is free).
+    buckets: BucketTable,
+    cells: Paged<Cell>,
+    /// Key of the cell in each slot allocated by [`Self::build`] / [`Self::insert`] (0 when
+    /// free); not kept for buckets written with [`Self::set_bucket`].
     slot_keys: Vec<u64>,
     /// Free slots below `cells.len()` (server side), reused last-freed first.
     free: Vec<u32>,
@@ -102,11 +113,23 @@ pub struct InstanceGrid {
     overflow_points: u64,
 }
 
+impl PartialEq for InstanceGrid {
+    /// Same layout, buckets, cell slots and overflow counters (whatever the storage).
+    fn eq(&self, other: &Self) -> bool {
+        self.layout == other.layout
+            && self.slot_count() == other.slot_count()
+            && (self.overflow_cells, self.overflow_points)
+                == (other.overflow_cells, other.overflow_points)
+            && self.buckets().eq(other.buckets())
+            && self.cells().eq(other.cells())
+    }
+}
+
 impl InstanceGrid {
     /// Heap bytes the grid's tables hold (allocated capacity).
     pub fn heap_bytes(&self) -> u64 {
-        crate::vec_bytes(&self.buckets)
-            + crate::vec_bytes(&self.cells)
+        self.buckets.heap_bytes()
+            + self.cells.heap_bytes()
             + crate::vec_bytes(&self.slot_keys)
             + crate::vec_bytes(&self.free)
     }
@@ -114,9 +137,9 @@ impl InstanceGrid {
     /// An empty grid: all buckets empty, no cells.
     pub fn new(layout: GridLayout) -> Self {
         Self {
-            buckets: vec![Bucket::default(); layout.bucket_count as usize],
+            buckets: BucketTable::new(layout.bucket_count as usize),
             layout,
-            cells: Vec::new(),
+            cells: Paged::new(0),
             slot_keys: Vec::new(),
             free: Vec::new(),
             overflow_cells: 0,
@@ -158,7 +181,7 @@ impl InstanceGrid {
                     continue;
                 }
                 let (pos, normal, ao) = points[i as usize];
-                grid.cells[slot as usize].points[k] = layout.pack(coord, pos, normal, ao);
+                grid.cells.get_mut(slot as usize).points[k] = layout.pack(coord, pos, normal, ao);
                 locs[i as usize] = Some(PointLoc {
                     slot,
                     index: k as u8,
@@ -185,14 +208,39 @@ impl InstanceGrid {
         &self.layout
     }
 
-    /// All hash buckets (length = `layout().bucket_count`).
-    pub fn buckets(&self) -> &[Bucket] {
-        &self.buckets
+    /// Number of hash buckets (`layout().bucket_count`).
+    pub fn bucket_count(&self) -> usize {
+        self.buckets.len()
     }
 
-    /// All cell slots (free slots are all-zero).
-    pub fn cells(&self) -> &[Cell] {
-        &self.cells
+    /// Hash bucket `index` (empty when out of range).
+    pub fn bucket(&self, index: usize) -> Bucket {
+        if index < self.buckets.len() {
+            self.buckets.bucket(index)
+        } else {
+            Bucket::default()
+        }
+    }
+
+    /// All hash buckets in index order (`bucket_count()` of them).
+    pub fn buckets(&self) -> impl Iterator<Item = Bucket> + '_ {
+        (0..self.buckets.len()).map(|b| self.buckets.bucket(b))
+    }
+
+    /// Number of cell slots written so far (cells past it read as empty).
+    pub fn slot_count(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// The cell in `slot` (empty when free, never written, or past [`Self::slot_count`]).
+    #[inline]
+    pub fn cell(&self, slot: u32) -> &Cell {
+        self.cells.get(slot as usize).unwrap_or(&EMPTY_CELL)
+    }
+
+    /// All cell slots below [`Self::slot_count`] in order (free slots are all-zero).
+    pub fn cells(&self) -> impl Iterator<Item = &Cell> + '_ {
+        (0..self.cells.len() as u32).map(|s| self.cell(s))
     }
 
     /// Cell allocations refused because the bucket was full.
@@ -205,21 +253,27 @@ impl InstanceGrid {
         self.overflow_points
     }
 
-    /// Number of allocated cells.
+    /// Number of allocated cells (used bucket entries).
     pub fn cell_count(&self) -> usize {
-        self.slot_keys.iter().filter(|&&k| k != 0).count()
+        self.buckets.used()
     }
 
     /// Number of stored points.
     pub fn point_count(&self) -> usize {
-        self.cells.iter().map(Cell::count).sum()
+        self.cells().map(Cell::count).sum()
     }
 
     /// Slot of the cell at `coord`, if allocated.
     #[inline]
     pub fn find_cell(&self, coord: UVec3) -> Option<u32> {
         let id = self.layout.cell_id(coord);
-        self.buckets[self.layout.bucket_of(id)].find(id)
+        self.buckets.find(self.layout.bucket_of(id), id + 1)
+    }
+
+    /// The cell in `slot` if the slot is below [`Self::slot_count`].
+    #[inline]
+    fn slot_cell(&self, slot: u32) -> Option<&Cell> {
+        ((slot as usize) < self.cells.len()).then(|| self.cell(slot))
     }
 
     /// Slot of the allocated cell containing local position `p`.
@@ -246,7 +300,7 @@ impl InstanceGrid {
             let offset = glam::IVec3::new(k & 1, (k >> 1) & 1, k >> 2);
             let c = self.layout.checked_coord(base.saturating_add(offset))?;
             let slot = self.find_cell(c)?;
-            self.cells.get(slot as usize).map(|cell| (c, cell))
+            self.slot_cell(slot).map(|cell| (c, cell))
         })
     }
 
@@ -261,13 +315,13 @@ impl InstanceGrid {
             }
             let c = self.layout.checked_coord(base.saturating_add(offset))?;
             let slot = self.find_cell(c)?;
-            self.cells.get(slot as usize).map(|cell| (c, cell))
+            self.slot_cell(slot).map(|cell| (c, cell))
         })
     }
 
     /// The decoded points of the cell at `coord` (nothing when it is not allocated).
     pub fn cell_points(&self, coord: UVec3) -> impl Iterator<Item = DecodedPoint> + '_ {
-        let cell = self.find_cell(coord).map(|s| &self.cells[s as usize]);
+        let cell = self.find_cell(coord).and_then(|s| self.slot_cell(s));
         cell.into_iter()
             .flat_map(|c| c.points.iter())
             .filter_map(move |&bits| self.layout.unpack(coord, bits))
@@ -276,8 +330,7 @@ impl InstanceGrid {
     /// The packed record at `loc`, if it holds a point.
     pub fn point(&self, loc: PointLoc) -> Option<u32> {
         let bits = *self
-            .cells
-            .get(loc.slot as usize)?
+            .slot_cell(loc.slot)?
             .points
             .get(usize::from(loc.index))?;
         is_valid(bits).then_some(bits)
@@ -304,7 +357,7 @@ impl InstanceGrid {
             })?,
         };
         let bits = self.layout.pack(coord, position, normal, ao);
-        let cell = &mut self.cells[slot as usize];
+        let cell = self.cells.get_mut(slot as usize);
         let Some(index) = cell.points.iter().position(|&b| !is_valid(b)) else {
             self.overflow_points += 1;
             return Err(PointsError::CellFull { slot });
@@ -323,14 +376,12 @@ impl InstanceGrid {
             index: loc.index,
         })?;
         let slot = loc.slot as usize;
-        self.cells[slot].points[usize::from(loc.index)] = 0;
-        if self.cells[slot].count() == 0 {
-            let key = std::mem::take(&mut self.slot_keys[slot]);
+        let cell = self.cells.get_mut(slot);
+        cell.points[usize::from(loc.index)] = 0;
+        if cell.count() == 0 {
+            let key = self.slot_keys.get_mut(slot).map_or(0, std::mem::take);
             if let Some(id) = key.checked_sub(1) {
-                let bucket = &mut self.buckets[self.layout.bucket_of(id)];
-                if let Some(e) = bucket.entries.iter_mut().find(|e| e.key == key) {
-                    *e = BucketEntry::default();
-                }
+                self.buckets.remove(self.layout.bucket_of(id), key);
                 self.free.push(loc.slot);
             }
         }
@@ -351,9 +402,9 @@ impl InstanceGrid {
             index: loc.index,
         })?;
         if let Some(coord) = self.layout.cell_coord(position) {
-            if self.slot_keys[loc.slot as usize] == self.layout.cell_id(coord) + 1 {
+            if self.slot_keys.get(loc.slot as usize) == Some(&(self.layout.cell_id(coord) + 1)) {
                 let bits = self.layout.pack(coord, position, normal, ao);
-                self.cells[loc.slot as usize].points[usize::from(loc.index)] = bits;
+                self.cells.get_mut(loc.slot as usize).points[usize::from(loc.index)] = bits;
                 return Ok(loc);
             }
         }
@@ -381,24 +432,18 @@ impl InstanceGrid {
                 });
             }
         }
-        for e in self.buckets[index].entries {
-            if e.key != 0 && self.slot_keys.get(e.slot as usize).copied() == Some(e.key) {
-                self.slot_keys[e.slot as usize] = 0;
-            }
-        }
+        self.buckets.set(index, &bucket)?;
         for e in bucket.entries.iter().filter(|e| e.key != 0) {
-            self.ensure_slot(e.slot);
-            self.slot_keys[e.slot as usize] = e.key;
+            self.cells.grow(e.slot as usize + 1);
         }
-        self.buckets[index] = bucket;
         Ok(())
     }
 
     /// Replace the cell in `slot` (client side: apply a received cell).
     pub fn set_cell(&mut self, slot: u32, cell: Cell) -> Result<(), PointsError> {
         self.check_slot(slot)?;
-        self.ensure_slot(slot);
-        self.cells[slot as usize] = cell;
+        self.cells.grow(slot as usize + 1);
+        self.cells.set(slot as usize, cell);
         Ok(())
     }
 
@@ -410,31 +455,24 @@ impl InstanceGrid {
         Ok(())
     }
 
-    fn ensure_slot(&mut self, slot: u32) {
-        let needed = slot as usize + 1;
-        if self.cells.len() < needed {
-            self.cells.resize(needed, Cell::default());
-            self.slot_keys.resize(needed, 0);
-        }
-    }
-
     /// Allocate a cell for `id` in its bucket (server side).
     fn alloc_cell(&mut self, id: u64) -> Result<u32, PointsError> {
         let b = self.layout.bucket_of(id);
-        let Some(e) = self.buckets[b].entries.iter().position(|e| e.key == 0) else {
+        let slot = match self.free.last() {
+            Some(&s) => s,
+            None => self.cells.len() as u32,
+        };
+        if self.buckets.insert(b, id + 1, slot)?.is_none() {
             return Err(PointsError::BucketFull { bucket: b });
-        };
-        let slot = match self.free.pop() {
-            Some(s) => s,
-            None => {
-                let s = self.cells.len() as u32;
-                self.ensure_slot(s);
-                s
-            }
-        };
-        self.cells[slot as usize] = Cell::default();
+        }
+        if self.free.pop().is_none() {
+            self.cells.grow(slot as usize + 1);
+        }
+        if self.slot_keys.len() <= slot as usize {
+            self.slot_keys.resize(slot as usize + 1, 0);
+        }
+        self.cells.set(slot as usize, Cell::default());
         self.slot_keys[slot as usize] = id + 1;
-        self.buckets[b].entries[e] = BucketEntry::new(id, slot);
         Ok(slot)
     }
 }

@@ -17,6 +17,7 @@ mod key_map;
 mod layout;
 mod linear_fit;
 pub mod pack;
+mod paged;
 mod reconstruct;
 mod rng;
 

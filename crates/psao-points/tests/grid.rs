@@ -98,13 +98,13 @@ fn lookups_find_every_cell_and_point() {
     );
     // Every bucket entry names a cell in its own bucket and a distinct slot.
     let mut slots = HashSet::new();
-    for (b, bucket) in grid.buckets().iter().enumerate() {
+    for (b, bucket) in grid.buckets().enumerate() {
         for e in bucket.entries.iter().filter(|e| e.key != 0) {
             let id = e.cell_id().unwrap();
             assert_eq!(layout.bucket_of(id), b);
             assert!(ids.contains(&id));
             assert!(slots.insert(e.slot));
-            assert!(grid.cells()[e.slot as usize].count() > 0);
+            assert!(grid.cell(e.slot).count() > 0);
         }
     }
     assert_eq!(slots.len(), grid.cell_count());
@@ -223,7 +223,6 @@ fn insert_remove_update() {
     assert_eq!(grid.find_cell(UVec3::ZERO), None);
     assert!(grid
         .buckets()
-        .iter()
         .all(|bk| bk.entries.iter().all(|e| e.slot != b.slot || e.key == 0)));
     let d = grid
         .insert(Vec3::new(0.95, 0.95, 0.95), Vec3::Z, 0.1)
@@ -259,16 +258,16 @@ fn client_mirror_reproduces_server_state() {
     let (server, _) = InstanceGrid::from_points(&pts, 0.3).unwrap();
     let layout = *server.layout();
     let mut client = InstanceGrid::new(layout);
-    for (i, b) in server.buckets().iter().enumerate() {
+    for (i, b) in server.buckets().enumerate() {
         if !b.is_empty() {
-            client.set_bucket(i, *b).unwrap();
+            client.set_bucket(i, b).unwrap();
         }
     }
-    for (s, c) in server.cells().iter().enumerate() {
+    for (s, c) in server.cells().enumerate() {
         client.set_cell(s as u32, *c).unwrap();
     }
-    assert_eq!(client.buckets(), server.buckets());
-    assert_eq!(client.cells(), server.cells());
+    assert!(client.buckets().eq(server.buckets()));
+    assert!(client.cells().eq(server.cells()));
     let params = ReconstructParams::default();
     for p in pts.points.iter().step_by(11) {
         let q = p.position + Vec3::splat(0.2 * layout.poisson_radius);
@@ -280,7 +279,6 @@ fn client_mirror_reproduces_server_state() {
     // Clearing a bucket hides its cells.
     let (b, bucket) = server
         .buckets()
-        .iter()
         .enumerate()
         .find(|(_, b)| !b.is_empty())
         .unwrap();
@@ -327,4 +325,39 @@ fn bucket_entries_carry_no_padding() {
     let copy = e;
     assert_eq!(copy.cell_id(), Some(u64::MAX - 1));
     assert_eq!({ copy.slot }, u32::MAX - 7);
+}
+
+#[test]
+fn storage_grows_with_what_is_written_not_with_the_table() {
+    // A table of 2^20 buckets (8 Mi addressable slots): empty, it holds only page tables.
+    let layout = GridLayout::new((Vec3::ZERO, Vec3::splat(100.0)), 0.025, 0.1, 3.0e4).unwrap();
+    assert!(layout.bucket_count >= 1 << 20);
+    let mut grid = InstanceGrid::new(layout);
+    let empty = grid.heap_bytes();
+    assert!(empty <= u64::from(layout.bucket_count) / 4, "{empty} bytes");
+    // One bucket entry and one cell far out in the table cost a page each, not the table.
+    let id = layout.cell_id(UVec3::new(500, 400, 300));
+    let slot = (layout.max_cells() - 1) as u32;
+    let mut bucket = Bucket::default();
+    bucket.entries[3] = BucketEntry::new(id, slot);
+    grid.set_bucket(layout.bucket_of(id), bucket).unwrap();
+    let mut cell = Cell::default();
+    cell.points[0] = grid.layout().pack(
+        UVec3::new(500, 400, 300),
+        grid.layout().cell_min(UVec3::new(500, 400, 300)),
+        Vec3::Z,
+        0.5,
+    );
+    grid.set_cell(slot, cell).unwrap();
+    assert_eq!(grid.bucket(layout.bucket_of(id)), bucket);
+    assert_eq!(grid.find_cell(UVec3::new(500, 400, 300)), Some(slot));
+    assert_eq!(grid.point_count(), 1);
+    // Beyond a page of each, only the cell slots' page table grows (8 bytes per 64 slots up
+    // to the highest one written).
+    let written = grid.heap_bytes() - empty;
+    let page_table = (u64::from(slot) / 64 + 1) * 8;
+    assert!(
+        written < page_table + 8 * 1024,
+        "{written} bytes for one entry and one cell"
+    );
 }

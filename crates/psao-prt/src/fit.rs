@@ -18,8 +18,14 @@ use crate::sh::{self, ShVec, BANDS, COEFFS};
 use crate::small::solve_spd;
 use crate::zonal::{ZhLobe, ZH_SCALE};
 
-/// Ridge on each band's normal equations, relative to their mean diagonal.
-const RIDGE: f64 = 1e-4;
+/// Ridge on each band's normal equations, relative to their mean diagonal. Two lobes whose
+/// axes are δ apart span, in band l, a difference mode whose Gram eigenvalue is about
+/// `l(l+1)δ²/4` of the diagonal; a ridge λ damps that mode below `δ ≈ 2√(λ/(l(l+1)))`
+/// (0.14 rad in band 1 for λ = 10⁻²), so close lobes cannot form a "dipole" of large opposite
+/// coefficients, whose sum a tiny axis error changes a lot: the linear pose model predicts
+/// each lobe separately and could not follow it. With 10⁻⁴ such pairs carried most of the
+/// 2-lobe model's error on the shared characters (docs/RELIGHTING.md).
+const RIDGE: f64 = 1e-2;
 /// Levenberg–Marquardt iterations at most.
 const ITERATIONS: usize = 25;
 /// Finite-difference step (radians) for the Jacobian.
@@ -53,7 +59,9 @@ fn solve_coefficients(
             rhs[i] = (0..width).map(|m| col(i, m) * target[first + m]).sum();
         }
         let trace: f64 = (0..c).map(|i| gram[i * c + i]).sum::<f64>() / c as f64;
-        if solve_spd(&mut gram, &mut rhs, c, RIDGE * trace + 1e-12).is_none() {
+        // One lobe has nothing to pair with: no ridge, no shrinkage.
+        let ridge = if c > 1 { RIDGE * trace } else { 0.0 };
+        if solve_spd(&mut gram, &mut rhs, c, ridge + 1e-12).is_none() {
             continue;
         }
         for (x, z) in rhs.iter().enumerate() {
@@ -349,6 +357,40 @@ mod tests {
             }
         }
         assert!(fits.iter().all(|(_, e)| *e < 0.1));
+    }
+
+    #[test]
+    fn close_lobes_do_not_form_a_large_opposite_pair() {
+        // The difference of two strong lobes 5° apart (a "dipole") over a constant, fitted
+        // from those very axes: the fit must not rebuild the dipole with large opposite
+        // coefficients (a ridge of 1e-4 does, with ±2.1), while staying closer than one lobe.
+        let a = Vec3::new(0.2, 0.1, 1.0).normalize();
+        let b = (a + Vec3::new(0.09, 0.0, 0.0)).normalize();
+        let strong = [0.0, 3.0, 2.0, 1.0];
+        let mut target = [0.0; COEFFS];
+        target[0] = 2.0 * std::f32::consts::PI.sqrt();
+        ZhLobe {
+            axis: a,
+            coeffs: strong,
+        }
+        .add_to(&mut target);
+        ZhLobe {
+            axis: b,
+            coeffs: strong.map(|c| -c),
+        }
+        .add_to(&mut target);
+        let (_, e1) = fit_lobes(&target, 1, None);
+        let (two, e2) = fit_lobes(&target, 2, Some(&[a, b]));
+        assert!(e2 < e1, "two lobes {e2} vs one {e1}");
+        let largest = two
+            .iter()
+            .flat_map(|l| l.coeffs[1..].iter().map(|c| c.abs()))
+            .fold(0.0f32, f32::max);
+        assert!(
+            largest < 1.5,
+            "coefficients {:?}",
+            two.iter().map(|l| l.coeffs).collect::<Vec<_>>()
+        );
     }
 
     #[test]

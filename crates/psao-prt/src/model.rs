@@ -13,7 +13,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::fit::{fit_sequence, rms_difference};
+use crate::fit::{fit_lobes, fit_sequence, rms_difference};
 use crate::sh::ShVec;
 use crate::zonal::ZhLobe;
 use crate::PrtError;
@@ -26,6 +26,9 @@ const ACTIVE_JOINT_STD: f32 = 1e-4;
 
 /// Ridge candidates, relative to the largest squared singular value of the pose matrix.
 const RIDGE_GRID: [f64; 9] = [0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1, 1.0];
+
+/// Rounds at most of refitting the lobes from the model's own prediction (see [`train`]).
+const REFIT_ROUNDS: usize = 1;
 
 /// One posed frame of training or validation data.
 #[derive(Clone, Debug)]
@@ -194,132 +197,255 @@ pub fn train(
     // Lobes per vertex over the training frames, in correspondence.
     let out_dim = lobes * LOBE_DIM;
     let done = std::sync::atomic::AtomicUsize::new(0);
-    let per_vertex: Vec<(Vec<f32>, Vec<f32>)> = (0..vertices)
+    let mut fits: Vec<VertexFits> = (0..vertices)
         .into_par_iter()
         .map(|v| {
             let seq: Vec<ShVec> = train.iter().map(|s| s.visibility[v]).collect();
-            let fits = fit_sequence(&seq, lobes);
-            let mut packed = vec![0.0f32; frames * out_dim];
-            let mut errs = Vec::with_capacity(frames);
-            for (f, (ls, e)) in fits.iter().enumerate() {
-                for (x, l) in ls.iter().enumerate() {
-                    pack_lobe(l, &mut packed[f * out_dim + x * LOBE_DIM..]);
-                }
-                errs.push(e / (4.0 * std::f32::consts::PI).sqrt());
-            }
+            let fits = VertexFits::pack(&fit_sequence(&seq, lobes), out_dim);
             let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             if d % 64 == 0 || d == vertices {
                 progress(d, vertices);
             }
-            (packed, errs)
+            fits
         })
         .collect();
-    let lobe_fit_error = mean_std(per_vertex.iter().flat_map(|(_, e)| e.iter().copied()));
-
-    // B: frames × (vertices·out_dim), column v·out_dim + k.
-    let cols = vertices * out_dim;
-    let b = faer::Mat::<f64>::from_fn(frames, cols, |f, c| {
-        per_vertex[c / out_dim].0[f * out_dim + c % out_dim] as f64
-    });
-    drop(per_vertex);
-    let feats = |s: &Sample| -> Vec<f64> {
-        active
-            .iter()
-            .flat_map(|&j| s.joint_rotations[j as usize].to_array())
-            .map(f64::from)
-            .collect()
-    };
-    let p = 3 * active.len();
-    let train_feats: Vec<Vec<f64>> = train.iter().map(feats).collect();
-    let mean_a: Vec<f64> = (0..p)
-        .map(|k| train_feats.iter().map(|r| r[k]).sum::<f64>() / frames as f64)
-        .collect();
-    let mean_b: Vec<f64> = (0..cols)
-        .map(|c| (0..frames).map(|f| b[(f, c)]).sum::<f64>() / frames as f64)
-        .collect();
-    let a = faer::Mat::<f64>::from_fn(frames, p.max(1), |f, k| {
-        if p == 0 {
-            0.0
-        } else {
-            train_feats[f][k] - mean_a[k]
-        }
-    });
-    let bc = faer::Mat::<f64>::from_fn(frames, cols, |f, c| b[(f, c)] - mean_b[c]);
-    drop(b);
-    let svd = a
-        .thin_svd()
-        .map_err(|e| PrtError::Solve(format!("SVD did not converge: {e:?}")))?;
-    let (u, s, vmat) = (svd.U(), svd.S().column_vector(), svd.V());
-    let rank = s.nrows();
-    let utb = u.transpose() * &bc; // rank × cols
-    let smax2 = (0..rank)
-        .map(|i| s[i] * s[i])
-        .fold(0.0f64, f64::max)
-        .max(1e-300);
-
-    let build = |lambda: f64| -> Vec<f32> {
-        // X = V diag(s / (s² + λ)) Uᵀ Bc, then the constant row folded in.
-        let scaled = faer::Mat::<f64>::from_fn(rank, cols, |i, c| {
-            let si = s[i];
-            let g = if si * si > 1e-12 * smax2 {
-                si / (si * si + lambda)
-            } else {
-                0.0
-            };
-            g * utb[(i, c)]
-        });
-        let x = vmat * &scaled; // p × cols
-        let mut w = vec![0.0f32; (1 + p) * cols];
-        for c in 0..cols {
-            let mut bias = mean_b[c];
-            for k in 0..p {
-                bias -= mean_a[k] * x[(k, c)];
-                w[(1 + k) * cols + c] = x[(k, c)] as f32;
-            }
-            w[c] = bias as f32;
-        }
-        w
-    };
-    let model_for = |weights: Vec<f32>| PoseModel {
-        character: character.to_string(),
+    let solver = Solver::new(train, &active)?;
+    let shape = Shape {
+        character,
         vertices,
         joints,
         lobes,
-        active: active.clone(),
-        weights,
+        active: &active,
     };
-    let mut ridge_errors = Vec::new();
-    let mut best: Option<(f32, f64, PoseModel)> = None;
-    for rel in RIDGE_GRID {
-        let lambda = rel * smax2;
-        let model = model_for(build(lambda));
-        let err = if validate.is_empty() {
-            0.0
-        } else {
-            model_error(&model, validate).0
-        };
-        ridge_errors.push((lambda, err));
-        if best.as_ref().map_or(true, |(e, _, _)| err < *e) {
-            best = Some((err, lambda, model));
-        }
-        if validate.is_empty() {
-            break;
+    let mut best = solver.solve(&shape, &fits, validate)?;
+    let mut lobe_fit_error = mean_std(fits.iter().flat_map(|f| f.errors.iter().copied()));
+    // Refit rounds: each frame's lobes again, started from (and pulled towards) the model's
+    // own prediction at that frame's pose instead of the previous frame's lobes, then the
+    // model solved again. A lobe that the frame-to-frame fit let jump or swap roles with
+    // another is moved back to what a linear function of the pose can follow (block
+    // coordinate descent on fit error + closeness to a linear model). A round is kept only
+    // if it lowers the error on the validation frames.
+    if lobes > 1 && !validate.is_empty() {
+        for _ in 0..REFIT_ROUNDS {
+            let predictions: Vec<Vec<f32>> = train
+                .iter()
+                .map(|s| {
+                    let mut raw = Vec::new();
+                    best.model
+                        .predict_raw(&best.model.pose_vector(&s.joint_rotations), &mut raw);
+                    raw
+                })
+                .collect();
+            let refits: Vec<VertexFits> = (0..vertices)
+                .into_par_iter()
+                .map_init(Vec::new, |predicted, v| {
+                    let per_frame: Vec<(Vec<ZhLobe>, f32)> = train
+                        .iter()
+                        .zip(&predictions)
+                        .map(|(s, raw)| {
+                            best.model.lobes_of(raw, v, predicted);
+                            let axes: Vec<Vec3> = predicted.iter().map(|l| l.axis).collect();
+                            fit_lobes(&s.visibility[v], lobes, Some(&axes))
+                        })
+                        .collect();
+                    VertexFits::pack(&per_frame, out_dim)
+                })
+                .collect();
+            let candidate = solver.solve(&shape, &refits, validate)?;
+            if candidate.validation_error >= best.validation_error {
+                break;
+            }
+            best = candidate;
+            fits = refits;
+            lobe_fit_error = mean_std(fits.iter().flat_map(|f| f.errors.iter().copied()));
         }
     }
-    let (_, ridge, model) = best.expect("the ridge grid is not empty");
     Ok((
-        model,
+        best.model,
         TrainReport {
             lobe_fit_error,
-            ridge_errors,
-            ridge,
+            ridge_errors: best.ridge_errors,
+            ridge: best.ridge,
         },
     ))
+}
+
+/// One vertex's fitted lobes over the training frames, packed `frames × (lobes·7)`, and
+/// the fit's RMS error over the sphere per frame.
+struct VertexFits {
+    packed: Vec<f32>,
+    errors: Vec<f32>,
+}
+
+impl VertexFits {
+    fn pack(fits: &[(Vec<ZhLobe>, f32)], out_dim: usize) -> Self {
+        let mut packed = vec![0.0f32; fits.len() * out_dim];
+        for (f, (ls, _)) in fits.iter().enumerate() {
+            for (x, l) in ls.iter().enumerate() {
+                pack_lobe(l, &mut packed[f * out_dim + x * LOBE_DIM..]);
+            }
+        }
+        let errors = fits
+            .iter()
+            .map(|(_, e)| e / (4.0 * std::f32::consts::PI).sqrt())
+            .collect();
+        Self { packed, errors }
+    }
+}
+
+/// What every model of one training run shares.
+struct Shape<'a> {
+    character: &'a str,
+    vertices: usize,
+    joints: usize,
+    lobes: usize,
+    active: &'a [u32],
+}
+
+/// A solved model with its ridge choice.
+struct Solved {
+    model: PoseModel,
+    ridge_errors: Vec<(f64, f32)>,
+    ridge: f64,
+    /// Mean RMS SH error on the validation frames (0 without them).
+    validation_error: f32,
+}
+
+/// The least-squares side of training: the thin SVD of the centred pose matrix, shared by
+/// every right-hand side and ridge value.
+struct Solver {
+    mean_a: Vec<f64>,
+    u: faer::Mat<f64>,
+    s: Vec<f64>,
+    v: faer::Mat<f64>,
+}
+
+impl Solver {
+    fn new(train: &[Sample], active: &[u32]) -> Result<Self, PrtError> {
+        let frames = train.len();
+        let p = 3 * active.len();
+        let feats: Vec<Vec<f64>> = train
+            .iter()
+            .map(|s| {
+                active
+                    .iter()
+                    .flat_map(|&j| s.joint_rotations[j as usize].to_array())
+                    .map(f64::from)
+                    .collect()
+            })
+            .collect();
+        let mean_a: Vec<f64> = (0..p)
+            .map(|k| feats.iter().map(|r| r[k]).sum::<f64>() / frames as f64)
+            .collect();
+        let a = faer::Mat::<f64>::from_fn(frames, p.max(1), |f, k| {
+            if p == 0 {
+                0.0
+            } else {
+                feats[f][k] - mean_a[k]
+            }
+        });
+        let svd = a
+            .thin_svd()
+            .map_err(|e| PrtError::Solve(format!("SVD did not converge: {e:?}")))?;
+        let s = svd.S().column_vector();
+        Ok(Self {
+            mean_a,
+            u: svd.U().to_owned(),
+            s: (0..s.nrows()).map(|i| s[i]).collect(),
+            v: svd.V().to_owned(),
+        })
+    }
+
+    /// Solves `A·X = B` for the packed lobes `fits` with the ridge (among [`RIDGE_GRID`])
+    /// that gives the lowest error on `validate` (the first when there is none).
+    fn solve(
+        &self,
+        shape: &Shape,
+        fits: &[VertexFits],
+        validate: &[Sample],
+    ) -> Result<Solved, PrtError> {
+        let frames = self.u.nrows();
+        let out_dim = shape.lobes * LOBE_DIM;
+        let cols = shape.vertices * out_dim;
+        let p = self.mean_a.len();
+        // B: frames × (vertices·out_dim), column v·out_dim + k.
+        let value = |f: usize, c: usize| fits[c / out_dim].packed[f * out_dim + c % out_dim] as f64;
+        let mean_b: Vec<f64> = (0..cols)
+            .map(|c| (0..frames).map(|f| value(f, c)).sum::<f64>() / frames as f64)
+            .collect();
+        let bc = faer::Mat::<f64>::from_fn(frames, cols, |f, c| value(f, c) - mean_b[c]);
+        let s = &self.s;
+        let rank = s.len();
+        let utb = self.u.transpose() * &bc; // rank × cols
+        drop(bc);
+        let smax2 = s.iter().map(|x| x * x).fold(0.0f64, f64::max).max(1e-300);
+        let build = |lambda: f64| -> Vec<f32> {
+            // X = V diag(s / (s² + λ)) Uᵀ Bc, then the constant row folded in.
+            let scaled = faer::Mat::<f64>::from_fn(rank, cols, |i, c| {
+                let si = s[i];
+                let g = if si * si > 1e-12 * smax2 {
+                    si / (si * si + lambda)
+                } else {
+                    0.0
+                };
+                g * utb[(i, c)]
+            });
+            let x = &self.v * &scaled; // p × cols
+            let mut w = vec![0.0f32; (1 + p) * cols];
+            for c in 0..cols {
+                let mut bias = mean_b[c];
+                for k in 0..p {
+                    bias -= self.mean_a[k] * x[(k, c)];
+                    w[(1 + k) * cols + c] = x[(k, c)] as f32;
+                }
+                w[c] = bias as f32;
+            }
+            w
+        };
+        let mut ridge_errors = Vec::new();
+        let mut best: Option<(f32, f64, PoseModel)> = None;
+        for rel in RIDGE_GRID {
+            let lambda = rel * smax2;
+            let model = PoseModel {
+                character: shape.character.to_string(),
+                vertices: shape.vertices,
+                joints: shape.joints,
+                lobes: shape.lobes,
+                active: shape.active.to_vec(),
+                weights: build(lambda),
+            };
+            let err = if validate.is_empty() {
+                0.0
+            } else {
+                model_error(&model, validate).0
+            };
+            ridge_errors.push((lambda, err));
+            if best.as_ref().map_or(true, |(e, _, _)| err < *e) {
+                best = Some((err, lambda, model));
+            }
+            if validate.is_empty() {
+                break;
+            }
+        }
+        let (validation_error, ridge, model) = best.expect("the ridge grid is not empty");
+        Ok(Solved {
+            model,
+            ridge_errors,
+            ridge,
+            validation_error,
+        })
+    }
 }
 
 /// Mean and standard deviation over vertices×frames of the RMS error over the sphere between
 /// the model's predicted visibility and the projected visibility of `frames`.
 pub fn model_error(model: &PoseModel, frames: &[Sample]) -> (f32, f32) {
+    mean_std(model_errors(model, frames).into_iter())
+}
+
+/// The RMS error over the sphere between the model's predicted visibility and the projected
+/// visibility of `frames`, per vertex, frame after frame.
+pub fn model_errors(model: &PoseModel, frames: &[Sample]) -> Vec<f32> {
     let mut raw = Vec::new();
     let mut errors = Vec::with_capacity(frames.len() * model.vertices);
     for s in frames {
@@ -333,7 +459,7 @@ pub fn model_error(model: &PoseModel, frames: &[Sample]) -> (f32, f32) {
             .collect();
         errors.extend(e);
     }
-    mean_std(errors.into_iter())
+    errors
 }
 
 /// Joints whose rotation varies over the training frames.

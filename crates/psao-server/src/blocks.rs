@@ -28,12 +28,75 @@ pub(crate) struct Block {
     pub hi: Vec3,
 }
 
+/// Point indices in culling order and its inverse. The server numbers its points in this
+/// order already ([`morton_order`]), so the identity is the usual case and is stored as
+/// nothing.
+pub(crate) enum PointOrder {
+    /// Position `k` holds point `k`.
+    Identity(usize),
+    /// Position `k` holds point `order[k]`; point `i` sits at position `rank[i]`.
+    Permuted { order: Vec<u32>, rank: Vec<u32> },
+}
+
+impl PointOrder {
+    /// The order `order` (a permutation of `0..order.len()`).
+    fn new(order: Vec<u32>) -> Self {
+        if order.iter().copied().eq(0..order.len() as u32) {
+            return Self::Identity(order.len());
+        }
+        let mut rank = vec![0; order.len()];
+        for (k, &i) in order.iter().enumerate() {
+            rank[i as usize] = k as u32;
+        }
+        Self::Permuted { order, rank }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Identity(n) => *n,
+            Self::Permuted { order, .. } => order.len(),
+        }
+    }
+
+    /// The point at position `k`.
+    #[inline]
+    pub fn at(&self, k: usize) -> u32 {
+        match self {
+            Self::Identity(_) => k as u32,
+            Self::Permuted { order, .. } => order[k],
+        }
+    }
+
+    /// The position of point `i`.
+    #[inline]
+    pub fn rank(&self, i: u32) -> u32 {
+        match self {
+            Self::Identity(_) => i,
+            Self::Permuted { rank, .. } => rank[i as usize],
+        }
+    }
+
+    /// The points at positions `range`.
+    pub fn range(&self, range: std::ops::Range<usize>) -> impl Iterator<Item = u32> + '_ {
+        range.map(|k| self.at(k))
+    }
+
+    fn heap_bytes(&self) -> u64 {
+        match self {
+            Self::Identity(_) => 0,
+            Self::Permuted { order, rank } => vec_bytes(order) + vec_bytes(rank),
+        }
+    }
+}
+
 /// An instance's points in Morton order of their initial local position, cut into blocks.
 pub(crate) struct CullBlocks {
     /// Point indices, block after block.
-    pub order: Vec<u32>,
-    /// The selection tie-break of each point in `order` (a seeded hash of the point).
-    pub tie: Vec<u32>,
+    pub order: PointOrder,
+    /// Instance index and seed of the selection tie-breaks ([`CullBlocks::tie`]).
+    instance: u32,
+    seed: u64,
     pub blocks: Vec<Block>,
     /// Local bounds of each run of [`SUB_POINTS`] points of `order` (sub-block `j` of block
     /// `b` is `subs[b * SUBS_PER_BLOCK + j]`; a short last block has fewer).
@@ -60,19 +123,24 @@ pub(crate) fn tie_of(instance: u32, index: u32, seed: u64) -> u32 {
 }
 
 impl CullBlocks {
-    /// Heap bytes of the order, tie-breaks and bounds.
+    /// Heap bytes of the order and bounds.
     pub fn heap_bytes(&self) -> u64 {
-        vec_bytes(&self.order)
-            + vec_bytes(&self.tie)
+        self.order.heap_bytes()
             + vec_bytes(&self.blocks)
             + vec_bytes(&self.subs)
             + vec_bytes(&self.groups)
     }
 
+    /// The selection tie-break of the point at position `k` (a seeded hash of the point,
+    /// recomputed rather than stored).
+    #[inline]
+    pub fn tie(&self, k: usize) -> u32 {
+        tie_of(self.instance, self.order.at(k), self.seed)
+    }
+
     /// Blocks of `positions` (instance `instance`, tie-breaks from `seed`).
     pub fn new(positions: &[Vec3], instance: u32, seed: u64) -> Self {
-        let order = morton_order(positions);
-        let tie = order.iter().map(|&i| tie_of(instance, i, seed)).collect();
+        let order = PointOrder::new(morton_order(positions));
         let blocks: Vec<Block> = (0..order.len())
             .step_by(BLOCK_POINTS)
             .map(|start| Block {
@@ -86,7 +154,8 @@ impl CullBlocks {
         let groups = vec![(Vec3::ZERO, Vec3::ZERO); blocks.len().div_ceil(GROUP_BLOCKS)];
         let mut out = Self {
             order,
-            tie,
+            instance,
+            seed,
             blocks,
             subs,
             groups,
@@ -98,9 +167,10 @@ impl CullBlocks {
     /// Recompute every block's and sub-block's bounds from the current `positions` (call
     /// after points moved in local space; membership stays).
     pub fn refresh_bounds(&mut self, positions: &[Vec3]) {
-        let order = &self.order;
-        for (k, sub) in order.chunks(SUB_POINTS).zip(&mut self.subs) {
-            *sub = bounds(k.iter().map(|&i| positions[i as usize]));
+        let (order, n) = (&self.order, self.order.len());
+        for (start, sub) in (0..n).step_by(SUB_POINTS).zip(&mut self.subs) {
+            let run = order.range(start..(start + SUB_POINTS).min(n));
+            *sub = bounds(run.map(|i| positions[i as usize]));
         }
         for (b, block) in self.blocks.iter_mut().enumerate() {
             let n = (block.end - block.start) as usize;
@@ -260,17 +330,21 @@ mod tests {
     fn blocks_cover_every_point_once_and_bound_it() {
         let p = points();
         let b = CullBlocks::new(&p, 3, 7);
-        let mut seen = b.order.clone();
+        let mut seen: Vec<u32> = b.order.range(0..p.len()).collect();
         seen.sort_unstable();
+        for (k, &i) in seen.iter().enumerate() {
+            assert_eq!(b.order.rank(b.order.at(k)), k as u32);
+            assert_eq!(b.order.at(b.order.rank(i) as usize), i);
+        }
         assert_eq!(seen, (0..p.len() as u32).collect::<Vec<_>>());
         assert_eq!(b.blocks.len(), p.len().div_ceil(BLOCK_POINTS));
         for blk in &b.blocks {
-            for &i in &b.order[blk.start as usize..blk.end as usize] {
+            for i in b.order.range(blk.start as usize..blk.end as usize) {
                 let q = p[i as usize];
                 assert!(q.cmpge(blk.lo).all() && q.cmple(blk.hi).all());
             }
         }
-        for (k, &i) in b.order.iter().enumerate() {
+        for (k, i) in b.order.range(0..p.len()).enumerate() {
             let (lo, hi) = b.subs[k / SUB_POINTS];
             assert!(p[i as usize].cmpge(lo).all() && p[i as usize].cmple(hi).all());
         }
@@ -281,7 +355,7 @@ mod tests {
                 .all(|blk| blk.lo.cmpge(lo).all() && blk.hi.cmple(hi).all()));
         }
         assert_eq!(b.groups.len(), b.blocks.len().div_ceil(GROUP_BLOCKS));
-        assert_eq!(b.tie[0], tie_of(3, b.order[0], 7));
+        assert_eq!(b.tie(0), tie_of(3, b.order.at(0), 7));
     }
 
     #[test]
@@ -291,12 +365,12 @@ mod tests {
         let moved: Vec<Vec3> = p.iter().map(|q| *q * 0.5 + Vec3::X).collect();
         b.refresh_bounds(&moved);
         for blk in &b.blocks {
-            for &i in &b.order[blk.start as usize..blk.end as usize] {
+            for i in b.order.range(blk.start as usize..blk.end as usize) {
                 let q = moved[i as usize];
                 assert!(q.cmpge(blk.lo).all() && q.cmple(blk.hi).all());
             }
         }
-        for (k, &i) in b.order.iter().enumerate() {
+        for (k, i) in b.order.range(0..p.len()).enumerate() {
             let (lo, hi) = b.subs[k / SUB_POINTS];
             assert!(moved[i as usize].cmpge(lo).all() && moved[i as usize].cmple(hi).all());
         }
@@ -334,9 +408,10 @@ mod tests {
             for (bounds, range) in blocks.chain(subs) {
                 let side = WorldBox::new(bounds, &transform).side(&f, 0.05);
                 sides[side as usize] += 1;
-                let mut inside = b.order[range.start as usize..range.end as usize]
-                    .iter()
-                    .map(|&i| f.contains(transform.transform_point3(p[i as usize]), 0.05));
+                let mut inside = b
+                    .order
+                    .range(range.start as usize..range.end as usize)
+                    .map(|i| f.contains(transform.transform_point3(p[i as usize]), 0.05));
                 match side {
                     Side::Inside => assert!(inside.all(|x| x)),
                     Side::Outside => assert!(!inside.any(|x| x)),

@@ -65,9 +65,43 @@ pub(crate) struct Points {
     /// Sum of AO samples and their number.
     pub sum: Vec<f32>,
     pub count: Vec<u32>,
-    /// Last published record (0 = never published) and the slot it was published in.
+    /// Last published record (0 = never published), and whether it was published in the
+    /// point's current slot (cleared when the point changes cell).
     pub published: Vec<u32>,
-    pub published_slot: Vec<u32>,
+    pub published_here: Bits,
+}
+
+/// One bit per point.
+#[derive(Default)]
+pub(crate) struct Bits(Vec<u64>);
+
+impl Bits {
+    /// `n` clear bits.
+    pub fn new(n: usize) -> Self {
+        Self(vec![0; n.div_ceil(64)])
+    }
+
+    /// Bit `i`.
+    #[inline]
+    pub fn get(&self, i: usize) -> bool {
+        (self.0[i / 64] >> (i % 64)) & 1 != 0
+    }
+
+    /// Set bit `i` to `value`.
+    #[inline]
+    pub fn set(&mut self, i: usize, value: bool) {
+        let mask = 1u64 << (i % 64);
+        if value {
+            self.0[i / 64] |= mask;
+        } else {
+            self.0[i / 64] &= !mask;
+        }
+    }
+
+    /// Heap bytes of the words.
+    pub fn heap_bytes(&self) -> u64 {
+        psao_points::vec_bytes(&self.0)
+    }
 }
 
 impl InstanceState {
@@ -107,10 +141,10 @@ impl InstanceState {
             sum: vec![0.0; n],
             count: vec![0; n],
             published: vec![0; n],
-            published_slot: vec![NONE; n],
+            published_here: Bits::new(n),
         };
-        let mut members = vec![[NONE; CELL_POINTS]; alloc.cells().len()];
-        let mut slot_ids = vec![0; alloc.cells().len()];
+        let mut members = vec![[NONE; CELL_POINTS]; alloc.slot_count()];
+        let mut slot_ids = vec![0; alloc.slot_count()];
         for (i, loc) in locs.iter().enumerate() {
             if let Some(loc) = loc {
                 p.slot[i] = loc.slot;
@@ -130,7 +164,7 @@ impl InstanceState {
             poisson_radius: points.poisson_radius_local,
             grid: InstanceGrid::new(layout),
             bucket_stamp: vec![0; layout.bucket_count as usize],
-            cell_stamp: vec![0; alloc.cells().len()],
+            cell_stamp: vec![0; alloc.slot_count()],
             alloc,
             slot_ids,
             members,
@@ -217,15 +251,13 @@ impl InstanceState {
             let layout = *self.layout();
             self.pending_buckets
                 .push(layout.bucket_of(self.slot_ids[old as usize]));
-            if self.points.published_slot[i] == old {
-                self.points.published_slot[i] = NONE;
-            }
+            self.points.published_here.set(i, false);
             self.points.slot[i] = NONE;
         }
         let Ok(loc) = self.alloc.insert(position, normal, 1.0) else {
             return;
         };
-        let cells = self.alloc.cells().len();
+        let cells = self.alloc.slot_count();
         if self.members.len() < cells {
             self.members.resize(cells, [NONE; CELL_POINTS]);
             self.slot_ids.resize(cells, 0);
@@ -263,7 +295,7 @@ impl InstanceState {
         let mut cell = Cell::default();
         let records = self.members[slot as usize]
             .iter()
-            .filter(|&&m| m != NONE && self.points.published_slot[m as usize] == slot)
+            .filter(|&&m| m != NONE && self.points.published_here.get(m as usize))
             .map(|&m| self.points.published[m as usize]);
         for (dst, bits) in cell.points.iter_mut().zip(records) {
             *dst = bits;
@@ -276,11 +308,11 @@ impl InstanceState {
     /// (with [`InstanceState::published_cell`]) first.
     pub fn published_bucket(&self, b: usize) -> Bucket {
         let mut bucket = Bucket::default();
-        let cells = self.grid.cells();
-        let entries = self.alloc.buckets()[b]
+        let alloc = self.alloc.bucket(b);
+        let entries = alloc
             .entries
             .iter()
-            .filter(|e| e.key != 0 && cells.get(e.slot as usize).is_some_and(|c| c.points[0] != 0));
+            .filter(|e| e.key != 0 && self.grid.cell(e.slot).points[0] != 0);
         for (dst, e) in bucket.entries.iter_mut().zip(entries) {
             *dst = *e;
         }

@@ -32,7 +32,7 @@ pub(crate) fn memory_parts(instances: &[InstanceState], skins: u64) -> Vec<Memor
             sum(&|i| {
                 vec_bytes(&i.points.slot)
                     + vec_bytes(&i.points.published)
-                    + vec_bytes(&i.points.published_slot)
+                    + i.points.published_here.heap_bytes()
             }),
         ),
         part(

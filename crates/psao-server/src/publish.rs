@@ -25,7 +25,7 @@ pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Optio
         unpack_ao(old)
     };
     let bits = layout.pack(inst.slot_coord(slot)?, p.position[i], p.normal[i], ao);
-    if old == 0 || p.published_slot[i] != slot {
+    if old == 0 || !p.published_here.get(i) {
         return Some(bits);
     }
     let step = layout.cell_size / POSITION_STEPS as f32;
@@ -47,12 +47,10 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     for &(i, bits) in updates {
         let i = i as usize;
         let p = &mut inst.points;
-        let old_slot = std::mem::replace(&mut p.published_slot[i], p.slot[i]);
+        // A point that changed cell had its flag cleared and its old cell queued (rehome).
+        p.published_here.set(i, true);
         p.published[i] = bits;
         dirty_cells.push(p.slot[i]);
-        if old_slot != NONE && old_slot != p.slot[i] {
-            dirty_cells.push(old_slot);
-        }
     }
     dirty_cells.par_sort_unstable();
     dirty_cells.dedup();
@@ -65,14 +63,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
         .map(|&slot| (slot, view.published_cell(slot)))
         .collect();
     for (slot, cell) in cells {
-        if inst
-            .grid
-            .cells()
-            .get(slot as usize)
-            .copied()
-            .unwrap_or_default()
-            != cell
-        {
+        if *inst.grid.cell(slot) != cell {
             inst.publish_cell(slot, cell, frame);
         }
         dirty_buckets.push(layout.bucket_of(inst.slot_ids[slot as usize]));
@@ -83,7 +74,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     let buckets: Vec<(usize, Bucket)> = dirty_buckets
         .par_iter()
         .map(|&b| (b, view.published_bucket(b)))
-        .filter(|(b, bucket)| view.grid.buckets()[*b] != *bucket)
+        .filter(|(b, bucket)| view.grid.bucket(*b) != *bucket)
         .collect();
     for (b, bucket) in buckets {
         inst.publish_bucket(b, bucket, frame);
@@ -167,10 +158,10 @@ mod tests {
         assert!(republish(&s, i, &t).is_some(), "moved 4 steps");
         s.points.position[i] = p;
 
-        let slot = s.points.slot[i];
-        s.points.slot[i] = (slot + 1) % s.members.len() as u32;
+        // What rehoming into another cell does to the flag.
+        s.points.published_here.set(i, false);
         assert!(republish(&s, i, &t).is_some(), "changed cell");
-        s.points.slot[i] = slot;
+        s.points.published_here.set(i, true);
         assert_eq!(republish(&s, i, &t), None);
     }
 
@@ -190,19 +181,19 @@ mod tests {
         let bits_b = republish(&s, b, &t).unwrap();
         apply(&mut s, &[(b as u32, bits_b)], 1);
         let bucket = s.layout().bucket_of(s.slot_ids[slot]);
-        assert_eq!(s.grid.cells()[slot].points[..2], [bits_b, 0]);
-        assert_eq!(s.grid.buckets()[bucket].len(), 1);
+        assert_eq!(s.grid.cell(slot as u32).points[..2], [bits_b, 0]);
+        assert_eq!(s.grid.bucket(bucket).len(), 1);
         assert_eq!((s.cell_stamp[slot], s.bucket_stamp[bucket]), (1, 1));
 
         let bits_a = republish(&s, a, &t).unwrap();
         apply(&mut s, &[(a as u32, bits_a)], 2);
         // Members keep their allocation order once both are published.
-        assert_eq!(s.grid.cells()[slot].points[..3], [bits_a, bits_b, 0]);
+        assert_eq!(s.grid.cell(slot as u32).points[..3], [bits_a, bits_b, 0]);
         assert_eq!(s.cell_stamp[slot], 2);
         assert_eq!(s.bucket_stamp[bucket], 1, "bucket unchanged");
         assert_eq!(s.max_stamp, 2);
         // Unpublished cells stay out of the published grid.
-        let published_slots = s.grid.buckets().iter().map(|b| b.len()).sum::<usize>();
+        let published_slots = s.grid.buckets().map(|b| b.len()).sum::<usize>();
         assert_eq!(published_slots, 1);
     }
 }

@@ -70,8 +70,6 @@ pub(crate) struct BlockSummaries {
     /// Per position in [`CullBlocks::order`]: the bin the point is listed under, or
     /// [`CONVERGED`] / [`UNSTORED`].
     listed: Vec<u16>,
-    /// Per point: its position in [`CullBlocks::order`].
-    rank: Vec<u32>,
     /// Samples at which a point is converged (no longer listed).
     max_samples: u32,
 }
@@ -83,22 +81,16 @@ impl BlockSummaries {
             + vec_bytes(&self.len)
             + vec_bytes(&self.entries)
             + vec_bytes(&self.listed)
-            + vec_bytes(&self.rank)
     }
 
     /// Summaries of `blocks` for the current state of `points`.
     pub fn new(blocks: &CullBlocks, points: &Points, max_samples: u32) -> Self {
         let n = blocks.order.len();
-        let mut rank = vec![0; n];
-        for (k, &i) in blocks.order.iter().enumerate() {
-            rank[i as usize] = k as u32;
-        }
         let mut out = Self {
             stored: vec![0; blocks.blocks.len()],
             len: vec![0; blocks.blocks.len()],
             entries: vec![0; n],
             listed: vec![UNSTORED; n],
-            rank,
             max_samples,
         };
         out.rebuild(blocks, points);
@@ -113,14 +105,14 @@ impl BlockSummaries {
         } else if points.count[i] >= self.max_samples {
             CONVERGED
         } else {
-            bin(points.count[i], blocks.tie[k])
+            bin(points.count[i], blocks.tie(k))
         }
     }
 
     /// Recompute every block from `points` (after most points changed).
     pub fn rebuild(&mut self, blocks: &CullBlocks, points: &Points) {
         for k in 0..blocks.order.len() {
-            self.listed[k] = self.state(blocks, points, blocks.order[k] as usize, k);
+            self.listed[k] = self.state(blocks, points, blocks.order.at(k) as usize, k);
         }
         let listed = &self.listed;
         self.entries
@@ -150,11 +142,11 @@ impl BlockSummaries {
         if changed.is_empty() {
             return;
         }
-        if changed.len() >= self.rank.len() / 4 {
+        if changed.len() >= self.listed.len() / 4 {
             self.rebuild(blocks, points);
             return;
         }
-        let mut ks: Vec<u32> = changed.iter().map(|&i| self.rank[i as usize]).collect();
+        let mut ks: Vec<u32> = changed.iter().map(|&i| blocks.order.rank(i)).collect();
         ks.par_sort_unstable();
         ks.dedup();
         // (block, first change, end of its changes) for each block with changes.
@@ -170,7 +162,7 @@ impl BlockSummaries {
             .iter()
             .map(|&k| {
                 let k = k as usize;
-                self.state(blocks, points, blocks.order[k] as usize, k)
+                self.state(blocks, points, blocks.order.at(k) as usize, k)
             })
             .collect();
         let update = |(b, from, to): (usize, usize, usize),
@@ -319,7 +311,7 @@ mod tests {
                 .map(|i| (hash64(i ^ 99) % 40) as u32)
                 .collect(),
             published: vec![0; n],
-            published_slot: vec![NONE; n],
+            published_here: crate::instance::Bits::new(n),
         }
     }
 
@@ -329,14 +321,14 @@ mod tests {
             let range = blk.start as usize..blk.end as usize;
             let stored = range
                 .clone()
-                .filter(|&k| p.slot[blocks.order[k] as usize] != NONE)
+                .filter(|&k| p.slot[blocks.order.at(k) as usize] != NONE)
                 .count();
             let mut expected: Vec<u32> = range
                 .clone()
                 .filter_map(|k| {
-                    let i = blocks.order[k] as usize;
+                    let i = blocks.order.at(k) as usize;
                     (p.slot[i] != NONE && p.count[i] < max)
-                        .then(|| entry(bin(p.count[i], blocks.tie[k]), k - range.start))
+                        .then(|| entry(bin(p.count[i], blocks.tie(k)), k - range.start))
                 })
                 .collect();
             expected.sort_unstable();
@@ -367,7 +359,7 @@ mod tests {
         let max = 32;
         let mut s = BlockSummaries::new(&blocks, &p, max);
         assert_consistent(&s, &blocks, &p, max);
-        assert_eq!(blocks.tie[0], tie_of(2, blocks.order[0], 5));
+        assert_eq!(blocks.tie(0), tie_of(2, blocks.order.at(0), 5));
         for round in 0..6u64 {
             // Trace some points (some converge), restart others, store and unstore a few.
             let mut changed = Vec::new();

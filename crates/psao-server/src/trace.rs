@@ -202,8 +202,8 @@ pub(crate) fn cull(
             let inst = &instances[vb.instance as usize];
             vb.up_to(cut).map(move |e| {
                 let k = vb.start as usize + offset_of(e);
-                let i = inst.blocks.order[k];
-                let (count, tie) = (inst.points.count[i as usize], inst.blocks.tie[k]);
+                let i = inst.blocks.order.at(k);
+                let (count, tie) = (inst.points.count[i as usize], inst.blocks.tie(k));
                 debug_assert_eq!(bin(count, tie), bin_of(e), "summaries are up to date");
                 Candidate {
                     key: (u64::from(count) << 32) | u64::from(tie),
@@ -261,7 +261,7 @@ fn straddling_mask<'f>(
             }
             let w = inst
                 .transform
-                .transform_point3(positions[order[k] as usize]);
+                .transform_point3(positions[order.at(k) as usize]);
             if sub_straddling.iter().any(|f| f.contains(w, inst.slack)) {
                 *visible += 1;
                 let offset = k - start;

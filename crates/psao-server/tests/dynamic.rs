@@ -335,7 +335,7 @@ fn skinned_points_follow_their_triangles_and_mirroring_stays_exact() {
     let current: Vec<Vec3> = server.points(strip).map(|p| p.position).collect();
     let step = layout.cell_size / 32.0;
     let mut decoded = 0;
-    for (b, bucket) in grid.buckets().iter().enumerate() {
+    for (b, bucket) in grid.buckets().enumerate() {
         for e in bucket.entries.iter().filter(|e| e.key != 0) {
             let coord = layout.coord_of_id(e.key - 1).unwrap();
             assert_eq!(layout.bucket_of(e.key - 1), b);

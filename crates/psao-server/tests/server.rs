@@ -28,11 +28,11 @@ fn first_update_is_a_snapshot_and_a_converged_static_view_sends_nothing() {
             delta.map_or(BTreeSet::new(), |d| d.buckets.iter().map(|b| b.0).collect());
         let sent_c: BTreeSet<u32> =
             delta.map_or(BTreeSet::new(), |d| d.cells.iter().map(|c| c.0).collect());
-        let want_b: BTreeSet<u32> = (0..grid.buckets().len() as u32)
-            .filter(|&b| !grid.buckets()[b as usize].is_empty())
+        let want_b: BTreeSet<u32> = (0..grid.bucket_count() as u32)
+            .filter(|&b| !grid.bucket(b as usize).is_empty())
             .collect();
-        let want_c: BTreeSet<u32> = (0..grid.cells().len() as u32)
-            .filter(|&s| grid.cells()[s as usize].count() > 0)
+        let want_c: BTreeSet<u32> = (0..grid.slot_count() as u32)
+            .filter(|&s| grid.cell(s).count() > 0)
             .collect();
         assert_eq!(sent_b, want_b, "instance {i}");
         assert_eq!(sent_c, want_c, "instance {i}");

@@ -1,25 +1,65 @@
 //! Voxel sampling that decodes compressed bricks on the fly, one 4³ block (one BC7 block) at
-//! a time: a sampler keeps a set-associative cache of decoded blocks, so a block is decoded once
-//! per ray segment, and usually once per tile of neighbouring rays. `f32` bricks are read in
-//! place.
+//! a time: a sampler keeps a set-associative cache of decoded L3 nodes, each a 9³ copy of the
+//! node's brick with the first voxel layer of its +x/+y/+z neighbours, so a trilinear sample
+//! anywhere in the node reads one slot. A block is decoded once per ray segment, and usually
+//! once per tile of neighbouring rays. `f32` bricks are read in place.
 
 use crate::codec::BrickFormat;
-use crate::grid::{floor_ivec, voxel_index, BRICK_VOXELS};
+use crate::grid::{floor_ivec, voxel_index};
 use crate::tree::Locate;
 use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
 
-/// Most bricks kept per sampler (log2); their 4³ blocks are decoded when first needed. A small
+/// Most nodes kept per sampler (log2); their 4³ blocks are decoded when first needed. A small
 /// pool gets a power of two near twice its size, so a render of a small volume does not
-/// allocate (and fault in) a 2 MiB cache per sampler.
+/// allocate (and fault in) a 3 MiB cache per sampler.
 const MAX_SLOT_BITS: u32 = 10;
-/// The cache is set-associative: a brick may sit in any of the `WAYS` slots of the set its
-/// hashed index picks (a direct-mapped cache made bricks that a tile's rays all cross evict
-/// each other over and over; the oldest brick of a set is replaced).
+/// The cache is set-associative: a node may sit in any of the `WAYS` slots of the set its
+/// hashed index picks (a direct-mapped cache made nodes that a tile's rays all cross evict
+/// each other over and over; the oldest node of a set is replaced).
 const WAY_BITS: u32 = 2;
 const WAYS: usize = 1 << WAY_BITS;
 /// Located cells remembered per sampler.
 const CELLS: usize = 4;
+/// Edge of a cached node: its 8³ voxels plus one layer from its +x, +y and +z neighbours.
+const PAD: usize = 9;
+/// Values per cached node.
+const PADDED_VOXELS: usize = PAD * PAD * PAD;
+/// Offsets of the eight trilinear corners in a cached node (bit 0: +x, 1: +y, 2: +z).
+const PADDED_CORNERS: [usize; 8] = [
+    0,
+    1,
+    PAD,
+    PAD + 1,
+    PAD * PAD,
+    PAD * PAD + 1,
+    PAD * PAD + PAD,
+    PAD * PAD + PAD + 1,
+];
+
+/// Index of (x, y, z) (each 0..9) in a cached node.
+#[inline(always)]
+fn padded_index(x: usize, y: usize, z: usize) -> usize {
+    x + PAD * (y + PAD * z)
+}
+
+/// Per set of crossed axes `c` (bit 0: x, 1: y, 2: z): the neighbour layers a sample crossing
+/// them reads, as bits `d` for every non-empty subset `d` of `c`.
+const LAYERS_OF_CROSS: [u8; 8] = {
+    let mut t = [0u8; 8];
+    let mut c = 0;
+    while c < 8 {
+        let mut d = 1;
+        while d < 8 {
+            if d & !c == 0 {
+                t[c] |= 1 << d;
+            }
+            d += 1;
+        }
+        c += 1;
+    }
+    t
+};
 
 /// The 4³ block (0..8) of voxel (x, y, z) of a brick.
 #[inline]
@@ -39,24 +79,25 @@ fn spread(xs: u8, ys: u8, zs: u8) -> u8 {
 pub struct Sampler<'a> {
     vol: &'a Volume,
     frame: usize,
+    /// Per slot: the L3 node it holds (`u32::MAX`: none).
     keys: Vec<u32>,
     /// log2 of the slot count.
     slot_bits: u32,
-    /// Per slot: which of the eight 4³ blocks are decoded.
+    /// Per slot: which of the node's eight 4³ blocks are decoded.
     valid: Vec<u8>,
+    /// Per slot: which neighbour layers are copied in (bit `d` for neighbour offset `d`,
+    /// 1..8, as in [`LAYERS_OF_CROSS`]).
+    layers: Vec<u8>,
     /// Per set: the way filled next (the oldest one).
     next_way: Vec<u8>,
-    /// Per slot: the brick's values ([`voxel_index`] layout; only decoded blocks are valid).
-    slots: Vec<[f32; BRICK_VOXELS]>,
+    /// Per slot: the node's values ([`padded_index`] layout; only decoded parts are valid).
+    slots: Vec<[f32; PADDED_VOXELS]>,
     /// Recently located 8³ cells and their L3 nodes (round robin).
     cells: [(IVec3, Option<u32>); CELLS],
     next_cell: usize,
-    /// The brick whose slot holds all its blocks and was used last, and that slot (compressed
-    /// formats; runs of samples in one brick skip the cache lookup).
+    /// The node whose slot holds all its blocks and was used last, and that slot (compressed
+    /// formats; runs of samples in one node skip the cache lookup).
     current: (u32, usize),
-    /// Bricks evicted from the cache so far (a sample that looked up several bricks checks
-    /// whether one took another's slot meanwhile).
-    evictions: u64,
     /// Blocks decoded so far (for statistics).
     pub decodes: u64,
 }
@@ -75,12 +116,12 @@ impl<'a> Sampler<'a> {
             keys: vec![u32::MAX; slots],
             slot_bits,
             valid: vec![0; slots],
+            layers: vec![0; slots],
             next_way: vec![0; slots / WAYS],
-            slots: vec![[0.0; BRICK_VOXELS]; slots],
+            slots: vec![[0.0; PADDED_VOXELS]; slots],
             cells: [(IVec3::MAX, None); CELLS],
             next_cell: 0,
             current: (u32::MAX, 0),
-            evictions: 0,
             decodes: 0,
         }
     }
@@ -115,47 +156,53 @@ impl<'a> Sampler<'a> {
     /// Value of voxel (x, y, z) (each 0..8) of L3 node `leaf`.
     #[inline(always)]
     pub fn leaf_value(&mut self, leaf: u32, x: usize, y: usize, z: usize) -> f32 {
-        let brick = self.vol.tree.l3[leaf as usize].brick();
         if self.slots.is_empty() {
+            let brick = self.vol.tree.l3[leaf as usize].brick();
             let at = brick as usize * 2048 + voxel_index(x, y, z) * 4;
             let d = &self.vol.pool.data[at..at + 4];
             return f32::from_le_bytes([d[0], d[1], d[2], d[3]]);
         }
-        let s = self.slot(brick, 1 << block_of(x, y, z));
-        self.slots[s][voxel_index(x, y, z)]
+        let s = self.slot(leaf, 1 << block_of(x, y, z), usize::MAX);
+        self.slots[s][padded_index(x, y, z)]
     }
 
-    /// The cache slot of `brick` with at least the blocks in bit set `need` decoded
-    /// (compressed formats only).
+    /// The cache slot of L3 node `leaf` with at least the blocks in bit set `need` decoded
+    /// (compressed formats only); a node not cached replaces the oldest of its set, but never
+    /// the node in slot `keep`.
     #[inline(always)]
-    fn slot(&mut self, brick: u32, need: u8) -> usize {
-        let set = ((brick.wrapping_mul(0x9E37_79B9) >> (32 - self.slot_bits + WAY_BITS)) as usize)
+    fn slot(&mut self, leaf: u32, need: u8, keep: usize) -> usize {
+        let set = ((leaf.wrapping_mul(0x9E37_79B9) >> (32 - self.slot_bits + WAY_BITS)) as usize)
             << WAY_BITS;
         for s in set..set + WAYS {
-            if self.keys[s] == brick {
+            if self.keys[s] == leaf {
                 if need & !self.valid[s] == 0 {
                     return s;
                 }
-                return self.fill(s, brick, need);
+                return self.fill(s, leaf, need);
             }
         }
         let way = &mut self.next_way[set >> WAY_BITS];
-        let s = set + *way as usize;
+        let mut s = set + *way as usize;
+        if s == keep {
+            *way = ((*way as usize + 1) % WAYS) as u8;
+            s = set + *way as usize;
+        }
         *way = ((*way as usize + 1) % WAYS) as u8;
-        self.fill(s, brick, need)
+        self.fill(s, leaf, need)
     }
 
-    /// Makes slot `s` hold `brick` with the blocks in `need` decoded.
+    /// Makes slot `s` hold L3 node `leaf` with the blocks in `need` decoded.
     #[inline(never)]
-    fn fill(&mut self, s: usize, brick: u32, need: u8) -> usize {
-        if self.keys[s] != brick {
-            self.evictions += (self.keys[s] != u32::MAX) as u64;
-            self.keys[s] = brick;
+    fn fill(&mut self, s: usize, leaf: u32, need: u8) -> usize {
+        if self.keys[s] != leaf {
+            self.keys[s] = leaf;
             self.valid[s] = 0;
+            self.layers[s] = 0;
             if self.current.1 == s {
                 self.current.0 = u32::MAX;
             }
         }
+        let brick = self.vol.tree.l3[leaf as usize].brick();
         let mut missing = need & !self.valid[s];
         let mut block = [0.0f32; 64];
         while missing != 0 {
@@ -165,7 +212,7 @@ impl<'a> Sampler<'a> {
             let slot = &mut self.slots[s];
             for dz in 0..4 {
                 for dy in 0..4 {
-                    let row = voxel_index(x0, y0 + dy, z0 + dz);
+                    let row = padded_index(x0, y0 + dy, z0 + dz);
                     slot[row..row + 4]
                         .copy_from_slice(&block[16 * dz + 4 * dy..16 * dz + 4 * dy + 4]);
                 }
@@ -175,6 +222,74 @@ impl<'a> Sampler<'a> {
         }
         self.valid[s] |= need;
         s
+    }
+
+    /// Copies into slot `s` (holding L3 node `leaf`) the neighbour layers in bit set `layers`
+    /// (bits `d` as in [`LAYERS_OF_CROSS`]): from each neighbour's own slot, decoding only the
+    /// blocks that touch the layer; the background where there is no neighbour.
+    #[inline(never)]
+    fn fill_layers(&mut self, s: usize, leaf: u32, layers: u8) {
+        let mut missing = layers & !self.layers[s];
+        while missing != 0 {
+            let d = missing.trailing_zeros() as usize;
+            missing &= missing - 1;
+            // Along the axes of `d` the layer is the node's coordinate 8, the neighbour's 0.
+            let range = |axis: usize| if d >> axis & 1 == 1 { 8..9 } else { 0..8 };
+            let n = self.vol.next_leaf(leaf, d);
+            if n == NO_LEAF {
+                let bg = self.vol.background;
+                let dst = &mut self.slots[s];
+                for z in range(2) {
+                    for y in range(1) {
+                        for x in range(0) {
+                            dst[padded_index(x, y, z)] = bg;
+                        }
+                    }
+                }
+                continue;
+            }
+            let halves = |axis: usize| if d >> axis & 1 == 1 { 0b01 } else { 0b11 };
+            let from = self.slot(n, spread(halves(0), halves(1), halves(2)), s);
+            let (src, dst) = if from < s {
+                let (a, b) = self.slots.split_at_mut(s);
+                (&a[from], &mut b[0])
+            } else {
+                let (a, b) = self.slots.split_at_mut(from);
+                (&b[0], &mut a[s])
+            };
+            for z in range(2) {
+                for y in range(1) {
+                    for x in range(0) {
+                        dst[padded_index(x, y, z)] = src[padded_index(x & 7, y & 7, z & 7)];
+                    }
+                }
+            }
+        }
+        self.layers[s] |= layers;
+    }
+
+    /// The eight corners of a trilinear sample with base voxel `l` (each 0..8, local to
+    /// `leaf`) from the node's cached 9³ copy (compressed formats only).
+    #[inline(always)]
+    fn corners_cached(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
+        let s = if self.current.0 == leaf {
+            self.current.1
+        } else {
+            // The whole node: the next samples along the ray mostly fall in it too.
+            let s = self.slot(leaf, 0xff, usize::MAX);
+            self.current = (leaf, s);
+            s
+        };
+        let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
+        let layers = LAYERS_OF_CROSS[cross];
+        if layers & !self.layers[s] != 0 {
+            self.fill_layers(s, leaf, layers);
+        }
+        let i0 = padded_index(l.x as usize, l.y as usize, l.z as usize);
+        let d = &self.slots[s];
+        for (k, o) in PADDED_CORNERS.iter().enumerate() {
+            c[k] = d[i0 + o];
+        }
     }
 
     /// Value of index-space voxel `p` (the background outside the leaves).
@@ -203,7 +318,9 @@ impl<'a> Sampler<'a> {
         }
         let f = p - b.as_vec3();
         let mut c = [0.0f32; 8];
-        if l.x < 7 && l.y < 7 && l.z < 7 {
+        if !self.slots.is_empty() {
+            self.corners_cached(leaf, l, &mut c);
+        } else if l.x < 7 && l.y < 7 && l.z < 7 {
             let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
             self.corners_in_brick(leaf, i0, &mut c);
         } else {
@@ -213,15 +330,12 @@ impl<'a> Sampler<'a> {
     }
 
     /// The eight corners of a trilinear sample with base voxel `l` (local to `leaf`) on its
-    /// +x, +y or +z border layer: each neighbour brick is found once from the neighbour table
-    /// (and, compressed, its cache slot once with all the blocks its corners need).
+    /// +x, +y or +z border layer, read in place from the f32 pool: each neighbour brick is
+    /// found once from the neighbour table.
     fn corners_across(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
         let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
-        let compressed = !self.slots.is_empty();
-        let evictions = self.evictions;
-        // Per neighbour offset d (a subset of `cross`): its brick and, compressed, its slot.
+        // Per neighbour offset d (a subset of `cross`): its brick.
         let mut brick = [NO_LEAF; 8];
-        let mut slot = [0usize; 8];
         let mut d = 0;
         loop {
             let n = if d == 0 {
@@ -231,24 +345,6 @@ impl<'a> Sampler<'a> {
             };
             if n != NO_LEAF {
                 brick[d] = self.vol.tree.l3[n as usize].brick();
-                if compressed && d == 0 && self.current.0 == brick[0] {
-                    // The node's own brick, whole in the cache already.
-                    slot[0] = self.current.1;
-                } else if compressed {
-                    // 4-voxel halves read along each axis: across the border only the
-                    // neighbour's first layer (half 0) or the node's last one (half 1).
-                    let halves = |axis: usize, v: i32| {
-                        if cross >> axis & 1 == 0 {
-                            (1u8 << (v >> 2)) | (1u8 << ((v + 1) >> 2))
-                        } else if d >> axis & 1 == 1 {
-                            0b01
-                        } else {
-                            0b10
-                        }
-                    };
-                    let need = spread(halves(0, l.x), halves(1, l.y), halves(2, l.z));
-                    slot[d] = self.slot(brick[d], need);
-                }
             }
             // Next subset of `cross` (all of them, then back to 0).
             d = d.wrapping_sub(cross) & cross;
@@ -256,9 +352,6 @@ impl<'a> Sampler<'a> {
                 break;
             }
         }
-        // A brick looked up here may have taken another's slot: then read each corner on its
-        // own.
-        let collided = self.evictions != evictions;
         for (k, v) in c.iter_mut().enumerate() {
             let d = k & cross;
             let q: IVec3 =
@@ -266,14 +359,6 @@ impl<'a> Sampler<'a> {
             let i = voxel_index(q.x as usize, q.y as usize, q.z as usize);
             *v = if brick[d] == NO_LEAF {
                 self.vol.background
-            } else if collided {
-                let s = self.slot(
-                    brick[d],
-                    1 << block_of(q.x as usize, q.y as usize, q.z as usize),
-                );
-                self.slots[s][i]
-            } else if compressed {
-                self.slots[slot[d]][i]
             } else {
                 let at = brick[d] as usize * 2048 + i * 4;
                 let b = &self.vol.pool.data[at..at + 4];
@@ -283,30 +368,15 @@ impl<'a> Sampler<'a> {
     }
 
     /// The eight corners `i0 + OFF` of a trilinear sample whose cell lies inside the brick of
-    /// `leaf` (`l`: its local base voxel).
+    /// `leaf`, read in place from the f32 pool.
     #[inline(always)]
     fn corners_in_brick(&mut self, leaf: u32, i0: usize, c: &mut [f32; 8]) {
         const OFF: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
         let brick = self.vol.tree.l3[leaf as usize].brick();
-        if self.slots.is_empty() {
-            let data = &self.vol.pool.data[brick as usize * 2048..brick as usize * 2048 + 2048];
-            for (k, o) in OFF.iter().enumerate() {
-                let at = (i0 + o) * 4;
-                c[k] = f32::from_le_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
-            }
-        } else {
-            let s = if self.current.0 == brick {
-                self.current.1
-            } else {
-                // The whole brick: the next samples along the ray mostly fall in it too.
-                let s = self.slot(brick, 0xff);
-                self.current = (brick, s);
-                s
-            };
-            let d = &self.slots[s];
-            for (k, o) in OFF.iter().enumerate() {
-                c[k] = d[i0 + o];
-            }
+        let data = &self.vol.pool.data[brick as usize * 2048..brick as usize * 2048 + 2048];
+        for (k, o) in OFF.iter().enumerate() {
+            let at = (i0 + o) * 4;
+            c[k] = f32::from_le_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
         }
     }
 
@@ -317,36 +387,43 @@ impl<'a> Sampler<'a> {
         let f = p - b.as_vec3();
         let l: IVec3 = b & 7i32;
         let mut c = [0.0f32; 8];
-        if l.x < 7 && l.y < 7 && l.z < 7 {
-            // All eight corners in one brick.
+        let compressed = !self.slots.is_empty();
+        if compressed || (l.x < 7 && l.y < 7 && l.z < 7) {
             match self.leaf_at(b) {
-                None => return self.vol.background,
+                Some(leaf) if compressed => self.corners_cached(leaf, l, &mut c),
                 Some(leaf) => {
+                    // All eight corners in one brick.
                     let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
                     self.corners_in_brick(leaf, i0, &mut c);
                 }
+                None if l.x < 7 && l.y < 7 && l.z < 7 => return self.vol.background,
+                None => self.corners_located(b, l, &mut c),
             }
         } else {
-            // Corners in up to eight bricks: locate each distinct brick once.
-            let cross =
-                (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
-            let mut leaves = [None; 8];
-            for (k, v) in c.iter_mut().enumerate() {
-                let d = IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
-                let p = b + d;
-                let key = k & cross;
-                if key == k {
-                    leaves[k] = self.leaf_at(p);
-                }
-                let q: IVec3 = p & 7i32;
-                // Read at once: a later corner's brick may take this one's cache slot.
-                *v = match leaves[key] {
-                    Some(leaf) => self.leaf_value(leaf, q.x as usize, q.y as usize, q.z as usize),
-                    None => self.vol.background,
-                };
-            }
+            self.corners_located(b, l, &mut c);
         }
         lerp8(&c, f)
+    }
+
+    /// The eight corners of a trilinear sample with base voxel `b` (`l` = `b` & 7) on a brick
+    /// border, each distinct brick located once in the tree.
+    fn corners_located(&mut self, b: IVec3, l: IVec3, c: &mut [f32; 8]) {
+        let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
+        let mut leaves = [None; 8];
+        for (k, v) in c.iter_mut().enumerate() {
+            let d = IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
+            let p = b + d;
+            let key = k & cross;
+            if key == k {
+                leaves[k] = self.leaf_at(p);
+            }
+            let q: IVec3 = p & 7i32;
+            // Read at once: a later corner's brick may take this one's cache slot.
+            *v = match leaves[key] {
+                Some(leaf) => self.leaf_value(leaf, q.x as usize, q.y as usize, q.z as usize),
+                None => self.vol.background,
+            };
+        }
     }
 }
 

@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use psao_eval::{AoImage, Metrics};
 use psao_prt::lighting::{Radiance, LUMINANCE};
-use psao_prt::model::{model_error, PoseModel};
+use psao_prt::model::{mean_std, model_errors, PoseModel};
 use psao_prt::reference::{reference_shading, ReferenceSettings};
 use psao_prt::shade::{Shader, ShadingGeometry, Visibility};
 use psao_prt::visibility::SelfTracer;
@@ -91,6 +91,8 @@ struct FitError {
     /// Mean RMS-over-the-sphere error of the model's visibility on the test frames.
     mean: f32,
     std: f32,
+    /// The 99th percentile of the per-vertex errors (the badly predicted vertices).
+    p99: f32,
     /// The direct lobe fit's error on the training frames (before the linear model).
     lobe_fit_mean: f32,
     lobe_fit_std: f32,
@@ -210,11 +212,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         let start = Instant::now();
         let (model, report) = train_model(&loaded.name, &train_set, &validate, lobes)?;
         let train_s = start.elapsed().as_secs_f64();
-        let (mean, std) = model_error(&model, &tests);
+        let mut errors = model_errors(&model, &tests);
+        let (mean, std) = mean_std(errors.iter().copied());
+        errors.sort_by(f32::total_cmp);
         fit_error.push(FitError {
             lobes,
             mean,
             std,
+            p99: errors[(errors.len() * 99 / 100).min(errors.len() - 1)],
             lobe_fit_mean: report.lobe_fit_error.0,
             lobe_fit_std: report.lobe_fit_error.1,
             train_s,
@@ -475,8 +480,8 @@ fn markdown(r: &Report) -> String {
          {} training frames, {} validation frames (ridge choice), test times {:?} s; \
          {} visibility rays per vertex; reference {} samples per vertex.\n\n\
          ## Fit error (RMS over the sphere of predicted vs projected visibility, test frames)\n\n\
-         | lobes | mean | std | lobe fit (train) | training s | model MB | ridge | ms per frame |\n\
-         |---|---|---|---|---|---|---|---|\n",
+         | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
         r.character,
         r.clip,
         r.vertices,
@@ -489,10 +494,11 @@ fn markdown(r: &Report) -> String {
     );
     for f in &r.fit_error {
         s += &format!(
-            "| {} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} |\n",
+            "| {} | {:.4} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} |\n",
             f.lobes,
             f.mean,
             f.std,
+            f.p99,
             f.lobe_fit_mean,
             f.lobe_fit_std,
             f.train_s,

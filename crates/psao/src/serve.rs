@@ -97,6 +97,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         serve = serve.with_corrections(psao_net::serve::Corrections {
             engine: std::sync::Arc::new(engine),
             samples_per_second: c.samples_per_second,
+            workers: psao_net::serve::DEFAULT_CORRECTION_WORKERS,
         });
     }
     println!("listening on {}", serve.local_addr());

@@ -210,17 +210,14 @@ pub fn delta(
         .map(|(i, (p, c))| {
             let buckets: Vec<(u32, Bucket)> = c
                 .buckets()
-                .iter()
                 .enumerate()
-                .filter(|&(b, bucket)| p.buckets()[b] != *bucket)
-                .map(|(b, bucket)| (b as u32, compact_bucket(bucket)))
+                .filter(|(b, bucket)| p.bucket(*b) != *bucket)
+                .map(|(b, bucket)| (b as u32, compact_bucket(&bucket)))
                 .collect();
-            let empty = Cell::default();
             let cells: Vec<(u32, Cell)> = c
                 .cells()
-                .iter()
                 .enumerate()
-                .filter(|&(s, cell)| p.cells().get(s).unwrap_or(&empty) != cell)
+                .filter(|&(s, cell)| p.cell(s as u32) != cell)
                 .map(|(s, cell)| (s as u32, compact_cell(cell)))
                 .collect();
             InstanceDelta {
@@ -244,10 +241,13 @@ pub fn assert_mirrors(state: &psao_client::ClientState, grids: &[InstanceGrid]) 
     for (i, g) in grids.iter().enumerate() {
         let mirror = state.grid(i).expect("grid");
         assert_eq!(mirror.layout(), g.layout(), "instance {i} layout");
-        let buckets: Vec<Bucket> = g.buckets().iter().map(compact_bucket).collect();
-        let cells: Vec<Cell> = g.cells().iter().map(compact_cell).collect();
-        assert!(mirror.buckets() == buckets, "instance {i} buckets differ");
-        assert!(mirror.cells() == cells, "instance {i} cells differ");
+        let buckets = g.buckets().map(|b| compact_bucket(&b));
+        let cells = g.cells().map(compact_cell);
+        assert!(mirror.buckets().eq(buckets), "instance {i} buckets differ");
+        assert!(
+            mirror.cells().copied().eq(cells),
+            "instance {i} cells differ"
+        );
     }
     let server_hash = psao_client::state_hash_of(grids.iter().map(Some));
     assert_eq!(state.state_hash(), server_hash);

@@ -1,15 +1,38 @@
 //! The serving side of corrective splatting: each client that asked for corrections
 //! ([`capabilities::CORRECTIVE`]) and whose server has them ([`Serve::with_corrections`])
-//! gets a [`RemoteCorrections`]; its regions and cameras update it, and at every lockstep
-//! round (before the round's answer) or server frame its samples are traced within its budget
-//! and queued on its connection as a `Samples` message.
+//! gets a correction state ([`SessionCorrections`]); its regions and cameras update it.
+//!
+//! - **Lockstep** (deterministic, for tests): at every round, before the round's answer, the
+//!   simulation thread traces the client's samples within its budget ([`RemoteCorrections`])
+//!   and sends them.
+//! - **Threaded** (the real-time server): the client's regions go into a region queue served
+//!   by tracing workers on their own threads ([`WorkerPool`], [`Corrections::workers`] of
+//!   them per client), which push samples into a sample queue. Each server frame grants the
+//!   client's budget for one tick and drains the samples that are ready within a wall-clock
+//!   share of the frame ([`DRAIN_SHARE`]), sent as `Samples` messages: the simulation thread
+//!   never traces corrections, so they cannot delay the AO step.
 
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
-use psao_wire::{capabilities, encode_frame, Message, RegionsMsg};
+use psao_corrective::schedule::Job;
+use psao_corrective::workers::{JobTracer, WorkerPool};
+use psao_scene::Camera;
+use psao_wire::{
+    capabilities, encode_frame, CameraMsg, Message, RegionsMsg, SampleMsg, SamplesMsg,
+};
 
 use super::{Serve, Session, Simulation};
-use crate::corrective::{CorrectionEngine, RemoteCorrections};
+use crate::convert::view_of;
+use crate::corrective::{
+    budget_of_tick, new_planner, object_regions, sample_msg, CorrectionEngine, RemoteCorrections,
+};
+
+/// Default tracing workers per client (both cores of the reference machine).
+pub const DEFAULT_WORKERS: usize = 2;
+/// Share of a server frame the simulation thread spends at most draining one client's
+/// sample queue.
+pub const DRAIN_SHARE: f64 = 0.1;
 
 /// The server's corrections: the tracing engine and every client's sample budget.
 #[derive(Clone)]
@@ -18,6 +41,8 @@ pub struct Corrections {
     pub engine: Arc<CorrectionEngine>,
     /// Samples per second per client.
     pub samples_per_second: u32,
+    /// Tracing worker threads per client when not in lockstep (at least 1).
+    pub workers: usize,
 }
 
 impl Serve {
@@ -28,14 +53,47 @@ impl Serve {
     }
 }
 
+/// One client's correction state on the server.
+pub(super) enum SessionCorrections {
+    /// Traced in the simulation thread at each lockstep round.
+    Lockstep(RemoteCorrections),
+    /// Traced by worker threads, drained by the server frames.
+    Threaded(ThreadedCorrections),
+}
+
+impl SessionCorrections {
+    /// The client's camera.
+    pub(super) fn camera(&mut self, msg: &CameraMsg) {
+        match self {
+            Self::Lockstep(r) => r.camera(msg),
+            Self::Threaded(t) => t.camera(msg),
+        }
+    }
+
+    /// The client's new analysis.
+    fn regions(&mut self, msg: &RegionsMsg) {
+        match self {
+            Self::Lockstep(r) => r.regions(msg),
+            Self::Threaded(t) => t.regions(msg),
+        }
+    }
+}
+
 /// A new session's correction state, when both ends want corrections.
 pub(super) fn session_state(
     corrections: Option<&Corrections>,
     client_capabilities: u32,
-) -> Option<RemoteCorrections> {
+    lockstep: bool,
+) -> Option<SessionCorrections> {
     let c = corrections?;
-    (client_capabilities & capabilities::CORRECTIVE != 0)
-        .then(|| RemoteCorrections::new(c.samples_per_second))
+    if client_capabilities & capabilities::CORRECTIVE == 0 {
+        return None;
+    }
+    Some(if lockstep {
+        SessionCorrections::Lockstep(RemoteCorrections::new(c.samples_per_second))
+    } else {
+        SessionCorrections::Threaded(ThreadedCorrections::new(c))
+    })
 }
 
 /// A client's regions (ignored when the session has no corrections).
@@ -46,37 +104,204 @@ pub(super) fn regions(session: &mut Session, msg: &RegionsMsg) {
     }
 }
 
+/// What a worker traces a job for: the client's camera, image size and camera age.
+pub(super) struct TraceView {
+    camera: Camera,
+    width: u32,
+    height: u32,
+    age: u32,
+}
+
+/// The engine as the workers use it: positions whose primary ray shows the job's object are
+/// traced; a sample carries the camera age it was traced at.
+pub(super) struct EngineJobs(Arc<CorrectionEngine>);
+
+impl JobTracer for EngineJobs {
+    type View = TraceView;
+    type Sample = (u32, SampleMsg);
+
+    fn trace_job(
+        &self,
+        v: &TraceView,
+        job: &Job,
+        positions: &[(i32, i32)],
+    ) -> Vec<(u32, SampleMsg)> {
+        self.0.with_tracer(|tracer| {
+            positions
+                .iter()
+                .filter(|&&(x, y)| {
+                    tracer.object_at(&v.camera, v.width, v.height, x, y) == job.object
+                })
+                .filter_map(|&(x, y)| {
+                    tracer.camera_sample(
+                        &v.camera, v.width, v.height, x, y, job.object, job.level, v.age,
+                    )
+                })
+                .map(|s| (v.age, sample_msg(&s)))
+                .collect()
+        })
+    }
+}
+
+/// A client's threaded correction state: its worker pool (region queue and sample queue),
+/// its camera and camera age, the image size of its analyses and its budget clock.
+pub(super) struct ThreadedCorrections {
+    pool: WorkerPool<EngineJobs>,
+    samples_per_second: u32,
+    camera: Option<Camera>,
+    camera_age: u32,
+    size: Option<(u32, u32)>,
+    ticks: u64,
+}
+
+impl ThreadedCorrections {
+    fn new(c: &Corrections) -> Self {
+        // Samples granted and not yet sent: a quarter second of budget (at least a job).
+        let outstanding =
+            (u64::from(c.samples_per_second) / 4).max(psao_corrective::schedule::DEFAULT_JOB_SIZE);
+        Self {
+            pool: WorkerPool::new(
+                EngineJobs(c.engine.clone()),
+                new_planner(1, 1),
+                c.workers,
+                outstanding,
+            ),
+            samples_per_second: c.samples_per_second,
+            camera: None,
+            camera_age: 0,
+            size: None,
+            ticks: 0,
+        }
+    }
+
+    fn camera(&mut self, msg: &CameraMsg) {
+        let camera = view_of(msg).camera;
+        if self.camera.is_some_and(|c| c != camera) {
+            self.camera_age = self.camera_age.wrapping_add(1);
+        }
+        self.camera = Some(camera);
+        self.set_view();
+    }
+
+    fn regions(&mut self, msg: &RegionsMsg) {
+        let size = (msg.width, msg.height);
+        if self.size != Some(size) {
+            self.pool
+                .replace_planner(new_planner(msg.width, msg.height));
+            self.size = Some(size);
+            self.set_view();
+        }
+        self.pool.analyze(&object_regions(msg), self.camera_age);
+    }
+
+    /// The workers' view, once both a camera and an image size are known.
+    fn set_view(&self) {
+        if let (Some(camera), Some((width, height))) = (self.camera, self.size) {
+            self.pool.set_view(TraceView {
+                camera,
+                width,
+                height,
+                age: self.camera_age,
+            });
+        }
+    }
+
+    /// One server frame of a clock at `hz`: grant the tick's budget, then take the samples
+    /// that are ready (within `drain` of wall-clock time), as messages of one camera age each.
+    fn frame(&mut self, hz: u32, drain: Duration) -> Vec<SamplesMsg> {
+        let budget = budget_of_tick(self.samples_per_second, hz, &mut self.ticks);
+        self.pool.grant(budget as u64);
+        let ready = self
+            .pool
+            .drain(psao_wire::MAX_SAMPLES, Instant::now() + drain);
+        messages_by_age(ready)
+    }
+}
+
+/// Consecutive samples of the same camera age, one message each.
+fn messages_by_age(samples: Vec<(u32, SampleMsg)>) -> Vec<SamplesMsg> {
+    let mut out: Vec<SamplesMsg> = Vec::new();
+    for (age, s) in samples {
+        match out.last_mut() {
+            Some(m) if m.camera_age == age => m.samples.push(s),
+            _ => out.push(SamplesMsg {
+                client_frame: None,
+                camera_age: age,
+                samples: vec![s],
+            }),
+        }
+    }
+    out
+}
+
 impl Simulation {
-    /// Trace and queue every corrective session's samples for one tick of a clock at `hz`.
-    /// Lockstep: only sessions with a camera awaiting its answer, each message carrying that
-    /// camera's frame and sent waiting for room; otherwise a session without room skips the
-    /// tick (its budget is not carried over).
+    /// Every corrective session's samples for one tick of a clock at `hz`. Lockstep: traced
+    /// here for the sessions with a camera awaiting its answer (the round's budget is spent
+    /// either way), each message carrying that camera's frame and sent waiting for room. Threaded: drained from the session's workers
+    /// and sent when there is room; a session without room gets no budget this tick (it is
+    /// not carried over) and keeps its traced samples for the next.
     pub(super) fn corrections(&mut self, hz: u32, lockstep: bool) {
         let Some(c) = self.corrections.clone() else {
             return;
         };
+        let drain = Duration::from_secs_f64(DRAIN_SHARE / f64::from(hz.max(1)));
         for s in self.sessions.values_mut() {
-            let Some(state) = &mut s.corrective else {
-                continue;
+            let messages = match &mut s.corrective {
+                None => continue,
+                Some(SessionCorrections::Lockstep(state)) => {
+                    let budget = state.next_budget(hz);
+                    if s.pending.is_none() {
+                        continue;
+                    }
+                    state
+                        .trace(&c.engine, budget, s.pending)
+                        .into_iter()
+                        .collect()
+                }
+                Some(SessionCorrections::Threaded(state)) => {
+                    if s.out.capacity() == 0 {
+                        state.ticks += 1;
+                        continue;
+                    }
+                    state.frame(hz, drain)
+                }
             };
-            let budget = state.next_budget(hz);
-            if lockstep && s.pending.is_none() || !lockstep && s.out.capacity() == 0 {
-                continue;
-            }
-            let client_frame = if lockstep { s.pending } else { None };
-            let Some(msg) = state.trace(&c.engine, budget, client_frame) else {
-                continue;
-            };
-            s.stats.samples += msg.samples.len() as u64;
-            let Ok(bytes) = encode_frame(&Message::Samples(msg)) else {
-                continue;
-            };
-            s.stats.bytes += bytes.len() as u64;
-            if lockstep {
-                let _ = self.rt.block_on(s.out.send(bytes));
-            } else {
-                let _ = s.out.try_send(bytes);
+            for msg in messages {
+                s.stats.samples += msg.samples.len() as u64;
+                let Ok(bytes) = encode_frame(&Message::Samples(msg)) else {
+                    continue;
+                };
+                s.stats.bytes += bytes.len() as u64;
+                if lockstep {
+                    let _ = self.rt.block_on(s.out.send(bytes));
+                } else {
+                    let _ = s.out.try_send(bytes);
+                }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_split_at_camera_age_changes() {
+        let s = |object| SampleMsg {
+            object,
+            level: 1,
+            position: [0.0; 3],
+            normal: [0.0, 1.0, 0.0],
+            ndotv: 1.0,
+            color: [0.5; 3],
+        };
+        let m = messages_by_age(vec![(3, s(1)), (3, s(2)), (4, s(3)), (3, s(4))]);
+        let shape: Vec<(u32, Vec<u32>)> = m
+            .iter()
+            .map(|m| (m.camera_age, m.samples.iter().map(|s| s.object).collect()))
+            .collect();
+        assert_eq!(shape, [(3, vec![1, 2]), (4, vec![3]), (3, vec![4])]);
+        assert!(messages_by_age(Vec::new()).is_empty());
     }
 }

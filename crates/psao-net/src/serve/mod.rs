@@ -26,7 +26,7 @@ use tokio::sync::{mpsc, oneshot, Semaphore};
 
 mod corrective;
 
-pub use corrective::Corrections;
+pub use corrective::{Corrections, DEFAULT_WORKERS as DEFAULT_CORRECTION_WORKERS};
 
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
@@ -186,7 +186,7 @@ struct Session {
     unacked: VecDeque<u64>,
     stats: ClientStats,
     /// Corrective splatting state, when both ends want it.
-    corrective: Option<crate::corrective::RemoteCorrections>,
+    corrective: Option<corrective::SessionCorrections>,
 }
 
 /// A bound server: listening, not yet stepping.
@@ -770,7 +770,11 @@ impl Simulation {
                     id: id.0,
                     ..Default::default()
                 },
-                corrective: corrective::session_state(self.corrections.as_ref(), join.capabilities),
+                corrective: corrective::session_state(
+                    self.corrections.as_ref(),
+                    join.capabilities,
+                    self.lockstep,
+                ),
             },
         );
         self.health
