@@ -2,7 +2,18 @@
 
 mod common;
 
+use std::io::{ErrorKind, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::Path;
+use std::process::Output;
+use std::time::{Duration, Instant};
+
 use common::{json, psao, stderr};
+use psao_wire::{
+    capabilities, decode_frame, encode_frame, frame_payload, CameraMsg, ErrorCode, Hello,
+    InstanceEntry, Message, Region, RegionsMsg, SampleMsg, SamplesMsg, Welcome, HEADER_LEN,
+    MAX_REGIONS, MAX_SAMPLES, PROTOCOL_VERSION,
+};
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/corrective.toml");
 
@@ -245,4 +256,379 @@ fn serve_and_view_with_corrections_end_in_the_same_state_as_run() {
     assert_eq!(view["samples"].as_u64().unwrap(), received);
     assert_eq!(view["corrective_state_hash"].as_str().unwrap(), run_hash);
     assert_eq!(view["state_hash"], run["state_hash"]);
+}
+
+/// Starts `psao serve` on the split fixture (port 0) with `extra`; returns it and its address.
+fn start_server(scene: &str, extra: &[&str]) -> (Child, String) {
+    let mut server = Child(
+        std::process::Command::new(common::BIN)
+            .args([
+                "--log",
+                "warn",
+                "serve",
+                "--scene",
+                scene,
+                "--listen",
+                "127.0.0.1:0",
+            ])
+            .args(SPLIT_SERVER)
+            .args(extra)
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(server.0.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .unwrap()
+        .to_string();
+    (server, addr)
+}
+
+/// `psao view` of the split fixture with corrections, 64×36.
+fn view_with_corrections(scene: &str, addr: &str, frames: u32, json: &Path) -> Output {
+    psao(
+        &[
+            &[
+                "view",
+                "--connect",
+                addr,
+                "--scene",
+                scene,
+                "--res",
+                "64x36",
+                "--frames",
+                &frames.to_string(),
+            ],
+            SPLIT_CLIENT,
+            &["--json", json.to_str().unwrap()],
+        ]
+        .concat(),
+    )
+}
+
+#[test]
+fn threaded_serve_streams_every_sample_within_the_budget_and_shuts_down_cleanly() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let stats = fx.path().join("serve.json");
+    let (mut server, addr) = start_server(
+        scene,
+        &["--hz", "30", "--once", "--json", stats.to_str().unwrap()],
+    );
+    let view_json = fx.path().join("view.json");
+    let o = view_with_corrections(scene, &addr, 60, &view_json);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // The last client left: the server stops its workers and exits.
+    assert!(server.0.wait().unwrap().success());
+    let view = json(&view_json);
+    let serve = json(&stats);
+    let received = view["samples"].as_u64().unwrap();
+    let sent = serve["clients"][0]["samples"].as_u64().unwrap();
+    let frames = serve["frames"].as_u64().unwrap();
+    assert!(received > 0, "no samples arrived");
+    // Every sample the server sent arrived, and no more than 3000 / 30 per server frame.
+    assert_eq!(received, sent);
+    assert!(sent <= frames * 100, "{sent} samples in {frames} frames");
+}
+
+/// Reads frames from `s` for `secs` seconds (or until it closes): the decoded messages.
+fn read_for(s: &mut TcpStream, secs: f64) -> Vec<Message> {
+    let end = Instant::now() + Duration::from_secs_f64(secs);
+    let mut all = Vec::new();
+    let mut buf = [0u8; 1 << 16];
+    while let Some(left) = end.checked_duration_since(Instant::now()) {
+        s.set_read_timeout(Some(left.max(Duration::from_millis(1))))
+            .unwrap();
+        match s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => all.extend_from_slice(&buf[..n]),
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => break,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    let mut out = Vec::new();
+    let mut rest = &all[..];
+    while rest.len() >= HEADER_LEN {
+        let len = u32::from_le_bytes(rest[4..8].try_into().unwrap()) as usize;
+        if rest.len() < HEADER_LEN + len {
+            break;
+        }
+        let (frame, tail) = rest.split_at(HEADER_LEN + len);
+        out.push(decode_frame(frame, 1 << 28).unwrap());
+        rest = tail;
+    }
+    out
+}
+
+fn hello() -> Vec<u8> {
+    encode_frame(&Message::Hello(Hello {
+        version: PROTOCOL_VERSION,
+        capabilities: capabilities::ALL,
+        token: None,
+        name: "hostile".into(),
+    }))
+    .unwrap()
+}
+
+/// The payload of `m`'s frame.
+fn payload(m: &Message) -> Vec<u8> {
+    encode_frame(m).unwrap()[HEADER_LEN..].to_vec()
+}
+
+fn region(object: u32) -> Region {
+    Region {
+        object,
+        x0: 0,
+        y0: 0,
+        x1: 64,
+        y1: 36,
+        priority: 1.0,
+    }
+}
+
+/// Regions of the fixture's non-diffuse objects (the room is instance 0: objects 2 and 3),
+/// each over the whole 64×36 image.
+fn regions(objects: impl IntoIterator<Item = u32>) -> RegionsMsg {
+    RegionsMsg {
+        frame: 0,
+        width: 64,
+        height: 36,
+        regions: objects.into_iter().map(region).collect(),
+    }
+}
+
+/// Sends `bytes` after a hello and returns the server's error text (it closes the session).
+fn error_after_hello(addr: &str, bytes: &[u8]) -> String {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.write_all(&[hello(), bytes.to_vec()].concat()).unwrap();
+    let _ = s.shutdown(std::net::Shutdown::Write);
+    let m = read_for(&mut s, 8.0);
+    assert!(matches!(m.first(), Some(Message::Welcome(_))), "{m:?}");
+    m.iter()
+        .find_map(|m| match m {
+            Message::Error(e) => {
+                assert_eq!(e.code, ErrorCode::Frame, "{e:?}");
+                Some(e.message.clone())
+            }
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("no error in {m:?}"))
+}
+
+#[test]
+fn hostile_region_senders_get_a_clear_error_and_floods_stay_within_the_budget() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let (_server, addr) = start_server(scene, &["--hz", "30"]);
+    let good = payload(&Message::Regions(regions([2, 3])));
+    // Layout of `good`: [variant, frame, width, height, count, region…]; a region is
+    // [object, x0, y0, x1, y1, priority f32] with one-byte varints here.
+    let mut outside = good.clone();
+    outside[2] = 32; // width 32 < x1 = 64
+    let e = error_after_hello(&addr, &frame_payload(&outside).unwrap());
+    assert!(e.contains("outside the 32×36 image"), "{e}");
+    let mut nan = good.clone();
+    let n = nan.len();
+    nan[n - 4..].copy_from_slice(&f32::NAN.to_le_bytes());
+    let e = error_after_hello(&addr, &frame_payload(&nan).unwrap());
+    assert!(e.contains("priority NaN"), "{e}");
+    let mut diffuse = good.clone();
+    diffuse[5] = 0; // object 0
+    let e = error_after_hello(&addr, &frame_payload(&diffuse).unwrap());
+    assert!(e.contains("object 0"), "{e}");
+    // Oversized: one region more than the limit.
+    let mut big = payload(&Message::Regions(regions(1..=MAX_REGIONS as u32)));
+    assert_eq!(&big[4..6], &[0x80, 0x08]); // varint 1024
+    big[4] = 0x81;
+    big.extend_from_slice(&payload(&Message::Regions(regions([5000])))[5..]);
+    let e = error_after_hello(&addr, &frame_payload(&big).unwrap());
+    assert!(e.contains("regions exceed"), "{e}");
+    // Truncated: half a regions frame, then the client stops sending.
+    let whole = frame_payload(&good).unwrap();
+    error_after_hello(&addr, &whole[..whole.len() / 2]);
+
+    // A flood of analyses with a camera: the server keeps to 3000 samples per second.
+    let camera = CameraMsg {
+        frame: 0,
+        position: [2.5, 1.5, 2.5],
+        target: [0.0, 0.5, 0.0],
+        up: [0.0, 1.0, 0.0],
+        fov_y: 60f32.to_radians(),
+        near: 0.05,
+        far: 100.0,
+        aspect: 64.0 / 36.0,
+    };
+    let mut flood = hello();
+    flood.extend(encode_frame(&Message::Camera(camera)).unwrap());
+    for _ in 0..500 {
+        flood.extend(encode_frame(&Message::Regions(regions([2, 3]))).unwrap());
+    }
+    let mut s = TcpStream::connect(&addr).unwrap();
+    let t = Instant::now();
+    s.write_all(&flood).unwrap();
+    let m = read_for(&mut s, 1.5);
+    let secs = t.elapsed().as_secs_f64();
+    let samples: usize = m
+        .iter()
+        .map(|m| match m {
+            Message::Samples(s) => s.samples.len(),
+            _ => 0,
+        })
+        .sum();
+    assert!(error_code_of(&m).is_none(), "{m:?}");
+    assert!(samples > 0, "no samples for a valid flood");
+    // One tick's budget ahead at most (3000 / 30) beyond the rate.
+    let bound = (3000.0 * secs).ceil() as usize + 100;
+    assert!(
+        samples <= bound,
+        "{samples} samples in {secs:.2} s (bound {bound})"
+    );
+    drop(s);
+
+    // The server still serves a real client.
+    let view_json = fx.path().join("view.json");
+    let o = view_with_corrections(scene, &addr, 30, &view_json);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(json(&view_json)["samples"].as_u64().unwrap() > 0);
+}
+
+fn error_code_of(m: &[Message]) -> Option<ErrorCode> {
+    m.iter().find_map(|m| match m {
+        Message::Error(e) => Some(e.code),
+        _ => None,
+    })
+}
+
+/// A fake server: accepts one client, answers its hello with a welcome for the split
+/// fixture's three instances, then sends `after` and keeps the connection open briefly.
+fn fake_server(after: Vec<u8>) -> (String, std::thread::JoinHandle<()>) {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    let handle = std::thread::spawn(move || {
+        let (mut s, _) = listener.accept().unwrap();
+        let mut header = [0u8; HEADER_LEN];
+        s.read_exact(&mut header).unwrap();
+        let len = u32::from_le_bytes(header[4..8].try_into().unwrap()) as usize;
+        let mut payload = vec![0u8; len];
+        s.read_exact(&mut payload).unwrap();
+        let entry = InstanceEntry {
+            origin: [-4.0, 0.0, -4.0],
+            cell_size: 0.5,
+            dims: [16, 6, 16],
+            layout_poisson_radius: 0.1,
+            bucket_count: 64,
+            poisson_radius: 0.1,
+            point_count: 100,
+        };
+        let welcome = Message::Welcome(Welcome {
+            version: PROTOCOL_VERSION,
+            client_id: 0,
+            codec: "compact".into(),
+            server_hz: 30,
+            client_hz: 60,
+            lockstep: false,
+            scene: "room".into(),
+            frame: 0,
+            scene_time: 0.0,
+            instances: vec![entry; 3],
+        });
+        s.write_all(&encode_frame(&welcome).unwrap()).unwrap();
+        let _ = s.write_all(&after);
+        std::thread::sleep(Duration::from_millis(1500));
+    });
+    (addr, handle)
+}
+
+fn sample(level: u8) -> SampleMsg {
+    SampleMsg {
+        object: 2,
+        level,
+        position: [0.0, 0.5, 0.0],
+        normal: [0.0, 0.0, 1.0],
+        ndotv: 0.5,
+        color: [0.5; 3],
+    }
+}
+
+fn samples(list: Vec<SampleMsg>) -> Message {
+    Message::Samples(SamplesMsg {
+        client_frame: None,
+        camera_age: 0,
+        samples: list,
+    })
+}
+
+/// `psao view` (`--corrective` when `corrective`) against a fake server sending `after`:
+/// its error text (it must fail).
+fn view_error(scene: &str, after: Vec<u8>, corrective: bool) -> String {
+    let (addr, h) = fake_server(after);
+    let mut args = vec![
+        "view",
+        "--connect",
+        &addr,
+        "--scene",
+        scene,
+        "--res",
+        "64x36",
+        "--frames",
+        "30",
+        "--retry-secs",
+        "1",
+    ];
+    if corrective {
+        args.push("--corrective");
+    }
+    let t = Instant::now();
+    let o = psao(&args);
+    h.join().unwrap();
+    assert!(!o.status.success());
+    assert!(t.elapsed() < Duration::from_secs(20));
+    stderr(&o)
+}
+
+#[test]
+fn clients_refuse_malformed_and_unasked_samples_with_a_clear_error() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let good = payload(&samples(vec![sample(1)]));
+    // Layout: [variant, client_frame None, camera_age, count, object, level, position…].
+    let mut level0 = good.clone();
+    level0[5] = 0;
+    let e = view_error(scene, frame_payload(&level0).unwrap(), true);
+    assert!(e.contains("level 0 outside"), "{e}");
+    let mut nan = good.clone();
+    nan[6..10].copy_from_slice(&f32::NAN.to_le_bytes());
+    let e = view_error(scene, frame_payload(&nan).unwrap(), true);
+    assert!(e.contains("finite") || e.contains("NaN"), "{e}");
+    // Oversized: one sample more than a message may carry.
+    let mut big = payload(&samples(vec![sample(1); MAX_SAMPLES]));
+    assert_eq!(&big[3..6], &[0x80, 0x80, 0x04]); // varint 65 536
+    big[3] = 0x81;
+    big.extend_from_slice(&good[4..]);
+    let e = view_error(scene, frame_payload(&big).unwrap(), true);
+    assert!(e.contains("samples exceed"), "{e}");
+    // Valid on the wire, but a level the client's 64×36 hierarchy lacks.
+    let e = view_error(
+        scene,
+        encode_frame(&samples(vec![sample(20)])).unwrap(),
+        true,
+    );
+    assert!(e.contains("bad samples from the server"), "{e}");
+    // Samples to a client that did not ask for corrections.
+    let e = view_error(
+        scene,
+        encode_frame(&samples(vec![sample(1)])).unwrap(),
+        false,
+    );
+    assert!(e.contains("without asking"), "{e}");
 }

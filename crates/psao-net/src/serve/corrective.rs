@@ -267,15 +267,19 @@ impl Simulation {
                 }
             };
             for msg in messages {
-                s.stats.samples += msg.samples.len() as u64;
+                let samples = msg.samples.len() as u64;
                 let Ok(bytes) = encode_frame(&Message::Samples(msg)) else {
                     continue;
                 };
-                s.stats.bytes += bytes.len() as u64;
-                if lockstep {
-                    let _ = self.rt.block_on(s.out.send(bytes));
+                let size = bytes.len() as u64;
+                let sent = if lockstep {
+                    self.rt.block_on(s.out.send(bytes)).is_ok()
                 } else {
-                    let _ = s.out.try_send(bytes);
+                    s.out.try_send(bytes).is_ok()
+                };
+                if sent {
+                    s.stats.samples += samples;
+                    s.stats.bytes += size;
                 }
             }
         }
