@@ -557,6 +557,9 @@ async fn session(
             ))))
         }
         Ok(None) => return Err(SessionError::Retry("closed before the welcome".into())),
+        Err(ReadError::Wire(w)) => {
+            return Err(SessionError::Fatal(NetError::Protocol(bad_frame(&w))))
+        }
         Err(e) => return Err(SessionError::Retry(e.to_string())),
     };
     if welcome.version != PROTOCOL_VERSION {
@@ -589,11 +592,10 @@ async fn session(
                     }
                 }
                 Ok(None) => return Ok(()),
-                // A frame cut short is what a crashing server leaves: reconnect. Any other
-                // malformed frame ends the client.
-                Err(ReadError::Wire(w)) if !matches!(w, WireError::Truncated { .. }) => {
-                    return Err((true, w.to_string()))
-                }
+                // A malformed frame, a frame cut short by the end of the stream included,
+                // ends the client; a failed connection (reset, WebSocket closed without
+                // its handshake) reconnects.
+                Err(ReadError::Wire(w)) => return Err((true, bad_frame(&w))),
                 Err(e) => return Err((false, e.to_string())),
             }
         }
@@ -605,7 +607,7 @@ async fn session(
                 let Some((due, m, size)) = item else {
                     let why = match (&mut reader_task).await {
                         Ok(Err((true, e))) => {
-                            return Err(SessionError::Fatal(NetError::Protocol(format!("bad frame from the server: {e}"))))
+                            return Err(SessionError::Fatal(NetError::Protocol(e)))
                         }
                         Ok(Err((false, e))) => e,
                         _ => "the server closed the connection".into(),
@@ -650,5 +652,15 @@ async fn session(
                 }
             }
         }
+    }
+}
+
+/// The error text of a malformed frame from the server.
+fn bad_frame(w: &WireError) -> String {
+    match w {
+        WireError::Truncated { .. } => {
+            format!("the server's frame was cut short: {w}")
+        }
+        _ => format!("bad frame from the server: {w}"),
     }
 }
