@@ -339,6 +339,47 @@ fn threaded_serve_streams_every_sample_within_the_budget_and_shuts_down_cleanly(
     assert!(sent <= frames * 100, "{sent} samples in {frames} frames");
 }
 
+#[test]
+fn one_worker_pool_serves_two_clients_and_shuts_down_when_they_leave() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let stats = fx.path().join("serve.json");
+    let (mut server, addr) = start_server(
+        scene,
+        &["--hz", "30", "--once", "--json", stats.to_str().unwrap()],
+    );
+    // Two clients at once, over the same two workers.
+    let received: Vec<u64> = std::thread::scope(|scope| {
+        let views: Vec<_> = (0..2)
+            .map(|i| {
+                let json_path = fx.path().join(format!("view{i}.json"));
+                let addr = addr.clone();
+                scope.spawn(move || {
+                    let o = view_with_corrections(scene, &addr, 60, &json_path);
+                    assert!(o.status.success(), "{}", stderr(&o));
+                    json(&json_path)["samples"].as_u64().unwrap()
+                })
+            })
+            .collect();
+        views.into_iter().map(|v| v.join().unwrap()).collect()
+    });
+    assert!(server.0.wait().unwrap().success());
+    let serve = json(&stats);
+    let mut sent: Vec<u64> = serve["clients"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["samples"].as_u64().unwrap())
+        .collect();
+    let mut received_sorted = received.clone();
+    received_sorted.sort_unstable();
+    sent.sort_unstable();
+    // Both clients got samples, and every sample sent arrived.
+    assert!(received.iter().all(|&n| n > 0), "{received:?}");
+    assert_eq!(received_sorted, sent);
+}
+
 /// Reads frames from `s` for `secs` seconds (or until it closes): the decoded messages.
 fn read_for(s: &mut TcpStream, secs: f64) -> Vec<Message> {
     let end = Instant::now() + Duration::from_secs_f64(secs);
