@@ -1,6 +1,7 @@
-//! `psao bench serve`: one `psao serve` and N headless `psao view` processes on loopback for
-//! a fixed number of client frames; reports per-client Mbit/s, server ms per frame and the
-//! updates coalesced because a client had no room.
+//! `psao bench serve`: one `psao serve` (or, with `--edge-nats`, one `psao edge`) and N
+//! headless `psao view` processes on loopback for a fixed number of client frames; reports
+//! per-client Mbit/s, server ms per frame and the updates coalesced because a client had no
+//! room.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -73,6 +74,11 @@ pub struct BenchServeArgs {
     /// clients on other machines; the clients fall behind sooner. Needs the `chrt` program.
     #[arg(long, conflicts_with = "client_nice")]
     pub client_idle: bool,
+    /// Measure a `psao edge` reading this NATS server instead of a `psao serve` (start
+    /// `nats-server -js` and `psao trace-node --nats URL` with the same scene and settings
+    /// first; docs/SCALE-OUT.md).
+    #[arg(long)]
+    pub edge_nats: Option<String>,
     /// Write the report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -166,16 +172,12 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     let dir = tempfile_dir()?;
     let serve_json = dir.join("serve.json");
     let mut serve = Command::new(&exe);
+    match &args.edge_nats {
+        Some(url) => serve.args(["--log", "warn", "edge", "--nats", url]),
+        None => serve.args(["--log", "warn", "serve"]),
+    };
     serve
-        .args([
-            "--log",
-            "warn",
-            "serve",
-            "--scene",
-            &args.load.scene,
-            "--listen",
-            "127.0.0.1:0",
-        ])
+        .args(["--scene", &args.load.scene, "--listen", "127.0.0.1:0"])
         .args([
             "--hz",
             &args.load.hz.to_string(),
@@ -188,7 +190,7 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         .arg(&serve_json)
         .stdout(Stdio::piped());
     serve.args(["--ray-budget", &args.ray_budget.to_string()]);
-    let mut server = Guard(serve.spawn().context("cannot start psao serve")?);
+    let mut server = Guard(serve.spawn().context("cannot start the server")?);
     let mut line = String::new();
     let stdout = server.0.stdout.take().context("no server stdout")?;
     BufReader::new(stdout).read_line(&mut line)?;

@@ -489,3 +489,106 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
         n.interrupt(20);
     }
 }
+
+/// The room with a box sliding over its floor (instance transforms) and, when the shared
+/// data is there, the skinned `RiggedSimple` playing its clip (skinned refits).
+fn animated_fixture(dir: &Path) -> (String, String) {
+    let (_, path) = fixture(dir);
+    let mut scene = "ao_radius = 0.6\n\
+        [[asset]]\nfile = \"room.obj\"\n\
+        [[asset]]\nfile = \"builtin:box\"\nscale = 0.5\n\
+        keys = { times = [0.0, 0.75, 1.5], translation = [[-2.5, 0.25, 2.0], [2.5, 0.25, 2.0], [-2.5, 0.25, 2.0]] }\n"
+        .to_string();
+    let rigged = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/characters/RiggedSimple.glb"
+    ));
+    if rigged.exists() {
+        scene += &format!(
+            "[[asset]]\nfile = \"{}\"\nscale = 0.3\ntranslation = [0.0, 0.0, -2.5]\n",
+            rigged.display()
+        );
+    } else {
+        eprintln!("note: ../shared/data is not there: the animated scene has no skinned mesh");
+    }
+    std::fs::write(dir.join("moving.toml"), scene).unwrap();
+    (dir.join("moving.toml").to_string_lossy().into_owned(), path)
+}
+
+#[test]
+fn an_animated_scene_replicates_like_one_serve() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_nats, url)) = nats(dir.path()) else {
+        return;
+    };
+    let (scene, path) = animated_fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+    const STEPS: u32 = 24;
+
+    let (serve, line) = start(
+        "serve",
+        &scene,
+        &[
+            "--listen",
+            "127.0.0.1:0",
+            "--lockstep",
+            "--wait-clients",
+            "2",
+            "--once",
+        ],
+    );
+    let at = addr(&line);
+    let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("s{i}.json"))).collect();
+    let views: Vec<Child> = files
+        .iter()
+        .map(|f| view(&at, &scene, &path, STEPS, f))
+        .collect();
+    views.into_iter().for_each(finished);
+    let mut serve = serve;
+    serve.wait(20);
+    let alone = view_hashes(&files);
+
+    let nodes: Vec<Proc> = (0..2)
+        .map(|k| {
+            let partition = format!("{k}/2");
+            let args = ["--nats", &url, "--partition", &partition];
+            let mut args = args.to_vec();
+            args.extend(["--lockstep-edges", "2"]);
+            start("trace-node", &scene, &args).0
+        })
+        .collect();
+    let edges: Vec<(Proc, String)> = (0..2)
+        .map(|e| {
+            let id = format!("e{e}");
+            let (p, line) = start(
+                "edge",
+                &scene,
+                &[
+                    "--nats",
+                    &url,
+                    "--listen",
+                    "127.0.0.1:0",
+                    "--lockstep",
+                    "--once",
+                    "--edge-id",
+                    &id,
+                ],
+            );
+            (p, addr(&line))
+        })
+        .collect();
+    let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("v{i}.json"))).collect();
+    let views: Vec<Child> = files
+        .iter()
+        .enumerate()
+        .map(|(i, f)| view(&edges[i].1, &scene, &path, STEPS, f))
+        .collect();
+    views.into_iter().for_each(finished);
+    for (mut p, _) in edges {
+        p.wait(20);
+    }
+    assert_eq!(view_hashes(&files), alone, "the state of psao serve alone");
+    for n in nodes {
+        n.interrupt(20);
+    }
+}

@@ -328,7 +328,8 @@ impl EdgeStepper {
     }
 
     fn add(&mut self, batch: Batch, server: &Server) {
-        if server.validate_records(&batch.records).is_err() {
+        if let Err(e) = server.check_records(&batch.records) {
+            tracing::warn!("batch of partition {} refused: {e}", batch.partition);
             self.counters.malformed.fetch_add(1, Ordering::Relaxed);
             return;
         }

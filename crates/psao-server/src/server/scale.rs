@@ -158,15 +158,17 @@ impl Server {
     /// One server frame of a replica at scene time `time`: pose the scene as
     /// [`Server::step_at`] does, then publish `records` (every partition's records of this
     /// frame) into the grids. Nothing is traced. Records naming a point that does not exist
-    /// or is not stored, or a zero record, are refused before anything changes.
+    /// or (once posed: points move) is not stored, or a zero record, are refused before
+    /// anything is published or the frame counted.
     pub fn step_replica(
         &mut self,
         time: f32,
         records: &[PointRecord],
     ) -> Result<StepStats, ServerError> {
-        self.validate_records(records)?;
+        self.check_records(records)?;
         let start = std::time::Instant::now();
         let advanced = self.pose(time)?;
+        self.validate_records(records)?;
         self.frame += 1;
         let published = self.publish_runs(runs(records));
         Ok(StepStats {
@@ -227,24 +229,40 @@ impl Server {
                 self.frame
             )));
         }
-        self.validate_records(records)?;
+        self.check_records(records)?;
         self.pose(time)?;
+        self.validate_records(records)?;
         self.frame = frame;
         Ok(self.publish_runs(runs(records)))
     }
 
-    /// Refuses records naming a point that does not exist or is not stored, zero records,
-    /// and a point named twice.
+    /// Refuses records naming a point that does not exist or is not stored in the current
+    /// pose, zero records, and a point named twice.
     pub fn validate_records(&self, records: &[PointRecord]) -> Result<(), ServerError> {
+        self.check_records(records)?;
+        for r in records {
+            if self.instances[r.instance as usize].points.slot[r.index as usize] == NONE {
+                return Err(ServerError::Records(format!(
+                    "instance {} point {}: not stored in the grid",
+                    r.instance, r.index
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses records naming a point that does not exist, zero records, and a point named
+    /// twice: what can be checked whatever the pose (an edge checks batches on arrival).
+    pub fn check_records(&self, records: &[PointRecord]) -> Result<(), ServerError> {
         for r in records {
             let ok = self
                 .instances
                 .get(r.instance as usize)
-                .and_then(|inst| inst.points.slot.get(r.index as usize))
-                .is_some_and(|&slot| slot != NONE && r.bits != 0);
+                .is_some_and(|inst| (r.index as usize) < inst.points.slot.len())
+                && r.bits != 0;
             if !ok {
                 return Err(ServerError::Records(format!(
-                    "instance {} point {} record {:#x}: no such stored point, or an empty record",
+                    "instance {} point {} record {:#x}: no such point, or an empty record",
                     r.instance, r.index, r.bits
                 )));
             }
