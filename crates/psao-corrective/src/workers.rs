@@ -1,15 +1,16 @@
-//! The threaded runtime of corrections (paper §4.4): tracing workers on their own threads
-//! take jobs from one viewer's region queue ([`Planner`]) and push their samples into a sample
-//! queue, which the frame loop drains within its per-frame time budget. The analyzer (at its
-//! own rate) replaces the queue's regions with [`WorkerPool::analyze`], the frame loop gives
-//! the current view with [`WorkerPool::set_view`] and the sample budget with
-//! [`WorkerPool::grant`]: workers trace at most as many samples as were granted, and never
-//! more than `max_outstanding` are granted but not yet drained.
+//! The threaded runtime of corrections (paper §4.4): one pool of tracing workers on their own
+//! threads serves the region queues ([`Planner`]) of every viewer, each in its own [`Lane`],
+//! taking jobs from the lanes in turn (round-robin), and pushes each job's samples into its
+//! lane's sample queue, which that viewer's frame loop drains within its per-frame time
+//! budget. Per lane, the analyzer (at its own rate) replaces the queue's regions with
+//! [`Lane::analyze`], the frame loop gives the current view with [`Lane::set_view`] and the
+//! sample budget with [`Lane::grant`]: workers trace at most as many samples as were granted,
+//! and never more than the lane's `max_outstanding` are granted but not yet drained.
 //!
 //! Plain `std` threads rather than rayon: the workers block on a condition variable between
 //! jobs and run for the pool's lifetime, which rayon's task pool is not made for.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -34,7 +35,7 @@ pub trait JobTracer: Send + Sync + 'static {
     ) -> Vec<Self::Sample>;
 }
 
-/// Counters of a pool since it started.
+/// Counters of a lane since it was opened.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PoolStats {
     /// Samples granted.
@@ -47,9 +48,11 @@ pub struct PoolStats {
     pub drained: u64,
 }
 
-struct State<T: JobTracer> {
+/// One viewer's region queue, view, allowance and sample queue.
+struct LaneState<T: JobTracer> {
     planner: Planner,
     view: Option<Arc<T::View>>,
+    max_outstanding: u64,
     /// Samples the workers may still trace.
     allowance: u64,
     /// Samples reserved by jobs in flight.
@@ -58,12 +61,31 @@ struct State<T: JobTracer> {
     busy: usize,
     samples: VecDeque<T::Sample>,
     stats: PoolStats,
+}
+
+impl<T: JobTracer> LaneState<T> {
+    fn can_work(&self) -> bool {
+        self.allowance > 0 && self.view.is_some() && self.planner.has_work()
+    }
+}
+
+struct State<T: JobTracer> {
+    lanes: BTreeMap<u64, LaneState<T>>,
+    next_id: u64,
+    /// The lane served next if it has work (round-robin over lane ids).
+    cursor: u64,
     shutdown: bool,
 }
 
 impl<T: JobTracer> State<T> {
-    fn can_work(&self) -> bool {
-        self.allowance > 0 && self.view.is_some() && self.planner.has_work()
+    /// The lane with work that is next in turn from the cursor, cyclically.
+    fn next_lane(&self) -> Option<u64> {
+        let after = self.lanes.range(self.cursor..);
+        let before = self.lanes.range(..self.cursor);
+        after
+            .chain(before)
+            .find(|(_, l)| l.can_work())
+            .map(|(&id, _)| id)
     }
 }
 
@@ -83,27 +105,20 @@ impl<T: JobTracer> Shared<T> {
     }
 }
 
-/// Tracing workers over one region queue, with the sample queue they fill.
+/// Tracing workers shared by every lane opened on them.
 pub struct WorkerPool<T: JobTracer> {
     shared: Arc<Shared<T>>,
-    tracer: Arc<T>,
-    max_outstanding: u64,
     threads: Vec<JoinHandle<()>>,
 }
 
 impl<T: JobTracer> WorkerPool<T> {
-    /// `workers` threads (at least 1) tracing with `tracer` from `planner`'s queue; at most
-    /// `max_outstanding` samples granted and not yet drained at any time.
-    pub fn new(tracer: T, planner: Planner, workers: usize, max_outstanding: u64) -> Self {
+    /// `workers` threads (at least 1) tracing with `tracer`, without lanes yet.
+    pub fn new(tracer: T, workers: usize) -> Self {
         let shared = Arc::new(Shared {
             state: Mutex::new(State {
-                planner,
-                view: None,
-                allowance: 0,
-                reserved: 0,
-                busy: 0,
-                samples: VecDeque::new(),
-                stats: PoolStats::default(),
+                lanes: BTreeMap::new(),
+                next_id: 0,
+                cursor: 0,
                 shutdown: false,
             }),
             work: Condvar::new(),
@@ -119,12 +134,7 @@ impl<T: JobTracer> WorkerPool<T> {
                     .ok()
             })
             .collect();
-        Self {
-            shared,
-            tracer,
-            max_outstanding,
-            threads,
-        }
+        Self { shared, threads }
     }
 
     /// Worker threads running.
@@ -132,38 +142,95 @@ impl<T: JobTracer> WorkerPool<T> {
         self.threads.len()
     }
 
-    /// The tracer.
-    pub fn tracer(&self) -> &T {
-        &self.tracer
+    /// Open a lane over `planner`'s queue, with at most `max_outstanding` samples granted and
+    /// not yet drained at any time; dropping the lane closes it.
+    pub fn lane(&self, planner: Planner, max_outstanding: u64) -> Lane<T> {
+        let mut s = self.shared.lock();
+        let id = s.next_id;
+        s.next_id += 1;
+        s.lanes.insert(
+            id,
+            LaneState {
+                planner,
+                view: None,
+                max_outstanding,
+                allowance: 0,
+                reserved: 0,
+                busy: 0,
+                samples: VecDeque::new(),
+                stats: PoolStats::default(),
+            },
+        );
+        Lane {
+            shared: self.shared.clone(),
+            id,
+        }
+    }
+
+    /// Lanes open.
+    pub fn lanes(&self) -> usize {
+        self.shared.lock().lanes.len()
+    }
+}
+
+impl<T: JobTracer> Drop for WorkerPool<T> {
+    /// Stop the workers (each finishes its job in flight) and join them; lanes still open
+    /// get no more samples.
+    fn drop(&mut self) {
+        self.shared.lock().shutdown = true;
+        self.shared.work.notify_all();
+        for t in self.threads.drain(..) {
+            // A worker that panicked has had its panic message printed; nothing to add.
+            let _ = t.join();
+        }
+    }
+}
+
+/// One viewer's share of a [`WorkerPool`]: its region queue and sample queue.
+pub struct Lane<T: JobTracer> {
+    shared: Arc<Shared<T>>,
+    id: u64,
+}
+
+impl<T: JobTracer> Lane<T> {
+    /// Runs `f` on this lane's state.
+    fn with<R>(&self, f: impl FnOnce(&mut LaneState<T>) -> R) -> R {
+        let mut s = self.shared.lock();
+        let lane = s
+            .lanes
+            .get_mut(&self.id)
+            .expect("a lane is open while its handle lives");
+        f(lane)
     }
 
     /// A new analysis of a frame seen at `camera_age` (see [`Planner::analyze`]).
     pub fn analyze(&self, regions: &[ObjectRegion], camera_age: u32) {
-        self.shared.lock().planner.analyze(regions, camera_age);
+        self.with(|l| l.planner.analyze(regions, camera_age));
         self.shared.work.notify_all();
     }
 
     /// Replace the queue (e.g. for a new image size).
     pub fn replace_planner(&self, planner: Planner) {
-        self.shared.lock().planner = planner;
+        self.with(|l| l.planner = planner);
         self.shared.work.notify_all();
     }
 
     /// Trace the next jobs for `view` (jobs in flight finish with the view they took).
     pub fn set_view(&self, view: T::View) {
-        self.shared.lock().view = Some(Arc::new(view));
+        self.with(|l| l.view = Some(Arc::new(view)));
         self.shared.work.notify_all();
     }
 
     /// Allow `samples` more samples, as far as `max_outstanding` leaves room (granted, in
     /// flight and queued samples count); returns the samples actually granted.
     pub fn grant(&self, samples: u64) -> u64 {
-        let mut s = self.shared.lock();
-        let outstanding = s.allowance + s.reserved + s.samples.len() as u64;
-        let granted = samples.min(self.max_outstanding.saturating_sub(outstanding));
-        s.allowance += granted;
-        s.stats.granted += granted;
-        drop(s);
+        let granted = self.with(|l| {
+            let outstanding = l.allowance + l.reserved + l.samples.len() as u64;
+            let granted = samples.min(l.max_outstanding.saturating_sub(outstanding));
+            l.allowance += granted;
+            l.stats.granted += granted;
+            granted
+        });
         if granted > 0 {
             self.shared.work.notify_all();
         }
@@ -176,25 +243,30 @@ impl<T: JobTracer> WorkerPool<T> {
         const BATCH: usize = 256;
         let mut out = Vec::new();
         loop {
-            let mut s = self.shared.lock();
-            let n = BATCH.min(max - out.len()).min(s.samples.len());
-            out.extend(s.samples.drain(..n));
-            s.stats.drained += n as u64;
-            let more = !s.samples.is_empty();
-            drop(s);
+            let (n, more) = self.with(|l| {
+                let n = BATCH.min(max - out.len()).min(l.samples.len());
+                out.extend(l.samples.drain(..n));
+                l.stats.drained += n as u64;
+                (n, !l.samples.is_empty())
+            });
             if n == 0 || !more || out.len() >= max || Instant::now() >= deadline {
                 return out;
             }
         }
     }
 
-    /// Wait up to `timeout` until no job is in flight and none can start (allowance spent,
-    /// queue dry or no view); true when idle.
+    /// Wait up to `timeout` until no job of this lane is in flight and none can start
+    /// (allowance spent, queue dry, no view, or the pool stopped); true when idle.
     pub fn wait_idle(&self, timeout: Duration) -> bool {
         let end = Instant::now() + timeout;
         let mut s = self.shared.lock();
         loop {
-            if s.busy == 0 && !s.can_work() {
+            let stopped = s.shutdown;
+            let lane = s
+                .lanes
+                .get(&self.id)
+                .expect("a lane is open while its handle lives");
+            if lane.busy == 0 && (stopped || !lane.can_work()) {
                 return true;
             }
             let now = Instant::now();
@@ -212,62 +284,64 @@ impl<T: JobTracer> WorkerPool<T> {
 
     /// The counters so far.
     pub fn stats(&self) -> PoolStats {
-        self.shared.lock().stats
+        self.with(|l| l.stats)
     }
 
     /// Samples waiting in the sample queue.
     pub fn queued(&self) -> usize {
-        self.shared.lock().samples.len()
+        self.with(|l| l.samples.len())
     }
 }
 
-impl<T: JobTracer> Drop for WorkerPool<T> {
-    /// Stop the workers (each finishes its job in flight) and join them.
+impl<T: JobTracer> Drop for Lane<T> {
+    /// Close the lane: its jobs in flight finish and their samples are dropped.
     fn drop(&mut self) {
-        self.shared.lock().shutdown = true;
-        self.shared.work.notify_all();
-        for t in self.threads.drain(..) {
-            // A worker that panicked has had its panic message printed; nothing to add.
-            let _ = t.join();
-        }
+        self.shared.lock().lanes.remove(&self.id);
     }
 }
 
-/// A worker's loop: wait for work, take a job within the allowance, trace it without the
-/// lock, queue its samples and give back the unused allowance.
+/// A worker's loop: wait for work, take a job within the allowance of the lane next in turn,
+/// trace it without the lock, queue its samples in its lane (if still open) and give back
+/// the unused allowance.
 fn work<T: JobTracer>(shared: &Shared<T>, tracer: &T) {
     let mut s = shared.lock();
     loop {
         if s.shutdown {
             return;
         }
-        if !s.can_work() {
+        let Some(id) = s.next_lane() else {
             s = shared.work.wait(s).unwrap_or_else(|e| e.into_inner());
             continue;
-        }
-        let allowance = s.allowance;
-        let Some(job) = s.planner.take_job(allowance) else {
+        };
+        s.cursor = id + 1;
+        let Some(lane) = s.lanes.get_mut(&id) else {
             continue;
         };
-        let Some(view) = s.view.clone() else {
+        let allowance = lane.allowance;
+        let Some(job) = lane.planner.take_job(allowance) else {
             continue;
         };
-        let positions = s.planner.positions(&job);
+        let Some(view) = lane.view.clone() else {
+            continue;
+        };
+        let positions = lane.planner.positions(&job);
         let reserve = job.len.min(allowance);
-        s.allowance -= reserve;
-        s.reserved += reserve;
-        s.busy += 1;
+        lane.allowance -= reserve;
+        lane.reserved += reserve;
+        lane.busy += 1;
         drop(s);
         let mut samples = tracer.trace_job(&view, &job, &positions);
         samples.truncate(reserve as usize);
         s = shared.lock();
-        let n = samples.len() as u64;
-        s.reserved -= reserve;
-        s.allowance += reserve - n;
-        s.busy -= 1;
-        s.stats.jobs += 1;
-        s.stats.traced += n;
-        s.samples.extend(samples);
+        if let Some(lane) = s.lanes.get_mut(&id) {
+            let n = samples.len() as u64;
+            lane.reserved -= reserve;
+            lane.allowance += reserve - n;
+            lane.busy -= 1;
+            lane.stats.jobs += 1;
+            lane.stats.traced += n;
+            lane.samples.extend(samples);
+        }
         shared.done.notify_all();
     }
 }
@@ -312,12 +386,16 @@ mod tests {
         }
     }
 
-    fn pool(workers: usize, max_outstanding: u64) -> WorkerPool<Stripes> {
-        let planner = Planner::new(Hierarchy::new(4).unwrap(), 16, 0.8);
-        let p = WorkerPool::new(Stripes, planner, workers, max_outstanding);
-        p.analyze(&[region()], 0);
-        p.set_view(7);
-        p
+    fn pool(workers: usize, max_outstanding: u64) -> (WorkerPool<Stripes>, Lane<Stripes>) {
+        let pool = WorkerPool::new(Stripes, workers);
+        let lane = pool.lane(planner(), max_outstanding);
+        lane.analyze(&[region()], 0);
+        lane.set_view(7);
+        (pool, lane)
+    }
+
+    fn planner() -> Planner {
+        Planner::new(Hierarchy::new(4).unwrap(), 16, 0.8)
     }
 
     fn on_object() -> usize {
@@ -329,8 +407,8 @@ mod tests {
     #[test]
     fn every_sample_arrives_exactly_once_with_one_and_two_workers() {
         for workers in [1, 2] {
-            let p = pool(workers, u64::MAX);
-            assert_eq!(p.workers(), workers);
+            let (pool, p) = pool(workers, u64::MAX);
+            assert_eq!(pool.workers(), workers);
             let mut seen = HashSet::new();
             // The frame loop: grant a frame's budget, drain what is ready.
             for _ in 0..10_000 {
@@ -355,7 +433,7 @@ mod tests {
     #[test]
     fn workers_trace_no_more_samples_than_granted() {
         for workers in [1, 2] {
-            let p = pool(workers, u64::MAX);
+            let (_pool, p) = pool(workers, u64::MAX);
             let mut granted = 0;
             for budget in [1, 5, 40, 3, 100] {
                 granted += p.grant(budget);
@@ -371,7 +449,7 @@ mod tests {
 
     #[test]
     fn grants_stop_at_the_outstanding_limit_until_drained() {
-        let p = pool(2, 50);
+        let (_pool, p) = pool(2, 50);
         assert_eq!(p.grant(40), 40);
         assert_eq!(p.grant(40), 10);
         assert!(p.wait_idle(WAIT));
@@ -383,7 +461,7 @@ mod tests {
 
     #[test]
     fn jobs_take_the_latest_view_and_queue_changes_wake_the_workers() {
-        let p = pool(2, u64::MAX);
+        let (_pool, p) = pool(2, u64::MAX);
         p.grant(10);
         assert!(p.wait_idle(WAIT));
         p.set_view(8);
@@ -409,15 +487,84 @@ mod tests {
     #[test]
     fn dropping_a_busy_pool_stops_its_workers() {
         for workers in [1, 2] {
-            let p = pool(workers, u64::MAX);
+            let (pool, p) = pool(workers, u64::MAX);
             p.grant(u64::MAX / 2);
-            drop(p);
+            drop(pool);
+            // The lane outlives the pool: idle, nothing more traced.
+            assert!(p.wait_idle(WAIT));
+            let traced = p.stats().traced;
+            p.grant(100);
+            assert!(p.wait_idle(WAIT));
+            assert_eq!(p.stats().traced, traced);
         }
         // Without a view nothing is traced, and the pool still shuts down.
-        let planner = Planner::new(Hierarchy::new(2).unwrap(), 16, 0.8);
-        let p = WorkerPool::new(Stripes, planner, 2, 100);
+        let pool = WorkerPool::new(Stripes, 2);
+        let p = pool.lane(Planner::new(Hierarchy::new(2).unwrap(), 16, 0.8), 100);
         p.grant(100);
         assert!(p.wait_idle(WAIT));
         assert_eq!(p.stats().traced, 0);
+    }
+
+    /// Logs the view of every job; the first job waits until the gate opens.
+    struct Gated(Arc<Gate>);
+
+    #[derive(Default)]
+    struct Gate {
+        open: Mutex<bool>,
+        opened: Condvar,
+        views: Mutex<Vec<u32>>,
+    }
+
+    impl JobTracer for Gated {
+        type View = u32;
+        type Sample = u32;
+        fn trace_job(&self, view: &u32, job: &Job, positions: &[(i32, i32)]) -> Vec<u32> {
+            let mut open = self.0.open.lock().unwrap();
+            while !*open {
+                open = self.0.opened.wait(open).unwrap();
+            }
+            drop(open);
+            self.0.views.lock().unwrap().push(*view);
+            Stripes
+                .trace_job(view, job, positions)
+                .iter()
+                .map(|s| s.2)
+                .collect()
+        }
+    }
+
+    #[test]
+    fn one_pool_serves_its_lanes_in_turn_and_closed_lanes_get_nothing() {
+        let gate = Arc::new(Gate::default());
+        let pool = WorkerPool::new(Gated(gate.clone()), 1);
+        let lanes: Vec<_> = (0..3).map(|_| pool.lane(planner(), u64::MAX)).collect();
+        assert_eq!(pool.lanes(), 3);
+        for lane in &lanes {
+            lane.analyze(&[region()], 0);
+            lane.grant(u64::MAX / 2);
+        }
+        // Lane 0 is first; its job waits at the gate until every lane has a view.
+        for (view, lane) in lanes.iter().enumerate() {
+            lane.set_view(view as u32);
+        }
+        // Closing lane 2 while a job is in flight leaves the others served.
+        let mut lanes = lanes;
+        drop(lanes.pop());
+        assert_eq!(pool.lanes(), 2);
+        *gate.open.lock().unwrap() = true;
+        gate.opened.notify_all();
+        for lane in &lanes {
+            assert!(lane.wait_idle(WAIT));
+            assert_eq!(lane.stats().traced, on_object() as u64);
+        }
+        let views = gate.views.lock().unwrap().clone();
+        assert!(!views.contains(&2), "{views:?}");
+        // Round-robin: the two lanes alternate, job for job.
+        let jobs = views.len() / 2;
+        assert!(jobs > 4, "{views:?}");
+        let alternating: Vec<u32> = (0..2 * jobs as u32).map(|i| i % 2).collect();
+        assert_eq!(views, alternating);
+        let drained: Vec<u32> = lanes[1].drain(usize::MAX, Instant::now() + WAIT);
+        assert!(drained.iter().all(|&v| v == 1));
     }
 }

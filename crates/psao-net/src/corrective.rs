@@ -273,6 +273,77 @@ pub struct CorrectedFrame {
     pub dropped: usize,
     /// A new analysis to send with the next camera, when one was due.
     pub regions: Option<RegionsMsg>,
+    /// What an analysis of this frame reads (besides the image).
+    shown: ShownFrame,
+}
+
+/// A shown frame's number, size, object id per pixel and moving objects.
+struct ShownFrame {
+    frame: u32,
+    width: u32,
+    height: u32,
+    ids: Vec<u32>,
+    moving: Vec<u32>,
+}
+
+impl CorrectedFrame {
+    /// A copy of what an analysis of this frame reads, to analyse elsewhere (e.g. on another
+    /// thread).
+    pub fn analysis(&self) -> FrameAnalysis {
+        FrameAnalysis {
+            image: self.image.clone(),
+            shown: ShownFrame {
+                frame: self.shown.frame,
+                width: self.shown.width,
+                height: self.shown.height,
+                ids: self.shown.ids.clone(),
+                moving: self.shown.moving.clone(),
+            },
+        }
+    }
+}
+
+/// A shown frame to analyse: its image, object ids and moving objects.
+pub struct FrameAnalysis {
+    image: Vec<[f32; 3]>,
+    shown: ShownFrame,
+}
+
+impl FrameAnalysis {
+    /// The regions and priorities of the frame (saliency and task importance per object,
+    /// moving objects left out), as sent to the server.
+    pub fn regions(&self) -> RegionsMsg {
+        analysis_of(&self.image, &self.shown)
+    }
+}
+
+/// The regions of a shown frame with `image` (see [`FrameAnalysis::regions`]).
+fn analysis_of(image: &[[f32; 3]], shown: &ShownFrame) -> RegionsMsg {
+    let (w, h) = (shown.width as usize, shown.height as usize);
+    let map = saliency(&RgbImage {
+        width: w,
+        height: h,
+        pixels: image.to_vec(),
+    });
+    let regions = analyze(&shown.ids, w, h, &map, DEFAULT_SALIENCY_WEIGHT);
+    RegionsMsg {
+        frame: shown.frame,
+        width: shown.width,
+        height: shown.height,
+        regions: regions
+            .iter()
+            .filter(|r| shown.moving.binary_search(&r.id).is_err())
+            .take(psao_wire::MAX_REGIONS)
+            .map(|r| Region {
+                object: r.id,
+                x0: r.rect.x0 as u32,
+                y0: r.rect.y0 as u32,
+                x1: r.rect.x1 as u32,
+                y1: r.rect.y1 as u32,
+                priority: r.priority.clamp(0.0, 1.0),
+            })
+            .collect(),
+    }
 }
 
 /// Which objects move, from the client's own animation of its scene at its frame times.
@@ -413,8 +484,24 @@ impl CorrectiveClient {
     /// Correct client frame `frame` (its G-buffer and AO, rasterized with the camera last
     /// given to [`Self::camera`], at `frame / 60` s): drop the cached samples of objects that
     /// moved into it, splat the cache over it, and analyse the result when an analysis is due
-    /// (moving objects left out).
+    /// (every `analyze_every` frames; moving objects left out).
     pub fn frame(
+        &mut self,
+        scene: &Scene,
+        frame: u32,
+        gbuffer: &GBuffer,
+        ao: &[f32],
+    ) -> CorrectedFrame {
+        let mut corrected = self.correct(scene, frame, gbuffer, ao);
+        if frame.is_multiple_of(self.config.analyze_every) {
+            corrected.regions = Some(analysis_of(&corrected.image, &corrected.shown));
+        }
+        corrected
+    }
+
+    /// [`Self::frame`] without the analysis (the caller analyses [`CorrectedFrame::analysis`]
+    /// when it wants to).
+    pub fn correct(
         &mut self,
         scene: &Scene,
         frame: u32,
@@ -429,7 +516,10 @@ impl CorrectiveClient {
                 dropped = self.cache.drop_objects(|o| m.is_moving(o));
             }
         }
-        let motion = motion.as_ref();
+        let moving = motion
+            .as_ref()
+            .map(|m| m.moving.clone())
+            .unwrap_or_default();
         let mut image = psao_client::composite(scene, gbuffer, ao, &Shading::default());
         let ids = object_ids(scene, gbuffer);
         let mut written = vec![false; image.len()];
@@ -445,38 +535,18 @@ impl CorrectiveClient {
             ),
             None => 0,
         };
-        let regions = frame.is_multiple_of(self.config.analyze_every).then(|| {
-            let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
-            let map = saliency(&RgbImage {
-                width: w,
-                height: h,
-                pixels: image.clone(),
-            });
-            let regions = analyze(&ids, w, h, &map, DEFAULT_SALIENCY_WEIGHT);
-            RegionsMsg {
-                frame,
-                width: gbuffer.width,
-                height: gbuffer.height,
-                regions: regions
-                    .iter()
-                    .filter(|r| !motion.is_some_and(|m| m.is_moving(r.id)))
-                    .take(psao_wire::MAX_REGIONS)
-                    .map(|r| Region {
-                        object: r.id,
-                        x0: r.rect.x0 as u32,
-                        y0: r.rect.y0 as u32,
-                        x1: r.rect.x1 as u32,
-                        y1: r.rect.y1 as u32,
-                        priority: r.priority.clamp(0.0, 1.0),
-                    })
-                    .collect(),
-            }
-        });
         CorrectedFrame {
             image,
             drawn,
             dropped,
-            regions,
+            regions: None,
+            shown: ShownFrame {
+                frame,
+                width: gbuffer.width,
+                height: gbuffer.height,
+                ids,
+                moving,
+            },
         }
     }
 

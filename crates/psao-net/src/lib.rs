@@ -22,6 +22,7 @@ pub mod start_cache;
 pub mod tls;
 pub mod transport;
 pub mod view;
+mod view_analyzer;
 
 pub use error::NetError;
 pub use resolution::{Resolution, ResolutionError, MAX_IMAGE_SIDE};

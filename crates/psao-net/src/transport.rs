@@ -178,14 +178,10 @@ impl FrameReader {
                     Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(None),
                     Err(e) => return Err(ReadError::Io(e.to_string())),
                 }
-                r.read_exact(&mut header[1..])
-                    .await
-                    .map_err(|e| truncated(e, 1))?;
+                read_part(r, &mut header[1..], 1, HEADER_LEN).await?;
                 let h = FrameHeader::parse(&header, limit)?;
                 let mut payload = vec![0u8; h.len as usize];
-                r.read_exact(&mut payload)
-                    .await
-                    .map_err(|e| truncated(e, HEADER_LEN + h.len as usize))?;
+                read_part(r, &mut payload, HEADER_LEN, HEADER_LEN + h.len as usize).await?;
                 let message = decode_payload(&h, &payload)?;
                 Ok(Some((message, HEADER_LEN + payload.len())))
             }
@@ -233,15 +229,29 @@ impl FrameReader {
     }
 }
 
-fn truncated(e: std::io::Error, needed: usize) -> ReadError {
-    if e.kind() == std::io::ErrorKind::UnexpectedEof {
-        ReadError::Wire(WireError::Truncated {
-            needed: needed as u64,
-            available: 0,
-        })
-    } else {
-        ReadError::Io(e.to_string())
+/// Fill `buf` with the next bytes of a frame of `needed` bytes of which `before` have
+/// arrived; the stream ending first is a truncated frame (counting what did arrive).
+async fn read_part(
+    r: &mut ReadHalf<BoxIo>,
+    buf: &mut [u8],
+    before: usize,
+    needed: usize,
+) -> Result<(), ReadError> {
+    let mut got = 0;
+    while got < buf.len() {
+        match r.read(&mut buf[got..]).await {
+            Ok(0) => {
+                return Err(ReadError::Wire(WireError::Truncated {
+                    needed: needed as u64,
+                    available: (before + got) as u64,
+                }))
+            }
+            Ok(n) => got += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(ReadError::Io(e.to_string())),
+        }
     }
+    Ok(())
 }
 
 impl FrameWriter {

@@ -25,6 +25,7 @@ use crate::corrective::{CorrectiveClient, CorrectiveClientConfig};
 use crate::cpu_time::cpu_seconds;
 use crate::pipeline::{ClientFrame, ClientRenderer, CLIENT_HZ};
 use crate::transport::{connect, ReadError};
+use crate::view_analyzer::Analyzer;
 use crate::{NetError, Resolution};
 
 /// How a client connects and what it runs.
@@ -59,8 +60,10 @@ pub struct ViewConfig {
     /// Write the first received frames (≤ 64 KiB each) and their update payloads to this
     /// folder (seed corpus for the fuzz targets).
     pub record: Option<PathBuf>,
-    /// Ask for corrective splatting: analyse every rendered frame, send the regions, splat the
-    /// server's samples (frames are rendered even without `render`).
+    /// Ask for corrective splatting: analyse the rendered frames, send the regions, splat the
+    /// server's samples (frames are rendered even without `render`). In lockstep the frame
+    /// loop analyses every `analyze_every` frames; otherwise an analyzer thread takes the
+    /// latest shown frame every `analyze_every / 60` s of wall clock.
     pub corrective: Option<CorrectiveClientConfig>,
 }
 
@@ -167,6 +170,13 @@ pub fn view(
     let mut start = Instant::now();
     let mut cpu_start = cpu_seconds();
     let mut lockstep = None;
+    // Without lockstep the analysis runs on its own thread, every `analyze_every` / 60 s.
+    let mut analyzer = match &args.corrective {
+        Some(c) => Some(Analyzer::new(Duration::from_secs_f64(
+            f64::from(c.analyze_every) / f64::from(CLIENT_HZ),
+        ))?),
+        None => None,
+    };
     for frame in 0..frames {
         let camera = path.camera_at_frame(((frame + args.path_offset) % total) as usize);
         if args.drop_at == Some(frame) {
@@ -181,6 +191,11 @@ pub fn view(
             cpu_start = cpu_seconds();
         }
         let camera_message = camera_msg(frame, &camera, aspect);
+        if let (Some(a), Some(false)) = (&mut analyzer, lockstep) {
+            if let Some(regions) = a.take(client.sessions) {
+                client.regions = Some(regions);
+            }
+        }
         if let Some(c) = &mut client.corrective {
             if let Some(regions) = client.regions.take() {
                 let _ = out_tx.send(Outgoing::Send(Message::Regions(regions)));
@@ -223,8 +238,19 @@ pub fn view(
             let time = frame as f32 / CLIENT_HZ as f32;
             let mut img = renderer.render(scene, &client.state, &camera, args.res, time)?;
             if let Some(c) = &mut client.corrective {
-                let corrected = c.frame(scene, frame, &img.gbuffer, &img.ao.data);
-                client.regions = corrected.regions;
+                let corrected = match (&mut analyzer, lockstep) {
+                    // Threaded: the analyzer thread takes the frame when it is due.
+                    (Some(a), Some(false)) => {
+                        let corrected = c.correct(scene, frame, &img.gbuffer, &img.ao.data);
+                        a.offer(client.sessions, &corrected);
+                        corrected
+                    }
+                    _ => {
+                        let mut corrected = c.frame(scene, frame, &img.gbuffer, &img.ao.data);
+                        client.regions = corrected.regions.take();
+                        corrected
+                    }
+                };
                 img.corrected = Some(corrected.image);
             }
             if args.render {
@@ -557,6 +583,9 @@ async fn session(
             ))))
         }
         Ok(None) => return Err(SessionError::Retry("closed before the welcome".into())),
+        Err(ReadError::Wire(w)) => {
+            return Err(SessionError::Fatal(NetError::Protocol(bad_frame(&w))))
+        }
         Err(e) => return Err(SessionError::Retry(e.to_string())),
     };
     if welcome.version != PROTOCOL_VERSION {
@@ -589,11 +618,10 @@ async fn session(
                     }
                 }
                 Ok(None) => return Ok(()),
-                // A frame cut short is what a crashing server leaves: reconnect. Any other
-                // malformed frame ends the client.
-                Err(ReadError::Wire(w)) if !matches!(w, WireError::Truncated { .. }) => {
-                    return Err((true, w.to_string()))
-                }
+                // A malformed frame, a frame cut short by the end of the stream included,
+                // ends the client; a failed connection (reset, WebSocket closed without
+                // its handshake) reconnects.
+                Err(ReadError::Wire(w)) => return Err((true, bad_frame(&w))),
                 Err(e) => return Err((false, e.to_string())),
             }
         }
@@ -605,7 +633,7 @@ async fn session(
                 let Some((due, m, size)) = item else {
                     let why = match (&mut reader_task).await {
                         Ok(Err((true, e))) => {
-                            return Err(SessionError::Fatal(NetError::Protocol(format!("bad frame from the server: {e}"))))
+                            return Err(SessionError::Fatal(NetError::Protocol(e)))
                         }
                         Ok(Err((false, e))) => e,
                         _ => "the server closed the connection".into(),
@@ -650,5 +678,15 @@ async fn session(
                 }
             }
         }
+    }
+}
+
+/// The error text of a malformed frame from the server.
+fn bad_frame(w: &WireError) -> String {
+    match w {
+        WireError::Truncated { .. } => {
+            format!("the server's frame was cut short: {w}")
+        }
+        _ => format!("bad frame from the server: {w}"),
     }
 }

@@ -94,11 +94,11 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             c.ao_spp,
             args.tuning.seed,
         )?;
-        serve = serve.with_corrections(psao_net::serve::Corrections {
-            engine: std::sync::Arc::new(engine),
-            samples_per_second: c.samples_per_second,
-            workers: psao_net::serve::DEFAULT_CORRECTION_WORKERS,
-        });
+        serve = serve.with_corrections(psao_net::serve::Corrections::new(
+            std::sync::Arc::new(engine),
+            c.samples_per_second,
+            psao_net::serve::DEFAULT_CORRECTION_WORKERS,
+        ));
     }
     println!("listening on {}", serve.local_addr());
     let stats = serve.run();

@@ -3,16 +3,16 @@
 mod common;
 
 use std::io::{ErrorKind, Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::{Shutdown, TcpListener, TcpStream};
 use std::path::Path;
 use std::process::Output;
 use std::time::{Duration, Instant};
 
 use common::{json, psao, stderr};
 use psao_wire::{
-    capabilities, decode_frame, encode_frame, frame_payload, CameraMsg, ErrorCode, Hello,
-    InstanceEntry, Message, Region, RegionsMsg, SampleMsg, SamplesMsg, Welcome, HEADER_LEN,
-    MAX_REGIONS, MAX_SAMPLES, PROTOCOL_VERSION,
+    capabilities, decode_frame, encode_frame, frame_payload, CameraMsg, Delta, ErrorCode, Hello,
+    InstanceEntry, Message, Region, RegionsMsg, SampleMsg, SamplesMsg, SceneTime, Welcome,
+    HEADER_LEN, MAX_REGIONS, MAX_SAMPLES, PROTOCOL_VERSION,
 };
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/corrective.toml");
@@ -339,6 +339,47 @@ fn threaded_serve_streams_every_sample_within_the_budget_and_shuts_down_cleanly(
     assert!(sent <= frames * 100, "{sent} samples in {frames} frames");
 }
 
+#[test]
+fn one_worker_pool_serves_two_clients_and_shuts_down_when_they_leave() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let stats = fx.path().join("serve.json");
+    let (mut server, addr) = start_server(
+        scene,
+        &["--hz", "30", "--once", "--json", stats.to_str().unwrap()],
+    );
+    // Two clients at once, over the same two workers.
+    let received: Vec<u64> = std::thread::scope(|scope| {
+        let views: Vec<_> = (0..2)
+            .map(|i| {
+                let json_path = fx.path().join(format!("view{i}.json"));
+                let addr = addr.clone();
+                scope.spawn(move || {
+                    let o = view_with_corrections(scene, &addr, 60, &json_path);
+                    assert!(o.status.success(), "{}", stderr(&o));
+                    json(&json_path)["samples"].as_u64().unwrap()
+                })
+            })
+            .collect();
+        views.into_iter().map(|v| v.join().unwrap()).collect()
+    });
+    assert!(server.0.wait().unwrap().success());
+    let serve = json(&stats);
+    let mut sent: Vec<u64> = serve["clients"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["samples"].as_u64().unwrap())
+        .collect();
+    let mut received_sorted = received.clone();
+    received_sorted.sort_unstable();
+    sent.sort_unstable();
+    // Both clients got samples, and every sample sent arrived.
+    assert!(received.iter().all(|&n| n > 0), "{received:?}");
+    assert_eq!(received_sorted, sent);
+}
+
 /// Reads frames from `s` for `secs` seconds (or until it closes): the decoded messages.
 fn read_for(s: &mut TcpStream, secs: f64) -> Vec<Message> {
     let end = Instant::now() + Duration::from_secs_f64(secs);
@@ -508,9 +549,49 @@ fn error_code_of(m: &[Message]) -> Option<ErrorCode> {
     })
 }
 
-/// A fake server: accepts one client, answers its hello with a welcome for the split
-/// fixture's three instances, then sends `after` and keeps the connection open briefly.
-fn fake_server(after: Vec<u8>) -> (String, std::thread::JoinHandle<()>) {
+/// The welcome of the fake servers: the split fixture's three instances, no lockstep.
+fn fake_welcome() -> Vec<u8> {
+    let entry = InstanceEntry {
+        origin: [-4.0, 0.0, -4.0],
+        cell_size: 0.5,
+        dims: [16, 6, 16],
+        layout_poisson_radius: 0.1,
+        bucket_count: 64,
+        poisson_radius: 0.1,
+        point_count: 100,
+    };
+    encode_frame(&Message::Welcome(Welcome {
+        version: PROTOCOL_VERSION,
+        client_id: 0,
+        codec: "compact".into(),
+        server_hz: 30,
+        client_hz: 60,
+        lockstep: false,
+        scene: "room".into(),
+        frame: 0,
+        scene_time: 0.0,
+        instances: vec![entry; 3],
+    }))
+    .unwrap()
+}
+
+/// After a fake server's last frame: either keep the connection open briefly, or close its
+/// sending side at once (the client sees the end of the stream) and read what the client
+/// still sends until it hangs up (so the close is not a reset).
+fn fake_server_end(s: &mut TcpStream, close: bool) {
+    if close {
+        let _ = s.shutdown(Shutdown::Write);
+        let _ = s.set_read_timeout(Some(Duration::from_secs(10)));
+        let mut buf = [0u8; 4096];
+        while matches!(s.read(&mut buf), Ok(n) if n > 0) {}
+    } else {
+        std::thread::sleep(Duration::from_millis(1500));
+    }
+}
+
+/// A fake raw-TCP server: accepts one client, answers its hello with [`fake_welcome`], then
+/// sends `after` and ends as [`fake_server_end`] says.
+fn fake_server(after: Vec<u8>, close: bool) -> (String, std::thread::JoinHandle<()>) {
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     let handle = std::thread::spawn(move || {
@@ -520,30 +601,27 @@ fn fake_server(after: Vec<u8>) -> (String, std::thread::JoinHandle<()>) {
         let len = u32::from_le_bytes(header[4..8].try_into().unwrap()) as usize;
         let mut payload = vec![0u8; len];
         s.read_exact(&mut payload).unwrap();
-        let entry = InstanceEntry {
-            origin: [-4.0, 0.0, -4.0],
-            cell_size: 0.5,
-            dims: [16, 6, 16],
-            layout_poisson_radius: 0.1,
-            bucket_count: 64,
-            poisson_radius: 0.1,
-            point_count: 100,
-        };
-        let welcome = Message::Welcome(Welcome {
-            version: PROTOCOL_VERSION,
-            client_id: 0,
-            codec: "compact".into(),
-            server_hz: 30,
-            client_hz: 60,
-            lockstep: false,
-            scene: "room".into(),
-            frame: 0,
-            scene_time: 0.0,
-            instances: vec![entry; 3],
-        });
-        s.write_all(&encode_frame(&welcome).unwrap()).unwrap();
+        s.write_all(&fake_welcome()).unwrap();
         let _ = s.write_all(&after);
-        std::thread::sleep(Duration::from_millis(1500));
+        fake_server_end(&mut s, close);
+    });
+    (addr, handle)
+}
+
+/// The WebSocket twin of [`fake_server`] (`ws://` address): one binary message per frame,
+/// `after` as one message, then the connection closes without the closing handshake.
+fn fake_ws_server(after: Vec<u8>) -> (String, std::thread::JoinHandle<()>) {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = format!("ws://{}", listener.local_addr().unwrap());
+    let handle = std::thread::spawn(move || {
+        let (s, _) = listener.accept().unwrap();
+        let mut ws = tungstenite::accept(s).unwrap();
+        let hello = ws.read().unwrap();
+        assert!(hello.is_binary());
+        ws.send(tungstenite::Message::binary(fake_welcome()))
+            .unwrap();
+        ws.send(tungstenite::Message::binary(after)).unwrap();
+        fake_server_end(ws.get_mut(), true);
     });
     (addr, handle)
 }
@@ -570,7 +648,16 @@ fn samples(list: Vec<SampleMsg>) -> Message {
 /// `psao view` (`--corrective` when `corrective`) against a fake server sending `after`:
 /// its error text (it must fail).
 fn view_error(scene: &str, after: Vec<u8>, corrective: bool) -> String {
-    let (addr, h) = fake_server(after);
+    view_error_at(scene, fake_server(after, false), corrective)
+}
+
+/// `psao view` (`--corrective` when `corrective`) against the fake server `(addr, thread)`:
+/// its error text (it must fail).
+fn view_error_at(
+    scene: &str,
+    (addr, h): (String, std::thread::JoinHandle<()>),
+    corrective: bool,
+) -> String {
     let mut args = vec![
         "view",
         "--connect",
@@ -631,4 +718,44 @@ fn clients_refuse_malformed_and_unasked_samples_with_a_clear_error() {
         false,
     );
     assert!(e.contains("without asking"), "{e}");
+}
+
+#[test]
+fn frames_cut_short_by_the_server_are_a_clear_error_on_tcp_and_websocket() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let delta = Delta {
+        frame: 1,
+        scene_time: 1.0 / 30.0,
+        client_frame: None,
+        state_hash: None,
+        payload: vec![7; 64],
+    };
+    let kinds = [
+        samples(vec![sample(1); 4]),
+        Message::Delta(delta.clone()),
+        Message::Snapshot(delta),
+        Message::SceneTime(SceneTime {
+            frame: 1,
+            seconds: 1.0 / 30.0,
+            client_frame: None,
+        }),
+    ];
+    for m in &kinds {
+        let frame = encode_frame(m).unwrap();
+        // Cut inside the payload, and inside the header.
+        for cut in [frame.len() / 2 + HEADER_LEN / 2, HEADER_LEN / 2] {
+            let after = frame[..cut].to_vec();
+            let e = view_error_at(scene, fake_server(after, true), true);
+            assert!(e.contains("cut short"), "{} cut at {cut}: {e}", m.kind());
+        }
+    }
+    // WebSocket: a whole message holding half a frame.
+    for m in &kinds[..2] {
+        let frame = encode_frame(m).unwrap();
+        let after = frame[..frame.len() / 2].to_vec();
+        let e = view_error_at(scene, fake_ws_server(after), true);
+        assert!(e.contains("cut short"), "{} over WebSocket: {e}", m.kind());
+    }
 }

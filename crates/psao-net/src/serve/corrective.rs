@@ -5,18 +5,20 @@
 //! - **Lockstep** (deterministic, for tests): at every round, before the round's answer, the
 //!   simulation thread traces the client's samples within its budget ([`RemoteCorrections`])
 //!   and sends them.
-//! - **Threaded** (the real-time server): the client's regions go into a region queue served
-//!   by tracing workers on their own threads ([`WorkerPool`], [`Corrections::workers`] of
-//!   them per client), which push samples into a sample queue. Each server frame grants the
-//!   client's budget for one tick and drains the samples that are ready within a wall-clock
-//!   share of the frame ([`DRAIN_SHARE`]), sent as `Samples` messages: the simulation thread
-//!   never traces corrections, so they cannot delay the AO step.
+//! - **Threaded** (the real-time server): one pool of tracing workers on their own threads
+//!   ([`WorkerPool`], [`Corrections::new`]'s `workers`, made with the first threaded client)
+//!   serves every client: each client's regions go into its own region queue (a [`Lane`]),
+//!   which the workers take jobs from in turn, pushing samples into the lane's sample queue.
+//!   Each server frame grants each client's budget for one tick and drains its samples that
+//!   are ready within a wall-clock share of the frame ([`DRAIN_SHARE`]), sent as `Samples`
+//!   messages: the simulation thread never traces corrections, so they cannot delay the AO
+//!   step, and more clients share the same cores instead of adding threads.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use psao_corrective::schedule::Job;
-use psao_corrective::workers::{JobTracer, WorkerPool};
+use psao_corrective::workers::{JobTracer, Lane, WorkerPool};
 use psao_scene::Camera;
 use psao_wire::{
     capabilities, encode_frame, CameraMsg, Message, RegionsMsg, SampleMsg, SamplesMsg,
@@ -28,21 +30,41 @@ use crate::corrective::{
     budget_of_tick, new_planner, object_regions, sample_msg, CorrectionEngine, RemoteCorrections,
 };
 
-/// Default tracing workers per client (both cores of the reference machine).
+/// Default tracing workers of a server, shared by all its clients (both cores of the
+/// reference machine).
 pub const DEFAULT_WORKERS: usize = 2;
 /// Share of a server frame the simulation thread spends at most draining one client's
 /// sample queue.
 pub const DRAIN_SHARE: f64 = 0.1;
 
-/// The server's corrections: the tracing engine and every client's sample budget.
+/// The server's corrections: the tracing engine, every client's sample budget and the
+/// workers all threaded clients share.
 #[derive(Clone)]
 pub struct Corrections {
-    /// Scene and tracers.
-    pub engine: Arc<CorrectionEngine>,
-    /// Samples per second per client.
-    pub samples_per_second: u32,
-    /// Tracing worker threads per client when not in lockstep (at least 1).
-    pub workers: usize,
+    engine: Arc<CorrectionEngine>,
+    samples_per_second: u32,
+    workers: usize,
+    /// The shared workers, started with the first threaded client.
+    pool: Arc<OnceLock<WorkerPool<EngineJobs>>>,
+}
+
+impl Corrections {
+    /// Corrections traced with `engine`, `samples_per_second` per client, by `workers`
+    /// threads (at least 1) shared by every client not in lockstep.
+    pub fn new(engine: Arc<CorrectionEngine>, samples_per_second: u32, workers: usize) -> Self {
+        Self {
+            engine,
+            samples_per_second,
+            workers,
+            pool: Arc::new(OnceLock::new()),
+        }
+    }
+
+    /// The shared workers (started on first use; stopped when the last copy is dropped).
+    fn pool(&self) -> &WorkerPool<EngineJobs> {
+        self.pool
+            .get_or_init(|| WorkerPool::new(EngineJobs(self.engine.clone()), self.workers))
+    }
 }
 
 impl Serve {
@@ -143,10 +165,11 @@ impl JobTracer for EngineJobs {
     }
 }
 
-/// A client's threaded correction state: its worker pool (region queue and sample queue),
-/// its camera and camera age, the image size of its analyses and its budget clock.
+/// A client's threaded correction state: its lane of the shared workers (region queue and
+/// sample queue), its camera and camera age, the image size of its analyses and its budget
+/// clock.
 pub(super) struct ThreadedCorrections {
-    pool: WorkerPool<EngineJobs>,
+    lane: Lane<EngineJobs>,
     samples_per_second: u32,
     camera: Option<Camera>,
     camera_age: u32,
@@ -160,12 +183,7 @@ impl ThreadedCorrections {
         let outstanding =
             (u64::from(c.samples_per_second) / 4).max(psao_corrective::schedule::DEFAULT_JOB_SIZE);
         Self {
-            pool: WorkerPool::new(
-                EngineJobs(c.engine.clone()),
-                new_planner(1, 1),
-                c.workers,
-                outstanding,
-            ),
+            lane: c.pool().lane(new_planner(1, 1), outstanding),
             samples_per_second: c.samples_per_second,
             camera: None,
             camera_age: 0,
@@ -186,18 +204,18 @@ impl ThreadedCorrections {
     fn regions(&mut self, msg: &RegionsMsg) {
         let size = (msg.width, msg.height);
         if self.size != Some(size) {
-            self.pool
+            self.lane
                 .replace_planner(new_planner(msg.width, msg.height));
             self.size = Some(size);
             self.set_view();
         }
-        self.pool.analyze(&object_regions(msg), self.camera_age);
+        self.lane.analyze(&object_regions(msg), self.camera_age);
     }
 
     /// The workers' view, once both a camera and an image size are known.
     fn set_view(&self) {
         if let (Some(camera), Some((width, height))) = (self.camera, self.size) {
-            self.pool.set_view(TraceView {
+            self.lane.set_view(TraceView {
                 camera,
                 width,
                 height,
@@ -210,9 +228,9 @@ impl ThreadedCorrections {
     /// that are ready (within `drain` of wall-clock time), as messages of one camera age each.
     fn frame(&mut self, hz: u32, drain: Duration) -> Vec<SamplesMsg> {
         let budget = budget_of_tick(self.samples_per_second, hz, &mut self.ticks);
-        self.pool.grant(budget as u64);
+        self.lane.grant(budget as u64);
         let ready = self
-            .pool
+            .lane
             .drain(psao_wire::MAX_SAMPLES, Instant::now() + drain);
         messages_by_age(ready)
     }

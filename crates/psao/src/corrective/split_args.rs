@@ -16,7 +16,8 @@ pub struct CorrectiveArgs {
     /// Server: correction samples per second per client.
     #[arg(long, default_value_t = DEFAULT_SAMPLES_PER_SECOND)]
     pub samples_per_second: u32,
-    /// Client: frames between analyses of its frame (18 = 0.3 s at 60 Hz).
+    /// Client: frames between analyses of its frame (18 = 0.3 s at 60 Hz); a view not in
+    /// lockstep analyses on its own thread every that many 60ths of a second of wall clock.
     #[arg(long, default_value_t = DEFAULT_ANALYZE_EVERY)]
     pub analyze_every: u32,
     /// Server: AO rays per diffuse point the correction rays reach.
