@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
 
+use psao_net::cpu_time::fine_cpu_seconds;
 use psao_prt::shade::{Shader, ShadingGeometry, Visibility};
 
 use crate::relight_cmd::{
@@ -100,7 +101,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
     // One warm-up frame, then the timed runs.
     for run in 0..=args.runs {
         let pose = &poses[run % poses.len()];
-        let cpu_start = cpu_seconds();
+        let cpu_start = fine_cpu_seconds();
         let start = Instant::now();
         model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
         let mid = Instant::now();
@@ -116,7 +117,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         )?;
         std::hint::black_box(v);
         let wall = start.elapsed();
-        let cpu_end = cpu_seconds();
+        let cpu_end = fine_cpu_seconds();
         if run > 0 {
             total.push(wall.as_secs_f64() * 1e3);
             synth.push((mid - start).as_secs_f64() * 1e3);
@@ -161,18 +162,4 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
-}
-
-/// CPU seconds used so far by all threads of this process, from the per-thread scheduler
-/// statistics (`/proc/self/task/*/schedstat`, whose first field is nanoseconds on the CPU; `getrusage` and `/proc/self/stat` count in ticks
-/// of 1–10 ms, too coarse for frames of a few milliseconds). `None` where it is not
-/// available (not Linux, or no scheduler statistics). The rayon pool's threads live for the
-/// whole process, so no thread's time leaves the sum between two readings.
-fn cpu_seconds() -> Option<f64> {
-    let mut ns = 0u64;
-    for task in std::fs::read_dir("/proc/self/task").ok()? {
-        let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
-        ns += stat.split_whitespace().next()?.parse::<u64>().ok()?;
-    }
-    Some(ns as f64 * 1e-9)
 }

@@ -2,6 +2,7 @@
 //! ones), one row per volume and mode, the worst ratio of each mode last.
 
 use anyhow::{Context, Result};
+use psao_net::cpu_time::fine_cpu_seconds;
 use psao_volume::render::{self, DenseGrid};
 use psao_volume::{
     BrickFormat, Camera, GridClass, Image, Procedural, RenderMode, RenderSettings, SparseGrid,
@@ -36,18 +37,6 @@ struct Pair {
     images: Vec<Image>,
 }
 
-/// CPU seconds used so far by all threads of this process, from the per-thread scheduler
-/// statistics (`/proc/self/task/*/schedstat`, nanoseconds; `/proc/self/stat` counts 10 ms
-/// ticks, too coarse for renders of tens of milliseconds). `None` where it is not available.
-fn cpu_seconds() -> Option<f64> {
-    let mut ns = 0u64;
-    for task in std::fs::read_dir("/proc/self/task").ok()? {
-        let stat = std::fs::read_to_string(task.ok()?.path().join("schedstat")).ok()?;
-        ns += stat.split_whitespace().next()?.parse::<u64>().ok()?;
-    }
-    Some(ns as f64 * 1e-9)
-}
-
 type Job<'a> = Box<dyn Fn() -> Result<Image> + 'a>;
 
 fn race(reps: u32, jobs: [Job; 2]) -> Result<Pair> {
@@ -60,11 +49,11 @@ fn race(reps: u32, jobs: [Job; 2]) -> Result<Pair> {
         // Alternate which renderer goes first, so a load change hits both alike.
         let order = if rep % 2 == 0 { [0, 1] } else { [1, 0] };
         for k in order {
-            let (t, c) = (Instant::now(), cpu_seconds());
+            let (t, c) = (Instant::now(), fine_cpu_seconds());
             let img = jobs[k]()?;
             p.wall[k] = p.wall[k].min(t.elapsed().as_secs_f64());
             // A thread that ended meanwhile takes its time along: no figure then.
-            if let (Some(a), Some(b)) = (c, cpu_seconds()) {
+            if let (Some(a), Some(b)) = (c, fine_cpu_seconds()) {
                 if b >= a {
                     p.cpu[k] = p.cpu[k].min(b - a);
                 }
