@@ -26,6 +26,10 @@ pub const RECORD_FRAMES: i64 = 1024;
 const SNAPSHOT_FRAMES: i64 = 2;
 /// How often a trace node refreshes its leases and looks for partitions without one.
 pub const LEASE_CHECK: Duration = Duration::from_millis(500);
+/// Growth of the delay between attempts to reconnect to the NATS server, per attempt.
+const RECONNECT_DELAY_STEP: Duration = Duration::from_millis(25);
+/// Longest delay between attempts to reconnect (well under [`LEASE_TTL`]).
+const RECONNECT_DELAY_MAX: Duration = Duration::from_millis(250);
 
 /// Connects to the NATS server at `url`. Clients reconnect by themselves after a restart;
 /// `connected` is notified at every (re)connection, for what the NATS server may have
@@ -33,6 +37,12 @@ pub const LEASE_CHECK: Duration = Duration::from_millis(500);
 async fn connect(url: &str, connected: Arc<Notify>) -> Result<async_nats::Client, NetError> {
     async_nats::ConnectOptions::new()
         .connection_timeout(Duration::from_secs(5))
+        // Reconnect within RECONNECT_DELAY_MAX of the server's return (the client's default
+        // backoff grows to 4 s): a node that lags behind the others' reconnection by more than
+        // LEASE_TTL would have its partitions adopted although it is alive.
+        .reconnect_delay_callback(|attempts| {
+            (RECONNECT_DELAY_STEP * attempts.min(10) as u32).min(RECONNECT_DELAY_MAX)
+        })
         .event_callback(move |event| {
             let connected = connected.clone();
             async move {
