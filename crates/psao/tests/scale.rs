@@ -185,6 +185,42 @@ fn finished(child: Child) {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
+/// The final state hashes of `viewers` lockstep views of `psao serve` alone (files `s{i}.json`
+/// in `dir`), each following `frames` frames of `path` with `view_args`.
+fn serve_alone(
+    dir: &Path,
+    scene: &str,
+    path: &str,
+    viewers: usize,
+    frames: u32,
+    view_args: &[&str],
+) -> Vec<String> {
+    let clients = viewers.to_string();
+    let (mut serve, line) = start(
+        "serve",
+        scene,
+        &[
+            "--listen",
+            "127.0.0.1:0",
+            "--lockstep",
+            "--wait-clients",
+            &clients,
+            "--once",
+        ],
+    );
+    let at = addr(&line);
+    let files: Vec<PathBuf> = (0..viewers)
+        .map(|i| dir.join(format!("s{i}.json")))
+        .collect();
+    let views: Vec<Child> = files
+        .iter()
+        .map(|f| view_with(&at, scene, path, frames, f, view_args))
+        .collect();
+    views.into_iter().for_each(finished);
+    serve.wait(20);
+    view_hashes(&files)
+}
+
 /// Every view's final state hash, after checking it matched the server's all along.
 fn view_hashes(files: &[PathBuf]) -> Vec<String> {
     files
@@ -214,28 +250,7 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
     let out = |n: &str| dir.path().join(n);
 
     // psao serve alone, four lockstep viewers.
-    let (serve, line) = start(
-        "serve",
-        &scene,
-        &[
-            "--listen",
-            "127.0.0.1:0",
-            "--lockstep",
-            "--wait-clients",
-            "4",
-            "--once",
-        ],
-    );
-    let at = addr(&line);
-    let files: Vec<PathBuf> = (0..4).map(|i| out(&format!("s{i}.json"))).collect();
-    let views: Vec<Child> = files
-        .iter()
-        .map(|f| view(&at, &scene, &path, FRAMES, f))
-        .collect();
-    views.into_iter().for_each(finished);
-    let mut serve = serve;
-    serve.wait(20);
-    let alone = view_hashes(&files);
+    let alone = serve_alone(dir.path(), &scene, &path, 4, FRAMES, &[]);
 
     // Two trace nodes, two edges with two viewers each.
     let nodes: Vec<Proc> = (0..2)
@@ -406,28 +421,7 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
     const STEPS: u32 = 60;
     let slow = ["--latency-ms", "30"];
 
-    let (serve, line) = start(
-        "serve",
-        &scene,
-        &[
-            "--listen",
-            "127.0.0.1:0",
-            "--lockstep",
-            "--wait-clients",
-            "2",
-            "--once",
-        ],
-    );
-    let at = addr(&line);
-    let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("s{i}.json"))).collect();
-    let views: Vec<Child> = files
-        .iter()
-        .map(|f| view_with(&at, &scene, &path, STEPS, f, &slow))
-        .collect();
-    views.into_iter().for_each(finished);
-    let mut serve = serve;
-    serve.wait(20);
-    let alone = view_hashes(&files);
+    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &slow);
 
     let nodes: Vec<Proc> = (0..2)
         .map(|k| {
@@ -525,28 +519,7 @@ fn an_animated_scene_replicates_like_one_serve() {
     let out = |n: &str| dir.path().join(n);
     const STEPS: u32 = 24;
 
-    let (serve, line) = start(
-        "serve",
-        &scene,
-        &[
-            "--listen",
-            "127.0.0.1:0",
-            "--lockstep",
-            "--wait-clients",
-            "2",
-            "--once",
-        ],
-    );
-    let at = addr(&line);
-    let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("s{i}.json"))).collect();
-    let views: Vec<Child> = files
-        .iter()
-        .map(|f| view(&at, &scene, &path, STEPS, f))
-        .collect();
-    views.into_iter().for_each(finished);
-    let mut serve = serve;
-    serve.wait(20);
-    let alone = view_hashes(&files);
+    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[]);
 
     let nodes: Vec<Proc> = (0..2)
         .map(|k| {
