@@ -203,34 +203,7 @@ fn serve_and_view_with_corrections_end_in_the_same_state_as_run() {
     assert!(run_out.join("corrected_00011.png").is_file());
 
     // Over a connection, lockstep.
-    let mut server = Child(
-        std::process::Command::new(common::BIN)
-            .args([
-                "--log",
-                "warn",
-                "serve",
-                "--scene",
-                scene,
-                "--listen",
-                "127.0.0.1:0",
-            ])
-            .args(SPLIT_SERVER)
-            .args(["--hz", "30", "--lockstep", "--once"])
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let mut line = String::new();
-    std::io::BufRead::read_line(
-        &mut std::io::BufReader::new(server.0.stdout.take().unwrap()),
-        &mut line,
-    )
-    .unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on ")
-        .unwrap()
-        .to_string();
+    let (mut server, addr) = start_server(scene, &["--hz", "30", "--lockstep", "--once"]);
     let view_json = fx.path().join("view.json");
     let o = psao(
         &[

@@ -221,6 +221,24 @@ fn serve_alone(
     view_hashes(&files)
 }
 
+/// Trace nodes for partitions 0/2 and 1/2, each waiting for two lockstep edges.
+fn lockstep_trace_nodes(url: &str, scene: &str) -> Vec<Proc> {
+    (0..2)
+        .map(|k| {
+            let partition = format!("{k}/2");
+            let args = [
+                "--nats",
+                url,
+                "--partition",
+                &partition,
+                "--lockstep-edges",
+                "2",
+            ];
+            start("trace-node", scene, &args).0
+        })
+        .collect()
+}
+
 /// Every view's final state hash, after checking it matched the server's all along.
 fn view_hashes(files: &[PathBuf]) -> Vec<String> {
     files
@@ -423,15 +441,7 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
 
     let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &slow);
 
-    let nodes: Vec<Proc> = (0..2)
-        .map(|k| {
-            let partition = format!("{k}/2");
-            let args = ["--nats", &url, "--partition", &partition];
-            let mut args = args.to_vec();
-            args.extend(["--lockstep-edges", "2"]);
-            start("trace-node", &scene, &args).0
-        })
-        .collect();
+    let nodes = lockstep_trace_nodes(&url, &scene);
     let edges: Vec<(Proc, String)> = (0..2)
         .map(|e| {
             let json = out(&format!("e{e}.json"));
@@ -521,15 +531,7 @@ fn an_animated_scene_replicates_like_one_serve() {
 
     let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[]);
 
-    let nodes: Vec<Proc> = (0..2)
-        .map(|k| {
-            let partition = format!("{k}/2");
-            let args = ["--nats", &url, "--partition", &partition];
-            let mut args = args.to_vec();
-            args.extend(["--lockstep-edges", "2"]);
-            start("trace-node", &scene, &args).0
-        })
-        .collect();
+    let nodes = lockstep_trace_nodes(&url, &scene);
     let edges: Vec<(Proc, String)> = (0..2)
         .map(|e| {
             let id = format!("e{e}");
