@@ -34,6 +34,7 @@ pub use layout::{
     MAX_DIM, TABLE_OVERSIZE,
 };
 pub use linear_fit::LinearFit;
+pub use paged::Paged;
 pub use reconstruct::{
     reconstruct_ao, ReconstructParams, DEFAULT_DIRECTION_THRESHOLD, DEFAULT_INTERPOLATION_FACTOR,
     DEFAULT_LINEAR_RIDGE, DEFAULT_NORMAL_EXPONENT, DEFAULT_NORMAL_THRESHOLD,

@@ -15,7 +15,7 @@ const PAGE: usize = 64;
 /// A vector of `len` elements stored in pages of [`PAGE`] elements, each allocated when an
 /// element in it is first written; absent pages read as `T::default()`.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct Paged<T> {
+pub struct Paged<T> {
     pages: Vec<Option<Box<[T; PAGE]>>>,
     len: usize,
 }
@@ -32,6 +32,11 @@ impl<T: Copy + Default> Paged<T> {
     /// Logical length.
     pub fn len(&self) -> usize {
         self.len
+    }
+
+    /// True when the logical length is 0.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
     }
 
     /// The element at `i` if its page exists (`None` when absent or past the end).

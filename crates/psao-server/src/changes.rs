@@ -4,6 +4,19 @@
 use psao_points::vec_bytes;
 use std::collections::VecDeque;
 
+/// A frame number as kept per published bucket and cell: exact below `u32::MAX`, saturated
+/// from there on (2³² − 1 frames are over four years at 30 Hz).
+pub(crate) fn stamp(frame: u64) -> u32 {
+    u32::try_from(frame).unwrap_or(u32::MAX)
+}
+
+/// Whether an entry stamped `stamp` may have changed after frame `since`: exact for
+/// unsaturated stamps, and always true for a saturated one (resending an unchanged entry
+/// costs bytes, never correctness).
+pub(crate) fn changed_after(stamp: u32, since: u64) -> bool {
+    stamp == u32::MAX || u64::from(stamp) > since
+}
+
 /// The buckets and cells stamped in one server frame.
 struct FrameChanges {
     frame: u64,
@@ -92,6 +105,23 @@ impl ChangeLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stamps_are_exact_below_saturation_and_conservative_after() {
+        for frame in [0, 1, 77, u64::from(u32::MAX) - 1] {
+            let t = stamp(frame);
+            assert_eq!(u64::from(t), frame);
+            assert!(changed_after(t, frame.wrapping_sub(1)) || frame == 0);
+            assert!(!changed_after(t, frame));
+        }
+        let late = u64::from(u32::MAX) + 5;
+        assert_eq!(stamp(late), u32::MAX);
+        assert!(changed_after(stamp(late), late - 1));
+        assert!(
+            changed_after(stamp(late), late),
+            "saturated stamps always resend"
+        );
+    }
 
     #[test]
     fn unions_recent_frames_and_refuses_forgotten_ones() {

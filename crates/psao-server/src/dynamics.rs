@@ -426,7 +426,7 @@ fn follow_triangles(inst: &mut InstanceState, skin: &SkinBinding, geo: &SkinnedG
         if slot != NONE {
             changed += 1;
         }
-        inst.rehome(i, position, normal);
+        inst.rehome(i, position);
     }
     changed
 }
@@ -528,7 +528,7 @@ impl Moves<'_> {
         }
         // The slots of the cells any box overlaps, each once (enumerated by cell range, or by
         // slot when some box spans more cells than there are slots).
-        let slots = inst.members.len();
+        let slots = inst.alloc.slot_count();
         let ranges: Vec<(UVec3, UVec3)> = boxes
             .iter()
             .map(|b| cell_range(layout, b.cells.0, b.cells.1))
@@ -663,7 +663,7 @@ fn push_members(
     motion_at: &impl Fn(Vec3) -> Option<f32>,
     out: &mut Vec<(u32, f32)>,
 ) {
-    for &m in &inst.members[s as usize] {
+    for &m in inst.alloc.members(s) {
         if m != NONE {
             if let Some(motion) = motion_at(inst.points.position[m as usize]) {
                 out.push((m, motion));

@@ -3,17 +3,17 @@
 
 use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use psao_points::{
-    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, PointLoc, CELL_POINTS,
-    DEFAULT_INTERPOLATION_FACTOR,
+    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, DEFAULT_INTERPOLATION_FACTOR,
 };
 
+use crate::alloc::CellAlloc;
 use crate::blocks::CullBlocks;
-use crate::changes::ChangeLog;
+use crate::changes::{stamp, ChangeLog};
 use crate::summary::BlockSummaries;
 use crate::ServerError;
 
 /// Marks "no point" in a member list and "not stored" in a point's slot.
-pub(crate) const NONE: u32 = u32::MAX;
+pub(crate) use crate::alloc::NONE;
 
 /// Server state of one mesh instance.
 pub(crate) struct InstanceState {
@@ -29,17 +29,15 @@ pub(crate) struct InstanceState {
     /// Poisson radius, local units.
     pub poisson_radius: f32,
     /// Where every stored point lives (all points, whether published or not).
-    pub alloc: InstanceGrid,
+    pub alloc: CellAlloc,
     /// The published grid: what clients mirror.
     pub grid: InstanceGrid,
-    /// Per allocation slot: the cell id and the points stored there ([`NONE`] = empty).
-    pub slot_ids: Vec<u64>,
-    pub members: Vec<[u32; CELL_POINTS]>,
     /// Points (structure of arrays).
     pub points: Points,
     /// Server frame at which each published bucket / cell last changed (0 = never).
-    pub bucket_stamp: Vec<u64>,
-    pub cell_stamp: Vec<u64>,
+    /// (Saturated, see [`crate::changes::stamp`].)
+    pub bucket_stamp: Vec<u32>,
+    pub cell_stamp: Vec<u32>,
     /// Largest stamp of this instance.
     pub max_stamp: u64,
     /// The buckets and cells stamped in recent frames.
@@ -129,13 +127,11 @@ impl InstanceState {
                 points.area_local,
             )?;
         }
-        let (alloc, locs) = InstanceGrid::build(
-            layout,
-            points.points.iter().map(|p| (p.position, p.normal, 1.0)),
-        );
+        let positions: Vec<Vec3> = points.points.iter().map(|s| s.position).collect();
+        let (alloc, locs) = CellAlloc::build(layout, &positions);
         let n = points.points.len();
         let mut p = Points {
-            position: points.points.iter().map(|s| s.position).collect(),
+            position: positions,
             normal: points.points.iter().map(|s| s.normal).collect(),
             slot: vec![NONE; n],
             sum: vec![0.0; n],
@@ -143,15 +139,9 @@ impl InstanceState {
             published: vec![0; n],
             published_here: Bits::new(n),
         };
-        let mut members = vec![[NONE; CELL_POINTS]; alloc.slot_count()];
-        let mut slot_ids = vec![0; alloc.slot_count()];
         for (i, loc) in locs.iter().enumerate() {
             if let Some(loc) = loc {
                 p.slot[i] = loc.slot;
-                members[loc.slot as usize][usize::from(loc.index)] = i as u32;
-                if let Some(c) = layout.cell_coord(p.position[i]) {
-                    slot_ids[loc.slot as usize] = layout.cell_id(c);
-                }
             }
         }
         let blocks = CullBlocks::new(&p.position, index, seed);
@@ -166,8 +156,6 @@ impl InstanceState {
             bucket_stamp: vec![0; layout.bucket_count as usize],
             cell_stamp: vec![0; alloc.slot_count()],
             alloc,
-            slot_ids,
-            members,
             points: p,
             max_stamp: 0,
             changes: ChangeLog::default(),
@@ -202,7 +190,7 @@ impl InstanceState {
     pub fn publish_cell(&mut self, slot: u32, cell: Cell, frame: u64) {
         let stored = self.grid.set_cell(slot, cell);
         debug_assert!(stored.is_ok(), "allocation slots are valid grid slots");
-        self.cell_stamp[slot as usize] = frame;
+        self.cell_stamp[slot as usize] = stamp(frame);
         self.max_stamp = frame;
         self.changes.cell(frame, slot);
     }
@@ -211,7 +199,7 @@ impl InstanceState {
     pub fn publish_bucket(&mut self, b: usize, bucket: Bucket, frame: u64) {
         let stored = self.grid.set_bucket(b, bucket);
         debug_assert!(stored.is_ok(), "allocation buckets are valid grid buckets");
-        self.bucket_stamp[b] = frame;
+        self.bucket_stamp[b] = stamp(frame);
         self.max_stamp = frame;
         self.changes.bucket(frame, b as u32);
     }
@@ -232,42 +220,22 @@ impl InstanceState {
     /// contains it: it leaves its old cell (freed when empty; the old cell and its bucket are
     /// queued for refreshing, and a publication there is withdrawn) and is inserted into the
     /// new one (allocated if needed). Overflow or leaving the grid leaves it unstored.
-    pub fn rehome(&mut self, i: usize, position: Vec3, normal: Vec3) {
+    pub fn rehome(&mut self, i: usize, position: Vec3) {
         let old = self.points.slot[i];
         if old != NONE {
-            if let Some(k) = self.members[old as usize]
-                .iter()
-                .position(|&m| m == i as u32)
-            {
-                let loc = PointLoc {
-                    slot: old,
-                    index: k as u8,
-                };
-                let removed = self.alloc.remove(loc);
-                debug_assert!(removed.is_ok(), "members mirror the allocation grid");
-                self.members[old as usize][k] = NONE;
-            }
+            self.alloc.remove(i as u32, old);
             self.pending_cells.push(old);
-            let layout = *self.layout();
-            self.pending_buckets
-                .push(layout.bucket_of(self.slot_ids[old as usize]));
+            self.pending_buckets.push(self.slot_bucket(old));
             self.points.published_here.set(i, false);
             self.points.slot[i] = NONE;
         }
-        let Ok(loc) = self.alloc.insert(position, normal, 1.0) else {
+        let Some(loc) = self.alloc.insert(i as u32, position) else {
             return;
         };
         let cells = self.alloc.slot_count();
-        if self.members.len() < cells {
-            self.members.resize(cells, [NONE; CELL_POINTS]);
-            self.slot_ids.resize(cells, 0);
+        if self.cell_stamp.len() < cells {
             self.cell_stamp.resize(cells, 0);
         }
-        let layout = *self.layout();
-        if let Some(c) = layout.cell_coord(position) {
-            self.slot_ids[loc.slot as usize] = layout.cell_id(c);
-        }
-        self.members[loc.slot as usize][usize::from(loc.index)] = i as u32;
         self.points.slot[i] = loc.slot;
     }
 
@@ -278,8 +246,13 @@ impl InstanceState {
 
     /// Cell coordinate of allocation slot `slot`.
     pub fn slot_coord(&self, slot: u32) -> Option<UVec3> {
-        let id = *self.slot_ids.get(slot as usize)?;
-        self.layout().coord_of_id(id)
+        self.layout().coord_of_id(self.alloc.slot_id(slot)?)
+    }
+
+    /// The hash bucket of the cell in allocation slot `slot`.
+    pub fn slot_bucket(&self, slot: u32) -> usize {
+        self.layout()
+            .bucket_of(self.alloc.slot_id(slot).unwrap_or_default())
     }
 
     /// World position and unit normal of point `i`.
@@ -293,7 +266,9 @@ impl InstanceState {
     /// The published content of slot `slot`: its members' published records, compacted.
     pub fn published_cell(&self, slot: u32) -> Cell {
         let mut cell = Cell::default();
-        let records = self.members[slot as usize]
+        let records = self
+            .alloc
+            .members(slot)
             .iter()
             .filter(|&&m| m != NONE && self.points.published_here.get(m as usize))
             .map(|&m| self.points.published[m as usize]);

@@ -6,6 +6,7 @@
 //! each server frame [`Server::step_at`] with the clients' views and the scene time → [`Server::update_for`] per
 //! client, encoded with a [`psao_delta::Codec`]. Pure computation: no file or network I/O.
 
+mod alloc;
 mod blocks;
 mod bury;
 mod changes;

@@ -35,10 +35,7 @@ pub(crate) fn memory_parts(instances: &[InstanceState], skins: u64) -> Vec<Memor
                     + i.points.published_here.heap_bytes()
             }),
         ),
-        part(
-            "allocation grid",
-            sum(&|i| i.alloc.heap_bytes() + vec_bytes(&i.members) + vec_bytes(&i.slot_ids)),
-        ),
+        part("allocation grid", sum(&|i| i.alloc.heap_bytes())),
         part("published grid", sum(&|i| i.grid.heap_bytes())),
         part(
             "change stamps and logs",

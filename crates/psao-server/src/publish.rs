@@ -54,7 +54,6 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     }
     dirty_cells.par_sort_unstable();
     dirty_cells.dedup();
-    let layout = *inst.layout();
     let mut dirty_buckets = std::mem::take(&mut inst.pending_buckets);
     // The new contents are read in parallel, then stored where they changed.
     let view: &InstanceState = inst;
@@ -66,7 +65,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
         if *inst.grid.cell(slot) != cell {
             inst.publish_cell(slot, cell, frame);
         }
-        dirty_buckets.push(layout.bucket_of(inst.slot_ids[slot as usize]));
+        dirty_buckets.push(inst.slot_bucket(slot));
     }
     dirty_buckets.par_sort_unstable();
     dirty_buckets.dedup();
@@ -170,17 +169,18 @@ mod tests {
         let mut s = state();
         let t = Thresholds::default();
         // Publish the second member of a cell with at least two, then the first.
-        let slot = (0..s.members.len())
-            .find(|&c| s.members[c][1] != NONE)
+        let slot = (0..s.alloc.slot_count())
+            .find(|&c| s.alloc.members(c as u32)[1] != NONE)
             .unwrap();
-        let [a, b] = [s.members[slot][0], s.members[slot][1]].map(|m| m as usize);
+        let members = s.alloc.members(slot as u32);
+        let [a, b] = [members[0], members[1]].map(|m| m as usize);
         for &m in &[a, b] {
             s.points.count[m] = 4;
             s.points.sum[m] = 2.0;
         }
         let bits_b = republish(&s, b, &t).unwrap();
         apply(&mut s, &[(b as u32, bits_b)], 1);
-        let bucket = s.layout().bucket_of(s.slot_ids[slot]);
+        let bucket = s.slot_bucket(slot as u32);
         assert_eq!(s.grid.cell(slot as u32).points[..2], [bits_b, 0]);
         assert_eq!(s.grid.bucket(bucket).len(), 1);
         assert_eq!((s.cell_stamp[slot], s.bucket_stamp[bucket]), (1, 1));

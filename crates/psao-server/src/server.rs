@@ -12,6 +12,7 @@ use psao_trace::ao::Medium;
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
 
+use crate::changes::changed_after;
 use crate::clients::Clients;
 use crate::dynamics::{Dynamics, Restarted};
 use crate::instance::{InstanceState, NONE};
@@ -641,7 +642,7 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
             if snapshot {
                 !bucket.is_empty()
             } else {
-                inst.bucket_stamp[b] > since
+                changed_after(inst.bucket_stamp[b], since)
             }
         })
         .map(|(b, bucket)| (b as u32, bucket))
@@ -653,7 +654,9 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
             if snapshot {
                 cell.points[0] != 0
             } else {
-                inst.cell_stamp.get(s).is_some_and(|&t| t > since)
+                inst.cell_stamp
+                    .get(s)
+                    .is_some_and(|&t| changed_after(t, since))
             }
         })
         .map(|(s, cell)| (s as u32, *cell))
