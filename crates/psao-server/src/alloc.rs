@@ -23,6 +23,61 @@ const NEXT_MASK: u32 = (1 << NEXT_BITS) - 1;
 /// Most slots an allocation can have (every slot must fit in [`NEXT_BITS`]).
 const MAX_SLOTS: usize = NEXT_MASK as usize - 1;
 
+/// Cell ids per slot: 32 bits each when every id of the layout fits (the usual case).
+enum SlotIds {
+    Narrow(Vec<u32>),
+    Wide(Vec<u64>),
+}
+
+impl SlotIds {
+    /// Empty, narrow when every cell id of `layout` fits in 32 bits.
+    fn new(layout: &GridLayout) -> Self {
+        let last = layout.cell_id(layout.dims - UVec3::ONE);
+        if u32::try_from(last).is_ok() {
+            Self::Narrow(Vec::new())
+        } else {
+            Self::Wide(Vec::new())
+        }
+    }
+
+    #[inline]
+    fn get(&self, slot: usize) -> Option<u64> {
+        match self {
+            Self::Narrow(v) => v.get(slot).map(|&id| u64::from(id)),
+            Self::Wide(v) => v.get(slot).copied(),
+        }
+    }
+
+    /// Set the id of `slot` (`id` is an id of the layout the ids were made for).
+    fn set(&mut self, slot: usize, id: u64) {
+        match self {
+            Self::Narrow(v) => v[slot] = id as u32,
+            Self::Wide(v) => v[slot] = id,
+        }
+    }
+
+    fn push(&mut self) {
+        match self {
+            Self::Narrow(v) => v.push(0),
+            Self::Wide(v) => v.push(0),
+        }
+    }
+
+    fn reserve_exact(&mut self, n: usize) {
+        match self {
+            Self::Narrow(v) => v.reserve_exact(n),
+            Self::Wide(v) => v.reserve_exact(n),
+        }
+    }
+
+    fn heap_bytes(&self) -> u64 {
+        match self {
+            Self::Narrow(v) => vec_bytes(v),
+            Self::Wide(v) => vec_bytes(v),
+        }
+    }
+}
+
 /// The allocation of one instance's points to grid cells.
 pub(crate) struct CellAlloc {
     layout: GridLayout,
@@ -35,7 +90,7 @@ pub(crate) struct CellAlloc {
     /// Per slot: the points stored there ([`NONE`] = free index).
     members: Vec<[u32; CELL_POINTS]>,
     /// Per slot: the id of the cell allocated there (stale once the slot is freed).
-    ids: Vec<u64>,
+    ids: SlotIds,
     /// Free slots, reused last-freed first.
     free: Vec<u32>,
     /// Stored points.
@@ -55,7 +110,7 @@ impl CellAlloc {
             layout,
             links: Vec::new(),
             members: Vec::new(),
-            ids: Vec::new(),
+            ids: SlotIds::new(&layout),
             free: Vec::new(),
             stored: 0,
             overflow_cells: 0,
@@ -106,7 +161,7 @@ impl CellAlloc {
         self.heads.heap_bytes()
             + vec_bytes(&self.links)
             + vec_bytes(&self.members)
-            + vec_bytes(&self.ids)
+            + self.ids.heap_bytes()
             + vec_bytes(&self.free)
     }
 
@@ -124,7 +179,7 @@ impl CellAlloc {
     /// Id of the cell in `slot` (of the cell last there when the slot is free).
     #[inline]
     pub fn slot_id(&self, slot: u32) -> Option<u64> {
-        self.ids.get(slot as usize).copied()
+        self.ids.get(slot as usize)
     }
 
     /// The slots of bucket `b`, in position order.
@@ -155,11 +210,17 @@ impl CellAlloc {
         }
     }
 
+    /// Id of the cell in allocated `slot`.
+    #[inline]
+    fn id(&self, slot: u32) -> u64 {
+        self.ids.get(slot as usize).unwrap_or_default()
+    }
+
     /// Bucket `b` as allocated.
     pub fn bucket(&self, b: usize) -> Bucket {
         let mut out = Bucket::default();
         for s in self.chain(b) {
-            out.entries[self.position(s)] = BucketEntry::new(self.ids[s as usize], s);
+            out.entries[self.position(s)] = BucketEntry::new(self.id(s), s);
         }
         out
     }
@@ -169,7 +230,7 @@ impl CellAlloc {
     pub fn find_cell(&self, coord: UVec3) -> Option<u32> {
         let id = self.layout.cell_id(coord);
         self.chain(self.layout.bucket_of(id))
-            .find(|&s| self.ids[s as usize] == id)
+            .find(|&s| self.id(s) == id)
     }
 
     /// Number of stored points.
@@ -229,7 +290,7 @@ impl CellAlloc {
         cell[k] = NONE;
         self.stored -= 1;
         if cell.iter().all(|&m| m == NONE) {
-            let b = self.layout.bucket_of(self.ids[slot as usize]);
+            let b = self.layout.bucket_of(self.id(slot));
             let before = self.chain(b).take_while(|&s| s != slot).last();
             let after = (self.links[slot as usize] & NEXT_MASK).checked_sub(1);
             self.relink(b, before, after);
@@ -259,7 +320,7 @@ impl CellAlloc {
             Some(s) => s,
             None if self.members.len() < MAX_SLOTS => {
                 self.members.push([NONE; CELL_POINTS]);
-                self.ids.push(0);
+                self.ids.push();
                 self.links.push(0);
                 self.members.len() as u32 - 1
             }
@@ -272,7 +333,7 @@ impl CellAlloc {
         self.links[slot as usize] = ((position as u32) << NEXT_BITS) | after;
         self.relink(b, before, Some(slot));
         self.members[slot as usize] = [NONE; CELL_POINTS];
-        self.ids[slot as usize] = id;
+        self.ids.set(slot as usize, id);
         Some(slot)
     }
 }
@@ -337,5 +398,19 @@ mod tests {
                 assert_eq!(alloc.slot_id(loc.slot), Some(layout.cell_id(c)));
             }
         }
+    }
+
+    #[test]
+    fn cell_ids_past_32_bits_are_kept_whole() {
+        let layout = GridLayout::new((Vec3::ZERO, Vec3::splat(4000.0)), 0.2, 1.0, 10.0).unwrap();
+        let far = Vec3::new(3999.5, 3999.5, 3999.5);
+        assert!(layout.cell_id(layout.cell_coord(far).unwrap()) > u64::from(u32::MAX));
+        let (mut alloc, locs) = CellAlloc::build(layout, &[Vec3::ZERO, far]);
+        assert!(matches!(alloc.ids, SlotIds::Wide(_)));
+        let loc = alloc.insert(2, far).unwrap();
+        assert_eq!(loc.slot, locs[1].unwrap().slot);
+        let c = layout.cell_coord(far).unwrap();
+        assert_eq!(alloc.slot_id(loc.slot), Some(layout.cell_id(c)));
+        assert_eq!(alloc.find_cell(c), Some(loc.slot));
     }
 }

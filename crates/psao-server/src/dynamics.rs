@@ -416,17 +416,17 @@ fn follow_triangles(inst: &mut InstanceState, skin: &SkinBinding, geo: &SkinnedG
         } else {
             normal
         };
+        let slot = inst.slot_of(i);
         inst.points.position[i] = position;
         inst.points.normal[i] = normal;
-        let slot = inst.points.slot[i];
         let coord = layout.cell_coord(position);
-        if slot != NONE && coord.is_some() && coord == inst.slot_coord(slot) {
-            continue;
-        }
-        if slot != NONE {
+        if let Some(s) = slot {
+            if coord.is_some() && coord == inst.slot_coord(s) {
+                continue;
+            }
             changed += 1;
         }
-        inst.rehome(i, position);
+        inst.rehome(i, slot, position);
     }
     changed
 }

@@ -12,7 +12,7 @@ use crate::changes::{stamp, ChangeLog};
 use crate::summary::BlockSummaries;
 use crate::ServerError;
 
-/// Marks "no point" in a member list and "not stored" in a point's slot.
+/// Marks "no point" in a member list.
 pub(crate) use crate::alloc::NONE;
 
 /// Server state of one mesh instance.
@@ -58,8 +58,9 @@ pub(crate) struct Points {
     /// Local position and unit normal.
     pub position: Vec<Vec3>,
     pub normal: Vec<Vec3>,
-    /// Allocation slot, or [`NONE`] when the point overflowed and is not stored.
-    pub slot: Vec<u32>,
+    /// Whether the point is stored in the allocation (in the cell containing its position,
+    /// see [`InstanceState::slot_of`]); clear when it overflowed.
+    pub stored: Bits,
     /// Sum of AO samples and their number.
     pub sum: Vec<f32>,
     pub count: Vec<u32>,
@@ -77,6 +78,15 @@ impl Bits {
     /// `n` clear bits.
     pub fn new(n: usize) -> Self {
         Self(vec![0; n.div_ceil(64)])
+    }
+
+    /// `n` bits, bit `i` set to `f(i)`.
+    pub fn from_fn(n: usize, f: impl Fn(usize) -> bool) -> Self {
+        let mut bits = Self::new(n);
+        for i in (0..n).filter(|&i| f(i)) {
+            bits.set(i, true);
+        }
+        bits
     }
 
     /// Bit `i`.
@@ -130,20 +140,15 @@ impl InstanceState {
         let positions: Vec<Vec3> = points.points.iter().map(|s| s.position).collect();
         let (alloc, locs) = CellAlloc::build(layout, &positions);
         let n = points.points.len();
-        let mut p = Points {
+        let p = Points {
             position: positions,
             normal: points.points.iter().map(|s| s.normal).collect(),
-            slot: vec![NONE; n],
+            stored: Bits::from_fn(n, |i| locs[i].is_some()),
             sum: vec![0.0; n],
             count: vec![0; n],
             published: vec![0; n],
             published_here: Bits::new(n),
         };
-        for (i, loc) in locs.iter().enumerate() {
-            if let Some(loc) = loc {
-                p.slot[i] = loc.slot;
-            }
-        }
         let blocks = CullBlocks::new(&p.position, index, seed);
         let summaries = BlockSummaries::new(&blocks, &p, max_samples);
         let mut state = Self {
@@ -216,27 +221,41 @@ impl InstanceState {
         self.world_bounds = world_bounds(&self.points.position, &self.transform);
     }
 
-    /// Store point `i` (already at its new local `position`) in the allocation cell that
-    /// contains it: it leaves its old cell (freed when empty; the old cell and its bucket are
-    /// queued for refreshing, and a publication there is withdrawn) and is inserted into the
-    /// new one (allocated if needed). Overflow or leaving the grid leaves it unstored.
-    pub fn rehome(&mut self, i: usize, position: Vec3) {
-        let old = self.points.slot[i];
-        if old != NONE {
+    /// Allocation slot of point `i`: the cell containing its position, when it is stored.
+    #[inline]
+    pub fn slot_of(&self, i: usize) -> Option<u32> {
+        if !self.points.stored.get(i) {
+            return None;
+        }
+        let slot = self
+            .layout()
+            .cell_coord(self.points.position[i])
+            .and_then(|c| self.alloc.find_cell(c));
+        debug_assert!(
+            slot.is_some_and(|s| self.alloc.members(s).contains(&(i as u32))),
+            "a stored point lives in the cell of its position"
+        );
+        slot
+    }
+
+    /// Store point `i` (already at its new local `position`; `old` is the slot it was stored
+    /// in at its previous position) in the allocation cell that contains it: it leaves its
+    /// old cell (freed when empty; the old cell and its bucket are queued for refreshing, and
+    /// a publication there is withdrawn) and is inserted into the new one (allocated if
+    /// needed). Overflow or leaving the grid leaves it unstored.
+    pub fn rehome(&mut self, i: usize, old: Option<u32>, position: Vec3) {
+        if let Some(old) = old {
             self.alloc.remove(i as u32, old);
             self.pending_cells.push(old);
             self.pending_buckets.push(self.slot_bucket(old));
             self.points.published_here.set(i, false);
-            self.points.slot[i] = NONE;
         }
-        let Some(loc) = self.alloc.insert(i as u32, position) else {
-            return;
-        };
+        let stored = self.alloc.insert(i as u32, position).is_some();
+        self.points.stored.set(i, stored);
         let cells = self.alloc.slot_count();
         if self.cell_stamp.len() < cells {
             self.cell_stamp.resize(cells, 0);
         }
-        self.points.slot[i] = loc.slot;
     }
 
     /// The grid layout.

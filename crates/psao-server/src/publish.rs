@@ -4,7 +4,7 @@ use psao_points::pack::{unpack_ao, unpack_normal, POSITION_STEPS};
 use psao_points::{Bucket, Cell};
 use rayon::prelude::*;
 
-use crate::instance::{InstanceState, NONE};
+use crate::instance::InstanceState;
 use crate::Thresholds;
 
 /// The record point `i` should be published with now, or `None` when what clients have is
@@ -14,10 +14,11 @@ use crate::Thresholds;
 /// restarted (invalidated, no samples yet) keeps its published AO.
 pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Option<u32> {
     let p = &inst.points;
-    let (slot, count, old) = (p.slot[i], p.count[i], p.published[i]);
-    if slot == NONE || (count == 0 && old == 0) {
+    let (count, old) = (p.count[i], p.published[i]);
+    if count == 0 && old == 0 {
         return None;
     }
+    let slot = inst.slot_of(i)?;
     let layout = inst.layout();
     let ao = if count > 0 {
         p.sum[i] / count as f32
@@ -46,11 +47,12 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
     let mut dirty_cells = std::mem::take(&mut inst.pending_cells);
     for &(i, bits) in updates {
         let i = i as usize;
+        // Only stored points are republished.
+        dirty_cells.extend(inst.slot_of(i));
         let p = &mut inst.points;
         // A point that changed cell had its flag cleared and its old cell queued (rehome).
         p.published_here.set(i, true);
         p.published[i] = bits;
-        dirty_cells.push(p.slot[i]);
     }
     dirty_cells.par_sort_unstable();
     dirty_cells.dedup();
@@ -84,6 +86,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::instance::NONE;
     use glam::{Affine3A, Quat, Vec3};
     use psao_points::{generate_instance_points, GenerateParams};
     use psao_scene::{Material, Mesh};
@@ -120,7 +123,7 @@ mod tests {
         (0..s.points.position.len())
             .find(|&i| {
                 let f = l.grid_coords(s.points.position[i]).x.fract();
-                s.points.slot[i] != NONE && (0.35..0.65).contains(&f)
+                s.points.stored.get(i) && (0.35..0.65).contains(&f)
             })
             .unwrap()
     }

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use crate::changes::changed_after;
 use crate::clients::Clients;
 use crate::dynamics::{Dynamics, Restarted};
-use crate::instance::{InstanceState, NONE};
+use crate::instance::InstanceState;
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select};
 use crate::StartPoints;
@@ -569,7 +569,7 @@ impl Server {
             Some(PointInfo {
                 position: p.position[i],
                 normal: p.normal[i],
-                stored: p.slot[i] != NONE,
+                stored: p.stored.get(i),
                 samples: p.count[i],
                 ao: (p.count[i] > 0).then(|| p.sum[i] / p.count[i] as f32),
                 published: (p.published[i] != 0).then_some(p.published[i]),
@@ -879,7 +879,7 @@ mod tests {
             let p = &inst.points;
             for i in 0..p.position.len() {
                 let w = inst.transform.transform_point3(p.position[i]);
-                if p.slot[i] == NONE || !frusta.iter().any(|f| f.contains(w, inst.slack)) {
+                if !p.stored.get(i) || !frusta.iter().any(|f| f.contains(w, inst.slack)) {
                     continue;
                 }
                 visible += 1;

@@ -8,7 +8,7 @@ use psao_points::vec_bytes;
 use rayon::prelude::*;
 
 use crate::blocks::{CullBlocks, BLOCK_POINTS};
-use crate::instance::{Points, NONE};
+use crate::instance::Points;
 
 /// The largest selection bin (shared by every count from [`COUNT_LEVELS`] on).
 pub(crate) const LAST_BIN: u16 = 0xFFFD;
@@ -100,7 +100,7 @@ impl BlockSummaries {
     /// The state point `i` should be summarised under.
     #[inline]
     fn state(&self, blocks: &CullBlocks, points: &Points, i: usize, k: usize) -> u16 {
-        if points.slot[i] == NONE {
+        if !points.stored.get(i) {
             UNSTORED
         } else if points.count[i] >= self.max_samples {
             CONVERGED
@@ -303,9 +303,7 @@ mod tests {
         Points {
             position,
             normal: vec![Vec3::Z; n],
-            slot: (0..n as u32)
-                .map(|i| if i % 7 == 3 { NONE } else { i })
-                .collect(),
+            stored: crate::instance::Bits::from_fn(n, |i| i % 7 != 3),
             sum: vec![0.0; n],
             count: (0..n as u64)
                 .map(|i| (hash64(i ^ 99) % 40) as u32)
@@ -321,13 +319,13 @@ mod tests {
             let range = blk.start as usize..blk.end as usize;
             let stored = range
                 .clone()
-                .filter(|&k| p.slot[blocks.order.at(k) as usize] != NONE)
+                .filter(|&k| p.stored.get(blocks.order.at(k) as usize))
                 .count();
             let mut expected: Vec<u32> = range
                 .clone()
                 .filter_map(|k| {
                     let i = blocks.order.at(k) as usize;
-                    (p.slot[i] != NONE && p.count[i] < max)
+                    (p.stored.get(i) && p.count[i] < max)
                         .then(|| entry(bin(p.count[i], blocks.tie(k)), k - range.start))
                 })
                 .collect();
@@ -368,7 +366,7 @@ mod tests {
                 match h % 29 {
                     0 | 1 => p.count[i] = (p.count[i] + 16).min(max),
                     2 => p.count[i] = 0,
-                    3 => p.slot[i] = if p.slot[i] == NONE { i as u32 } else { NONE },
+                    3 => p.stored.set(i, !p.stored.get(i)),
                     _ => continue,
                 }
                 changed.push(i as u32);

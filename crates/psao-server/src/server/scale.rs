@@ -7,7 +7,6 @@
 use psao_points::pack::unpack_ao;
 
 use super::Server;
-use crate::instance::NONE;
 use crate::partition::Owners;
 use crate::publish::apply;
 use crate::trace::{trace, Candidate, Traced};
@@ -201,7 +200,7 @@ impl Server {
                     chunks.push(Vec::new());
                 }
                 ordinal += 1;
-                if p.published[j] != 0 && p.slot[j] != NONE {
+                if p.published[j] != 0 && p.stored.get(j) {
                     chunks.last_mut().expect("pushed above").push(PointRecord {
                         instance: i as u32,
                         index: j as u32,
@@ -241,7 +240,11 @@ impl Server {
     pub fn validate_records(&self, records: &[PointRecord]) -> Result<(), ServerError> {
         self.check_records(records)?;
         for r in records {
-            if self.instances[r.instance as usize].points.slot[r.index as usize] == NONE {
+            if !self.instances[r.instance as usize]
+                .points
+                .stored
+                .get(r.index as usize)
+            {
                 return Err(ServerError::Records(format!(
                     "instance {} point {}: not stored in the grid",
                     r.instance, r.index
@@ -258,7 +261,7 @@ impl Server {
             let ok = self
                 .instances
                 .get(r.instance as usize)
-                .is_some_and(|inst| (r.index as usize) < inst.points.slot.len())
+                .is_some_and(|inst| (r.index as usize) < inst.points.position.len())
                 && r.bits != 0;
             if !ok {
                 return Err(ServerError::Records(format!(
