@@ -33,5 +33,5 @@ pub use error::ServerError;
 pub use frustum::{Frustum, View};
 pub use memory::MemoryPart;
 pub use partition::{Owners, Partition};
-pub use server::{PointInfo, PointRecord, Server, StepStats};
+pub use server::{PointInfo, PointRecord, PointState, Server, StepStats};
 pub use start_points::StartPoints;
