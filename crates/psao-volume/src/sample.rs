@@ -5,7 +5,7 @@
 //! once per tile of neighbouring rays. `f32` bricks are read in place.
 
 use crate::codec::BrickFormat;
-use crate::grid::{floor_ivec, voxel_index};
+use crate::grid::{floor_ivec, voxel_index, BRICK_VOXELS};
 use crate::tree::Locate;
 use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
@@ -336,10 +336,7 @@ impl<'a> Sampler<'a> {
     fn corners_across(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
         let vol = self.vol;
         let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
-        let brick = |n: u32| -> &[u8] {
-            let at = vol.tree.l3[n as usize].brick() as usize * 2048;
-            &vol.pool.data[at..at + 2048]
-        };
+        let brick = |n: u32| f32_brick(vol, vol.tree.l3[n as usize].brick());
         let own = brick(leaf);
         let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
         if cross.is_power_of_two() {
@@ -393,11 +390,9 @@ impl<'a> Sampler<'a> {
     #[inline(always)]
     fn corners_in_brick(&mut self, leaf: u32, i0: usize, c: &mut [f32; 8]) {
         const OFF: [usize; 8] = CORNER_OFFSETS;
-        let brick = self.vol.tree.l3[leaf as usize].brick();
-        let data = &self.vol.pool.data[brick as usize * 2048..brick as usize * 2048 + 2048];
+        let data = f32_brick(self.vol, self.vol.tree.l3[leaf as usize].brick());
         for (k, o) in OFF.iter().enumerate() {
-            let at = (i0 + o) * 4;
-            c[k] = f32::from_le_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
+            c[k] = f32_at(data, i0 + o);
         }
     }
 
@@ -455,11 +450,19 @@ const BRICK_ROW: usize = 8;
 /// 1: +y, 2: +z).
 const CORNER_OFFSETS: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
 
-/// Voxel `i` of an f32 brick (little-endian bytes).
+/// Voxel `i` (below 512) of an f32 brick (its 2048 little-endian bytes, see [`f32_brick`]).
 #[inline(always)]
-fn f32_at(brick: &[u8], i: usize) -> f32 {
-    let b = &brick[4 * i..4 * i + 4];
-    f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+fn f32_at(brick: &[u8; 2048], i: usize) -> f32 {
+    // The mask keeps a valid index as it is and lets the compiler drop the bounds checks.
+    let at = 4 * (i & (BRICK_VOXELS - 1));
+    f32::from_le_bytes([brick[at], brick[at + 1], brick[at + 2], brick[at + 3]])
+}
+
+/// The bytes of brick `brick` of an f32 pool.
+#[inline(always)]
+fn f32_brick(vol: &Volume, brick: u32) -> &[u8; 2048] {
+    let at = brick as usize * 2048;
+    vol.pool.data[at..at + 2048].try_into().expect("2048 bytes")
 }
 
 /// Trilinear interpolation of corners `c` (bit 0: +x, 1: +y, 2: +z) at fractions `f`.
