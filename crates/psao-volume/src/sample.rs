@@ -308,7 +308,7 @@ impl<'a> Sampler<'a> {
     /// `origin` (as on a [`crate::trace::Segment`]): the same value as
     /// [`Sampler::trilinear`] without searching the tree; corners past the node's +faces are
     /// read through its neighbour table.
-    #[inline]
+    #[inline(always)]
     pub fn trilinear_in(&mut self, leaf: u32, origin: IVec3, p: Vec3) -> f32 {
         let b = floor_ivec(p);
         let l = b - origin;
@@ -333,6 +333,7 @@ impl<'a> Sampler<'a> {
     /// +x, +y or +z border layer, read in place from the f32 pool: each neighbour brick is
     /// found once from the neighbour table (a sample on one border layer, the common case,
     /// reads four corners from its own brick and four from one neighbour).
+    #[inline(always)]
     fn corners_across(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
         let vol = self.vol;
         let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
