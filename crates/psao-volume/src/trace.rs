@@ -99,7 +99,7 @@ pub fn march(
     };
     let end = b.min(t_max);
     let mut t = a.max(t_min);
-    if !(t < end) {
+    if t >= end || t.is_nan() {
         return;
     }
     const B: i32 = BRICK as i32;
@@ -155,7 +155,7 @@ pub fn march(
             // An empty 128³ cell: on to the cell where the ray leaves it.
             let exit = far_planes(l2_lo, 16);
             let axis = nearest(exit);
-            if !(exit[axis] < end) {
+            if exit[axis] >= end || exit[axis].is_nan() {
                 return;
             }
             t = t.max(exit[axis]);
