@@ -210,6 +210,9 @@ pub fn render(vol: &Volume, cam: &Camera, st: &RenderSettings) -> Result<Image> 
     let (w, h) = (st.width, st.height);
     let range = depth_range(vol, st.frame, cam.eye);
     let rays = cam.pixel_rays(w, h);
+    // The eye and the world-to-index direction scale, mapped once for all pixels.
+    let eye = vol.transform.world_to_index(cam.eye);
+    let to_index = (1.0 / vol.transform.scale).as_vec3();
     let tiles_x = w.div_ceil(TILE);
     let tiles = tiles_x * h.div_ceil(TILE);
     // Runs of consecutive tiles, each rendered by one sampler taken from a shared stack and
@@ -230,8 +233,7 @@ pub fn render(vol: &Volume, cam: &Camera, st: &RenderSettings) -> Result<Image> 
                 let (x0, y0) = ((tile % tiles_x) * TILE, (tile / tiles_x) * TILE);
                 for y in y0..(y0 + TILE).min(h) {
                     for x in x0..(x0 + TILE).min(w) {
-                        let dir = rays.dir(x, y);
-                        let ray = IndexRay::from_world(vol, cam.eye, dir);
+                        let ray = IndexRay::new(eye, rays.dir(x, y) * to_index);
                         let v = match st.mode {
                             RenderMode::LevelSet => {
                                 shade_depth(level_set_hit(&mut s, &ray, f32::INFINITY), range)

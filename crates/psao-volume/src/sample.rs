@@ -5,7 +5,7 @@
 //! once per tile of neighbouring rays. `f32` bricks are read in place.
 
 use crate::codec::BrickFormat;
-use crate::grid::{floor_ivec, voxel_index};
+use crate::grid::{floor_ivec, voxel_index, BRICK_VOXELS};
 use crate::tree::Locate;
 use crate::volume::{Volume, NO_LEAF};
 use glam::{IVec3, Vec3};
@@ -308,7 +308,7 @@ impl<'a> Sampler<'a> {
     /// `origin` (as on a [`crate::trace::Segment`]): the same value as
     /// [`Sampler::trilinear`] without searching the tree; corners past the node's +faces are
     /// read through its neighbour table.
-    #[inline]
+    #[inline(always)]
     pub fn trilinear_in(&mut self, leaf: u32, origin: IVec3, p: Vec3) -> f32 {
         let b = floor_ivec(p);
         let l = b - origin;
@@ -331,38 +331,57 @@ impl<'a> Sampler<'a> {
 
     /// The eight corners of a trilinear sample with base voxel `l` (local to `leaf`) on its
     /// +x, +y or +z border layer, read in place from the f32 pool: each neighbour brick is
-    /// found once from the neighbour table.
+    /// found once from the neighbour table (a sample on one border layer, the common case,
+    /// reads four corners from its own brick and four from one neighbour).
+    #[inline(always)]
     fn corners_across(&mut self, leaf: u32, l: IVec3, c: &mut [f32; 8]) {
+        let vol = self.vol;
         let cross = (l.x == 7) as usize | ((l.y == 7) as usize) << 1 | ((l.z == 7) as usize) << 2;
-        // Per neighbour offset d (a subset of `cross`): its brick.
-        let mut brick = [NO_LEAF; 8];
-        let mut d = 0;
-        loop {
-            let n = if d == 0 {
-                leaf
-            } else {
-                self.vol.next_leaf(leaf, d)
-            };
-            if n != NO_LEAF {
-                brick[d] = self.vol.tree.l3[n as usize].brick();
+        let brick = |n: u32| f32_brick(vol, vol.tree.l3[n as usize].brick());
+        let own = brick(leaf);
+        let i0 = voxel_index(l.x as usize, l.y as usize, l.z as usize);
+        if cross.is_power_of_two() {
+            // One neighbour: the corners across read its layer 0 (the base voxel's index
+            // with the crossed coordinate 7 → 0).
+            let stride = [1, BRICK_ROW, BRICK_ROW * BRICK_ROW][cross.trailing_zeros() as usize];
+            let n = vol.next_leaf(leaf, cross);
+            let other = (n != NO_LEAF).then(|| brick(n));
+            for (k, v) in c.iter_mut().enumerate() {
+                let o = CORNER_OFFSETS[k & !cross];
+                *v = if k & cross == 0 {
+                    f32_at(own, i0 + o)
+                } else {
+                    match other {
+                        Some(b) => f32_at(b, i0 - 7 * stride + o),
+                        None => vol.background,
+                    }
+                };
             }
-            // Next subset of `cross` (all of them, then back to 0).
-            d = d.wrapping_sub(cross) & cross;
-            if d == 0 {
-                break;
+            return;
+        }
+        // Per neighbour offset d (a subset of `cross`): its brick, or a bit of `missing`.
+        let mut src = [own; 8];
+        let mut missing = 0u8;
+        for (d, b) in src.iter_mut().enumerate().skip(1) {
+            if d & !cross == 0 {
+                match vol.next_leaf(leaf, d) {
+                    NO_LEAF => missing |= 1 << d,
+                    n => *b = brick(n),
+                }
             }
         }
         for (k, v) in c.iter_mut().enumerate() {
             let d = k & cross;
             let q: IVec3 =
                 (l + IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32)) & 7i32;
-            let i = voxel_index(q.x as usize, q.y as usize, q.z as usize);
-            *v = if brick[d] == NO_LEAF {
-                self.vol.background
+            let value = f32_at(
+                src[d],
+                voxel_index(q.x as usize, q.y as usize, q.z as usize),
+            );
+            *v = if missing >> d & 1 != 0 {
+                vol.background
             } else {
-                let at = brick[d] as usize * 2048 + i * 4;
-                let b = &self.vol.pool.data[at..at + 4];
-                f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+                value
             };
         }
     }
@@ -371,12 +390,10 @@ impl<'a> Sampler<'a> {
     /// `leaf`, read in place from the f32 pool.
     #[inline(always)]
     fn corners_in_brick(&mut self, leaf: u32, i0: usize, c: &mut [f32; 8]) {
-        const OFF: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
-        let brick = self.vol.tree.l3[leaf as usize].brick();
-        let data = &self.vol.pool.data[brick as usize * 2048..brick as usize * 2048 + 2048];
+        const OFF: [usize; 8] = CORNER_OFFSETS;
+        let data = f32_brick(self.vol, self.vol.tree.l3[leaf as usize].brick());
         for (k, o) in OFF.iter().enumerate() {
-            let at = (i0 + o) * 4;
-            c[k] = f32::from_le_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
+            c[k] = f32_at(data, i0 + o);
         }
     }
 
@@ -425,6 +442,28 @@ impl<'a> Sampler<'a> {
             };
         }
     }
+}
+
+/// Voxels per brick row (x) and, squared, per brick slice.
+const BRICK_ROW: usize = 8;
+
+/// Offsets in a brick ([`voxel_index`] layout) of the eight trilinear corners (bit 0: +x,
+/// 1: +y, 2: +z).
+const CORNER_OFFSETS: [usize; 8] = [0, 1, 8, 9, 64, 65, 72, 73];
+
+/// Voxel `i` (below 512) of an f32 brick (its 2048 little-endian bytes, see [`f32_brick`]).
+#[inline(always)]
+fn f32_at(brick: &[u8; 2048], i: usize) -> f32 {
+    // The mask keeps a valid index as it is and lets the compiler drop the bounds checks.
+    let at = 4 * (i & (BRICK_VOXELS - 1));
+    f32::from_le_bytes([brick[at], brick[at + 1], brick[at + 2], brick[at + 3]])
+}
+
+/// The bytes of brick `brick` of an f32 pool.
+#[inline(always)]
+fn f32_brick(vol: &Volume, brick: u32) -> &[u8; 2048] {
+    let at = brick as usize * 2048;
+    vol.pool.data[at..at + 2048].try_into().expect("2048 bytes")
 }
 
 /// Trilinear interpolation of corners `c` (bit 0: +x, 1: +y, 2: +z) at fractions `f`.

@@ -8,7 +8,6 @@
 use crate::grid::{floor_ivec, GridClass, BRICK};
 use crate::rng::Rng;
 use crate::sample::Sampler;
-use crate::tree::{Locate, L2_SPAN};
 use crate::volume::{LevelSetBounds, Volume};
 use glam::{IVec3, Vec3};
 
@@ -27,10 +26,18 @@ impl IndexRay {
     pub fn from_world(vol: &Volume, origin: Vec3, dir: Vec3) -> Self {
         let o = vol.transform.world_to_index(origin);
         let d = vol.transform.world_dir_to_index(dir);
+        IndexRay::new(o, d)
+    }
+
+    /// A ray already in index space: `dir` is a world unit vector mapped by the transform, so
+    /// that `t` stays a world distance (many rays from one eye map the eye once, see
+    /// [`crate::render::render`]).
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
         IndexRay {
-            origin: o,
-            dir: d,
-            inv: Vec3::ONE / d,
+            origin,
+            dir,
+            inv: Vec3::ONE / dir,
         }
     }
 
@@ -49,14 +56,6 @@ impl IndexRay {
         let t1 = a.max(b).min_element();
         (t0 <= t1).then_some((t0, t1))
     }
-
-    /// Parameter where the ray leaves the box `lo..hi` it is in.
-    #[inline]
-    fn exit(&self, lo: Vec3, hi: Vec3) -> f32 {
-        let a = (lo - self.origin) * self.inv;
-        let b = (hi - self.origin) * self.inv;
-        a.max(b).min_element()
-    }
 }
 
 /// Part of a ray inside one L3 node.
@@ -70,11 +69,21 @@ pub struct Segment {
     pub leaf: u32,
     /// Index-space origin of the L3 node.
     pub origin: IVec3,
+    /// The face of the node's cell the ray enters through at `t0` (−x, +x, −y, +y, −z, +z as
+    /// 0..6) when the traversal knows it (a face of the bounds, or a DDA step), else
+    /// [`NO_FACE`].
+    pub entry: u8,
 }
 
-/// Steps through the L3 nodes of `frame` hit by `ray` between `t_min` and `t_max`, skipping
-/// empty 128³ cells in one step each and walking the 8³ cells of non-empty ones with an
-/// incremental 3D DDA (HDDA). `visit` returns `false` to stop.
+/// [`Segment::entry`] when the traversal does not know the entry face (the ray starts inside
+/// the bounds, or rounding put a crossing before the previous one).
+pub const NO_FACE: u8 = u8::MAX;
+
+/// Steps through the L3 nodes of `frame` hit by `ray` between `t_min` and `t_max` (HDDA): one
+/// incremental 3D DDA over the 8³ cells from where the ray enters the bounds, which tests one
+/// bit per cell of a non-empty 128³ cell (and ranks only L3 nodes), looks up the L2 node once
+/// per 128³ cell it enters and crosses an empty 128³ cell in one step. `visit` returns `false`
+/// to stop.
 pub fn march(
     vol: &Volume,
     frame: usize,
@@ -84,62 +93,111 @@ pub fn march(
     mut visit: impl FnMut(Segment) -> bool,
 ) {
     let (lo, hi) = vol.index_bounds(frame);
-    let Some((a, b)) = ray.clip(lo.as_vec3(), hi.as_vec3()) else {
+    let (lo_f, hi_f) = (lo.as_vec3(), hi.as_vec3());
+    let Some((a, b)) = ray.clip(lo_f, hi_f) else {
         return;
     };
-    let (mut t, end) = (a.max(t_min), b.min(t_max));
-    let eps = 1e-4 * (1.0 + end.abs());
-    let top = vol.tree.l1[frame].origin;
+    let end = b.min(t_max);
+    let mut t = a.max(t_min);
+    if t >= end || t.is_nan() {
+        return;
+    }
+    const B: i32 = BRICK as i32;
+    // Cells of 8³ voxels, in cell coordinates (voxel >> 3); the bounds are leaf-aligned.
+    let (cell_lo, cell_hi) = (lo >> 3i32, (hi >> 3i32) - IVec3::ONE);
+    let top = vol.tree.l1[frame].origin >> 3i32;
     let forward = ray.dir.cmpgt(Vec3::ZERO);
     let step = IVec3::select(forward, IVec3::ONE, IVec3::NEG_ONE);
+    let ahead = IVec3::select(forward, IVec3::ONE, IVec3::ZERO);
     let still = ray.dir.cmpeq(Vec3::ZERO);
-    let delta = Vec3::select(still, Vec3::INFINITY, (ray.inv * BRICK as f32).abs());
-    while t < end {
-        let p = floor_ivec(ray.at(t + eps));
-        let Some(n2) = vol.tree.l2_index(frame, p) else {
-            // Outside the frame, or an empty 128³ cell: jump to its exit.
-            let Locate::EmptyL2(cell) = vol.tree.locate(frame, p) else {
+    let delta = Vec3::select(still, Vec3::INFINITY, (ray.inv * B as f32).abs());
+    // Parameters where the ray crosses the far planes (along its direction) of the box of
+    // cells `c` .. `c + size − 1`, per axis.
+    let far_planes = |c: IVec3, size: i32| {
+        let plane = ((c + ahead * size) * B).as_vec3();
+        Vec3::select(still, Vec3::INFINITY, (plane - ray.origin) * ray.inv)
+    };
+    let face = |axis: usize| (2 * axis + !forward.test(axis) as usize) as u8;
+    let nearest = |v: Vec3| {
+        if v.x <= v.y && v.x <= v.z {
+            0
+        } else if v.y <= v.z {
+            1
+        } else {
+            2
+        }
+    };
+    // The first cell: where the ray enters the bounds (through a face of both), or where it
+    // starts inside them.
+    let mut cell = (floor_ivec(ray.at(t)) >> 3i32).clamp(cell_lo, cell_hi);
+    let mut entry = NO_FACE;
+    if a >= t_min {
+        let near = ((lo_f - ray.origin) * ray.inv).min((hi_f - ray.origin) * ray.inv);
+        let axis = if near.x >= near.y && near.x >= near.z {
+            0
+        } else if near.y >= near.z {
+            1
+        } else {
+            2
+        };
+        cell[axis] = if forward.test(axis) {
+            cell_lo[axis]
+        } else {
+            cell_hi[axis]
+        };
+        entry = face(axis);
+    }
+    let mut far = far_planes(cell, 1);
+    loop {
+        let c1 = (cell - top) >> 4i32;
+        let l2_lo = top + (c1 << 4i32);
+        let Some(n2) = vol.tree.l2_child(frame, c1) else {
+            // An empty 128³ cell: on to the cell where the ray leaves it.
+            let exit = far_planes(l2_lo, 16);
+            let axis = nearest(exit);
+            if exit[axis] >= end || exit[axis].is_nan() {
                 return;
-            };
-            let size = Vec3::splat(L2_SPAN as f32);
-            t = ray
-                .exit(cell.as_vec3(), cell.as_vec3() + size)
-                .min(end)
-                .max(t + eps);
+            }
+            t = t.max(exit[axis]);
+            cell = (floor_ivec(ray.at(t)) >> 3i32).clamp(l2_lo, l2_lo + IVec3::splat(15));
+            cell[axis] = l2_lo[axis] + if forward.test(axis) { 16 } else { -1 };
+            if cell.cmplt(cell_lo).any() || cell.cmpgt(cell_hi).any() {
+                return;
+            }
+            entry = face(axis);
+            far = far_planes(cell, 1);
             continue;
         };
-        // DDA over the 16³ cells of L2 node `n2`: `far` holds the parameter where the ray
-        // leaves the current cell along each axis.
-        let l2_origin = top + (((p - top) >> 7i32) << 7i32);
-        let mut c2: IVec3 = (p - l2_origin) >> 3i32;
-        let cell_lo = (l2_origin + c2 * BRICK as i32).as_vec3();
-        let plane = cell_lo + Vec3::select(forward, Vec3::splat(BRICK as f32), Vec3::ZERO);
-        let mut far = Vec3::select(still, Vec3::INFINITY, (plane - ray.origin) * ray.inv);
+        let mut c2 = cell - l2_lo;
         loop {
-            let next = far.min_element().min(end).max(t + eps);
+            // `far` holds the parameters where the ray leaves the current cell per axis.
+            let axis = nearest(far);
+            let cross = far[axis];
+            let next = cross.min(end).max(t);
             if let Some(leaf) = vol.tree.leaf_in_l2(n2, c2) {
                 if !visit(Segment {
                     t0: t,
                     t1: next,
                     leaf,
-                    origin: l2_origin + c2 * BRICK as i32,
+                    origin: cell * B,
+                    entry,
                 }) {
                     return;
                 }
             }
-            t = next;
-            if t >= end {
+            if next >= end {
                 return;
             }
-            let axis = if far.x <= far.y && far.x <= far.z {
-                0
-            } else if far.y <= far.z {
-                1
-            } else {
-                2
-            };
+            // The next cell is entered through its face across `axis` at `next`, unless
+            // rounding put the crossing before `t`.
+            entry = if next == cross { face(axis) } else { NO_FACE };
+            t = next;
+            cell[axis] += step[axis];
             c2[axis] += step[axis];
             far[axis] += delta[axis];
+            if cell[axis] < cell_lo[axis] || cell[axis] > cell_hi[axis] {
+                return;
+            }
             if !(0..16).contains(&c2[axis]) {
                 break;
             }
@@ -301,16 +359,29 @@ impl Fall {
 
 /// A lower bound on the field where `ray` enters the cell of `seg` (the minimum of the face it
 /// enters through), carried to `seg.t0` at rates `fall`; `None` if the ray starts in the cell.
+/// The face is the traversal's when it knows it, else found from the cell's slabs.
 fn entry_bound(ray: &IndexRay, seg: &Segment, lb: &LevelSetBounds, fall: &Fall) -> Option<f32> {
+    if seg.entry != NO_FACE {
+        // Entered through this face at `t0`.
+        return Some(lb.face_min[seg.entry as usize]);
+    }
     let lo = seg.origin.as_vec3();
     let a = (lo - ray.origin) * ray.inv;
     let b = (lo + Vec3::splat(BRICK as f32) - ray.origin) * ray.inv;
     let near = a.min(b);
     let t_in = near.max_element();
-    if !(t_in > 0.0 && t_in.is_finite()) {
+    if !(t_in > 0.0 && t_in < f32::INFINITY) {
         return None;
     }
-    let axis = (0..3).find(|&k| near[k] == t_in)?;
+    let axis = if near.x == t_in {
+        0
+    } else if near.y == t_in {
+        1
+    } else if near.z == t_in {
+        2
+    } else {
+        return None;
+    };
     let face = 2 * axis + (ray.dir[axis] < 0.0) as usize;
     Some(fall.after(lb.face_min[face], (seg.t0 - t_in).max(0.0)))
 }

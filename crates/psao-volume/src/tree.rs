@@ -300,6 +300,15 @@ impl FlatTree {
         test(&node.mask, b2).then(|| node.first + rank(&node.mask, node.prefix[b2 / 64] as u32, b2))
     }
 
+    /// Index of the L2 node at L1 child `c1` (each coordinate 0..32) of `frame`, if any.
+    #[inline]
+    pub fn l2_child(&self, frame: usize, c1: IVec3) -> Option<usize> {
+        let top = &self.l1[frame];
+        let b1 = (c1.x + 32 * (c1.y + 32 * c1.z)) as usize;
+        test(&top.mask, b1)
+            .then(|| (top.first + rank(&top.mask, top.prefix[b1 / 64] as u32, b1)) as usize)
+    }
+
     /// Index of the L2 node containing `p` in `frame`, if any.
     pub fn l2_index(&self, frame: usize, p: IVec3) -> Option<usize> {
         let top = &self.l1[frame];
