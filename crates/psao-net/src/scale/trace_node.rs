@@ -89,6 +89,8 @@ pub struct TraceNodeStats {
     /// those whose points changed since their previous message).
     pub snapshot_bytes: u64,
     pub snapshot_chunks: u64,
+    /// Bytes the snapshot rounds would have cost had every chunk been published.
+    pub snapshot_full_bytes: u64,
     /// The published state the node started from.
     pub restored: Restored,
     /// Messages that did not parse (or named points that do not exist): dropped.
@@ -630,6 +632,7 @@ impl Node {
         let mut changed = Vec::new();
         let mut messages: Vec<(String, String, bytes::Bytes)> = Vec::new();
         for (c, points) in chunks.into_iter().enumerate() {
+            self.stats.snapshot_full_bytes += Snapshot::encoded_len(points.len()) as u64;
             let key = (k, c as u32);
             if self.published_chunks.get(&key) == Some(&points) {
                 continue;

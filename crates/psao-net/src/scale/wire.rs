@@ -218,6 +218,11 @@ impl Reader<'_> {
 }
 
 impl Snapshot {
+    /// Bytes of the payload of a chunk of `points` points.
+    pub fn encoded_len(points: usize) -> usize {
+        SNAPSHOT_HEADER + points * POINT_BYTES
+    }
+
     /// The payload.
     pub fn encode(&self) -> Vec<u8> {
         let mut out = Vec::with_capacity(SNAPSHOT_HEADER + self.points.len() * POINT_BYTES);
@@ -579,6 +584,7 @@ mod tests {
         let mut s = snapshot();
         s.points = vec![s.points[0]; CHUNK_POINTS];
         let bytes = s.encode();
+        assert_eq!(bytes.len(), Snapshot::encoded_len(CHUNK_POINTS));
         assert!(bytes.len() < 1 << 20, "under NATS's default payload limit");
         assert_eq!(Snapshot::decode(&bytes).unwrap().points.len(), CHUNK_POINTS);
         s.points.push(s.points[0]);
