@@ -79,6 +79,8 @@ pub struct ScaleRow {
     pub snapshot_chunks: u64,
     /// Bytes per server frame had every round published every chunk (full snapshots).
     pub full_snapshot_bytes_per_frame: f64,
+    /// Of `snapshot_bytes_per_frame`: chunks published only because sample counts changed.
+    pub samples_only_snapshot_bytes_per_frame: f64,
     /// Whether the edge's final grids hash like the one-process server's.
     pub same_state: bool,
     /// Bytes of every batch in the records stream at the end (the history).
@@ -201,6 +203,11 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             snapshot_bytes_per_frame: stats.iter().map(|s| s.snapshot_bytes).sum::<u64>() as f64
                 / frames,
             snapshot_chunks: stats.iter().map(|s| s.snapshot_chunks).sum(),
+            samples_only_snapshot_bytes_per_frame: stats
+                .iter()
+                .map(|s| s.snapshot_samples_only_bytes)
+                .sum::<u64>() as f64
+                / frames,
             full_snapshot_bytes_per_frame: stats.iter().map(|s| s.snapshot_full_bytes).sum::<u64>()
                 as f64
                 / frames,
