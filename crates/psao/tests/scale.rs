@@ -526,7 +526,13 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
         args.extend(extra);
         start("trace-node", &scene, &args).0
     };
-    let mut first: Vec<Proc> = (0..2).map(|k| node(k, &["--frames", FIRST])).collect();
+    let first_json: Vec<PathBuf> = (0..2).map(|k| out(&format!("t{k}.json"))).collect();
+    let mut first: Vec<Proc> = (0..2)
+        .map(|k| {
+            let json = first_json[k as usize].to_str().unwrap();
+            node(k, &["--frames", FIRST, "--json", json])
+        })
+        .collect();
     let edges: Vec<(Proc, String)> = (0..2)
         .map(|e| {
             let json = out(&format!("e{e}.json"));
@@ -572,6 +578,15 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
         assert_eq!(s["edge"]["malformed"], 0, "{s}");
         assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
         assert_eq!(s["edge"]["frames"], STEPS / 2, "{s}");
+    }
+    // The state converged before frame 50: the last rounds republished no chunk.
+    for f in &first_json {
+        let t = json(f);
+        let (sent, full) = (&t["snapshot_bytes"], &t["snapshot_full_bytes"]);
+        assert!(
+            sent.as_u64() < full.as_u64(),
+            "{sent} of {full} snapshot bytes"
+        );
     }
     let late = json(&late_json);
     assert_eq!(late["partitions"], serde_json::json!([0, 1]), "{late}");
