@@ -502,8 +502,10 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
     };
     let (scene, path) = fixture(dir.path());
     let out = |n: &str| dir.path().join(n);
-    // 70 server frames; the path stops moving at frame 30, the state converges after it.
-    const STEPS: u32 = 140;
+    // 52 server frames; the path stops moving at frame 30, the state converges after it.
+    // The fresh node steps the last two: one restarting from zero would trace and publish
+    // other records in them.
+    const STEPS: u32 = 104;
     // The first two nodes trace this many frames and stop, releasing their leases.
     const FIRST: &str = "50";
     let quick = ["--max-samples", "16"];
@@ -595,8 +597,10 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
     assert_eq!(restored["frame"], 50, "{late}");
     assert_eq!(restored["snapshot_frame"], 50, "{late}");
     assert!(restored["records"].as_u64().unwrap() > 0, "{late}");
-    // Sample counts restored: a node starting from zero would have none.
+    // Sample counts restored: a node starting from zero would have none, and would trace
+    // the converged points again.
     assert!(restored["samples"].as_u64().unwrap() > 0, "{late}");
+    assert_eq!(late["rays"], 0, "nothing left to trace: {late}");
 }
 
 /// The room with a box sliding over its floor (instance transforms) and, when the shared
