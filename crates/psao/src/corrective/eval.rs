@@ -3,9 +3,9 @@
 //!
 //! Budgets are samples per frame (not time, so the results are deterministic). The scene is
 //! frozen (no animation). Every analysis period the ordering assigns region priorities:
-//! `saliency` (bottom-up saliency of the base frame blended with task importance),
-//! `uniform` (all equal) or `random` (hashed from the seed, frame, object and region). Regions are the objects' parts in
-//! the tiles of [`analyze_tiles`].
+//! `saliency` (bottom-up saliency of the frame as shown blended with task importance),
+//! `uniform` (all equal) or `random` (hashed from the seed, frame, object and region).
+//! Regions are the objects' parts in the tiles of [`analyze_tiles`].
 
 use super::frame::{frame_images, rgb_image, trace_sample, FrameImages};
 use super::metrics::{frame_error, FrameError};
