@@ -9,7 +9,7 @@
 
 use glam::{IVec3, Vec3};
 use psao_points::pack::{is_valid, normal_code, normal_table, unpack_ao};
-use psao_points::{InstanceGrid, LinearFit, ReconstructParams, CELL_POINTS};
+use psao_points::{InstanceGrid, LinearFit, NearestK, ReconstructParams, CELL_POINTS};
 
 /// Most points a 2×2×2 block can hold.
 const MAX_POINTS: usize = 8 * CELL_POINTS;
@@ -49,7 +49,7 @@ impl Neighbourhood {
         params: &ReconstructParams,
     ) -> f32 {
         let layout = grid.layout();
-        let r = layout.poisson_radius * params.interpolation_factor;
+        let mut r = layout.poisson_radius * params.interpolation_factor;
         if !(r > 0.0 && r.is_finite() && p.is_finite()) {
             return 1.0;
         }
@@ -58,13 +58,25 @@ impl Neighbourhood {
             self.gather(grid, base);
             self.key = Some((instance, base));
         }
-        let (r2, inv_r) = (r * r, 1.0 / r);
         let plane = params.plane_tolerance * layout.poisson_radius;
+        let [px, py, pz] = &self.position;
+        let [nx, ny, nz] = &self.normal;
+        if let Some(factor) = params.adaptive_radius {
+            let mut near = NearestK::default();
+            for i in 0..self.count {
+                let delta = Vec3::new(px[i], py[i], pz[i]) - p;
+                let ni = Vec3::new(nx[i], ny[i], nz[i]);
+                let d2 = delta.length_squared();
+                if d2 < r * r && compatible(ni, n, delta, d2, plane, params) {
+                    near.offer(d2);
+                }
+            }
+            r = near.radius(r, factor);
+        }
+        let (r2, inv_r) = (r * r, 1.0 / r);
         // Branch-free: a rejected point gets weight +0, which leaves both sums unchanged, so
         // the result equals the early-continue formulation bit for bit.
         let mut weight = [0.0f32; MAX_POINTS];
-        let [px, py, pz] = &self.position;
-        let [nx, ny, nz] = &self.normal;
         for i in 0..self.count {
             // Same operations as glam's `Vec3` arithmetic in `reconstruct_ao`.
             let delta = Vec3::new(px[i], py[i], pz[i]) - p;

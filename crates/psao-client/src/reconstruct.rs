@@ -29,6 +29,8 @@ pub struct ReconstructSettings {
     pub nearest_fallback: bool,
     /// Planar fit instead of the weighted mean ([`ReconstructParams::linear_ridge`]).
     pub linear_ridge: Option<f32>,
+    /// Footprint following the local point spacing ([`ReconstructParams::adaptive_radius`]).
+    pub adaptive_radius: Option<f32>,
 }
 
 impl Default for ReconstructSettings {
@@ -39,6 +41,7 @@ impl Default for ReconstructSettings {
             normal_exponent: DEFAULT_NORMAL_EXPONENT,
             nearest_fallback: true,
             linear_ridge: None,
+            adaptive_radius: None,
         }
     }
 }
@@ -117,6 +120,7 @@ pub fn reconstruct_into(
         normal_exponent: settings.normal_exponent,
         nearest_fallback: settings.nearest_fallback,
         linear_ridge: settings.linear_ridge,
+        adaptive_radius: settings.adaptive_radius,
         ..ReconstructParams::default()
     };
     // Zipping row slices tolerates inconsistent attribute lengths: missing pixels stay 1.

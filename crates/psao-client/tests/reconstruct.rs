@@ -239,6 +239,16 @@ fn matches_reconstruct_ao_bitwise() {
             normal_exponent: 0,
             nearest_fallback: false,
             linear_ridge: None,
+            adaptive_radius: None,
+        },
+        ReconstructSettings {
+            adaptive_radius: Some(1.2),
+            ..defaults
+        },
+        ReconstructSettings {
+            adaptive_radius: Some(1.2),
+            linear_ridge: Some(0.5),
+            ..defaults
         },
     ];
     for settings in variants {
@@ -249,6 +259,7 @@ fn matches_reconstruct_ao_bitwise() {
             normal_exponent: settings.normal_exponent,
             nearest_fallback: settings.nearest_fallback,
             linear_ridge: settings.linear_ridge,
+            adaptive_radius: settings.adaptive_radius,
             ..ReconstructParams::default()
         };
         let ao = reconstruct(&state, &g, &settings);

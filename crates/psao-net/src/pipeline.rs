@@ -36,6 +36,8 @@ pub struct PipelineConfig {
     /// The client's screen-space contact term below the point spacing
     /// ([`psao_client::apply_detail`]); `None` (the default) leaves it out.
     pub detail: Option<DetailSettings>,
+    /// The client's reconstruction settings (default: [`ReconstructSettings::default`]).
+    pub reconstruct: ReconstructSettings,
     /// Corrective splatting ([`crate::corrective`]), when wanted.
     pub corrective: Option<CorrectiveConfig>,
 }
@@ -143,7 +145,9 @@ impl<'a> Pipeline<'a> {
                 .map_err(NetError::codec("the server's codec"))?,
             decoder,
             client,
-            renderer: ClientRenderer::new(scene)?.with_detail(config.detail),
+            renderer: ClientRenderer::new(scene)?
+                .with_detail(config.detail)
+                .with_reconstruct(config.reconstruct),
             server_hz: config.server_hz,
             last_tick: None,
             res: config.res,
@@ -286,6 +290,8 @@ pub struct ClientRenderer {
     animation: Option<(Animator, ScenePose)>,
     /// The contact term applied after reconstruction, if any.
     detail: Option<DetailSettings>,
+    /// Reconstruction settings.
+    reconstruct: ReconstructSettings,
 }
 
 impl ClientRenderer {
@@ -298,7 +304,14 @@ impl ClientRenderer {
                 .is_dynamic()
                 .then(|| (animator, ScenePose::default())),
             detail: None,
+            reconstruct: ReconstructSettings::default(),
         })
+    }
+
+    /// The same renderer reconstructing with `settings`.
+    pub fn with_reconstruct(mut self, settings: ReconstructSettings) -> Self {
+        self.reconstruct = settings;
+        self
     }
 
     /// The same renderer applying `detail` after reconstruction (`None`: not at all).
@@ -332,7 +345,7 @@ impl ClientRenderer {
                     .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)?;
             }
         }
-        let mut ao = psao_client::reconstruct(state, &gbuffer, &ReconstructSettings::default());
+        let mut ao = psao_client::reconstruct(state, &gbuffer, &self.reconstruct);
         if let Some(detail) = &self.detail {
             psao_client::apply_detail(state, &gbuffer, camera, detail, &mut ao);
         }

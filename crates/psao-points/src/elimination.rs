@@ -65,6 +65,22 @@ pub fn max_poisson_radius(area: f64, count: usize) -> f64 {
 /// first. With `keep >= positions.len()` every index is returned; with a non-positive or
 /// non-finite `d_max` points do not interact and the lowest indices are kept.
 pub fn eliminate(positions: &[Vec3], keep: usize, d_max: f32) -> Vec<u32> {
+    eliminate_scaled(positions, None, keep, d_max)
+}
+
+/// [`eliminate`] with a local interaction distance: point `i` carries a scale `s_i` in
+/// (0, 1] (`scales[i]`, same order as `positions`) and a pair interacts within
+/// `d_max · (s_i + s_j) / 2` (symmetric, so removals subtract the terms the weights were built
+/// from). Where the scales are small the kept points end up denser: their local spacing follows
+/// the scale (Yuksel's adaptive sampling with a symmetric pair distance). `None`, or a
+/// `scales` slice of another length than `positions`, behaves as all scales 1; scales are
+/// clamped to [1/64, 1] (NaN counts as 1).
+pub fn eliminate_scaled(
+    positions: &[Vec3],
+    scales: Option<&[f32]>,
+    keep: usize,
+    d_max: f32,
+) -> Vec<u32> {
     let n = positions.len();
     if keep >= n {
         return (0..n as u32).collect();
@@ -77,7 +93,20 @@ pub fn eliminate(positions: &[Vec3], keep: usize, d_max: f32) -> Vec<u32> {
     }
     let grid = BlockGrid::new(positions, d_max);
     let sorted: Vec<Vec3> = grid.order.iter().map(|&i| positions[i as usize]).collect();
-    let nbrs = Neighbours::build(&grid, &sorted, d_max);
+    let sorted_scales: Option<Vec<f32>> = scales.filter(|s| s.len() == n).map(|s| {
+        grid.order
+            .iter()
+            .map(|&i| {
+                let x = s[i as usize];
+                if x.is_nan() {
+                    1.0
+                } else {
+                    x.clamp(1.0 / 64.0, 1.0)
+                }
+            })
+            .collect()
+    });
+    let nbrs = Neighbours::build(&grid, &sorted, sorted_scales.as_deref(), d_max);
     drop(sorted);
     let mut w = nbrs.weight_sums();
     remove_all_by_local_maxima(&nbrs, &mut w);
@@ -350,7 +379,7 @@ impl Neighbours {
             .collect()
     }
 
-    fn build(grid: &BlockGrid, sorted: &[Vec3], d_max: f32) -> Self {
+    fn build(grid: &BlockGrid, sorted: &[Vec3], scales: Option<&[f32]>, d_max: f32) -> Self {
         let d2_max = d_max * d_max;
         let nblocks = grid.block_key.len();
         let first: Vec<u32> = (0..nblocks)
@@ -398,7 +427,13 @@ impl Neighbours {
                                     if d2 >= d2_max || m == k {
                                         continue;
                                     }
-                                    let w = weight_term(d2, d_max);
+                                    let w = match scales {
+                                        Some(sc) => weight_term(
+                                            d2,
+                                            d_max * 0.5 * (sc[k as usize] + sc[m as usize]),
+                                        ),
+                                        None => weight_term(d2, d_max),
+                                    };
                                     if w > 0 {
                                         part.index.push(m);
                                         part.weight.push(w);
@@ -513,6 +548,41 @@ mod tests {
             wse_min > 5.0 * random_min,
             "{wse_min} vs random {random_min}"
         );
+    }
+
+    #[test]
+    fn unit_scales_match_plain_elimination() {
+        let input = random_square(3000, 7);
+        let d = 2.0 * max_poisson_radius(1.0, 1500) as f32;
+        let ones = vec![1.0f32; input.len()];
+        assert_eq!(
+            eliminate(&input, 1500, d),
+            eliminate_scaled(&input, Some(&ones), 1500, d)
+        );
+        // A slice of the wrong length is ignored.
+        assert_eq!(
+            eliminate(&input, 1500, d),
+            eliminate_scaled(&input, Some(&ones[1..]), 1500, d)
+        );
+    }
+
+    #[test]
+    fn small_scales_keep_more_points() {
+        // Half scale on the left half of the square: its local spacing halves, so it keeps
+        // clearly more than half of the points (about 4/5 for a quartered disk area).
+        let input = random_square(8000, 3);
+        let scales: Vec<f32> = input
+            .iter()
+            .map(|p| if p.x < 0.5 { 0.5 } else { 1.0 })
+            .collect();
+        let keep = 2000;
+        let d = 2.0 * max_poisson_radius(1.0, keep) as f32 * (2.5f32).sqrt();
+        let kept = eliminate_scaled(&input, Some(&scales), keep, d);
+        assert_eq!(kept.len(), keep);
+        let left = kept.iter().filter(|&&i| input[i as usize].x < 0.5).count();
+        assert!(left as f32 > 0.7 * keep as f32, "left {left} of {keep}");
+        // Deterministic.
+        assert_eq!(kept, eliminate_scaled(&input, Some(&scales), keep, d));
     }
 
     #[test]

@@ -8,6 +8,9 @@ pub enum PointsError {
     /// The requested point density is not a finite positive number.
     #[error("invalid point density {0}: must be finite and > 0")]
     InvalidDensity(f32),
+    /// The adaptive placement's largest density boost is not a finite number ≥ 1.
+    #[error("invalid adaptive density boost {0}: must be finite and >= 1")]
+    InvalidBoost(f32),
     /// A triangle references a vertex that does not exist.
     #[error("triangle {triangle} references vertex {index}, but the mesh has {count} positions")]
     IndexOutOfRange {

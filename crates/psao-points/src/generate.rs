@@ -12,7 +12,7 @@ use glam::{Affine3A, Vec3};
 use psao_scene::{AlphaMode, Material, Mesh, Scene};
 use rayon::prelude::*;
 
-use crate::elimination::{eliminate, max_poisson_radius};
+use crate::elimination::{eliminate_scaled, max_poisson_radius};
 use crate::error::PointsError;
 use crate::rng::{hash2, Stream};
 
@@ -32,6 +32,29 @@ pub type AlphaTest<'a> = &'a (dyn Fn(u32, Vec3) -> bool + Sync);
 
 /// Scene-level alpha hook: like [`AlphaTest`] with the mesh index first.
 pub type SceneAlphaTest<'a> = &'a (dyn Fn(usize, u32, Vec3) -> bool + Sync);
+
+/// Near-field signal of adaptive placement ([`Adaptive`]): called once per instance with the
+/// instance index, the world position and unit world normal of every candidate, and the
+/// uniform point spacing `2·r_max` in world units; returns one value per candidate in [0, 1]
+/// (0: open, nothing near: the base density; 1: the most). Values are clamped (NaN counts as
+/// 0); a result of another length counts as all 0.
+pub type DensitySignal<'a> = &'a (dyn Fn(usize, &[(Vec3, Vec3)], f32) -> Vec<f32> + Sync);
+
+/// Adaptive placement (issue 15 item 4): the local density rises with a geometric signal
+/// (e.g. near-field occlusion) at the same total point count, so detail finer than the uniform
+/// spacing holds more points and open flat areas fewer.
+///
+/// A candidate with signal `s` gets the density factor `f = 1 + (max_boost − 1)·s`; the
+/// instance keeps as many points as uniform placement would, with a local spacing
+/// proportional to `1/√f` (see [`generate_instance_points_adaptive`]).
+#[derive(Clone, Copy)]
+pub struct Adaptive<'a> {
+    /// Density of the most signalled areas relative to areas without signal (≥ 1; 1 gives
+    /// uniform placement, as [`generate_instance_points`]).
+    pub max_boost: f32,
+    /// The signal.
+    pub signal: DensitySignal<'a>,
+}
 
 /// How points are generated.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -183,6 +206,58 @@ impl Triangles {
         }
     }
 
+    /// A candidate on `c`'s triangle near it: uniform in the disk of world radius `radius`
+    /// around it (in the triangle's plane, up to [`EXTRA_TRIES`] draws), or uniform on the
+    /// whole triangle when its world area is below the disk's; `None` when every draw missed.
+    fn spawn_near(
+        &self,
+        c: &Candidate,
+        radius: f32,
+        transform: &Affine3A,
+        rng: &mut Stream,
+    ) -> Option<Candidate> {
+        let t = c.triangle as usize;
+        let [a, b, cc] = self.verts[t];
+        let world_area = self.cdf[t] - if t == 0 { 0.0 } else { self.cdf[t - 1] };
+        if world_area <= f64::from(std::f32::consts::PI * radius * radius) {
+            let s = rng.next_f32().sqrt();
+            let u = rng.next_f32();
+            return Some(Candidate {
+                triangle: c.triangle,
+                b1: s * (1.0 - u),
+                b2: s * u,
+            });
+        }
+        let [wa, wb, wc] = [a, b, cc].map(|p| transform.transform_point3(p));
+        let (e1, e2) = (wb - wa, wc - wa);
+        let x = e1.normalize_or_zero();
+        let y = e1.cross(e2).cross(e1).normalize_or_zero();
+        let w = c.bary();
+        let centre = wa * w.x + wb * w.y + wc * w.z;
+        // Barycentrics of a world point in the triangle's plane.
+        let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let det = d00 * d11 - d01 * d01;
+        if det.is_nan() || det <= 0.0 {
+            return None;
+        }
+        for _ in 0..EXTRA_TRIES {
+            let r = radius * rng.next_f32().sqrt();
+            let phi = std::f32::consts::TAU * rng.next_f32();
+            let q = centre + x * (r * phi.cos()) + y * (r * phi.sin()) - wa;
+            let (d20, d21) = (q.dot(e1), q.dot(e2));
+            let b1 = (d11 * d20 - d01 * d21) / det;
+            let b2 = (d00 * d21 - d01 * d20) / det;
+            if b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 {
+                return Some(Candidate {
+                    triangle: c.triangle,
+                    b1,
+                    b2,
+                });
+            }
+        }
+        None
+    }
+
     fn local_position(&self, c: &Candidate) -> Vec3 {
         let [a, b, cc] = self.verts[c.triangle as usize];
         let w = c.bary();
@@ -229,6 +304,38 @@ pub fn generate_instance_points(
     params: &GenerateParams,
     alpha: Option<AlphaTest<'_>>,
 ) -> Result<InstancePoints, PointsError> {
+    generate_instance_points_adaptive(mesh, material, transform, params, alpha, None, 0)
+}
+
+/// [`generate_instance_points`] with adaptive placement: `adaptive` (when its boost is > 1)
+/// is asked for the signal of the `2·M` uniform candidates (`instance` is handed to it);
+/// each candidate with factor `f > 1` spawns `f − 1` extra candidates on average near it (on
+/// its triangle, within one uniform spacing, or anywhere on the triangle when that is
+/// smaller), so the candidates keep twice the wanted local density; elimination then keeps
+/// `M` points with a pair interaction distance `2·r_u·√(f̄)·(1/√f_i + 1/√f_j)/2`, where `r_u`
+/// is the uniform Poisson radius and `f̄` the mean factor over the uniform candidates (the
+/// area-weighted mean of `f`). [`InstancePoints::poisson_radius`] stays the uniform `r_u`, so
+/// the grid's cells (and their 7-point capacity) and hash table are sized as for uniform
+/// placement: cells sized for the sparsest local spacing `r_u·√(f̄)` would hold `f` times
+/// their share of points where the signal is strong and overflow (measured on the built-in
+/// hall at boost 2: whole cells refused, white gaps in the grille). The reconstruction radius
+/// `2√2·r_u` still reaches across the sparser open areas as long as `f̄` stays modest.
+/// Deterministic for a given seed and signal.
+pub fn generate_instance_points_adaptive(
+    mesh: &Mesh,
+    material: &Material,
+    transform: &Affine3A,
+    params: &GenerateParams,
+    alpha: Option<AlphaTest<'_>>,
+    adaptive: Option<Adaptive<'_>>,
+    instance: usize,
+) -> Result<InstancePoints, PointsError> {
+    if let Some(a) = adaptive {
+        if !(a.max_boost.is_finite() && a.max_boost >= 1.0) {
+            return Err(PointsError::InvalidBoost(a.max_boost));
+        }
+    }
+    let adaptive = adaptive.filter(|a| a.max_boost > 1.0);
     if !(params.density.is_finite() && params.density > 0.0) {
         return Err(PointsError::InvalidDensity(params.density));
     }
@@ -276,12 +383,31 @@ pub fn generate_instance_points(
 
     let keep = candidates.len().div_ceil(2);
     let kept_area = area * candidates.len() as f64 / spawn as f64;
-    let r_max = max_poisson_radius(kept_area, keep);
+    let r_uniform = max_poisson_radius(kept_area, keep);
+    let mut r_max = r_uniform;
+    let mut candidates = candidates;
+    let mut scales: Option<Vec<f32>> = None;
+    if let Some(a) = adaptive {
+        let (extra, factors, mean) = adaptive_candidates(
+            &tris,
+            mesh,
+            transform,
+            &candidates,
+            a,
+            instance,
+            (seed, spawn),
+            2.0 * r_max as f32,
+            mask,
+        );
+        r_max *= f64::from(mean).sqrt();
+        candidates.extend(extra);
+        scales = Some(factors.iter().map(|f| 1.0 / f.sqrt()).collect());
+    }
     let world: Vec<Vec3> = candidates
         .par_iter()
         .map(|c| transform.transform_point3(tris.local_position(c)))
         .collect();
-    let kept = eliminate(&world, keep, (2.0 * r_max) as f32);
+    let kept = eliminate_scaled(&world, scales.as_deref(), keep, (2.0 * r_max) as f32);
 
     out.points = Vec::with_capacity(kept.len() * usize::from(sides));
     for &i in &kept {
@@ -302,9 +428,82 @@ pub fn generate_instance_points(
             });
         }
     }
-    out.poisson_radius = r_max as f32;
-    out.poisson_radius_local = (r_max * (tris.area_local / area).sqrt()) as f32;
+    // The grid and the reconstruction keep the uniform radius (see the function's docs).
+    out.poisson_radius = r_uniform as f32;
+    out.poisson_radius_local = (r_uniform * (tris.area_local / area).sqrt()) as f32;
     Ok(out)
+}
+
+/// Salt of the random choices of extra candidates (decorrelated from the uniform stream).
+const EXTRA_SALT: u64 = 0x6164_6170_7469_7665;
+/// Tries per extra candidate to land on its triangle within the spread disk.
+const EXTRA_TRIES: u64 = 4;
+
+/// The extra candidates of adaptive placement and the factor of every candidate (the uniform
+/// ones first, then the extras), with the mean factor of the uniform ones. `stream` is the
+/// instance's seed and the uniform spawn count (extras draw from indices above it); `spacing`
+/// is the uniform spacing `2·r_u` in world units.
+#[allow(clippy::too_many_arguments)]
+fn adaptive_candidates(
+    tris: &Triangles,
+    mesh: &Mesh,
+    transform: &Affine3A,
+    base: &[Candidate],
+    adaptive: Adaptive<'_>,
+    instance: usize,
+    stream: (u64, u64),
+    spacing: f32,
+    mask: Option<AlphaTest<'_>>,
+) -> (Vec<Candidate>, Vec<f32>, f32) {
+    let normal_matrix = transform.matrix3.inverse().transpose();
+    let probes: Vec<(Vec3, Vec3)> = base
+        .par_iter()
+        .map(|c| {
+            let p = transform.transform_point3(tris.local_position(c));
+            let n = normal_matrix
+                .mul_vec3(local_normal(mesh, tris, c))
+                .normalize_or(Vec3::Z);
+            (p, n)
+        })
+        .collect();
+    let signal = (adaptive.signal)(instance, &probes, spacing);
+    let boost = adaptive.max_boost;
+    let mut factors: Vec<f32> = (0..base.len())
+        .map(|i| {
+            let s = signal
+                .get(i)
+                .copied()
+                .filter(|_| signal.len() == base.len());
+            let s = s.filter(|x| !x.is_nan()).unwrap_or(0.0).clamp(0.0, 1.0);
+            1.0 + (boost - 1.0) * s
+        })
+        .collect();
+    let mean = factors.iter().map(|&f| f64::from(f)).sum::<f64>() / base.len().max(1) as f64;
+    let (seed, spawned) = stream;
+    let seed = seed ^ EXTRA_SALT;
+    // Per uniform candidate: how many extras (f − 1 on average) and where.
+    let extras: Vec<(Candidate, f32)> = base
+        .par_iter()
+        .zip(factors.par_iter())
+        .enumerate()
+        .flat_map_iter(|(i, (c, &f))| {
+            let mut rng = Stream::new(seed, spawned + i as u64);
+            let want = f - 1.0;
+            let count = want.floor() as u32 + u32::from(rng.next_f32() < want.fract());
+            let mut out = Vec::with_capacity(count as usize);
+            for _ in 0..count {
+                if let Some(e) = tris.spawn_near(c, spacing, transform, &mut rng) {
+                    if mask.is_none_or(|m| m(e.triangle, e.bary())) {
+                        out.push((e, f));
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let (extra, extra_factors): (Vec<Candidate>, Vec<f32>) = extras.into_iter().unzip();
+    factors.extend(extra_factors);
+    (extra, factors, mean as f32)
 }
 
 /// World-space area of a mesh under `transform` (invalid triangles count 0); used to schedule.
@@ -330,6 +529,17 @@ pub fn generate_scene_points(
     params: &GenerateParams,
     alpha: Option<SceneAlphaTest<'_>>,
 ) -> Result<Vec<InstancePoints>, PointsError> {
+    generate_scene_points_adaptive(scene, params, alpha, None)
+}
+
+/// [`generate_scene_points`] with adaptive placement ([`generate_instance_points_adaptive`];
+/// the signal receives the instance index).
+pub fn generate_scene_points_adaptive(
+    scene: &Scene,
+    params: &GenerateParams,
+    alpha: Option<SceneAlphaTest<'_>>,
+    adaptive: Option<Adaptive<'_>>,
+) -> Result<Vec<InstancePoints>, PointsError> {
     let fallback = Material::default();
     let run = |i: usize| {
         let inst = &scene.instances[i];
@@ -347,12 +557,14 @@ pub fn generate_scene_points(
             seed: instance_seed(params.seed, i),
             ..*params
         };
-        generate_instance_points(
+        generate_instance_points_adaptive(
             mesh,
             material,
             &inst.transform,
             &p,
             hook.as_ref().map(|h| h as AlphaTest<'_>),
+            adaptive,
+            i,
         )
     };
     let mut order: Vec<(f64, usize)> = scene

@@ -21,11 +21,12 @@ mod paged;
 mod reconstruct;
 mod rng;
 
-pub use elimination::{eliminate, max_poisson_radius};
+pub use elimination::{eliminate, eliminate_scaled, max_poisson_radius};
 pub use error::PointsError;
 pub use generate::{
-    generate_instance_points, generate_scene_points, instance_seed, AlphaTest, GenerateParams,
-    InstancePoints, SceneAlphaTest, SurfacePoint, DEFAULT_DENSITY, MAX_SPAWNED,
+    generate_instance_points, generate_instance_points_adaptive, generate_scene_points,
+    generate_scene_points_adaptive, instance_seed, Adaptive, AlphaTest, DensitySignal,
+    GenerateParams, InstancePoints, SceneAlphaTest, SurfacePoint, DEFAULT_DENSITY, MAX_SPAWNED,
 };
 pub use grid::{Bucket, BucketEntry, Cell, InstanceGrid, PointLoc};
 pub use key_map::{KeyHasher, KeyMap};
@@ -36,9 +37,9 @@ pub use layout::{
 pub use linear_fit::LinearFit;
 pub use paged::Paged;
 pub use reconstruct::{
-    reconstruct_ao, ReconstructParams, DEFAULT_DIRECTION_THRESHOLD, DEFAULT_INTERPOLATION_FACTOR,
-    DEFAULT_LINEAR_RIDGE, DEFAULT_NORMAL_EXPONENT, DEFAULT_NORMAL_THRESHOLD,
-    DEFAULT_PLANE_TOLERANCE,
+    reconstruct_ao, NearestK, ReconstructParams, ADAPTIVE_NEIGHBOURS, DEFAULT_ADAPTIVE_RADIUS,
+    DEFAULT_DIRECTION_THRESHOLD, DEFAULT_INTERPOLATION_FACTOR, DEFAULT_LINEAR_RIDGE,
+    DEFAULT_NORMAL_EXPONENT, DEFAULT_NORMAL_THRESHOLD, DEFAULT_PLANE_TOLERANCE,
 };
 
 /// Heap bytes a vector holds: its allocated capacity times the element size.

@@ -35,6 +35,58 @@ pub const DEFAULT_NORMAL_EXPONENT: i32 = 8;
 /// few samples it tilts with their noise and lowers SSIM, see docs/BENCHMARKS.md).
 pub const DEFAULT_LINEAR_RIDGE: f32 = 0.25;
 
+/// Neighbours that set the footprint of [`ReconstructParams::adaptive_radius`]: the radius
+/// follows the distance to the third nearest compatible point.
+pub const ADAPTIVE_NEIGHBOURS: usize = 3;
+/// Default factor of [`ReconstructParams::adaptive_radius`] when it is chosen: on a uniform
+/// Poisson set of radius `r_max` the third nearest point of a random position lies about
+/// `1.8 r_max` away (3 points expected in a disk of that radius at the density
+/// `1 / (2√3 r_max²)`), so 1.8 × it is about 3.3 `r_max`, beyond the default radius of
+/// 2√2 `r_max`: the footprint shrinks only where the points are clearly denser than the
+/// instance's Poisson radius says (adaptive placement).
+pub const DEFAULT_ADAPTIVE_RADIUS: f32 = 1.8;
+
+/// The [`ADAPTIVE_NEIGHBOURS`] smallest squared distances offered to it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NearestK {
+    d2: [f32; ADAPTIVE_NEIGHBOURS],
+}
+
+impl Default for NearestK {
+    fn default() -> Self {
+        Self {
+            d2: [f32::INFINITY; ADAPTIVE_NEIGHBOURS],
+        }
+    }
+}
+
+impl NearestK {
+    /// Offer a squared distance.
+    #[inline]
+    pub fn offer(&mut self, d2: f32) {
+        if d2 < self.d2[ADAPTIVE_NEIGHBOURS - 1] {
+            let mut i = ADAPTIVE_NEIGHBOURS - 1;
+            while i > 0 && self.d2[i - 1] > d2 {
+                self.d2[i] = self.d2[i - 1];
+                i -= 1;
+            }
+            self.d2[i] = d2;
+        }
+    }
+
+    /// The footprint radius: `min(r, factor · d_k)` with `d_k` the distance of the k-th
+    /// nearest offered point, or `r` when fewer than k were offered.
+    #[inline]
+    pub fn radius(&self, r: f32, factor: f32) -> f32 {
+        let dk = self.d2[ADAPTIVE_NEIGHBOURS - 1];
+        if dk.is_finite() {
+            r.min(factor * dk.sqrt())
+        } else {
+            r
+        }
+    }
+}
+
 /// Parameters of the reconstruction.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReconstructParams {
@@ -55,6 +107,12 @@ pub struct ReconstructParams {
     /// `Some(ridge)`: fit a plane through the weighted AO values ([`LinearFit`]) instead of
     /// taking their weighted mean; `ridge` is in Poisson radii.
     pub linear_ridge: Option<f32>,
+    /// `Some(c)`: a footprint that follows the local point spacing (for adaptive placement,
+    /// where the points are denser than the instance's Poisson radius says): the radius is
+    /// `min(r, c · d_k)`, with `d_k` the distance to the k-th nearest point within `r` that
+    /// passes every other test ([`ADAPTIVE_NEIGHBOURS`], [`NearestK`]). `None` (the default):
+    /// always `r`.
+    pub adaptive_radius: Option<f32>,
 }
 
 impl Default for ReconstructParams {
@@ -67,6 +125,7 @@ impl Default for ReconstructParams {
             normal_exponent: DEFAULT_NORMAL_EXPONENT,
             nearest_fallback: true,
             linear_ridge: None,
+            adaptive_radius: None,
         }
     }
 }
@@ -100,11 +159,10 @@ impl Default for ReconstructParams {
 /// which keeps AO gradients steeper than the radius (the foot of a low wall).
 pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &ReconstructParams) -> f32 {
     let layout = grid.layout();
-    let r = layout.poisson_radius * params.interpolation_factor;
+    let mut r = layout.poisson_radius * params.interpolation_factor;
     if !(r > 0.0 && r.is_finite() && p.is_finite()) {
         return 1.0;
     }
-    let (r2, inv_r) = (r * r, 1.0 / r);
     let plane = params.plane_tolerance * layout.poisson_radius;
     let base = layout.nearest_base(p);
     let normals = normal_table();
@@ -122,6 +180,20 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
         }
         true
     };
+    if let Some(factor) = params.adaptive_radius {
+        let mut near = NearestK::default();
+        for (coord, cell) in grid.block_cells(base) {
+            for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+                let delta = layout.unpack_position(coord, bits) - p;
+                let d2 = delta.length_squared();
+                if d2 < r * r && passes(normals[normal_code(bits) as usize], delta, d2) {
+                    near.offer(d2);
+                }
+            }
+        }
+        r = near.radius(r, factor);
+    }
+    let (r2, inv_r) = (r * r, 1.0 / r);
     let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
     let mut fit = LinearFit::new(n);
     let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, 1.0f32);

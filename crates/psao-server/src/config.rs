@@ -56,6 +56,10 @@ pub struct ServerConfig {
     pub seed: u64,
     /// Ray-tracing backend.
     pub backend: Backend,
+    /// Adaptive point placement (issue 15 item 4): the density of the points with the most
+    /// near-field occlusion relative to open areas, at the same total count (1 = uniform
+    /// placement, the default; see `start_points.rs` for the signal).
+    pub adaptive_boost: f32,
 }
 
 impl Default for ServerConfig {
@@ -75,6 +79,7 @@ impl Default for ServerConfig {
             invalidation: Invalidation::Proximity,
             seed: 0,
             backend: Backend::default(),
+            adaptive_boost: 1.0,
         }
     }
 }
@@ -91,6 +96,9 @@ impl ServerConfig {
         }
         if !(self.frustum_margin.is_finite() && self.frustum_margin >= 0.0) {
             return bad("frustum_margin must be finite and >= 0");
+        }
+        if !(self.adaptive_boost.is_finite() && self.adaptive_boost >= 1.0) {
+            return bad("adaptive_boost must be finite and >= 1");
         }
         let t = &self.thresholds;
         if !(t.ao.is_finite() && t.normal_cos.is_finite() && t.position_steps.is_finite()) {

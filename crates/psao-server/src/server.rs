@@ -195,7 +195,7 @@ impl Server {
                 )
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Server {
+        let server = Server {
             config,
             radius,
             tracer,
@@ -208,7 +208,16 @@ impl Server {
             cut_guess: 0,
             buried_points,
             held: None,
-        })
+        };
+        let (overflow_cells, overflow_points) = server.overflow();
+        tracing::info!(
+            points = server.point_count(),
+            buried = server.buried_points,
+            overflow_cells,
+            overflow_points,
+            "server grids built"
+        );
+        Ok(server)
     }
 
     /// What a joining client needs: per instance its grid layout, Poisson radius and

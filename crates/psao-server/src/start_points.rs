@@ -5,7 +5,9 @@
 use std::hash::Hasher;
 
 use glam::Vec3;
-use psao_points::{generate_scene_points, GenerateParams, InstancePoints, SurfacePoint};
+use psao_points::{
+    generate_scene_points_adaptive, Adaptive, GenerateParams, InstancePoints, SurfacePoint,
+};
 use psao_scene::{AlphaMode, Scene};
 use psao_trace::{GeometryMode, Tracer};
 use rayon::prelude::*;
@@ -16,7 +18,7 @@ use crate::{ServerConfig, ServerError};
 /// Format tag of [`StartPoints::to_bytes`].
 const MAGIC: [u8; 4] = *b"PSSP";
 /// Format version; bump it whenever the bytes or what generation produces change.
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 /// Bytes before the instances: magic, version, key, instance count, buried count.
 const HEADER_BYTES: usize = 4 + 4 + 8 + 4 + 8;
 /// Bytes of one instance's statistics before its points.
@@ -59,7 +61,14 @@ impl StartPoints {
             seed: config.seed,
         };
         let opaque = |mesh: usize, tri: u32, bary: Vec3| scene.opaque_at(mesh, tri, bary);
-        let mut points = generate_scene_points(scene, &params, Some(&opaque))?;
+        let signal = |instance: usize, probes: &[(Vec3, Vec3)], spacing: f32| {
+            crate::near_field::near_field_signal(tracer, config.seed, instance, probes, spacing)
+        };
+        let adaptive = (config.adaptive_boost > 1.0).then_some(Adaptive {
+            max_boost: config.adaptive_boost,
+            signal: &signal,
+        });
+        let mut points = generate_scene_points_adaptive(scene, &params, Some(&opaque), adaptive)?;
         let buried_points = if config.cull_buried {
             let buried = buried(tracer, scene, &points, config.seed);
             let mut dropped = 0;
@@ -87,7 +96,7 @@ impl StartPoints {
     /// A hash of everything that shapes the start points: the format version; per mesh its
     /// positions, normals, UVs, triangles and material; per material its sidedness, alpha
     /// mode, base-colour alpha and alpha texture; per instance its mesh, transform and skin; the density, seed,
-    /// burial switch and tracing backend (burial verdicts may differ between backends on
+    /// burial switch, adaptive boost and tracing backend (burial verdicts may differ between backends on
     /// coincident faces). Equal keys give equal points.
     pub fn key(scene: &Scene, config: &ServerConfig) -> u64 {
         // std's SipHash with fixed keys: deterministic within a Rust release; another release
@@ -142,6 +151,7 @@ impl StartPoints {
         h.write_u32(config.density.to_bits());
         h.write_u64(config.seed);
         h.write_u8(u8::from(config.cull_buried));
+        h.write_u32(config.adaptive_boost.to_bits());
         h.write(config.backend.name().as_bytes());
         h.finish()
     }

@@ -44,6 +44,10 @@ fn the_key_follows_what_shapes_the_points() {
         seed: config.seed + 1,
         ..config
     };
+    let adaptive = ServerConfig {
+        adaptive_boost: 2.0,
+        ..config
+    };
     let mut moved = scene.clone();
     moved.meshes[0].positions[0].x += 1e-3;
     let mut flipped = scene.clone();
@@ -51,6 +55,7 @@ fn the_key_follows_what_shapes_the_points() {
     for other in [
         StartPoints::key(&scene, &denser),
         StartPoints::key(&scene, &reseeded),
+        StartPoints::key(&scene, &adaptive),
         StartPoints::key(&moved, &config),
         StartPoints::key(&flipped, &config),
     ] {
@@ -101,5 +106,30 @@ fn stored_points_that_do_not_fit_are_refused() {
     assert!(matches!(
         Server::with_start_points(&scene, denser, None, start),
         Err(ServerError::StartPoints(_))
+    ));
+}
+
+#[test]
+fn adaptive_placement_keeps_the_count_and_is_deterministic() {
+    let (scene, config) = (scene(), config());
+    let adaptive = ServerConfig {
+        adaptive_boost: 3.0,
+        ..config
+    };
+    let uniform = StartPoints::generate(&scene, &config).unwrap();
+    let a = StartPoints::generate(&scene, &adaptive).unwrap();
+    assert_eq!(a, StartPoints::generate(&scene, &adaptive).unwrap());
+    assert_ne!(a.instances, uniform.instances);
+    // Same count before the burial test, up to the points it drops.
+    let before = |s: &StartPoints| s.point_count() + s.buried;
+    let (u, v) = (before(&uniform) as f64, before(&a) as f64);
+    assert!((u - v).abs() <= 0.01 * u, "{u} vs {v}");
+    let bad = ServerConfig {
+        adaptive_boost: 0.5,
+        ..config
+    };
+    assert!(matches!(
+        StartPoints::generate(&scene, &bad),
+        Err(ServerError::InvalidConfig(_))
     ));
 }

@@ -50,6 +50,16 @@ pub struct ServerTuning {
     /// (`psao_client::apply_detail`, docs/BENCHMARKS.md "Fine detail") after reconstruction.
     #[arg(long)]
     pub detail: bool,
+    /// Adaptive point placement: the density where near-field occlusion is strongest,
+    /// relative to open areas, at the same point count (1 = uniform; docs/BENCHMARKS.md
+    /// "Fine detail").
+    #[arg(long, default_value_t = 1.0)]
+    pub adaptive_boost: f32,
+    /// Reconstruction footprint following the local point spacing: radius
+    /// min(r, FACTOR × distance to the third nearest compatible point) (off by default;
+    /// `psao_points::ReconstructParams::adaptive_radius`).
+    #[arg(long)]
+    pub adaptive_radius: Option<f32>,
 }
 
 /// `--invalidation` values.
@@ -76,6 +86,17 @@ impl ServerTuning {
         if !(points.is_finite() && points > 0.0 && points <= 65_536.0) {
             bail!("--points must be in (0, 65536], got {points}");
         }
+        if !(self.adaptive_boost.is_finite() && (1.0..=16.0).contains(&self.adaptive_boost)) {
+            bail!(
+                "--adaptive-boost must be in [1, 16], got {}",
+                self.adaptive_boost
+            );
+        }
+        if let Some(f) = self.adaptive_radius {
+            if !(f.is_finite() && f > 0.0) {
+                bail!("--adaptive-radius must be finite and > 0, got {f}");
+            }
+        }
         psao_delta::codec_by_name(&self.codec)?;
         Ok(PipelineConfig {
             server: ServerConfig {
@@ -86,6 +107,7 @@ impl ServerTuning {
                 seed: self.seed,
                 backend: self.backend.unwrap_or_default(),
                 invalidation: self.invalidation.into(),
+                adaptive_boost: self.adaptive_boost,
                 ..ServerConfig::default()
             },
             server_hz,
@@ -94,6 +116,10 @@ impl ServerTuning {
             medium: None,
             points_cache: self.points_cache_dir(),
             detail: self.detail.then(psao_client::DetailSettings::default),
+            reconstruct: psao_client::ReconstructSettings {
+                adaptive_radius: self.adaptive_radius,
+                ..Default::default()
+            },
             corrective: None,
         })
     }
