@@ -5,9 +5,8 @@ mod common;
 
 use glam::{Affine3A, Vec3};
 use psao_points::{
-    generate_instance_points, generate_instance_points_adaptive, reconstruct_ao, Adaptive,
-    GenerateParams, GridLayout, InstanceGrid, InstancePoints, PointsError, ReconstructParams,
-    DEFAULT_ADAPTIVE_RADIUS,
+    generate_instance_points_adaptive, reconstruct_ao, Adaptive, GenerateParams, GridLayout,
+    InstanceGrid, InstancePoints, PointsError, ReconstructParams, DEFAULT_ADAPTIVE_RADIUS,
 };
 use psao_scene::{Material, Mesh};
 
@@ -40,14 +39,7 @@ fn groove_ao(p: Vec3) -> f32 {
 }
 
 fn uniform(mesh: &Mesh, seed: u64) -> InstancePoints {
-    generate_instance_points(
-        mesh,
-        &Material::default(),
-        &Affine3A::IDENTITY,
-        &params(seed),
-        None,
-    )
-    .unwrap()
+    common::uniform_points(mesh, &params(seed))
 }
 
 fn adaptive(mesh: &Mesh, seed: u64, boost: f32) -> InstancePoints {

@@ -19,14 +19,7 @@ fn params(seed: u64) -> GenerateParams {
 }
 
 fn single(mesh: &Mesh, seed: u64) -> InstancePoints {
-    generate_instance_points(
-        mesh,
-        &Material::default(),
-        &Affine3A::IDENTITY,
-        &params(seed),
-        None,
-    )
-    .unwrap()
+    common::uniform_points(mesh, &params(seed))
 }
 
 /// Points lie on their triangle at their barycentrics, with the triangle's normal.

@@ -3,8 +3,9 @@
 
 use std::path::PathBuf;
 
-use glam::Vec3;
-use psao_scene::Mesh;
+use glam::{Affine3A, Vec3};
+use psao_points::{generate_instance_points, GenerateParams, InstancePoints};
+use psao_scene::{Material, Mesh};
 
 /// `/work/shared/data` relative to this crate, or `None` (with a note) when missing.
 pub fn data_dir() -> Option<PathBuf> {
@@ -144,4 +145,16 @@ pub fn min_distance(points: &[Vec3], cell: f32, skip_identical: bool) -> f32 {
         }
     }
     best
+}
+
+/// Uniform points of `mesh` (default material, identity transform, no alpha test).
+pub fn uniform_points(mesh: &Mesh, params: &GenerateParams) -> InstancePoints {
+    generate_instance_points(
+        mesh,
+        &Material::default(),
+        &Affine3A::IDENTITY,
+        params,
+        None,
+    )
+    .unwrap()
 }
