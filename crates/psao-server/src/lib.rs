@@ -35,5 +35,5 @@ pub use frustum::{Frustum, View};
 pub use memory::MemoryPart;
 pub use near_field::{NEAR_FIELD_RAYS, NEAR_FIELD_SPACINGS};
 pub use partition::{Owners, Partition};
-pub use server::{PointInfo, PointRecord, Server, StepStats};
+pub use server::{PointInfo, PointRecord, PointState, Server, StepStats};
 pub use start_points::StartPoints;

@@ -118,6 +118,28 @@ impl Owners {
             .map_or(0, |&k| u32::from(k))
     }
 
+    /// The snapshot chunk of every point (per instance, per point index): its ordinal among
+    /// its partition's points in (instance, index) order, divided by `chunk_points` (at
+    /// least 1). A chunk therefore names the same points every time.
+    pub fn chunks(&self, chunk_points: usize) -> Vec<Vec<u32>> {
+        let chunk_points = chunk_points.max(1);
+        let mut ordinal = vec![0usize; self.count as usize];
+        self.of
+            .iter()
+            .map(|owners| {
+                owners
+                    .iter()
+                    .map(|&k| {
+                        let n = &mut ordinal[k as usize];
+                        let chunk = *n / chunk_points;
+                        *n += 1;
+                        chunk as u32
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Points owned by each partition.
     pub fn points_per_partition(&self) -> Vec<u64> {
         let mut n = vec![0u64; self.count as usize];
@@ -183,5 +205,14 @@ mod tests {
         assert_eq!(owners.owner(0, 0), 0);
         assert_eq!(owners.owner(1, 2), 1);
         assert_eq!(owners.owner(9, 9), 0, "out of range");
+        // Chunks of 3: partition 0 holds points 0..6 of instance 0 (chunks 0, 0, 0, 1, 1, 1).
+        let chunks = owners.chunks(3);
+        assert_eq!(chunks[0][..6], [0, 0, 0, 1, 1, 1]);
+        assert_eq!(
+            chunks[0][6..],
+            [0, 0, 0, 1],
+            "partition 1 starts again at chunk 0"
+        );
+        assert_eq!(chunks[1], [1, 1, 2]);
     }
 }

@@ -22,7 +22,7 @@ use crate::StartPoints;
 use crate::{ClientId, Frustum, ServerConfig, ServerError, View};
 
 mod scale;
-pub use scale::PointRecord;
+pub use scale::{PointRecord, PointState};
 
 /// What one [`Server::step`] did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -73,6 +73,10 @@ pub struct ScaleRow {
     pub nats_bytes_per_frame: f64,
     /// Bytes one viewer receives per server frame (the update encoded with the codec).
     pub viewer_bytes_per_frame: f64,
+    /// Bytes of snapshot chunks and marks the nodes published per server frame, and the
+    /// chunks published (only those whose points changed since their previous message).
+    pub snapshot_bytes_per_frame: f64,
+    pub snapshot_chunks: u64,
     /// Whether the edge's final grids hash like the one-process server's.
     pub same_state: bool,
     /// Bytes of every batch in the records stream at the end (the history).
@@ -192,6 +196,9 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             step_ms: stats.iter().map(|s| s.mean_step_ms).collect(),
             nats_bytes_per_frame: nats_bytes as f64 / frames,
             viewer_bytes_per_frame: viewer_bytes as f64 / frames,
+            snapshot_bytes_per_frame: stats.iter().map(|s| s.snapshot_bytes).sum::<u64>() as f64
+                / frames,
+            snapshot_chunks: stats.iter().map(|s| s.snapshot_chunks).sum(),
             same_state: state_hash(&replica) == serve_hash,
             history_bytes: nats_bytes,
             late_join_bytes,

@@ -186,7 +186,8 @@ fn finished(child: Child) {
 }
 
 /// The final state hashes of `viewers` lockstep views of `psao serve` alone (files `s{i}.json`
-/// in `dir`), each following `frames` frames of `path` with `view_args`.
+/// in `dir`), each following `frames` frames of `path` with `view_args`; the server gets
+/// `server_args` besides [`SERVER`].
 fn serve_alone(
     dir: &Path,
     scene: &str,
@@ -194,20 +195,19 @@ fn serve_alone(
     viewers: usize,
     frames: u32,
     view_args: &[&str],
+    server_args: &[&str],
 ) -> Vec<String> {
     let clients = viewers.to_string();
-    let (mut serve, line) = start(
-        "serve",
-        scene,
-        &[
-            "--listen",
-            "127.0.0.1:0",
-            "--lockstep",
-            "--wait-clients",
-            &clients,
-            "--once",
-        ],
-    );
+    let mut args = vec![
+        "--listen",
+        "127.0.0.1:0",
+        "--lockstep",
+        "--wait-clients",
+        &clients,
+        "--once",
+    ];
+    args.extend(server_args);
+    let (mut serve, line) = start("serve", scene, &args);
     let at = addr(&line);
     let files: Vec<PathBuf> = (0..viewers)
         .map(|i| dir.join(format!("s{i}.json")))
@@ -268,7 +268,7 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
     let out = |n: &str| dir.path().join(n);
 
     // psao serve alone, four lockstep viewers.
-    let alone = serve_alone(dir.path(), &scene, &path, 4, FRAMES, &[]);
+    let alone = serve_alone(dir.path(), &scene, &path, 4, FRAMES, &[], &[]);
 
     // Two trace nodes, two edges with two viewers each.
     let nodes: Vec<Proc> = (0..2)
@@ -439,7 +439,7 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
     const STEPS: u32 = 60;
     let slow = ["--latency-ms", "30"];
 
-    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &slow);
+    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &slow, &[]);
 
     let nodes = lockstep_trace_nodes(&url, &scene);
     let edges: Vec<(Proc, String)> = (0..2)
@@ -494,6 +494,96 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
     }
 }
 
+#[test]
+fn a_trace_node_starting_late_restarts_from_the_published_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_nats, url)) = nats(dir.path()) else {
+        return;
+    };
+    let (scene, path) = fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+    // 70 server frames; the path stops moving at frame 30, the state converges after it.
+    const STEPS: u32 = 140;
+    // The first two nodes trace this many frames and stop, releasing their leases.
+    const FIRST: &str = "50";
+    let quick = ["--max-samples", "16"];
+
+    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[], &quick);
+
+    let node = |k: u32, extra: &[&str]| {
+        let partition = format!("{k}/2");
+        let mut args = vec![
+            "--nats",
+            &url,
+            "--partition",
+            &partition,
+            "--lockstep-edges",
+            "2",
+            "--snapshot-every",
+            "5",
+        ];
+        args.extend(quick);
+        args.extend(extra);
+        start("trace-node", &scene, &args).0
+    };
+    let mut first: Vec<Proc> = (0..2).map(|k| node(k, &["--frames", FIRST])).collect();
+    let edges: Vec<(Proc, String)> = (0..2)
+        .map(|e| {
+            let json = out(&format!("e{e}.json"));
+            let id = format!("e{e}");
+            let mut args = vec![
+                "--nats",
+                &url,
+                "--listen",
+                "127.0.0.1:0",
+                "--lockstep",
+                "--once",
+                "--edge-id",
+                &id,
+                "--json",
+                json.to_str().unwrap(),
+            ];
+            args.extend(quick);
+            let (p, line) = start("edge", &scene, &args);
+            (p, addr(&line))
+        })
+        .collect();
+    let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("v{i}.json"))).collect();
+    let views: Vec<Child> = files
+        .iter()
+        .enumerate()
+        .map(|(i, f)| view(&edges[i].1, &scene, &path, STEPS, f))
+        .collect();
+    // Both nodes gone: a fresh node (started after them, knowing nothing) takes partition
+    // 0, adopts partition 1 and continues from the published state.
+    for p in &mut first {
+        p.wait(60);
+    }
+    let late_json = out("late.json");
+    let late = node(0, &["--json", late_json.to_str().unwrap()]);
+    views.into_iter().for_each(finished);
+    for (mut p, _) in edges {
+        p.wait(30);
+    }
+    late.interrupt(20);
+    assert_eq!(view_hashes(&files), alone, "the state of psao serve alone");
+    for e in ["e0.json", "e1.json"] {
+        let s = json(&out(e));
+        assert_eq!(s["edge"]["malformed"], 0, "{s}");
+        assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
+        assert_eq!(s["edge"]["frames"], STEPS / 2, "{s}");
+    }
+    let late = json(&late_json);
+    assert_eq!(late["partitions"], serde_json::json!([0, 1]), "{late}");
+    assert_eq!(late["adopted"][0]["partition"], 1, "{late}");
+    let restored = &late["restored"];
+    assert_eq!(restored["frame"], 50, "{late}");
+    assert_eq!(restored["snapshot_frame"], 50, "{late}");
+    assert!(restored["records"].as_u64().unwrap() > 0, "{late}");
+    // Sample counts restored: a node starting from zero would have none.
+    assert!(restored["samples"].as_u64().unwrap() > 0, "{late}");
+}
+
 /// The room with a box sliding over its floor (instance transforms) and, when the shared
 /// data is there, the skinned `RiggedSimple` playing its clip (skinned refits).
 fn animated_fixture(dir: &Path) -> (String, String) {
@@ -529,7 +619,7 @@ fn an_animated_scene_replicates_like_one_serve() {
     let out = |n: &str| dir.path().join(n);
     const STEPS: u32 = 24;
 
-    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[]);
+    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[], &[]);
 
     let nodes = lockstep_trace_nodes(&url, &scene);
     let edges: Vec<(Proc, String)> = (0..2)

@@ -1,8 +1,9 @@
-//! An edge (`psao edge`): starts from the latest frame every partition has a snapshot of
-//! (or from the first frame), then reads every partition's record batches that follow from
-//! the records stream, rebuilds the whole published state in a replica [`Server`]
-//! ([`Server::restore_replica`], [`Server::step_replica`]), and serves viewers with
-//! [`crate::serve`], publishing their views for the trace nodes.
+//! An edge (`psao edge`): joins from the latest snapshot chunks and the batches after them
+//! ([`super::join`]; from the first frame when there is no snapshot), then reads every
+//! partition's record batches that follow from the records stream, rebuilds the whole
+//! published state in a replica [`Server`] ([`Server::restore_replica`],
+//! [`Server::step_replica`]), and serves viewers with [`crate::serve`], publishing their
+//! views for the trace nodes.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -15,8 +16,9 @@ use psao_server::{PointRecord, Server, StepStats, View};
 use serde::Serialize;
 use tokio::sync::{mpsc, Notify};
 
-use super::wire::{Batch, Snapshot, ViewSet};
-use super::{connect, records_stream, snapshot_stream, Names};
+use super::join::{join, Joiner};
+use super::wire::{Batch, ViewSet};
+use super::{connect, records_stream, Names};
 use crate::serve::Stepper;
 use crate::NetError;
 
@@ -25,8 +27,6 @@ const INBOX: usize = 1024;
 /// Frames an edge keeps incomplete before it refuses more (a partition that never
 /// publishes again would otherwise grow this without bound).
 pub const MAX_PENDING_FRAMES: usize = 1 << 16;
-/// Longest wait for the next snapshot chunk while joining.
-const SNAPSHOT_WAIT: Duration = Duration::from_secs(10);
 /// How long a lockstep edge waits for a frame's batches before publishing its views again.
 const VIEWS_AGAIN: Duration = Duration::from_secs(1);
 
@@ -164,63 +164,6 @@ impl Assembler {
     }
 }
 
-/// Where a joining edge starts: the latest frame every partition's every chunk has a
-/// snapshot of.
-#[derive(Debug, PartialEq)]
-pub struct Start {
-    /// The frame and its scene time.
-    pub frame: u64,
-    pub seconds: f64,
-    /// The records stream's first message to read (later batches of every partition).
-    pub sequence: u64,
-    /// Every partition's records at `frame`.
-    pub records: Vec<PointRecord>,
-}
-
-/// The latest frame of `snapshots` at which every partition (of one partition count) has
-/// every chunk, as a [`Start`]; `None` when no frame is complete.
-pub fn complete_snapshot(snapshots: Vec<Snapshot>) -> Option<Start> {
-    let mut frames: BTreeMap<u64, Vec<Snapshot>> = BTreeMap::new();
-    for s in snapshots {
-        frames.entry(s.frame).or_default().push(s);
-    }
-    frames.into_iter().rev().find_map(|(frame, chunks)| {
-        let n = chunks[0].partitions;
-        // partition -> (its chunk count, the chunks present)
-        let mut parts: BTreeMap<u32, (u32, BTreeSet<u32>)> = BTreeMap::new();
-        for c in &chunks {
-            let part = parts
-                .entry(c.partition)
-                .or_insert((c.chunks, BTreeSet::new()));
-            if c.partitions != n || part.0 != c.chunks {
-                return None;
-            }
-            part.1.insert(c.chunk);
-        }
-        let complete =
-            parts.len() == n as usize && parts.values().all(|(m, have)| have.len() == *m as usize);
-        if !complete {
-            return None;
-        }
-        let sequence = chunks.iter().map(|c| c.sequence).min()? + 1;
-        let seconds = chunks[0].seconds;
-        let mut seen = BTreeSet::new();
-        let mut records = Vec::new();
-        for c in chunks {
-            // A chunk stored twice (a retried publish) counts once.
-            if seen.insert((c.partition, c.chunk)) {
-                records.extend(c.records);
-            }
-        }
-        Some(Start {
-            frame,
-            seconds,
-            sequence,
-            records,
-        })
-    })
-}
-
 /// The [`Stepper`] of an edge.
 pub struct EdgeStepper {
     config: EdgeConfig,
@@ -237,9 +180,9 @@ pub struct EdgeStepper {
 }
 
 impl EdgeStepper {
-    /// Connects; starts `server` (a fresh replica) from the latest frame every partition
-    /// has a snapshot of when there is one ([`complete_snapshot`]) and reads the records
-    /// stream after it, else from the stream's first message.
+    /// Connects; starts `server` (a fresh replica) from the latest snapshot chunks and the
+    /// batches after them when there is a complete snapshot ([`join`]), else from the
+    /// records stream's first message.
     pub fn connect(config: EdgeConfig, server: &mut Server) -> Result<Self, NetError> {
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
@@ -248,15 +191,19 @@ impl EdgeStepper {
             .map_err(NetError::io("cannot start the async runtime"))?;
         let names = Names::new(&config.scene);
         let counters = Arc::new(EdgeCounters::default());
-        let (client, batches, backlog, start) = rt.block_on(async {
+        let (client, batches, backlog, joined) = rt.block_on(async {
             let connected = Arc::new(Notify::new());
             let client = connect(&config.nats, connected.clone()).await?;
             let js = async_nats::jetstream::new(client.clone());
-            let stream = records_stream(&js, &names).await?;
-            let start = complete_snapshot(read_snapshots(&js, &names, &counters).await?);
-            let backlog = stream.cached_info().state.last_sequence;
-            let first = start.as_ref().map_or(1, |s| s.sequence);
-            let messages = ordered_from(&stream, &names, first)
+            let mut stream = records_stream(&js, &names).await?;
+            let joined = join(&js, &names, server, Joiner::Replica).await?;
+            let backlog = stream
+                .info()
+                .await
+                .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?
+                .state
+                .last_sequence;
+            let messages = ordered_from(&stream, &names, joined.next)
                 .await
                 .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?;
             let (tx, rx) = mpsc::channel(INBOX);
@@ -267,33 +214,43 @@ impl EdgeStepper {
                 tx,
                 counters: counters.clone(),
             };
-            tokio::spawn(reader.run(messages, first));
-            Ok::<_, NetError>((client, rx, backlog, start))
+            tokio::spawn(reader.run(messages, joined.next));
+            Ok::<_, NetError>((client, rx, backlog, joined))
         })?;
-        let mut first = 1;
-        if let Some(start) = start {
-            server.restore_replica(start.frame, start.seconds as f32, &start.records)?;
+        let c = joined.counts;
+        let add = |a: &AtomicU64, v: u64| a.fetch_add(v, Ordering::Relaxed);
+        add(&counters.snapshot_bytes, c.snapshot_bytes);
+        add(&counters.batches, c.batches);
+        add(&counters.bytes, c.batch_bytes);
+        add(&counters.malformed, c.malformed);
+        add(&counters.duplicates, c.duplicates);
+        add(&counters.sequence_gaps, c.sequence_gaps);
+        let frame = joined.fold.snapshot_frame();
+        if frame > 0 {
+            let records = joined.fold.records();
+            let seconds = joined.fold.snapshot_seconds();
+            server.restore_replica(frame, seconds as f32, &records)?;
             tracing::info!(
-                "started from the snapshots of frame {} ({} records)",
-                start.frame,
-                start.records.len()
+                "started from the snapshots of frame {frame} ({} records)",
+                records.len()
             );
-            counters
-                .snapshot_frame
-                .store(start.frame, Ordering::Relaxed);
-            first = start.sequence;
+            counters.snapshot_frame.store(frame, Ordering::Relaxed);
         }
-        Ok(Self {
+        let mut edge = Self {
             config,
             rt,
             client,
             names,
             batches,
             backlog,
-            first,
+            first: joined.next,
             assembler: Assembler::default(),
             counters,
-        })
+        };
+        for batch in joined.later {
+            edge.add(batch, server);
+        }
+        Ok(edge)
     }
 
     /// The edge's counters.
@@ -306,8 +263,10 @@ impl EdgeStepper {
     /// applied.
     pub fn catch_up(&mut self, server: &mut Server, quiet: Duration) -> Result<u64, NetError> {
         let start = server.frame();
+        // Frames the join read past its snapshot.
+        self.apply_ready(server)?;
         if self.backlog < self.first {
-            return Ok(0);
+            return Ok(server.frame() - start);
         }
         loop {
             let got = self
@@ -364,65 +323,6 @@ impl EdgeStepper {
         }
         Ok(total)
     }
-}
-
-/// Every chunk in the snapshots stream (the last few of each subject); chunks that do not
-/// parse are counted and dropped.
-async fn read_snapshots(
-    js: &async_nats::jetstream::Context,
-    names: &Names,
-    counters: &EdgeCounters,
-) -> Result<Vec<Snapshot>, NetError> {
-    let failed =
-        |e: &dyn std::fmt::Display| NetError::Nats(format!("cannot read the snapshots: {e}"));
-    let mut stream = snapshot_stream(js, names).await?;
-    let last = stream
-        .info()
-        .await
-        .map_err(|e| failed(&e))?
-        .state
-        .last_sequence;
-    let mut snapshots = Vec::new();
-    if last == 0 {
-        return Ok(snapshots);
-    }
-    let mut messages = stream
-        .create_consumer(pull::OrderedConfig {
-            deliver_policy: DeliverPolicy::All,
-            ..Default::default()
-        })
-        .await
-        .map_err(|e| failed(&e))?
-        .messages()
-        .await
-        .map_err(|e| failed(&e))?;
-    loop {
-        let next = tokio::time::timeout(SNAPSHOT_WAIT, messages.next())
-            .await
-            .map_err(|_| failed(&"nothing arrived for 10 s"))?;
-        let message = match next {
-            Some(Ok(m)) => m,
-            Some(Err(e)) => {
-                tracing::warn!("snapshots stream: {e}");
-                continue;
-            }
-            None => break,
-        };
-        counters
-            .snapshot_bytes
-            .fetch_add(message.payload.len() as u64, Ordering::Relaxed);
-        match Snapshot::decode(&message.payload) {
-            Ok(s) => snapshots.push(s),
-            Err(e) => {
-                tracing::debug!("{e}");
-                counters.malformed.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-        if message.info().map_or(true, |i| i.stream_sequence >= last) {
-            break;
-        }
-    }
-    Ok(snapshots)
 }
 
 /// An ordered consumer of the records stream from sequence number `first`.
@@ -630,52 +530,6 @@ mod tests {
         assert!(!a.ready(2));
         assert_eq!(a.add(batch(0, 2, 5), 1), Added::Kept);
         assert!(a.ready(2));
-    }
-
-    fn chunk(partition: u32, chunk: u32, frame: u64) -> Snapshot {
-        Snapshot {
-            partition,
-            partitions: 2,
-            chunk,
-            chunks: 2,
-            frame,
-            seconds: frame as f64 / 30.0,
-            sequence: frame * 10 + u64::from(partition),
-            records: vec![PointRecord {
-                instance: partition,
-                index: chunk,
-                bits: frame as u32,
-            }],
-        }
-    }
-
-    #[test]
-    fn a_joining_edge_starts_from_the_latest_complete_snapshot_frame() {
-        assert_eq!(complete_snapshot(Vec::new()), None);
-        // Frame 8 misses chunk 1 of partition 1: frame 4 is the latest complete one.
-        let mut chunks = vec![chunk(0, 0, 8), chunk(0, 1, 8), chunk(1, 0, 8)];
-        chunks.extend([
-            chunk(0, 0, 4),
-            chunk(0, 1, 4),
-            chunk(1, 0, 4),
-            chunk(1, 1, 4),
-        ]);
-        chunks.push(chunk(1, 1, 4));
-        let start = complete_snapshot(chunks.clone()).unwrap();
-        assert_eq!((start.frame, start.sequence), (4, 41));
-        assert_eq!(start.seconds, 4.0 / 30.0);
-        assert_eq!(start.records.len(), 4, "a chunk stored twice counts once");
-        chunks.push(chunk(1, 1, 8));
-        assert_eq!(complete_snapshot(chunks.clone()).unwrap().frame, 8);
-        // Chunks of another partition count do not complete a frame.
-        let other = Snapshot {
-            partitions: 3,
-            ..chunk(2, 0, 12)
-        };
-        let mut mixed = vec![chunk(0, 0, 12), chunk(0, 1, 12), other];
-        mixed.extend([chunk(1, 0, 12), chunk(1, 1, 12)]);
-        mixed.extend(chunks);
-        assert_eq!(complete_snapshot(mixed).unwrap().frame, 8);
     }
 
     #[test]

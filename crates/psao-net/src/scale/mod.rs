@@ -4,6 +4,7 @@
 //! code of `psao serve` ([`crate::serve`]).
 
 pub mod edge;
+pub mod join;
 mod names;
 pub mod trace_node;
 pub mod wire;
@@ -22,8 +23,9 @@ pub const LEASE_TTL: Duration = Duration::from_secs(3);
 /// Frames of batches the records stream keeps per partition; older ones are dropped (a
 /// joining edge starts from the snapshots, which are much more recent).
 pub const RECORD_FRAMES: i64 = 1024;
-/// Snapshot frames kept per chunk: a joining edge needs one frame that every chunk has.
-const SNAPSHOT_FRAMES: i64 = 2;
+/// Messages kept per snapshot subject: a chunk's latest message is its points' current
+/// state, and a partition's latest mark says as of which frame (docs/SCALE-OUT.md).
+const SNAPSHOT_FRAMES: i64 = 1;
 /// How often a trace node refreshes its leases and looks for partitions without one.
 pub const LEASE_CHECK: Duration = Duration::from_millis(500);
 /// Growth of the delay between attempts to reconnect to the NATS server, per attempt.
@@ -73,7 +75,7 @@ async fn records_stream(
     .map_err(|e| NetError::Nats(format!("cannot open stream {}: {e}", names.stream())))
 }
 
-/// The snapshots stream of `names` (the last [`SNAPSHOT_FRAMES`] chunks of each subject),
+/// The snapshots stream of `names` (the last [`SNAPSHOT_FRAMES`] messages of each subject),
 /// created when missing.
 async fn snapshot_stream(
     js: &async_nats::jetstream::Context,

@@ -47,7 +47,12 @@ impl Names {
         format!("psao.{}.snap.{k}.{c}", self.id)
     }
 
-    /// Every snapshot chunk.
+    /// Snapshot marks of partition `k` (see [`super::wire::SnapshotMark`]).
+    pub fn snapshot_mark(&self, k: u32) -> String {
+        format!("psao.{}.snap.{k}.mark", self.id)
+    }
+
+    /// Every snapshot chunk and mark.
     pub fn snapshots_wildcard(&self) -> String {
         format!("psao.{}.snap.>", self.id)
     }
@@ -92,6 +97,7 @@ mod tests {
         assert_eq!(n.views("edge 1"), "psao.room_obj.views.edge_1");
         assert_eq!(n.stream(), "PSAO_room_obj");
         assert_eq!(n.snapshot(2, 5), "psao.room_obj.snap.2.5");
+        assert_eq!(n.snapshot_mark(2), "psao.room_obj.snap.2.mark");
         assert_eq!(n.snapshot_stream(), "PSAO_room_obj_SNAP");
         assert_eq!(n.leases(), "psao_room_obj_leases");
     }

@@ -1,7 +1,9 @@
 //! A trace node (`psao trace-node`): steps the whole scene's selection each server frame,
 //! traces the points of the partitions it holds, and publishes their new records as one
-//! batch per held partition into the records stream. Partitions are held by leases in a
-//! key-value bucket; a node adopts partitions whose lease expired (docs/SCALE-OUT.md).
+//! batch per held partition into the records stream, and every `--snapshot-every` frames
+//! the snapshot chunks of its partitions that changed. Partitions are held by leases in a
+//! key-value bucket; a node adopts partitions whose lease expired (docs/SCALE-OUT.md). A
+//! node starts from the published state ([`super::join`]), not from zero.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -10,11 +12,12 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use async_nats::jetstream::kv;
 use futures_util::StreamExt;
-use psao_server::{Partition, PointRecord, Server, View};
+use psao_server::{Partition, PointRecord, PointState, Server, View};
 use serde::{Deserialize, Serialize};
 use tokio::sync::mpsc;
 
-use super::wire::{Batch, Snapshot, ViewSet, CHUNK_POINTS};
+use super::join::{join, Joiner};
+use super::wire::{Batch, Snapshot, SnapshotMark, ViewSet, CHUNK_POINTS};
 use super::{connect, records_stream, snapshot_stream, Names, LEASE_CHECK, LEASE_TTL};
 use crate::cpu_time::cpu_seconds;
 use crate::NetError;
@@ -82,8 +85,12 @@ pub struct TraceNodeStats {
     /// Records published, and the bytes of their batches.
     pub records: u64,
     pub batch_bytes: u64,
-    /// Bytes of the snapshot chunks published.
+    /// Bytes of the snapshot chunks and marks published, and the chunks published (only
+    /// those whose points changed since their previous message).
     pub snapshot_bytes: u64,
+    pub snapshot_chunks: u64,
+    /// The published state the node started from.
+    pub restored: Restored,
     /// Messages that did not parse (or named points that do not exist): dropped.
     pub malformed: u64,
     /// Messages dropped because the inbox was full.
@@ -92,6 +99,22 @@ pub struct TraceNodeStats {
     pub partitions: Vec<u32>,
     /// Partitions adopted from dead nodes.
     pub adopted: Vec<Adoption>,
+}
+
+/// The published state a trace node started from ([`join`]).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Restored {
+    /// The server frame the node started at (0: a new session), and the frame of the
+    /// snapshots it started from (0: none).
+    pub frame: u64,
+    pub snapshot_frame: u64,
+    /// Published records restored (every partition's points), and points whose sample
+    /// counts came from the snapshots.
+    pub records: u64,
+    pub samples: u64,
+    /// Bytes of snapshot messages and of record batches read to start.
+    pub snapshot_bytes: u64,
+    pub batch_bytes: u64,
 }
 
 /// Counters the subscription tasks share with the node.
@@ -240,6 +263,10 @@ struct Node {
     recent_seconds: BTreeMap<u64, f64>,
     /// Per partition: the last frame a batch was seen for it, and when.
     last_seen: BTreeMap<u32, (u64, Instant)>,
+    /// Per partition: the last frame whose records are in this node's published state.
+    noted: BTreeMap<u32, u64>,
+    /// The points of every snapshot chunk this node published last, per (partition, chunk).
+    published_chunks: BTreeMap<(u32, u32), Vec<PointState>>,
     last_upkeep: Instant,
     /// No partition is adopted before this: after the NATS server was away, the other
     /// nodes get a lease's lifetime to refresh theirs.
@@ -305,7 +332,34 @@ pub fn run(
         }
         std::thread::sleep(LEASE_CHECK);
     }
+    // Start from the published state: every partition's records, and the sample counts
+    // of the snapshots.
     let mut server = server;
+    let joined = rt.block_on(join(&js, &names, &server, Joiner::TraceNode))?;
+    let (frame, seconds) = joined.fold.last_frame();
+    let records = joined.fold.records();
+    let mut restored = Restored {
+        frame,
+        snapshot_frame: joined.fold.snapshot_frame(),
+        records: records.len() as u64,
+        snapshot_bytes: joined.counts.snapshot_bytes,
+        batch_bytes: joined.counts.batch_bytes,
+        ..Restored::default()
+    };
+    if frame > 0 {
+        server.restore_replica(frame, seconds as f32, &records)?;
+        restored.samples = server.restore_samples(joined.fold.snapshot_points())? as u64;
+        tracing::info!(
+            "starting at frame {frame} from the published state ({} records, snapshots of frame {})",
+            records.len(),
+            restored.snapshot_frame
+        );
+    }
+    let now = Instant::now();
+    let latest = joined.fold.latest_frames();
+    let last_seen = latest.iter().map(|(&k, &(f, _))| (k, (f, now))).collect();
+    let noted = latest.iter().map(|(&k, &(f, _))| (k, f)).collect();
+    let recent_seconds = latest.values().copied().collect();
     let owners = server.owners(partition.count);
     server.hold_partitions(owners, &[partition.index]);
     tracing::info!("tracing partition {partition} as {}", config.node_id);
@@ -322,12 +376,19 @@ pub fn run(
         pending_views: BTreeMap::new(),
         latest_views: BTreeMap::new(),
         pending_seconds: BTreeMap::new(),
-        recent_seconds: BTreeMap::new(),
-        last_seen: BTreeMap::new(),
+        recent_seconds,
+        last_seen,
+        noted,
+        published_chunks: BTreeMap::new(),
         last_upkeep: Instant::now(),
         adopt_after: Instant::now(),
-        stats: TraceNodeStats::default(),
+        stats: TraceNodeStats {
+            restored,
+            ..TraceNodeStats::default()
+        },
     };
+    // Adopt at once the partitions nobody holds (their nodes died before this one started).
+    node.upkeep(true)?;
     node.run(&stop)
 }
 
@@ -500,6 +561,12 @@ impl Node {
             if self.leases.held.contains_key(&batch.partition) {
                 continue;
             }
+            // Frames this node has the records of already (read when it started).
+            let noted = self.noted.entry(batch.partition).or_insert(0);
+            if batch.frame <= *noted {
+                continue;
+            }
+            *noted = batch.frame;
             if self.server.note_records(&batch.records).is_err() {
                 self.counters.malformed.fetch_add(1, Ordering::Relaxed);
             }
@@ -547,7 +614,9 @@ impl Node {
     }
 
     /// Publish the snapshot of partition `k` at `frame`, whose batch has stream sequence
-    /// number `sequence`, chunk by chunk.
+    /// number `sequence`: the chunks whose points changed (records or sample counts) since
+    /// this node last published them (all of them the first time), then the partition's
+    /// mark, once they are stored.
     fn snapshot(
         &mut self,
         k: u32,
@@ -558,26 +627,47 @@ impl Node {
         let chunks = self.server.partition_records(k, CHUNK_POINTS);
         let partitions = self.server.partition_owners().map_or(1, |o| o.count());
         let count = chunks.len() as u32;
-        let messages: Vec<(String, String, bytes::Bytes)> = chunks
-            .into_iter()
-            .enumerate()
-            .map(|(c, records)| {
-                let chunk = Snapshot {
-                    partition: k,
-                    partitions,
-                    chunk: c as u32,
-                    chunks: count,
-                    frame,
-                    seconds,
-                    sequence,
-                    records,
-                };
-                let id = format!("{}.snap.{k}.{c}.{frame}", self.config.node_id);
-                (self.names.snapshot(k, c as u32), id, chunk.encode().into())
-            })
-            .collect();
+        let mut changed = Vec::new();
+        let mut messages: Vec<(String, String, bytes::Bytes)> = Vec::new();
+        for (c, points) in chunks.into_iter().enumerate() {
+            let key = (k, c as u32);
+            if self.published_chunks.get(&key) == Some(&points) {
+                continue;
+            }
+            let chunk = Snapshot {
+                partition: k,
+                partitions,
+                chunk: c as u32,
+                chunks: count,
+                frame,
+                seconds,
+                sequence,
+                points,
+            };
+            let id = format!("{}.snap.{k}.{c}.{frame}", self.config.node_id);
+            messages.push((self.names.snapshot(k, c as u32), id, chunk.encode().into()));
+            changed.push((key, chunk.points));
+        }
         self.store_retrying(&messages)?;
-        self.stats.snapshot_bytes += messages.iter().map(|m| m.2.len() as u64).sum::<u64>();
+        let mark = SnapshotMark {
+            partition: k,
+            partitions,
+            chunks: count,
+            frame,
+            seconds,
+            sequence,
+        };
+        let id = format!("{}.mark.{k}.{frame}", self.config.node_id);
+        let mark = [(self.names.snapshot_mark(k), id, mark.encode().into())];
+        // Only after the chunks are stored: a mark vouches for them.
+        self.store_retrying(&mark)?;
+        self.stats.snapshot_chunks += messages.len() as u64;
+        self.stats.snapshot_bytes += messages
+            .iter()
+            .chain(&mark)
+            .map(|m| m.2.len() as u64)
+            .sum::<u64>();
+        self.published_chunks.extend(changed);
         Ok(())
     }
 

@@ -1,11 +1,11 @@
 //! The payloads trace nodes and edges exchange through NATS (docs/SCALE-OUT.md): record
-//! batches, snapshot chunks and view sets, little-endian binary with a magic and a version. Decoding checks
+//! batches, snapshot chunks and marks, and view sets, little-endian binary with a magic and a version. Decoding checks
 //! every length against the message before allocating, so a malformed message is an error,
 //! never a panic or a huge allocation.
 
 use glam::Vec3;
 use psao_scene::Camera;
-use psao_server::{PointRecord, View};
+use psao_server::{PointRecord, PointState, View};
 
 /// Magic of a record batch.
 const BATCH_MAGIC: &[u8; 4] = b"PSRB";
@@ -13,14 +13,21 @@ const BATCH_MAGIC: &[u8; 4] = b"PSRB";
 const VIEWS_MAGIC: &[u8; 4] = b"PSVW";
 /// Magic of a snapshot chunk.
 const SNAPSHOT_MAGIC: &[u8; 4] = b"PSSN";
-/// Version of every payload.
+/// Magic of a snapshot mark.
+const MARK_MAGIC: &[u8; 4] = b"PSSM";
+/// Version of the batches, view sets and snapshot marks.
 const VERSION: u8 = 1;
+/// Version of the snapshot chunks (2: with sample counts).
+const SNAPSHOT_VERSION: u8 = 2;
 /// Bytes of a batch before its records, and of one record.
 const BATCH_HEADER: usize = 4 + 1 + 4 + 4 + 8 + 8 + 4;
 const RECORD_BYTES: usize = 12;
-/// Bytes of a snapshot chunk before its records.
+/// Bytes of a snapshot chunk before its points, and of one point (record and samples).
 const SNAPSHOT_HEADER: usize = 4 + 1 + 4 * 4 + 8 + 8 + 8 + 4;
-/// Most points in one snapshot chunk: 12 bytes each, so a chunk stays under NATS's default
+const POINT_BYTES: usize = RECORD_BYTES + 2;
+/// Bytes of a snapshot mark.
+const MARK_BYTES: usize = 4 + 1 + 3 * 4 + 8 + 8 + 8;
+/// Most points in one snapshot chunk: 14 bytes each, so a chunk stays under NATS's default
 /// 1 MiB payload limit.
 pub const CHUNK_POINTS: usize = 65536;
 /// Bytes of a view set before its views, and of one view.
@@ -43,8 +50,9 @@ pub struct Batch {
     pub records: Vec<PointRecord>,
 }
 
-/// One chunk of the published records of a partition's points at one server frame: a
-/// joining edge starts from every partition's chunks instead of the whole history.
+/// One chunk of the published records of a partition's points at one server frame, with
+/// their sample counts: a joining edge or trace node starts from every chunk's latest
+/// message instead of the whole history.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Snapshot {
     /// The partition, and the number of partitions.
@@ -60,8 +68,26 @@ pub struct Snapshot {
     /// later batches follow it.
     pub sequence: u64,
     /// The published records of the chunk's points (stored ones only), in (instance,
-    /// index) order.
-    pub records: Vec<PointRecord>,
+    /// index) order, with their sample counts (sent as 16 bits: larger counts saturate).
+    pub points: Vec<PointState>,
+}
+
+/// Published after a trace node's snapshot round of one partition at `frame`: every chunk
+/// of the partition whose points changed since its previous message was published again
+/// at `frame` (and stored) before this mark, so the latest message of every chunk is the
+/// state of its points at `frame` or later.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SnapshotMark {
+    /// The partition, and the number of partitions.
+    pub partition: u32,
+    pub partitions: u32,
+    /// The partition's number of chunks.
+    pub chunks: u32,
+    /// The frame of the round, and its scene time, seconds.
+    pub frame: u64,
+    pub seconds: f64,
+    /// Records-stream sequence number of the partition's batch of `frame`.
+    pub sequence: u64,
 }
 
 /// The views an edge's viewers had for one server frame.
@@ -122,14 +148,32 @@ impl Reader<'_> {
     }
     /// The magic and version, checked.
     fn header(&mut self, magic: &[u8; 4]) -> Result<(), PayloadError> {
+        self.header_version(magic, VERSION)
+    }
+    /// The magic and a version other than [`VERSION`], checked.
+    fn header_version(&mut self, magic: &[u8; 4], want: u8) -> Result<(), PayloadError> {
         if &self.take::<4>()? != magic {
             return Err(fail(self.what, "wrong magic"));
         }
         let [version] = self.take::<1>()?;
-        if version != VERSION {
-            return Err(fail(self.what, format!("version {version}, not {VERSION}")));
+        if version != want {
+            return Err(fail(self.what, format!("version {version}, not {want}")));
         }
         Ok(())
+    }
+    fn u16(&mut self) -> Result<u16, PayloadError> {
+        self.take().map(u16::from_le_bytes)
+    }
+    /// A partition and partition count, checked.
+    fn partition(&mut self) -> Result<(u32, u32), PayloadError> {
+        let (partition, partitions) = (self.u32()?, self.u32()?);
+        if partitions == 0 || partition >= partitions {
+            return Err(fail(
+                self.what,
+                format!("partition {partition} of {partitions}"),
+            ));
+        }
+        Ok((partition, partitions))
     }
     /// A count of items of `size` bytes that must fill the rest exactly.
     fn count(&mut self, size: usize, max: usize) -> Result<usize, PayloadError> {
@@ -176,34 +220,36 @@ impl Reader<'_> {
 impl Snapshot {
     /// The payload.
     pub fn encode(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(SNAPSHOT_HEADER + self.records.len() * RECORD_BYTES);
+        let mut out = Vec::with_capacity(SNAPSHOT_HEADER + self.points.len() * POINT_BYTES);
         out.extend_from_slice(SNAPSHOT_MAGIC);
-        out.push(VERSION);
+        out.push(SNAPSHOT_VERSION);
         for v in [self.partition, self.partitions, self.chunk, self.chunks] {
             out.extend_from_slice(&v.to_le_bytes());
         }
         out.extend_from_slice(&self.frame.to_le_bytes());
         out.extend_from_slice(&self.seconds.to_le_bytes());
         out.extend_from_slice(&self.sequence.to_le_bytes());
-        put_records(&mut out, &self.records);
+        out.extend_from_slice(&(self.points.len() as u32).to_le_bytes());
+        for p in &self.points {
+            let r = p.record;
+            for v in [r.instance, r.index, r.bits] {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+            let samples = u16::try_from(p.samples).unwrap_or(u16::MAX);
+            out.extend_from_slice(&samples.to_le_bytes());
+        }
         out
     }
 
     /// Decode a payload; refuses a partition or chunk outside its count, more than
-    /// [`CHUNK_POINTS`] records and non-finite times.
+    /// [`CHUNK_POINTS`] points and non-finite times.
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, PayloadError> {
         let mut r = Reader {
             bytes,
             what: "snapshot chunk",
         };
-        r.header(SNAPSHOT_MAGIC)?;
-        let (partition, partitions) = (r.u32()?, r.u32()?);
-        if partitions == 0 || partition >= partitions {
-            return Err(fail(
-                r.what,
-                format!("partition {partition} of {partitions}"),
-            ));
-        }
+        r.header_version(SNAPSHOT_MAGIC, SNAPSHOT_VERSION)?;
+        let (partition, partitions) = r.partition()?;
         let (chunk, chunks) = (r.u32()?, r.u32()?);
         if chunk >= chunks {
             return Err(fail(r.what, format!("chunk {chunk} of {chunks}")));
@@ -212,7 +258,17 @@ impl Snapshot {
         if !seconds.is_finite() {
             return Err(fail(r.what, "non-finite scene time"));
         }
-        let records = r.records(CHUNK_POINTS)?;
+        let n = r.count(POINT_BYTES, CHUNK_POINTS)?;
+        let mut points = Vec::with_capacity(n);
+        for _ in 0..n {
+            let record = PointRecord {
+                instance: r.u32()?,
+                index: r.u32()?,
+                bits: r.u32()?,
+            };
+            let samples = u32::from(r.u16()?);
+            points.push(PointState { record, samples });
+        }
         Ok(Snapshot {
             partition,
             partitions,
@@ -221,7 +277,50 @@ impl Snapshot {
             frame,
             seconds,
             sequence,
-            records,
+            points,
+        })
+    }
+}
+
+impl SnapshotMark {
+    /// The payload.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(MARK_BYTES);
+        out.extend_from_slice(MARK_MAGIC);
+        out.push(VERSION);
+        for v in [self.partition, self.partitions, self.chunks] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&self.frame.to_le_bytes());
+        out.extend_from_slice(&self.seconds.to_le_bytes());
+        out.extend_from_slice(&self.sequence.to_le_bytes());
+        out
+    }
+
+    /// Decode a payload; refuses a partition outside its count, non-finite times and
+    /// trailing bytes.
+    pub fn decode(bytes: &[u8]) -> Result<SnapshotMark, PayloadError> {
+        let mut r = Reader {
+            bytes,
+            what: "snapshot mark",
+        };
+        r.header(MARK_MAGIC)?;
+        let (partition, partitions) = r.partition()?;
+        let chunks = r.u32()?;
+        let (frame, seconds, sequence) = (r.u64()?, r.f64()?, r.u64()?);
+        if !seconds.is_finite() {
+            return Err(fail(r.what, "non-finite scene time"));
+        }
+        if !r.bytes.is_empty() {
+            return Err(fail(r.what, "trailing bytes"));
+        }
+        Ok(SnapshotMark {
+            partition,
+            partitions,
+            chunks,
+            frame,
+            seconds,
+            sequence,
         })
     }
 }
@@ -247,13 +346,7 @@ impl Batch {
             what: "record batch",
         };
         r.header(BATCH_MAGIC)?;
-        let (partition, partitions) = (r.u32()?, r.u32()?);
-        if partitions == 0 || partition >= partitions {
-            return Err(fail(
-                r.what,
-                format!("partition {partition} of {partitions}"),
-            ));
-        }
+        let (partition, partitions) = r.partition()?;
         let (frame, seconds) = (r.u64()?, r.f64()?);
         if !seconds.is_finite() {
             return Err(fail(r.what, "non-finite scene time"));
@@ -362,7 +455,23 @@ mod tests {
             frame: 64,
             seconds: 2.1,
             sequence: 190,
-            records: b.records,
+            points: b
+                .records
+                .into_iter()
+                .zip([0, 3, 70_000, 16, 1])
+                .map(|(record, samples)| PointState { record, samples })
+                .collect(),
+        }
+    }
+
+    fn mark() -> SnapshotMark {
+        SnapshotMark {
+            partition: 1,
+            partitions: 2,
+            chunks: 3,
+            frame: 64,
+            seconds: 2.1,
+            sequence: 191,
         }
     }
 
@@ -389,20 +498,40 @@ mod tests {
             ..batch()
         };
         assert_eq!(Batch::decode(&empty.encode()), Ok(empty));
-        let s = snapshot();
-        assert_eq!(Snapshot::decode(&s.encode()), Ok(s));
+        let mut s = snapshot();
+        let back = Snapshot::decode(&s.encode()).unwrap();
+        assert_eq!(
+            back.points[2].samples,
+            u32::from(u16::MAX),
+            "counts saturate"
+        );
+        s.points[2].samples = u32::from(u16::MAX);
+        assert_eq!(back, s);
+        let m = mark();
+        assert_eq!(SnapshotMark::decode(&m.encode()), Ok(m));
     }
 
     #[test]
     fn every_truncation_and_corruption_is_an_error() {
         let (b, v, s) = (batch().encode(), views().encode(), snapshot().encode());
-        for bytes in [&b, &v, &s] {
+        let m = mark().encode();
+        for bytes in [&b, &v, &s, &m] {
             for n in 0..bytes.len() {
                 assert!(Batch::decode(&bytes[..n]).is_err());
                 assert!(ViewSet::decode(&bytes[..n]).is_err());
                 assert!(Snapshot::decode(&bytes[..n]).is_err());
+                assert!(SnapshotMark::decode(&bytes[..n]).is_err());
             }
         }
+        let mut extra = m.clone();
+        extra.push(0);
+        assert!(SnapshotMark::decode(&extra).is_err());
+        let mut wrong = m.clone();
+        wrong[5..9].copy_from_slice(&2u32.to_le_bytes());
+        assert!(SnapshotMark::decode(&wrong)
+            .unwrap_err()
+            .to_string()
+            .contains("partition 2 of 2"));
         let mut wrong = s.clone();
         wrong[13..17].copy_from_slice(&4u32.to_le_bytes());
         assert!(Snapshot::decode(&wrong)
@@ -448,14 +577,11 @@ mod tests {
     #[test]
     fn the_largest_snapshot_chunk_is_accepted_and_one_more_record_refused() {
         let mut s = snapshot();
-        s.records = vec![s.records[0]; CHUNK_POINTS];
+        s.points = vec![s.points[0]; CHUNK_POINTS];
         let bytes = s.encode();
         assert!(bytes.len() < 1 << 20, "under NATS's default payload limit");
-        assert_eq!(
-            Snapshot::decode(&bytes).unwrap().records.len(),
-            CHUNK_POINTS
-        );
-        s.records.push(s.records[0]);
+        assert_eq!(Snapshot::decode(&bytes).unwrap().points.len(), CHUNK_POINTS);
+        s.points.push(s.points[0]);
         assert!(Snapshot::decode(&s.encode()).is_err());
     }
 

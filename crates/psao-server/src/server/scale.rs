@@ -23,6 +23,16 @@ pub struct PointRecord {
     pub bits: u32,
 }
 
+/// A published point and its sample count: what a trace node's snapshot says of one point,
+/// so that a node starting later restarts it from there instead of from zero.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct PointState {
+    /// The point and its published record.
+    pub record: PointRecord,
+    /// AO samples the point had.
+    pub samples: u32,
+}
+
 /// What a trace node holds: the owners of every point and the partitions it traces.
 pub(crate) struct Held {
     owners: Owners,
@@ -179,16 +189,17 @@ impl Server {
         })
     }
 
-    /// The published records of partition `k`'s stored points, in (instance, index)
-    /// order, cut into chunks of `chunk_points` of the partition's points each (published or
-    /// not, so a chunk names the same points every time): a trace node's snapshot of the
-    /// partition. Empty when this server holds no partitions.
-    pub fn partition_records(&self, k: u32, chunk_points: usize) -> Vec<Vec<PointRecord>> {
+    /// The published records of partition `k`'s stored points with their sample counts, in
+    /// (instance, index) order, cut into chunks of `chunk_points` of the partition's points
+    /// each (published or not, so a chunk names the same points every time, see
+    /// [`Owners::chunks`]): a trace node's snapshot of the partition. Empty when this server
+    /// holds no partitions.
+    pub fn partition_records(&self, k: u32, chunk_points: usize) -> Vec<Vec<PointState>> {
         let Some(held) = &self.held else {
             return Vec::new();
         };
         let chunk_points = chunk_points.max(1);
-        let mut chunks: Vec<Vec<PointRecord>> = Vec::new();
+        let mut chunks: Vec<Vec<PointState>> = Vec::new();
         let mut ordinal = 0usize;
         for (i, inst) in self.instances.iter().enumerate() {
             let p = &inst.points;
@@ -201,10 +212,13 @@ impl Server {
                 }
                 ordinal += 1;
                 if p.published[j] != 0 && p.stored.get(j) {
-                    chunks.last_mut().expect("pushed above").push(PointRecord {
-                        instance: i as u32,
-                        index: j as u32,
-                        bits: p.published[j],
+                    chunks.last_mut().expect("pushed above").push(PointState {
+                        record: PointRecord {
+                            instance: i as u32,
+                            index: j as u32,
+                            bits: p.published[j],
+                        },
+                        samples: p.count[j],
                     });
                 }
             }
@@ -212,9 +226,36 @@ impl Server {
         chunks
     }
 
-    /// Start a fresh replica at server frame `frame` (scene time `time`) from the published
-    /// `records` of every point at that frame (the snapshots of every partition): pose the
-    /// scene, publish them, and continue with [`Server::step_replica`] for `frame + 1`.
+    /// Give the points of `states` their sample counts, each sample worth the point's
+    /// published AO (a trace node restored with [`Server::restore_replica`] from snapshots
+    /// continues their sampling instead of restarting it). Counts above the configured
+    /// maximum are clamped; points without a published record keep no samples. Refuses
+    /// points that do not exist.
+    pub fn restore_samples(&mut self, states: &[PointState]) -> Result<usize, ServerError> {
+        let records: Vec<PointRecord> = states.iter().map(|s| s.record).collect();
+        self.check_records(&records)?;
+        let max = self.config.max_samples;
+        let mut restored = 0;
+        for s in states {
+            let p = &mut self.instances[s.record.instance as usize].points;
+            let j = s.record.index as usize;
+            if p.published[j] == 0 {
+                continue;
+            }
+            p.count[j] = s.samples.min(max);
+            p.sum[j] = unpack_ao(p.published[j]) * p.count[j] as f32;
+            restored += 1;
+        }
+        for inst in &mut self.instances {
+            inst.rebuild_summaries();
+        }
+        Ok(restored)
+    }
+
+    /// Start a fresh replica (or trace node) at server frame `frame` (scene time `time`)
+    /// from the published `records` of every point at that frame (the snapshots of every
+    /// partition and the batches after them): pose the scene, publish them, and continue
+    /// with [`Server::step_replica`] (or [`Server::step_at`]) for `frame + 1`.
     /// Refuses a replica that stepped already, and malformed records.
     pub fn restore_replica(
         &mut self,
@@ -232,7 +273,12 @@ impl Server {
         self.pose(time)?;
         self.validate_records(records)?;
         self.frame = frame;
-        Ok(self.publish_runs(runs(records)))
+        let published = self.publish_runs(runs(records));
+        // On a trace node these are not this frame's records to send.
+        if let Some(held) = &mut self.held {
+            held.records.clear();
+        }
+        Ok(published)
     }
 
     /// Refuses records naming a point that does not exist or is not stored in the current
@@ -544,14 +590,37 @@ mod tests {
             full.step_replica(0.0, &step(&mut nodes, frame)).unwrap();
         }
         // Chunks of 5 points: each partition's points split over several chunks.
-        let chunks: Vec<Vec<PointRecord>> = (0..2)
+        let chunks: Vec<Vec<PointState>> = (0..2)
             .flat_map(|k| nodes[k as usize].partition_records(k, 5))
             .collect();
         let per = owners.points_per_partition();
         assert_eq!(chunks.len() as u64, per[0].div_ceil(5) + per[1].div_ceil(5));
         assert!(chunks.iter().all(|c| c.len() <= 5));
-        let records = chunks.concat();
+        let states = chunks.concat();
+        let records: Vec<PointRecord> = states.iter().map(|s| s.record).collect();
         assert!(!records.is_empty());
+        // A trace node starting now restores the published records and their samples.
+        let mut fresh = Server::new(&scene, config()).unwrap();
+        fresh.hold_partitions(owners.clone(), &[0]);
+        fresh.restore_replica(8, 0.0, &records).unwrap();
+        assert!(
+            fresh.take_records().is_empty(),
+            "nothing to send for the restore"
+        );
+        assert_eq!(fresh.restore_samples(&states).unwrap(), records.len());
+        assert!(same_grids(&full, &fresh));
+        for inst in 0..fresh.instance_count() {
+            let theirs = nodes[0].points(inst);
+            for (mine, theirs) in fresh.points(inst).zip(theirs) {
+                if let Some(bits) = mine.published {
+                    assert_eq!(mine.samples, theirs.samples);
+                    let ao = psao_points::pack::unpack_ao(bits);
+                    assert!((mine.ao.unwrap_or(ao) - ao).abs() < 1e-6);
+                } else {
+                    assert_eq!(mine.samples, 0);
+                }
+            }
+        }
         late.restore_replica(8, 0.0, &records).unwrap();
         assert!(same_grids(&full, &late), "restored at frame 8");
         let e = late.restore_replica(8, 0.0, &records).unwrap_err();
