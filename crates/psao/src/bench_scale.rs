@@ -77,6 +77,10 @@ pub struct ScaleRow {
     /// chunks published (only those whose points changed since their previous message).
     pub snapshot_bytes_per_frame: f64,
     pub snapshot_chunks: u64,
+    /// Bytes per server frame had every round published every chunk (full snapshots).
+    pub full_snapshot_bytes_per_frame: f64,
+    /// Of `snapshot_bytes_per_frame`: chunks published only because sample counts changed.
+    pub samples_only_snapshot_bytes_per_frame: f64,
     /// Whether the edge's final grids hash like the one-process server's.
     pub same_state: bool,
     /// Bytes of every batch in the records stream at the end (the history).
@@ -199,6 +203,14 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             snapshot_bytes_per_frame: stats.iter().map(|s| s.snapshot_bytes).sum::<u64>() as f64
                 / frames,
             snapshot_chunks: stats.iter().map(|s| s.snapshot_chunks).sum(),
+            samples_only_snapshot_bytes_per_frame: stats
+                .iter()
+                .map(|s| s.snapshot_samples_only_bytes)
+                .sum::<u64>() as f64
+                / frames,
+            full_snapshot_bytes_per_frame: stats.iter().map(|s| s.snapshot_full_bytes).sum::<u64>()
+                as f64
+                / frames,
             same_state: state_hash(&replica) == serve_hash,
             history_bytes: nats_bytes,
             late_join_bytes,

@@ -502,8 +502,10 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
     };
     let (scene, path) = fixture(dir.path());
     let out = |n: &str| dir.path().join(n);
-    // 70 server frames; the path stops moving at frame 30, the state converges after it.
-    const STEPS: u32 = 140;
+    // 52 server frames; the path stops moving at frame 30, the state converges after it.
+    // The fresh node steps the last two: one restarting from zero would trace and publish
+    // other records in them.
+    const STEPS: u32 = 104;
     // The first two nodes trace this many frames and stop, releasing their leases.
     const FIRST: &str = "50";
     let quick = ["--max-samples", "16"];
@@ -526,7 +528,13 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
         args.extend(extra);
         start("trace-node", &scene, &args).0
     };
-    let mut first: Vec<Proc> = (0..2).map(|k| node(k, &["--frames", FIRST])).collect();
+    let first_json: Vec<PathBuf> = (0..2).map(|k| out(&format!("t{k}.json"))).collect();
+    let mut first: Vec<Proc> = (0..2)
+        .map(|k| {
+            let json = first_json[k as usize].to_str().unwrap();
+            node(k, &["--frames", FIRST, "--json", json])
+        })
+        .collect();
     let edges: Vec<(Proc, String)> = (0..2)
         .map(|e| {
             let json = out(&format!("e{e}.json"));
@@ -573,6 +581,15 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
         assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
         assert_eq!(s["edge"]["frames"], STEPS / 2, "{s}");
     }
+    // The state converged before frame 50: the last rounds republished no chunk.
+    for f in &first_json {
+        let t = json(f);
+        let (sent, full) = (&t["snapshot_bytes"], &t["snapshot_full_bytes"]);
+        assert!(
+            sent.as_u64() < full.as_u64(),
+            "{sent} of {full} snapshot bytes"
+        );
+    }
     let late = json(&late_json);
     assert_eq!(late["partitions"], serde_json::json!([0, 1]), "{late}");
     assert_eq!(late["adopted"][0]["partition"], 1, "{late}");
@@ -580,8 +597,10 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
     assert_eq!(restored["frame"], 50, "{late}");
     assert_eq!(restored["snapshot_frame"], 50, "{late}");
     assert!(restored["records"].as_u64().unwrap() > 0, "{late}");
-    // Sample counts restored: a node starting from zero would have none.
+    // Sample counts restored: a node starting from zero would have none, and would trace
+    // the converged points again.
     assert!(restored["samples"].as_u64().unwrap() > 0, "{late}");
+    assert_eq!(late["rays"], 0, "nothing left to trace: {late}");
 }
 
 /// The room with a box sliding over its floor (instance transforms) and, when the shared

@@ -73,9 +73,9 @@ pub struct EdgeStats {
     pub sequence_gaps: u64,
     /// Server frames applied.
     pub frames: u64,
-    /// Bytes of the snapshot chunks read when the edge joined.
+    /// Bytes of the snapshot chunks and marks read when the edge joined.
     pub snapshot_bytes: u64,
-    /// The frame the edge started from (0: no complete snapshot, the stream from its start).
+    /// The frame the edge started from (0: no snapshot, the stream from its start).
     pub snapshot_frame: u64,
 }
 

@@ -89,6 +89,11 @@ pub struct TraceNodeStats {
     /// those whose points changed since their previous message).
     pub snapshot_bytes: u64,
     pub snapshot_chunks: u64,
+    /// Bytes the snapshot rounds would have cost had every chunk been published.
+    pub snapshot_full_bytes: u64,
+    /// Bytes of the chunks published although their records had not changed (only their
+    /// points' sample counts).
+    pub snapshot_samples_only_bytes: u64,
     /// The published state the node started from.
     pub restored: Restored,
     /// Messages that did not parse (or named points that do not exist): dropped.
@@ -630,9 +635,18 @@ impl Node {
         let mut changed = Vec::new();
         let mut messages: Vec<(String, String, bytes::Bytes)> = Vec::new();
         for (c, points) in chunks.into_iter().enumerate() {
+            self.stats.snapshot_full_bytes += Snapshot::encoded_len(points.len()) as u64;
             let key = (k, c as u32);
-            if self.published_chunks.get(&key) == Some(&points) {
+            let last = self.published_chunks.get(&key);
+            if last == Some(&points) {
                 continue;
+            }
+            let same_records = last.is_some_and(|l| {
+                l.len() == points.len() && l.iter().zip(&points).all(|(a, b)| a.record == b.record)
+            });
+            if same_records {
+                self.stats.snapshot_samples_only_bytes +=
+                    Snapshot::encoded_len(points.len()) as u64;
             }
             let chunk = Snapshot {
                 partition: k,

@@ -27,9 +27,13 @@ const SNAPSHOT_HEADER: usize = 4 + 1 + 4 * 4 + 8 + 8 + 8 + 4;
 const POINT_BYTES: usize = RECORD_BYTES + 2;
 /// Bytes of a snapshot mark.
 const MARK_BYTES: usize = 4 + 1 + 3 * 4 + 8 + 8 + 8;
-/// Most points in one snapshot chunk: 14 bytes each, so a chunk stays under NATS's default
-/// 1 MiB payload limit.
-pub const CHUNK_POINTS: usize = 65536;
+/// Points of a partition per snapshot chunk (every node of a session must use the same):
+/// small enough that a round republishes little beside the points that changed, large
+/// enough to keep the subjects few (some 370 for Sponza's 1.5 M points).
+pub const CHUNK_POINTS: usize = 4096;
+/// Most points a snapshot chunk may hold: 14 bytes each, so a chunk stays under NATS's
+/// default 1 MiB payload limit.
+pub const MAX_CHUNK_POINTS: usize = 65536;
 /// Bytes of a view set before its views, and of one view.
 const VIEWS_HEADER: usize = 4 + 1 + 8 + 8 + 4;
 const VIEW_BYTES: usize = 13 * 4;
@@ -68,7 +72,8 @@ pub struct Snapshot {
     /// later batches follow it.
     pub sequence: u64,
     /// The published records of the chunk's points (stored ones only), in (instance,
-    /// index) order, with their sample counts (sent as 16 bits: larger counts saturate).
+    /// index) order, with their sample counts (sent as 16 bits: larger counts saturate); at
+    /// most [`MAX_CHUNK_POINTS`].
     pub points: Vec<PointState>,
 }
 
@@ -218,6 +223,11 @@ impl Reader<'_> {
 }
 
 impl Snapshot {
+    /// Bytes of the payload of a chunk of `points` points.
+    pub fn encoded_len(points: usize) -> usize {
+        SNAPSHOT_HEADER + points * POINT_BYTES
+    }
+
     /// The payload.
     pub fn encode(&self) -> Vec<u8> {
         let mut out = Vec::with_capacity(SNAPSHOT_HEADER + self.points.len() * POINT_BYTES);
@@ -242,7 +252,7 @@ impl Snapshot {
     }
 
     /// Decode a payload; refuses a partition or chunk outside its count, more than
-    /// [`CHUNK_POINTS`] points and non-finite times.
+    /// [`MAX_CHUNK_POINTS`] points and non-finite times.
     pub fn decode(bytes: &[u8]) -> Result<Snapshot, PayloadError> {
         let mut r = Reader {
             bytes,
@@ -258,7 +268,7 @@ impl Snapshot {
         if !seconds.is_finite() {
             return Err(fail(r.what, "non-finite scene time"));
         }
-        let n = r.count(POINT_BYTES, CHUNK_POINTS)?;
+        let n = r.count(POINT_BYTES, MAX_CHUNK_POINTS)?;
         let mut points = Vec::with_capacity(n);
         for _ in 0..n {
             let record = PointRecord {
@@ -577,10 +587,14 @@ mod tests {
     #[test]
     fn the_largest_snapshot_chunk_is_accepted_and_one_more_record_refused() {
         let mut s = snapshot();
-        s.points = vec![s.points[0]; CHUNK_POINTS];
+        s.points = vec![s.points[0]; MAX_CHUNK_POINTS];
         let bytes = s.encode();
+        assert_eq!(bytes.len(), Snapshot::encoded_len(MAX_CHUNK_POINTS));
         assert!(bytes.len() < 1 << 20, "under NATS's default payload limit");
-        assert_eq!(Snapshot::decode(&bytes).unwrap().points.len(), CHUNK_POINTS);
+        assert_eq!(
+            Snapshot::decode(&bytes).unwrap().points.len(),
+            MAX_CHUNK_POINTS
+        );
         s.points.push(s.points[0]);
         assert!(Snapshot::decode(&s.encode()).is_err());
     }
