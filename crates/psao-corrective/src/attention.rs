@@ -97,6 +97,100 @@ pub fn analyze(
         .collect()
 }
 
+/// The tile side for regions of a `width × height` image: two cells of its saliency map
+/// ([`crate::saliency::cell_size`]), the shortest period over which the (resampled) map can
+/// rise and fall again, so tiles separate its features without cutting one feature's area
+/// into pieces of the same saliency.
+pub fn tile_size(width: usize, height: usize) -> usize {
+    2 * crate::saliency::cell_size(width, height)
+}
+
+/// [`analyze`], then each object cut along a grid of square tiles of [`tile_size`] (aligned to
+/// the image origin) into regions: the object's pixels inside one tile, with their bounding
+/// rectangle and mean saliency, and the object's importance (the paper's task importance is
+/// per object). So the saliency within a large object steers which of its parts are sampled
+/// first. When that makes more than `max_regions` regions, the tile side doubles until they
+/// fit. Regions come out sorted by object id, then tile row, then tile column.
+///
+/// # Panics
+/// As [`analyze`].
+pub fn analyze_tiles(
+    ids: &[u32],
+    width: usize,
+    height: usize,
+    saliency: &Map,
+    weight: f32,
+    max_regions: usize,
+) -> Vec<ObjectRegion> {
+    let objects = analyze(ids, width, height, saliency, weight);
+    let weight = weight.clamp(0.0, 1.0);
+    let mut tile = tile_size(width, height);
+    loop {
+        let regions = cut(&objects, ids, width, saliency, weight, tile);
+        if regions.len() <= max_regions || tile >= width.max(height) {
+            return regions;
+        }
+        tile *= 2;
+    }
+}
+
+/// Each object's region cut into the parts inside tiles of side `tile`.
+fn cut(
+    objects: &[ObjectRegion],
+    ids: &[u32],
+    width: usize,
+    saliency: &Map,
+    weight: f32,
+    tile: usize,
+) -> Vec<ObjectRegion> {
+    let tile = tile.max(1) as i32;
+    let mut out = Vec::new();
+    for o in objects {
+        let mut ty = o.rect.y0.div_euclid(tile) * tile;
+        while ty < o.rect.y1 {
+            let mut tx = o.rect.x0.div_euclid(tile) * tile;
+            while tx < o.rect.x1 {
+                let mut rect: Option<PixelRect> = None;
+                let (mut pixels, mut sum) = (0u32, 0.0f64);
+                for y in ty.max(o.rect.y0)..(ty + tile).min(o.rect.y1) {
+                    for x in tx.max(o.rect.x0)..(tx + tile).min(o.rect.x1) {
+                        let i = y as usize * width + x as usize;
+                        if ids[i] != o.id {
+                            continue;
+                        }
+                        pixels += 1;
+                        sum += saliency.values[i] as f64;
+                        let r = rect.get_or_insert(PixelRect {
+                            x0: x,
+                            y0: y,
+                            x1: x + 1,
+                            y1: y + 1,
+                        });
+                        r.x0 = r.x0.min(x);
+                        r.y0 = r.y0.min(y);
+                        r.x1 = r.x1.max(x + 1);
+                        r.y1 = r.y1.max(y + 1);
+                    }
+                }
+                if let Some(rect) = rect {
+                    let mean = (sum / pixels as f64) as f32;
+                    out.push(ObjectRegion {
+                        id: o.id,
+                        rect,
+                        pixels,
+                        saliency: mean,
+                        importance: o.importance,
+                        priority: weight * mean + (1.0 - weight) * o.importance,
+                    });
+                }
+                tx += tile;
+            }
+            ty += tile;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,6 +232,57 @@ mod tests {
         // Same distance class, but object 3 covers four times the pixels of object 2.
         assert!(r[2].importance > r[1].importance);
         assert!(r.iter().all(|o| o.priority == o.importance));
+    }
+
+    #[test]
+    fn tiles_partition_an_object_and_follow_saliency_within_it() {
+        let (w, h) = (64, 48);
+        let tile = tile_size(w, h);
+        assert!(tile >= 2);
+        // One object spanning several tiles; saliency only on its left part.
+        let ids = ids_with(w, h, &[(5, 3, 3, 4 * tile)]);
+        let mut sal = Map {
+            width: w,
+            height: h,
+            values: vec![0.0; w * h],
+        };
+        for y in 0..h {
+            for x in 0..tile {
+                sal.values[y * w + x] = 1.0;
+            }
+        }
+        let regions = analyze_tiles(&ids, w, h, &sal, 0.5, usize::MAX);
+        assert!(regions.len() > 1);
+        // Every pixel of the object lies in exactly one region, and each region's rectangle
+        // stays inside one tile.
+        for y in 0..h as i32 {
+            for x in 0..w as i32 {
+                let n = regions.iter().filter(|r| r.rect.contains(x, y)).count();
+                let on = ids[y as usize * w + x as usize] == 5;
+                assert_eq!(n, usize::from(on), "pixel ({x}, {y})");
+            }
+        }
+        for r in &regions {
+            assert_eq!(r.rect.x0 / tile as i32, (r.rect.x1 - 1) / tile as i32);
+            assert_eq!(r.rect.y0 / tile as i32, (r.rect.y1 - 1) / tile as i32);
+            assert_eq!(r.pixels as u64, r.rect.area());
+        }
+        let total: u32 = regions.iter().map(|r| r.pixels).sum();
+        assert_eq!(total as usize, 16 * tile * tile);
+        // The salient column of tiles comes first; all share the object's importance.
+        let best = regions
+            .iter()
+            .max_by(|a, b| a.priority.total_cmp(&b.priority))
+            .unwrap();
+        assert!(best.rect.x0 < tile as i32);
+        assert!(regions
+            .iter()
+            .all(|r| r.importance == regions[0].importance));
+        // Too many regions: the tiles grow until they fit.
+        let few = analyze_tiles(&ids, w, h, &sal, 0.5, 4);
+        assert!(few.len() <= 4 && few.len() < regions.len());
+        let total: u32 = few.iter().map(|r| r.pixels).sum();
+        assert_eq!(total as usize, 16 * tile * tile);
     }
 
     #[test]

@@ -238,6 +238,21 @@ fn conspicuity(pyramid: &[Map], pairs: &[(usize, usize)], width: usize, height: 
     sum
 }
 
+/// The pyramid depth and centre–surround pairs for a `width × height` image.
+fn layout(width: usize, height: usize) -> (usize, Vec<(usize, usize)>) {
+    let depth = (usize::BITS - width.min(height).leading_zeros()) as usize;
+    let depth = depth.min(9);
+    (depth, scales(depth))
+}
+
+/// The side in pixels of one cell of the saliency map of a `width × height` image: the map
+/// is computed at the middle centre scale and resampled to the image, so it holds one
+/// independent value per cell (1 when the image is too small for a map).
+pub fn cell_size(width: usize, height: usize) -> usize {
+    let (_, pairs) = layout(width, height);
+    pairs.get(pairs.len() / 2).map_or(1, |&(c, _)| 1 << c)
+}
+
 /// The bottom-up saliency map of an image at full resolution, in [0, 1] (all zero when nothing
 /// stands out, e.g. a uniform image or one too small for the pyramid).
 pub fn saliency(image: &RgbImage) -> Map {
@@ -245,9 +260,7 @@ pub fn saliency(image: &RgbImage) -> Map {
     if w == 0 || h == 0 {
         return Map::zeros(w, h);
     }
-    let depth = (usize::BITS - w.min(h).leading_zeros()) as usize;
-    let depth = depth.min(9);
-    let pairs = scales(depth);
+    let (depth, pairs) = layout(w, h);
     if pairs.is_empty() {
         return Map::zeros(w, h);
     }

@@ -103,7 +103,12 @@ impl RegionQueue {
     /// priority (decayed by their level), and only objects not queued yet are added at level 1
     /// — objects whose regions were finished are not resubmitted. Either way, objects the
     /// analysis no longer lists (gone from view, or moving) leave the queue.
-    pub fn submit(&mut self, regions: &[ObjectRegion], camera_changed: bool, finished: &[u32]) {
+    pub fn submit(
+        &mut self,
+        regions: &[ObjectRegion],
+        camera_changed: bool,
+        finished: &[(u32, PixelRect)],
+    ) {
         if camera_changed {
             self.heap = regions
                 .iter()
@@ -118,11 +123,14 @@ impl RegionQueue {
             return;
         }
         let mut entries: Vec<Entry> = std::mem::take(&mut self.heap).into_vec();
-        entries.retain(|e| regions.iter().any(|r| r.id == e.object));
+        entries.retain(|e| regions.iter().any(|r| (r.id, r.rect) == (e.object, e.rect)));
         for r in regions {
-            if let Some(e) = entries.iter_mut().find(|e| e.object == r.id) {
+            if let Some(e) = entries
+                .iter_mut()
+                .find(|e| (e.object, e.rect) == (r.id, r.rect))
+            {
                 e.priority = r.priority * (1.0 - self.decay).powi(e.level as i32 - 1);
-            } else if !finished.contains(&r.id) {
+            } else if !finished.contains(&(r.id, r.rect)) {
                 entries.push(Entry {
                     priority: r.priority,
                     object: r.id,
@@ -249,7 +257,7 @@ mod tests {
         q.submit(&[region(1, 1.0, A), region(2, 0.5, B)], false, &[]);
         let (next, _) = q.take(u64::MAX).unwrap();
         assert_eq!((next.object, next.level), (1, 2));
-        q.submit(&[region(1, 1.0, A), region(2, 0.5, B)], false, &[1]);
+        q.submit(&[region(1, 1.0, A), region(2, 0.5, B)], false, &[(1, A)]);
         let rest: Vec<_> = std::iter::from_fn(|| q.take(u64::MAX))
             .map(|(j, _)| j.object)
             .collect();
@@ -259,7 +267,7 @@ mod tests {
         q.submit(&[region(2, 0.5, B)], false, &[]);
         assert!(std::iter::from_fn(|| q.take(u64::MAX)).all(|(j, _)| j.object == 2));
         // A camera change restarts everything at level 1.
-        q.submit(&[region(1, 1.0, A)], true, &[1]);
+        q.submit(&[region(1, 1.0, A)], true, &[(1, A)]);
         assert_eq!(q.take(u64::MAX).unwrap().0.level, 1);
     }
 

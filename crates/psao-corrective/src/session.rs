@@ -10,7 +10,7 @@ use crate::cache::{AgingStats, CacheConfig, CacheError, SampleCache};
 use crate::schedule::{Job, RegionQueue};
 use crate::screen::ScreenView;
 use crate::splat::{Sample, SplatTarget};
-use crate::sqrt5::Hierarchy;
+use crate::sqrt5::{Hierarchy, PixelRect};
 
 /// A pixel to trace: position, object and level.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,8 +33,12 @@ pub struct Planner {
     queue: RegionQueue,
     /// Camera age at the last analysis.
     analyzed_age: Option<u32>,
-    /// Objects whose every level was planned since the last camera change.
-    finished: Vec<u32>,
+    /// Regions (object, rectangle) whose every level was planned since the last camera change.
+    finished: Vec<(u32, PixelRect)>,
+    /// The regions of the last analysis.
+    last: Vec<ObjectRegion>,
+    /// The viewer's current camera age, when told.
+    camera_age: Option<u32>,
 }
 
 impl Planner {
@@ -45,6 +49,8 @@ impl Planner {
             queue: RegionQueue::new(hierarchy, job_size, decay),
             analyzed_age: None,
             finished: Vec::new(),
+            last: Vec::new(),
+            camera_age: None,
         }
     }
 
@@ -61,19 +67,42 @@ impl Planner {
         }
         self.queue.submit(regions, changed, &self.finished);
         self.analyzed_age = Some(camera_age);
+        self.last = regions.to_vec();
+    }
+
+    /// The viewer's camera age now. Once the queue has run dry while the camera moved
+    /// since the last analysis, every cached sample shows an older view and the budget would
+    /// idle until the next analysis: the next job then starts that analysis's regions again
+    /// at level 1 for this camera age, as a new analysis of the same regions would. A camera
+    /// that has not moved never retraces a pixel.
+    pub fn set_camera_age(&mut self, camera_age: u32) {
+        self.camera_age = Some(camera_age);
+    }
+
+    /// Whether the dry queue would start again (see [`Self::set_camera_age`]).
+    fn can_restart(&self) -> bool {
+        self.queue.is_empty()
+            && !self.last.is_empty()
+            && self.analyzed_age.is_some()
+            && self.camera_age.is_some()
+            && self.camera_age != self.analyzed_age
     }
 
     /// True when the queue holds work.
     pub fn has_work(&self) -> bool {
-        !self.queue.is_empty()
+        !self.queue.is_empty() || self.can_restart()
     }
 
     /// The next job of at most `max_len` positions (the remainder stays queued); a job that
     /// ends its region's last level marks the object finished.
     pub fn take_job(&mut self, max_len: u64) -> Option<Job> {
+        if let (true, Some(age)) = (self.can_restart(), self.camera_age) {
+            let last = std::mem::take(&mut self.last);
+            self.analyze(&last, age);
+        }
         let (job, done) = self.queue.take(max_len)?;
         if done {
-            self.finished.push(job.object);
+            self.finished.push((job.object, job.rect));
         }
         Some(job)
     }
@@ -150,7 +179,9 @@ impl Corrector {
 
     /// The camera changed: age the cache (the camera age goes up by one).
     pub fn camera_changed(&mut self, view: &ScreenView) -> AgingStats {
-        self.cache.camera_changed(view)
+        let stats = self.cache.camera_changed(view);
+        self.planner.set_camera_age(self.cache.camera_age());
+        stats
     }
 
     /// Drop the cached samples of moving objects.
@@ -231,5 +262,48 @@ mod tests {
             }
         }
         assert_eq!(seen.len(), ids.iter().filter(|&&i| i != 0).count());
+    }
+
+    #[test]
+    fn a_dry_queue_starts_again_only_after_the_camera_moved() {
+        let rect = PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: 12,
+            y1: 9,
+        };
+        let region = ObjectRegion {
+            id: 1,
+            rect,
+            pixels: 108,
+            saliency: 0.0,
+            importance: 0.0,
+            priority: 0.5,
+        };
+        let mut p = Planner::new(Hierarchy::new(3).unwrap(), 1000, 0.8);
+        let drain = |p: &mut Planner| {
+            let mut n = 0;
+            while let Some(job) = p.take_job(u64::MAX) {
+                n += job.len;
+            }
+            n
+        };
+        // Dry before any analysis: nothing to start again.
+        p.set_camera_age(0);
+        assert!(!p.has_work());
+        p.analyze(std::slice::from_ref(&region), 0);
+        assert_eq!(drain(&mut p), rect.area());
+        // Same camera: the queue stays dry.
+        p.set_camera_age(0);
+        assert!(!p.has_work());
+        // The camera moved: the last analysis's region is traced again, from level 1, once.
+        p.set_camera_age(1);
+        assert!(p.has_work());
+        assert_eq!(p.take_job(1).unwrap().level, 1);
+        assert_eq!(1 + drain(&mut p), rect.area());
+        assert!(!p.has_work());
+        // A later analysis at that age keeps the progress (nothing is traced twice).
+        p.analyze(&[region], 1);
+        assert!(!p.has_work());
     }
 }

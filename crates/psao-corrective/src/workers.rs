@@ -209,6 +209,12 @@ impl<T: JobTracer> Lane<T> {
         self.shared.work.notify_all();
     }
 
+    /// The viewer's camera age now (see [`Planner::set_camera_age`]).
+    pub fn set_camera_age(&self, camera_age: u32) {
+        self.with(|l| l.planner.set_camera_age(camera_age));
+        self.shared.work.notify_all();
+    }
+
     /// Replace the queue (e.g. for a new image size).
     pub fn replace_planner(&self, planner: Planner) {
         self.with(|l| l.planner = planner);

@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 use glam::{Affine3A, Vec3};
 use psao_client::Shading;
-use psao_corrective::attention::{analyze, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
+use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
 use psao_corrective::base::{object_ids, TracedAoShade};
 use psao_corrective::cache::{CacheConfig, SampleCache};
 use psao_corrective::saliency::{saliency, RgbImage};
@@ -137,6 +137,7 @@ impl RemoteCorrections {
             self.planner = Some((new_planner(msg.width, msg.height), msg.width, msg.height));
         }
         if let Some((planner, _, _)) = &mut self.planner {
+            planner.set_camera_age(self.camera_age);
             planner.analyze(&object_regions(msg), self.camera_age);
         }
     }
@@ -148,6 +149,9 @@ impl RemoteCorrections {
             self.camera_age = self.camera_age.wrapping_add(1);
         }
         self.camera = Some(camera);
+        if let Some((planner, _, _)) = &mut self.planner {
+            planner.set_camera_age(self.camera_age);
+        }
     }
 
     /// The budget of the next tick of a clock at `hz` ticks per second (the ticks' budgets
@@ -325,7 +329,14 @@ fn analysis_of(image: &[[f32; 3]], shown: &ShownFrame) -> RegionsMsg {
         height: h,
         pixels: image.to_vec(),
     });
-    let regions = analyze(&shown.ids, w, h, &map, DEFAULT_SALIENCY_WEIGHT);
+    let regions = analyze_tiles(
+        &shown.ids,
+        w,
+        h,
+        &map,
+        DEFAULT_SALIENCY_WEIGHT,
+        psao_wire::MAX_REGIONS,
+    );
     RegionsMsg {
         frame: shown.frame,
         width: shown.width,
@@ -333,7 +344,6 @@ fn analysis_of(image: &[[f32; 3]], shown: &ShownFrame) -> RegionsMsg {
         regions: regions
             .iter()
             .filter(|r| shown.moving.binary_search(&r.id).is_err())
-            .take(psao_wire::MAX_REGIONS)
             .map(|r| Region {
                 object: r.id,
                 x0: r.rect.x0 as u32,
@@ -762,13 +772,15 @@ mod tests {
         let frame = |client: &mut CorrectiveClient, f: u32| {
             client.camera(&crate::convert::camera_msg(f, &camera, w as f32 / h as f32));
             let c = client.frame(&scene, f, &gbuffer, &ao);
-            let asked: Vec<u32> = c
+            // The objects asked for (each in one region per tile it covers).
+            let mut asked: Vec<u32> = c
                 .regions
                 .unwrap()
                 .regions
                 .iter()
                 .map(|r| r.object)
                 .collect();
+            asked.dedup();
             (c.dropped, asked)
         };
         let count = |client: &CorrectiveClient, object| {

@@ -17,7 +17,8 @@ pub const MAX_SAMPLE_LEVEL: u8 = 32;
 /// Largest radiance component a sample may carry (linear RGB; far above any light's).
 pub const MAX_RADIANCE: f32 = 1.0e6;
 
-/// One screen region (a non-diffuse object's bounding rectangle) and its priority.
+/// One screen region (the bounding rectangle of a non-diffuse object's pixels inside one tile
+/// of the image) and its priority.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Region {
     /// Object id (instance + 1; never 0).
@@ -44,7 +45,7 @@ pub struct RegionsMsg {
     pub width: u32,
     /// Image height, pixels.
     pub height: u32,
-    /// The regions, each object at most once.
+    /// The regions; two regions of one object never overlap.
     pub regions: Vec<Region>,
 }
 
@@ -81,7 +82,8 @@ fn invalid(text: String) -> WireError {
 }
 
 impl RegionsMsg {
-    /// Sizes, rectangles inside the image, priorities in [0, 1], each object once.
+    /// Sizes, rectangles inside the image, priorities in [0, 1], no two regions of one object
+    /// overlapping.
     pub(crate) fn validate(&self) -> Result<(), WireError> {
         let side = 1..=MAX_REGION_IMAGE_SIDE;
         if !side.contains(&self.width) || !side.contains(&self.height) {
@@ -96,7 +98,6 @@ impl RegionsMsg {
                 self.regions.len()
             )));
         }
-        let mut objects: Vec<u32> = Vec::with_capacity(self.regions.len());
         for r in &self.regions {
             if r.object == 0 {
                 return Err(invalid("region of object 0 (diffuse)".into()));
@@ -114,11 +115,21 @@ impl RegionsMsg {
                     r.object, r.priority
                 )));
             }
-            objects.push(r.object);
         }
-        objects.sort_unstable();
-        if let Some(w) = objects.windows(2).find(|w| w[0] == w[1]) {
-            return Err(invalid(format!("object {} has two regions", w[0])));
+        let mut order: Vec<&Region> = self.regions.iter().collect();
+        order.sort_unstable_by_key(|r| (r.object, r.x0));
+        for (i, a) in order.iter().enumerate() {
+            // Regions of a's object starting left of a's right edge (sorted by x0).
+            let overlap = order[i + 1..]
+                .iter()
+                .take_while(|b| b.object == a.object && b.x0 < a.x1)
+                .find(|b| b.y0 < a.y1 && a.y0 < b.y1);
+            if let Some(b) = overlap {
+                return Err(invalid(format!(
+                    "object {} has overlapping regions [{}, {}) × [{}, {}) and [{}, {}) × [{}, {})",
+                    a.object, a.x0, a.x1, a.y0, a.y1, b.x0, b.x1, b.y0, b.y1
+                )));
+            }
         }
         Ok(())
     }
@@ -261,6 +272,20 @@ mod tests {
         for case in cases {
             assert!(matches!(bad_regions(case), Err(WireError::Invalid(_))));
         }
+        // One object in two tiles: side by side is fine, one pixel of overlap is not.
+        let side_by_side = |m: &mut RegionsMsg| {
+            m.regions[1].object = m.regions[0].object;
+            m.regions[1].x0 -= 2;
+            m.regions[1].x1 -= 2;
+        };
+        assert!(bad_regions(&side_by_side).is_ok());
+        assert!(matches!(
+            bad_regions(&|m| {
+                side_by_side(m);
+                m.regions[1].x1 += 1;
+            }),
+            Err(WireError::Invalid(_))
+        ));
         let bad_samples = |f: &dyn Fn(&mut SampleMsg)| {
             let mut s = sample();
             f(&mut s);

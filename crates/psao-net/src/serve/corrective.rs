@@ -214,6 +214,7 @@ impl ThreadedCorrections {
 
     /// The workers' view, once both a camera and an image size are known.
     fn set_view(&self) {
+        self.lane.set_camera_age(self.camera_age);
         if let (Some(camera), Some((width, height))) = (self.camera, self.size) {
             self.lane.set_view(TraceView {
                 camera,

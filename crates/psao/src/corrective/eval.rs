@@ -3,8 +3,9 @@
 //!
 //! Budgets are samples per frame (not time, so the results are deterministic). The scene is
 //! frozen (no animation). Every analysis period the ordering assigns region priorities:
-//! `saliency` (bottom-up saliency of the base frame blended with task importance),
-//! `uniform` (all equal) or `random` (hashed from the seed, frame and object).
+//! `saliency` (bottom-up saliency of the frame as shown blended with task importance),
+//! `uniform` (all equal) or `random` (hashed from the seed, frame, object and region).
+//! Regions are the objects' parts in the tiles of [`analyze_tiles`].
 
 use super::frame::{frame_images, rgb_image, trace_sample, FrameImages};
 use super::metrics::{frame_error, FrameError};
@@ -15,7 +16,7 @@ use crate::progress;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use psao_corrective::attention::{analyze, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
+use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
 use psao_corrective::base::TracedAoShade;
 use psao_corrective::cache::CacheConfig;
 use psao_corrective::saliency::saliency;
@@ -201,7 +202,7 @@ fn priorities(
             values: vec![0.0; w * h],
         },
     };
-    let mut regions = analyze(&f.ids, w, h, &sal, DEFAULT_SALIENCY_WEIGHT);
+    let mut regions = analyze_tiles(&f.ids, w, h, &sal, DEFAULT_SALIENCY_WEIGHT, usize::MAX);
     if order == Order::Saliency {
         clock.analysis_ms.push(t.elapsed().as_secs_f64() * 1e3);
     }
@@ -210,7 +211,9 @@ fn priorities(
             Order::Saliency => r.priority,
             Order::Uniform => 1.0,
             Order::Random => {
-                (hash64(seed ^ hash64(frame as u64 ^ hash64(r.id as u64))) >> 40) as f32
+                let place = (r.rect.x0 as u64) << 32 | r.rect.y0 as u64;
+                (hash64(seed ^ hash64(frame as u64 ^ hash64(r.id as u64 ^ hash64(place)))) >> 40)
+                    as f32
                     / (1u64 << 24) as f32
             }
         };
