@@ -73,6 +73,8 @@ pub type FrameSink<'a> =
 
 /// Frames (and update payloads) `--record` writes at most.
 const RECORD_MAX: u32 = 8;
+/// How long a leaving client waits for the server to close after its bye.
+const LEAVE_TIMEOUT: Duration = Duration::from_secs(3);
 
 /// What a client run measured (`psao view --json` writes it).
 #[derive(Debug, Default, Serialize)]
@@ -261,7 +263,19 @@ pub fn view(
     let _ = out_tx.send(Outgoing::Send(Message::Bye(Bye {
         reason: "done".into(),
     })));
-    std::thread::sleep(Duration::from_millis(50));
+    // What the server sent before it read the bye is still on its way: take it until the
+    // server closes (bounded, in case the server never does), so nothing it counted as sent
+    // goes missing here.
+    let leave_by = Instant::now() + LEAVE_TIMEOUT;
+    while let Ok(Some(e)) = rt.block_on(async {
+        tokio::time::timeout(
+            leave_by.saturating_duration_since(Instant::now()),
+            events.recv(),
+        )
+        .await
+    }) {
+        client.handle(e, &out_tx)?;
+    }
     rt.shutdown_timeout(Duration::from_millis(200));
     let seconds = f64::from(frames) / f64::from(CLIENT_HZ);
     let stats = ViewStats {
@@ -667,6 +681,10 @@ async fn session(
                             Err(_) => false,
                         };
                         if bye {
+                            if sent {
+                                forward_until_closed(&mut delay_rx, events).await;
+                            }
+                            reader_task.abort();
                             writer.close().await;
                             return Ok(SessionEnd::Closed);
                         }
@@ -677,6 +695,21 @@ async fn session(
                     }
                 }
             }
+        }
+    }
+}
+
+/// After the bye: passes on what the server still sends until it closes the connection or
+/// [`LEAVE_TIMEOUT`] passes.
+async fn forward_until_closed(
+    delay_rx: &mut mpsc::Receiver<(Instant, Message, usize)>,
+    events: &mpsc::Sender<NetEvent>,
+) {
+    let leave_by = tokio::time::Instant::now() + LEAVE_TIMEOUT;
+    while let Ok(Some((due, m, size))) = tokio::time::timeout_at(leave_by, delay_rx.recv()).await {
+        tokio::time::sleep_until(due.into()).await;
+        if events.send(NetEvent::Message(m, size)).await.is_err() {
+            return;
         }
     }
 }
