@@ -132,6 +132,15 @@ impl ClientState {
             .sum()
     }
 
+    /// Where the mirror's heap bytes go, summed over its grids.
+    pub fn memory_parts(&self) -> psao_points::GridMemory {
+        let mut parts = psao_points::GridMemory::default();
+        for grid in self.grids.iter().flatten() {
+            parts += grid.memory_parts();
+        }
+        parts
+    }
+
     /// Number of valid points over all instances.
     pub fn point_count(&self) -> usize {
         self.grids

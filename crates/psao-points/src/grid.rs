@@ -78,6 +78,63 @@ impl Cell {
     }
 }
 
+/// Heap bytes of an [`InstanceGrid`] by what they hold ([`InstanceGrid::memory_parts`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GridMemory {
+    /// The packed records of the valid points (4 bytes each).
+    pub records: u64,
+    /// Empty record entries of cells holding at least one point.
+    pub empty_entries: u64,
+    /// Cell slots of allocated pages that hold no point.
+    pub unheld_cells: u64,
+    /// The cell pages' table (one pointer per page of cell slots).
+    pub cell_page_table: u64,
+    /// Per-bucket chain heads (page table and pages).
+    pub bucket_heads: u64,
+    /// The bucket entry pool (key, slot, link).
+    pub bucket_entries: u64,
+    /// The server side's slot keys and free slots.
+    pub slot_lists: u64,
+}
+
+impl GridMemory {
+    /// All parts together: the grid's heap bytes.
+    pub fn total(&self) -> u64 {
+        self.records
+            + self.empty_entries
+            + self.unheld_cells
+            + self.cell_page_table
+            + self.bucket_heads
+            + self.bucket_entries
+            + self.slot_lists
+    }
+
+    /// The parts with their names, in the order of the fields.
+    pub fn named(&self) -> [(&'static str, u64); 7] {
+        [
+            ("records (u32 per point)", self.records),
+            ("empty entries of held cells", self.empty_entries),
+            ("unheld cells of allocated pages", self.unheld_cells),
+            ("cell page table", self.cell_page_table),
+            ("bucket heads", self.bucket_heads),
+            ("bucket entries", self.bucket_entries),
+            ("slot lists", self.slot_lists),
+        ]
+    }
+}
+
+impl std::ops::AddAssign for GridMemory {
+    fn add_assign(&mut self, o: Self) {
+        self.records += o.records;
+        self.empty_entries += o.empty_entries;
+        self.unheld_cells += o.unheld_cells;
+        self.cell_page_table += o.cell_page_table;
+        self.bucket_heads += o.bucket_heads;
+        self.bucket_entries += o.bucket_entries;
+        self.slot_lists += o.slot_lists;
+    }
+}
+
 /// Where a point is stored: its cell slot and its index inside the cell.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PointLoc {
@@ -128,10 +185,27 @@ impl PartialEq for InstanceGrid {
 impl InstanceGrid {
     /// Heap bytes the grid's tables hold (allocated capacity).
     pub fn heap_bytes(&self) -> u64 {
-        self.buckets.heap_bytes()
-            + self.cells.heap_bytes()
-            + crate::vec_bytes(&self.slot_keys)
-            + crate::vec_bytes(&self.free)
+        self.memory_parts().total()
+    }
+
+    /// Where [`Self::heap_bytes`] goes, part by part (the parts add up to it).
+    pub fn memory_parts(&self) -> GridMemory {
+        let (mut held_cells, mut points) = (0u64, 0u64);
+        for cell in self.cells().filter(|c| c.count() > 0) {
+            held_cells += 1;
+            points += cell.count() as u64;
+        }
+        let cell_bytes = std::mem::size_of::<Cell>() as u64;
+        let record_bytes = std::mem::size_of::<u32>() as u64;
+        GridMemory {
+            records: points * record_bytes,
+            empty_entries: held_cells * cell_bytes - points * record_bytes,
+            unheld_cells: self.cells.page_bytes() - held_cells * cell_bytes,
+            cell_page_table: self.cells.page_table_bytes(),
+            bucket_heads: self.buckets.head_bytes(),
+            bucket_entries: self.buckets.entry_bytes(),
+            slot_lists: crate::vec_bytes(&self.slot_keys) + crate::vec_bytes(&self.free),
+        }
     }
 
     /// An empty grid: all buckets empty, no cells.

@@ -28,7 +28,7 @@ pub use generate::{
     generate_scene_points_adaptive, instance_seed, Adaptive, AlphaTest, DensitySignal,
     GenerateParams, InstancePoints, SceneAlphaTest, SurfacePoint, DEFAULT_DENSITY, MAX_SPAWNED,
 };
-pub use grid::{Bucket, BucketEntry, Cell, InstanceGrid, PointLoc};
+pub use grid::{Bucket, BucketEntry, Cell, GridMemory, InstanceGrid, PointLoc};
 pub use key_map::{KeyHasher, KeyMap};
 pub use layout::{
     DecodedPoint, GridLayout, BUCKET_ENTRIES, CELLS_PER_AREA, CELL_POINTS, CELL_RADIUS_FACTOR,

@@ -80,9 +80,18 @@ impl<T: Copy + Default> Paged<T> {
 
     /// Heap bytes: the page table plus the allocated pages.
     pub fn heap_bytes(&self) -> u64 {
+        self.page_table_bytes() + self.page_bytes()
+    }
+
+    /// Heap bytes of the page table (one pointer per page, allocated or not).
+    pub fn page_table_bytes(&self) -> u64 {
+        (self.pages.capacity() * std::mem::size_of::<Option<Box<[T; PAGE]>>>()) as u64
+    }
+
+    /// Heap bytes of the allocated pages.
+    pub fn page_bytes(&self) -> u64 {
         let present = self.pages.iter().filter(|p| p.is_some()).count();
-        (self.pages.capacity() * std::mem::size_of::<Option<Box<[T; PAGE]>>>()
-            + present * PAGE * std::mem::size_of::<T>()) as u64
+        (present * PAGE * std::mem::size_of::<T>()) as u64
     }
 }
 
@@ -151,9 +160,14 @@ impl BucketTable {
         self.used
     }
 
-    /// Heap bytes of the heads and the entry pool.
-    pub fn heap_bytes(&self) -> u64 {
-        self.heads.heap_bytes() + crate::vec_bytes(&self.entries)
+    /// Heap bytes of the per-bucket chain heads (page table and pages).
+    pub fn head_bytes(&self) -> u64 {
+        self.heads.heap_bytes()
+    }
+
+    /// Heap bytes of the entry pool (16 bytes per entry, free ones and spare capacity included).
+    pub fn entry_bytes(&self) -> u64 {
+        crate::vec_bytes(&self.entries)
     }
 
     /// Indices of bucket `b`'s entries, in position order.

@@ -360,4 +360,14 @@ fn storage_grows_with_what_is_written_not_with_the_table() {
         written < page_table + 8 * 1024,
         "{written} bytes for one entry and one cell"
     );
+    // The parts name where the bytes go: one record, the cell's six empty entries, the 63
+    // other cells of its page, one bucket entry of 16 bytes (in a pool of some capacity).
+    let parts = grid.memory_parts();
+    assert_eq!(parts.total(), grid.heap_bytes());
+    assert_eq!(parts.records, 4);
+    assert_eq!(parts.empty_entries, 6 * 4);
+    assert_eq!(parts.unheld_cells, 63 * 28);
+    assert_eq!(parts.cell_page_table, page_table);
+    assert!(parts.bucket_entries >= 16 && parts.bucket_entries % 16 == 0);
+    assert_eq!(parts.slot_lists, 0);
 }

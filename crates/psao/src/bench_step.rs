@@ -102,6 +102,9 @@ pub struct BenchStepReport {
     /// Heap bytes of the first client's mirror (`psao-client`'s grids, fed the same updates
     /// its codec encodes) per point it holds.
     pub client_bytes_per_point: f64,
+    /// The first client's mirror by part, in heap bytes per point it holds
+    /// (`psao_points::GridMemory`).
+    pub client_memory: Vec<MemoryRow>,
     /// Rays per second of the step's tracing phase (selection, tracing, accumulation), Mrays/s.
     pub step_trace_mrays_s: f64,
     /// `psao bench trace`'s sorted closest-hit rate on this scene and backend, measured in this
@@ -271,6 +274,16 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         memory,
         client_points: mirror.point_count(),
         client_bytes_per_point: mirror.heap_bytes() as f64 / mirror.point_count().max(1) as f64,
+        client_memory: mirror
+            .memory_parts()
+            .named()
+            .into_iter()
+            .map(|(name, bytes)| MemoryRow {
+                name,
+                bytes,
+                bytes_per_point: bytes as f64 / mirror.point_count().max(1) as f64,
+            })
+            .collect(),
         step_trace_mrays_s,
         bench_trace_mrays_s,
         trace_ratio: step_trace_mrays_s / bench_trace_mrays_s,
@@ -319,6 +332,12 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         "first client's mirror: {} points, {:.1} bytes per point",
         report.client_points, report.client_bytes_per_point
     );
+    for m in &report.client_memory {
+        println!(
+            "  {:<32} {:>8.2} bytes per point",
+            m.name, m.bytes_per_point
+        );
+    }
     if let Some(json) = &args.json {
         write_json(json, &report)?;
     }
