@@ -368,6 +368,6 @@ fn storage_grows_with_what_is_written_not_with_the_table() {
     assert_eq!(parts.empty_entries, 6 * 4);
     assert_eq!(parts.unheld_cells, 63 * 28);
     assert_eq!(parts.cell_page_table, page_table);
-    assert!(parts.bucket_entries >= 16 && parts.bucket_entries % 16 == 0);
+    assert!(parts.bucket_entries >= 16 && parts.bucket_entries.is_multiple_of(16));
     assert_eq!(parts.slot_lists, 0);
 }
