@@ -10,13 +10,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use async_nats::jetstream::consumer::{pull, DeliverPolicy};
+use async_nats::jetstream::consumer::pull;
 use futures_util::StreamExt;
 use psao_server::{PointRecord, Server, StepStats, View};
 use serde::Serialize;
 use tokio::sync::{mpsc, Notify};
 
-use super::join::{join, Joiner};
+use super::join::{join, records_from, Joiner};
 use super::wire::{Batch, ViewSet};
 use super::{connect, records_stream, Names};
 use crate::serve::Stepper;
@@ -203,7 +203,7 @@ impl EdgeStepper {
                 .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?
                 .state
                 .last_sequence;
-            let messages = ordered_from(&stream, &names, joined.next)
+            let messages = records_from(&stream, &names, joined.next)
                 .await
                 .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?;
             let (tx, rx) = mpsc::channel(INBOX);
@@ -325,27 +325,6 @@ impl EdgeStepper {
     }
 }
 
-/// An ordered consumer of the records stream from sequence number `first`.
-async fn ordered_from(
-    stream: &async_nats::jetstream::stream::Stream,
-    names: &Names,
-    first: u64,
-) -> Result<pull::Ordered, String> {
-    stream
-        .create_consumer(pull::OrderedConfig {
-            deliver_policy: DeliverPolicy::ByStartSequence {
-                start_sequence: first,
-            },
-            filter_subject: names.records_wildcard(),
-            ..Default::default()
-        })
-        .await
-        .map_err(|e| e.to_string())?
-        .messages()
-        .await
-        .map_err(|e| e.to_string())
-}
-
 /// Forwards the records stream's batches to the edge, checking that sequence numbers
 /// follow one another. The consumer lives in the NATS server, which forgets it when it
 /// restarts: at every reconnection, and when the consumer fails, a new one resumes after
@@ -377,7 +356,7 @@ impl StreamReader {
                     }
                     let resume = last.map_or(1, |l| l + 1);
                     messages = loop {
-                        match ordered_from(&self.stream, &self.names, resume).await {
+                        match records_from(&self.stream, &self.names, resume).await {
                             Ok(m) => break m,
                             Err(e) => {
                                 tracing::warn!("cannot read the records stream again: {e}");

@@ -374,17 +374,7 @@ pub async fn join(
             counts,
         });
     }
-    let mut messages = stream
-        .create_consumer(pull::OrderedConfig {
-            deliver_policy: DeliverPolicy::ByStartSequence {
-                start_sequence: first,
-            },
-            filter_subject: names.records_wildcard(),
-            ..Default::default()
-        })
-        .await
-        .map_err(|e| failed(&e))?
-        .messages()
+    let mut messages = records_from(&stream, names, first)
         .await
         .map_err(|e| failed(&e))?;
     let mut prev = first - 1;
@@ -453,17 +443,13 @@ async fn read_published(
     if last == 0 {
         return Ok(published);
     }
-    let mut messages = stream
-        .create_consumer(pull::OrderedConfig {
-            deliver_policy: DeliverPolicy::LastPerSubject,
-            filter_subject: names.snapshots_wildcard(),
-            ..Default::default()
-        })
-        .await
-        .map_err(|e| failed(&e))?
-        .messages()
-        .await
-        .map_err(|e| failed(&e))?;
+    let mut messages = ordered(
+        &stream,
+        DeliverPolicy::LastPerSubject,
+        names.snapshots_wildcard(),
+    )
+    .await
+    .map_err(|e| failed(&e))?;
     loop {
         let next = tokio::time::timeout(JOIN_WAIT, messages.next())
             .await
@@ -491,6 +477,37 @@ async fn read_published(
         }
     }
     Ok(published)
+}
+
+/// An ordered consumer of the records stream from sequence number `first`.
+pub(super) async fn records_from(
+    stream: &async_nats::jetstream::stream::Stream,
+    names: &Names,
+    first: u64,
+) -> Result<pull::Ordered, String> {
+    let from = DeliverPolicy::ByStartSequence {
+        start_sequence: first,
+    };
+    ordered(stream, from, names.records_wildcard()).await
+}
+
+/// The messages of an ordered consumer of `stream` on `subject`, delivered from `from`.
+async fn ordered(
+    stream: &async_nats::jetstream::stream::Stream,
+    from: DeliverPolicy,
+    subject: String,
+) -> Result<pull::Ordered, String> {
+    stream
+        .create_consumer(pull::OrderedConfig {
+            deliver_policy: from,
+            filter_subject: subject,
+            ..Default::default()
+        })
+        .await
+        .map_err(|e| e.to_string())?
+        .messages()
+        .await
+        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
