@@ -480,9 +480,14 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
     for (mut p, _) in edges {
         p.wait(30);
     }
-    assert_eq!(view_hashes(&files), alone, "the state of psao serve alone");
-    for e in ["e0.json", "e1.json"] {
-        let s = json(&out(e));
+    // On a mismatch, the edges' reports say where the state went apart.
+    let edge_reports = [json(&out("e0.json")), json(&out("e1.json"))];
+    assert_eq!(
+        view_hashes(&files),
+        alone,
+        "the state of psao serve alone; edges: {edge_reports:?}"
+    );
+    for s in edge_reports {
         assert_eq!(s["state_hash"].as_str(), Some(alone[0].as_str()), "{s}");
         assert_eq!(s["edge"]["malformed"], 0, "{s}");
         assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
