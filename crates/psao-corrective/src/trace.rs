@@ -19,7 +19,7 @@
 
 use crate::splat::Sample;
 use glam::{Affine3A, Mat3A, Vec3};
-use psao_scene::{Camera, LightShape, Material, Scene};
+use psao_scene::{Camera, LightShape, Material, Scene, ScenePose};
 use psao_trace::ao::{hash64, orthonormal_basis, ray_offset, sample_2d};
 use psao_trace::{Hit, Ray, Tracer};
 
@@ -74,12 +74,15 @@ struct Surface {
     material: usize,
 }
 
-/// Traces correction samples of a static scene (every instance at its stored transform).
+/// Traces correction samples of a scene: every instance at its stored transform, or at a
+/// pose of its animation ([`CorrectionTracer::posed`]).
 pub struct CorrectionTracer<'a> {
     scene: &'a Scene,
     tracer: &'a Tracer,
     shade: &'a dyn DiffuseShade,
     settings: TraceSettings,
+    /// The pose the tracer holds, when not the stored one.
+    pose: Option<&'a ScenePose>,
     normal_matrices: Vec<Mat3A>,
 }
 
@@ -131,8 +134,19 @@ impl<'a> CorrectionTracer<'a> {
             tracer,
             shade,
             settings,
+            pose: None,
             normal_matrices,
         }
+    }
+
+    /// The same tracer for the scene in `pose`, which its `tracer` must hold (see
+    /// [`Tracer::apply_pose`]): surfaces take the posed transforms and skinned vertices.
+    pub fn posed(mut self, pose: &'a ScenePose) -> Self {
+        self.normal_matrices = (self.scene.instances.iter().enumerate())
+            .map(|(i, inst)| normal_matrix(pose.transforms.get(i).unwrap_or(&inst.transform)))
+            .collect();
+        self.pose = Some(pose);
+        self
     }
 
     fn hit(&self, ray: &Ray) -> Option<Hit> {
@@ -151,16 +165,21 @@ impl<'a> CorrectionTracer<'a> {
         let inst = self.scene.instances.get(hit.instance as usize)?;
         let mesh = self.scene.meshes.get(inst.mesh)?;
         let [a, b, c] = *mesh.indices.get(hit.triangle as usize)?;
-        let p = |i: u32| mesh.positions.get(i as usize).copied();
+        let skinned = (self.pose)
+            .and_then(|p| p.skinned.get(hit.instance as usize))
+            .and_then(Option::as_ref);
+        let positions = skinned.map_or(&mesh.positions, |g| &g.positions);
+        let normals = skinned.map_or(&mesh.normals, |g| &g.normals);
+        let p = |i: u32| positions.get(i as usize).copied();
         let (p0, p1, p2) = (p(a)?, p(b)?, p(c)?);
         let (u, v) = (hit.u, hit.v);
         let w = 1.0 - u - v;
         let nm = self.normal_matrices[hit.instance as usize];
         let face = (nm * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
         let interp = match (
-            mesh.normals.get(a as usize),
-            mesh.normals.get(b as usize),
-            mesh.normals.get(c as usize),
+            normals.get(a as usize),
+            normals.get(b as usize),
+            normals.get(c as usize),
         ) {
             (Some(na), Some(nb), Some(nc)) => {
                 (nm * (*na * w + *nb * u + *nc * v)).normalize_or_zero()

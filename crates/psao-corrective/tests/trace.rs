@@ -225,3 +225,57 @@ fn camera_samples_match_primary_rays_and_only_their_object() {
             .is_none());
     }
 }
+
+#[test]
+fn a_posed_tracer_sees_skinned_vertices_like_a_scene_built_in_that_pose() {
+    // The mirror slab deformed (tilted 25° about y, pushed back) as a skinned pose would.
+    let s = scene(chrome(0.0));
+    let tilt = glam::Quat::from_rotation_y(0.44);
+    let geometry = psao_scene::SkinnedGeometry {
+        positions: (s.meshes[0].positions.iter())
+            .map(|&p| tilt * p - Vec3::new(0.0, 0.0, 0.3))
+            .collect(),
+        normals: s.meshes[0].normals.iter().map(|&n| tilt * n).collect(),
+    };
+    let pose = psao_scene::ScenePose {
+        time: 1.0,
+        nodes: Vec::new(),
+        transforms: s.instances.iter().map(|i| i.transform).collect(),
+        skinned: vec![Some(geometry.clone()), None, None],
+    };
+    let motion = [
+        psao_scene::Motion::Skinned,
+        psao_scene::Motion::Static,
+        psao_scene::Motion::Static,
+    ];
+    let mut built = s.clone();
+    built.meshes[0].positions = geometry.positions;
+    built.meshes[0].normals = geometry.normals;
+    let camera = psao_scene::Camera::look_at(Vec3::new(0.3, 0.2, 2.0), Vec3::ZERO, 50.0);
+    let (w, h) = (24u32, 16u32);
+    for backend in Backend::compiled() {
+        let mut posed_tracer = Tracer::new(backend, &s, GeometryMode::Primary).unwrap();
+        posed_tracer.apply_pose(&s, &motion, &pose).unwrap();
+        let built_tracer = Tracer::new(backend, &built, GeometryMode::Primary).unwrap();
+        let rest_tracer = Tracer::new(backend, &s, GeometryMode::Primary).unwrap();
+        let settings = TraceSettings::default();
+        let posed = CorrectionTracer::new(&s, &posed_tracer, &PerInstance, settings).posed(&pose);
+        let reference = CorrectionTracer::new(&built, &built_tracer, &PerInstance, settings);
+        let rest = CorrectionTracer::new(&s, &rest_tracer, &PerInstance, settings);
+        let (mut on_slab, mut moved) = (0, 0);
+        for y in 0..h as i32 {
+            for x in 0..w as i32 {
+                let sample = |t: &CorrectionTracer| t.camera_sample(&camera, w, h, x, y, 1, 1, 0);
+                let got = sample(&posed);
+                assert_eq!(got, sample(&reference), "pixel ({x}, {y}) on {backend:?}");
+                on_slab += usize::from(got.is_some());
+                moved += usize::from(got != sample(&rest));
+            }
+        }
+        assert!(on_slab > 20, "{on_slab} pixels show the slab");
+        assert!(
+            moved * 2 > on_slab,
+            "the pose changes {moved} of {on_slab} samples"
+        );
+    }
+}

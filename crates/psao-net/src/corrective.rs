@@ -9,7 +9,7 @@
 //! its frame. `psao run --corrective` ([`crate::pipeline`]), `psao serve --corrective`
 //! ([`crate::serve`]) and `psao view --corrective` ([`crate::view`]) use these same parts.
 
-use std::sync::Arc;
+use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard};
 
 use glam::{Affine3A, Vec3};
 use psao_client::Shading;
@@ -49,18 +49,33 @@ pub fn hierarchy_for(width: u32, height: u32) -> Hierarchy {
     Hierarchy::for_spacing(width.min(height) as f32 / 4.0)
 }
 
-/// What the server traces with: the scene at rest and its tracers.
+/// What the server traces with: the scene, its animation, and its tracers at the pose last
+/// asked for.
 pub struct CorrectionEngine {
     scene: Arc<Scene>,
-    primary: Tracer,
-    occlusion: Tracer,
+    /// The scene's animation, when anything moves.
+    animator: Option<Animator>,
+    geometry: RwLock<PosedGeometry>,
     ao_spp: u32,
     seed: u64,
 }
 
+/// The correction tracers and the pose they hold (`None`: the stored one).
+struct PosedGeometry {
+    pose: Option<ScenePose>,
+    primary: Tracer,
+    occlusion: Tracer,
+}
+
+/// The scene time of client frame `frame` (the client plays its scene at [`CLIENT_HZ`]).
+pub fn client_time(frame: u32) -> f32 {
+    frame as f32 / CLIENT_HZ as f32
+}
+
 impl CorrectionEngine {
-    /// Tracers over `scene` (its instances at their stored transforms) on `backend`;
-    /// `ao_spp` AO rays per diffuse point reached, `seed` for every random choice.
+    /// Tracers over `scene` on `backend`, posed at each traced frame's time when the scene is
+    /// animated (a frozen scene stays at its stored transforms); `ao_spp` AO rays per diffuse
+    /// point reached, `seed` for every random choice.
     pub fn new(
         scene: Arc<Scene>,
         backend: Backend,
@@ -71,22 +86,69 @@ impl CorrectionEngine {
             Tracer::new(backend, &scene, mode)
                 .map_err(|e| NetError::Config(format!("cannot build the correction tracer: {e}")))
         };
-        let primary = tracer(GeometryMode::Primary)?;
-        let occlusion = tracer(GeometryMode::Occlusion)?;
+        let geometry = PosedGeometry {
+            pose: None,
+            primary: tracer(GeometryMode::Primary)?,
+            occlusion: tracer(GeometryMode::Occlusion)?,
+        };
+        let animator = Animator::new(&scene)
+            .map_err(|e| NetError::Config(format!("the scene's animation cannot play: {e}")))?;
         Ok(Self {
+            animator: animator.is_dynamic().then_some(animator),
             scene,
-            primary,
-            occlusion,
+            geometry: RwLock::new(geometry),
             ao_spp: ao_spp.max(1),
             seed,
         })
     }
 
-    /// Runs `f` with the correction tracer (diffuse surfaces shaded as the client shades
-    /// them, AO traced with the DESIGN §2 estimator).
-    pub(crate) fn with_tracer<R>(&self, f: impl FnOnce(&CorrectionTracer<'_>) -> R) -> R {
+    /// Runs `f` with the correction tracer of the scene at `time` (diffuse surfaces shaded as
+    /// the client shades them, AO traced with the DESIGN §2 estimator). An animated scene is
+    /// posed at `time` first unless the tracers hold it already; callers at the same time
+    /// trace side by side.
+    pub(crate) fn with_tracer<R>(
+        &self,
+        time: f32,
+        f: impl FnOnce(&CorrectionTracer<'_>) -> R,
+    ) -> Result<R, NetError> {
+        let Some(animator) = &self.animator else {
+            return Ok(self.trace_in(&read(&self.geometry), f));
+        };
+        {
+            let geometry = read(&self.geometry);
+            if geometry.pose.as_ref().is_some_and(|p| p.time == time) {
+                return Ok(self.trace_in(&geometry, f));
+            }
+        }
+        let mut geometry = self
+            .geometry
+            .write()
+            .unwrap_or_else(PoisonError::into_inner);
+        if !geometry.pose.as_ref().is_some_and(|p| p.time == time) {
+            // The pose counts as held only once both tracers hold it.
+            let g = &mut *geometry;
+            let mut pose = g.pose.take().unwrap_or_default();
+            animator.pose_into(time, &mut pose);
+            for tracer in [&mut g.primary, &mut g.occlusion] {
+                tracer
+                    .apply_pose(&self.scene, animator.motion(), &pose)
+                    .map_err(|e| {
+                        NetError::Config(format!("cannot pose the scene at {time} s: {e}"))
+                    })?;
+            }
+            g.pose = Some(pose);
+        }
+        Ok(self.trace_in(&geometry, f))
+    }
+
+    /// `f` with the correction tracer over `geometry`.
+    fn trace_in<R>(
+        &self,
+        geometry: &PosedGeometry,
+        f: impl FnOnce(&CorrectionTracer<'_>) -> R,
+    ) -> R {
         let shade = TracedAoShade {
-            tracer: &self.occlusion,
+            tracer: &geometry.occlusion,
             shading: Shading::default(),
             radius: self.scene.ao_radius,
             spp: self.ao_spp,
@@ -97,9 +159,18 @@ impl CorrectionEngine {
             seed: self.seed,
             ..TraceSettings::default()
         };
-        let tracer = CorrectionTracer::new(&self.scene, &self.primary, &shade, settings);
-        f(&tracer)
+        let tracer = CorrectionTracer::new(&self.scene, &geometry.primary, &shade, settings);
+        match &geometry.pose {
+            Some(pose) => f(&tracer.posed(pose)),
+            None => f(&tracer),
+        }
     }
+}
+
+/// A read guard of `lock`, also after a panic elsewhere (a pose counts as held only once it
+/// is fully applied).
+fn read<T>(lock: &RwLock<T>) -> RwLockReadGuard<'_, T> {
+    lock.read().unwrap_or_else(PoisonError::into_inner)
 }
 
 /// The server's correction state of one client: its camera and camera age, its region queue
@@ -108,7 +179,8 @@ pub struct RemoteCorrections {
     samples_per_second: u32,
     /// The planner and the image size it was made for.
     planner: Option<(Planner, u32, u32)>,
-    camera: Option<Camera>,
+    /// The client's camera and the frame it was sent for.
+    camera: Option<(Camera, u32)>,
     camera_age: u32,
     /// Budget ticks so far.
     ticks: u64,
@@ -145,10 +217,10 @@ impl RemoteCorrections {
     /// The client's camera; a camera different from the last one advances the camera age.
     pub fn camera(&mut self, msg: &CameraMsg) {
         let camera = view_of(msg).camera;
-        if self.camera.is_some_and(|c| c != camera) {
+        if self.camera.is_some_and(|(c, _)| c != camera) {
             self.camera_age = self.camera_age.wrapping_add(1);
         }
-        self.camera = Some(camera);
+        self.camera = Some((camera, msg.frame));
         if let Some((planner, _, _)) = &mut self.planner {
             planner.set_camera_age(self.camera_age);
         }
@@ -160,8 +232,9 @@ impl RemoteCorrections {
         budget_of_tick(self.samples_per_second, hz, &mut self.ticks)
     }
 
-    /// Plan and trace up to `budget` samples for the current camera (in parallel); `None`
-    /// when there is nothing to do yet (no camera, no regions, or the queue is dry).
+    /// Plan and trace up to `budget` samples for the current camera, in the scene at its
+    /// frame's time (in parallel); `None` when there is nothing to do yet (no camera, no
+    /// regions, or the queue is dry) or the scene cannot be posed (logged).
     pub fn trace(
         &mut self,
         engine: &CorrectionEngine,
@@ -170,10 +243,10 @@ impl RemoteCorrections {
     ) -> Option<SamplesMsg> {
         let (planner, w, h) = self.planner.as_mut()?;
         let (w, h) = (*w, *h);
-        let camera = self.camera?;
+        let (camera, frame) = self.camera?;
         let age = self.camera_age;
         let budget = budget.min(MAX_SAMPLES);
-        let samples: Vec<SampleMsg> = engine.with_tracer(|tracer| {
+        let traced = engine.with_tracer(client_time(frame), |tracer| {
             let examine = budget.saturating_mul(EXAMINE_PER_SAMPLE) + DEFAULT_JOB_SIZE as usize;
             let planned = planner.plan(budget, examine, |x, y, object| {
                 tracer.object_at(&camera, w, h, x, y) == object
@@ -184,8 +257,15 @@ impl RemoteCorrections {
                     tracer.camera_sample(&camera, w, h, p.x, p.y, p.object, p.level, age)
                 })
                 .map(|s| sample_msg(&s))
-                .collect()
+                .collect::<Vec<_>>()
         });
+        let samples = match traced {
+            Ok(samples) => samples,
+            Err(e) => {
+                tracing::warn!("no corrections traced: {e}");
+                return None;
+            }
+        };
         if samples.is_empty() {
             return None;
         }
@@ -643,7 +723,8 @@ fn over_the_wire(message: &Message, limit: u32) -> Result<(Message, usize), NetE
 }
 
 impl InProcessCorrections {
-    /// Both halves for `width × height` frames of `scene` (a clone of it, at rest, is traced).
+    /// Both halves for `width × height` frames of `scene` (the server half traces a clone of
+    /// it, posed at each client frame's time).
     pub fn new(
         scene: &Scene,
         backend: Backend,
@@ -652,10 +733,8 @@ impl InProcessCorrections {
         height: u32,
         config: &CorrectiveConfig,
     ) -> Result<Self, NetError> {
-        let mut frozen = scene.clone();
-        frozen.freeze();
         Ok(Self {
-            engine: CorrectionEngine::new(Arc::new(frozen), backend, config.ao_spp, seed)?,
+            engine: CorrectionEngine::new(Arc::new(scene.clone()), backend, config.ao_spp, seed)?,
             remote: RemoteCorrections::new(config.samples_per_second),
             client: CorrectiveClient::new(width, height, config.client)?,
             pending: None,
@@ -739,6 +818,73 @@ mod tests {
         )
         .unwrap();
         psao_scene::scene_file::load(&path).unwrap().scene
+    }
+
+    /// A chrome wall (a mirror) and a diffuse ball sliding in front of it within the first
+    /// second, resting there for another.
+    fn mirror_scene() -> Scene {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.toml");
+        std::fs::write(
+            &path,
+            "[[asset]]\nfile = \"builtin:box\"\ntranslation = [0, 1, -1]\nscale = [3, 2, 0.1]\n\
+             [[asset]]\nfile = \"builtin:sphere\"\n\
+             keys = { times = [0, 1, 2], translation = [[-8, 1, 1], [0.6, 0.6, 1], [0.6, 0.6, 1]] }\n\
+             [[material]]\nname = \"box\"\npreset = \"mirror\"\n",
+        )
+        .unwrap();
+        psao_scene::scene_file::load(&path).unwrap().scene
+    }
+
+    #[test]
+    fn corrections_are_traced_in_the_scene_posed_at_the_frame_time() {
+        let scene = mirror_scene();
+        let motion = Animator::new(&scene).unwrap().motion().to_vec();
+        let mirror = motion.iter().position(|&m| m == Motion::Static).unwrap() as u32 + 1;
+        let engine = |scene: Scene| CorrectionEngine::new(Arc::new(scene), Backend::Obvhs, 2, 7);
+        let animated = engine(scene.clone()).unwrap();
+        // The reference: a still scene built with every instance where it is at time `t`.
+        let built_at = |t: f32| {
+            let pose = scene.pose_at(t).unwrap();
+            let mut built = scene.clone();
+            for (instance, &transform) in built.instances.iter_mut().zip(&pose.transforms) {
+                instance.transform = transform;
+            }
+            built.freeze();
+            engine(built).unwrap()
+        };
+        let camera = Camera::look_at(Vec3::new(0.0, 1.0, 3.0), Vec3::new(0.0, 1.0, -1.0), 60.0);
+        let (w, h) = (48u32, 27u32);
+        let samples = |e: &CorrectionEngine, time: f32| {
+            e.with_tracer(time, |t| {
+                (0..(w * h) as i32)
+                    .map(|i| {
+                        t.camera_sample(&camera, w, h, i % w as i32, i / w as i32, mirror, 1, 0)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .unwrap()
+        };
+        let late = client_time(60);
+        let at_late = samples(&animated, late);
+        assert_eq!(at_late, samples(&built_at(late), 0.0));
+        let at_start = samples(&animated, 0.0);
+        assert_eq!(at_start, samples(&built_at(0.0), 0.0));
+        assert_eq!(
+            samples(&animated, late),
+            at_late,
+            "posed back to the same time"
+        );
+        let shown = at_late.iter().filter(|s| s.is_some()).count();
+        let changed = at_late
+            .iter()
+            .zip(&at_start)
+            .filter(|(a, b)| a != b)
+            .count();
+        assert!(
+            shown > 100 && changed > 10,
+            "{changed} of the mirror's {shown} samples show the ball"
+        );
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The [`Tracer`] facade: one two-level structure, whichever backend holds it.
 
 use glam::{Affine3A, Vec3};
-use psao_scene::Scene;
+use psao_scene::{Motion, Scene, ScenePose};
 
 #[cfg(feature = "embree")]
 use crate::embree_backend::EmbreeTracer;
@@ -164,6 +164,37 @@ impl Tracer {
             rebuilt: rebuild,
             cost_ratio: self.mesh_cost_ratio(mesh),
         })
+    }
+
+    /// Moves the structure to `pose`, a pose of `scene`'s animation whose instances move as
+    /// `motion` says (see [`psao_scene::Animator::motion`]): every moving instance to its
+    /// posed transform, every skinned mesh to its posed vertices (refitted or rebuilt as by
+    /// [`Tracer::update_deforming_mesh`] with [`DEFAULT_MAX_COST_RATIO`]); then commits.
+    pub fn apply_pose(
+        &mut self,
+        scene: &Scene,
+        motion: &[Motion],
+        pose: &ScenePose,
+    ) -> Result<(), TraceError> {
+        for (i, m) in motion.iter().enumerate() {
+            if *m == Motion::Static {
+                continue;
+            }
+            if let Some(&transform) = pose.transforms.get(i) {
+                self.set_instance_transform(i, transform);
+            }
+            if let (Some(Some(geometry)), Some(instance)) =
+                (pose.skinned.get(i), scene.instances.get(i))
+            {
+                self.update_deforming_mesh(
+                    instance.mesh,
+                    &geometry.positions,
+                    DEFAULT_MAX_COST_RATIO,
+                )?;
+            }
+        }
+        self.commit();
+        Ok(())
     }
 
     /// Rebuilds the top level after transform or mesh updates; call before querying again.

@@ -86,10 +86,8 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     };
     let mut serve = Serve::bind(server, config)?;
     if let Some(c) = args.corrective.config()? {
-        let mut scene = input.scene.clone();
-        scene.freeze();
         let engine = psao_net::corrective::CorrectionEngine::new(
-            std::sync::Arc::new(scene),
+            std::sync::Arc::new(input.scene.clone()),
             args.tuning.backend.unwrap_or_default(),
             c.ao_spp,
             args.tuning.seed,

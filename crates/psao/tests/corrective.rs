@@ -101,6 +101,10 @@ fn bench_reports_the_cache_costs() {
         "500",
         "--repeat",
         "2",
+        "--loop-frames",
+        "5",
+        "--analyze-every",
+        "2",
         "--json",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -108,9 +112,25 @@ fn bench_reports_the_cache_costs() {
     assert_eq!(v["samples"], 500);
     assert!(v["splat_ms"].as_f64().unwrap() >= 0.0);
     assert!(v["drawn"].as_u64().unwrap() > 0);
+    let f = &v["frame_loop"];
+    assert_eq!(
+        (f["frames"].as_u64(), f["analyze_every"].as_u64()),
+        (Some(5), Some(2))
+    );
+    assert!(f["analysis_ms"].as_f64().unwrap() > 0.0);
+    for key in ["inline", "threaded"] {
+        let (mean, max) = (
+            f[format!("{key}_mean_ms")].as_f64(),
+            f[format!("{key}_max_ms")].as_f64(),
+        );
+        assert!(mean.unwrap() > 0.0 && max.unwrap() >= mean.unwrap(), "{f}");
+    }
+    let o = psao(&["corrective", "bench", "--loop-frames", "0"]);
+    assert!(!o.status.success() && stderr(&o).contains("--loop-frames"));
 }
 
-/// A small room with a chrome ball, a glossy box and a sun, and a 1-second camera path.
+/// A small room with a chrome ball, a glossy box, a diffuse post sliding between them in the
+/// first 0.2 s and a sun, and a 1-second camera path.
 fn split_fixture() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let mut obj = String::new();
@@ -132,6 +152,8 @@ fn split_fixture() -> tempfile::TempDir {
         [[asset]]\nfile = \"room.obj\"\n\
         [[asset]]\nfile = \"builtin:sphere\"\ntranslation = [-0.6, 0.5, 0.0]\n\
         [[asset]]\nfile = \"builtin:box\"\ntranslation = [0.9, 0.0, -0.5]\nscale = 0.8\n\
+        [[asset]]\nfile = \"builtin:cylinder\"\nscale = [0.4, 1.2, 0.4]\n\
+        keys = { times = [0, 0.2, 1], translation = [[0.3, 0, 1.2], [0.1, 0, 0.4], [0.1, 0, 0.4]] }\n\
         [[material]]\nname = \"sphere\"\npreset = \"chrome\"\n\
         [[material]]\nname = \"box\"\npreset = \"glossy\"\n\
         [[light]]\nkind = \"sun\"\ndirection = [0.35, 1.0, 0.6]\npower = 2.0\n";

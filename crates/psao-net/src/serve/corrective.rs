@@ -27,7 +27,8 @@ use psao_wire::{
 use super::{Serve, Session, Simulation};
 use crate::convert::view_of;
 use crate::corrective::{
-    budget_of_tick, new_planner, object_regions, sample_msg, CorrectionEngine, RemoteCorrections,
+    budget_of_tick, client_time, new_planner, object_regions, sample_msg, CorrectionEngine,
+    RemoteCorrections,
 };
 
 /// Default tracing workers of a server, shared by all its clients (both cores of the
@@ -126,16 +127,19 @@ pub(super) fn regions(session: &mut Session, msg: &RegionsMsg) {
     }
 }
 
-/// What a worker traces a job for: the client's camera, image size and camera age.
+/// What a worker traces a job for: the client's camera, its frame's scene time, image size and
+/// camera age.
 pub(super) struct TraceView {
     camera: Camera,
+    time: f32,
     width: u32,
     height: u32,
     age: u32,
 }
 
 /// The engine as the workers use it: positions whose primary ray shows the job's object are
-/// traced; a sample carries the camera age it was traced at.
+/// traced in the scene at the view's time; a sample carries the camera age it was traced at.
+/// A scene that cannot be posed gives no samples (logged).
 pub(super) struct EngineJobs(Arc<CorrectionEngine>);
 
 impl JobTracer for EngineJobs {
@@ -148,7 +152,7 @@ impl JobTracer for EngineJobs {
         job: &Job,
         positions: &[(i32, i32)],
     ) -> Vec<(u32, SampleMsg)> {
-        self.0.with_tracer(|tracer| {
+        let traced = self.0.with_tracer(v.time, |tracer| {
             positions
                 .iter()
                 .filter(|&&(x, y)| {
@@ -161,6 +165,10 @@ impl JobTracer for EngineJobs {
                 })
                 .map(|s| (v.age, sample_msg(&s)))
                 .collect()
+        });
+        traced.unwrap_or_else(|e| {
+            tracing::warn!("no corrections traced: {e}");
+            Vec::new()
         })
     }
 }
@@ -171,7 +179,8 @@ impl JobTracer for EngineJobs {
 pub(super) struct ThreadedCorrections {
     lane: Lane<EngineJobs>,
     samples_per_second: u32,
-    camera: Option<Camera>,
+    /// The client's camera and the frame it was sent for.
+    camera: Option<(Camera, u32)>,
     camera_age: u32,
     size: Option<(u32, u32)>,
     ticks: u64,
@@ -194,10 +203,10 @@ impl ThreadedCorrections {
 
     fn camera(&mut self, msg: &CameraMsg) {
         let camera = view_of(msg).camera;
-        if self.camera.is_some_and(|c| c != camera) {
+        if self.camera.is_some_and(|(c, _)| c != camera) {
             self.camera_age = self.camera_age.wrapping_add(1);
         }
-        self.camera = Some(camera);
+        self.camera = Some((camera, msg.frame));
         self.set_view();
     }
 
@@ -215,9 +224,10 @@ impl ThreadedCorrections {
     /// The workers' view, once both a camera and an image size are known.
     fn set_view(&self) {
         self.lane.set_camera_age(self.camera_age);
-        if let (Some(camera), Some((width, height))) = (self.camera, self.size) {
+        if let (Some((camera, frame)), Some((width, height))) = (self.camera, self.size) {
             self.lane.set_view(TraceView {
                 camera,
+                time: client_time(frame),
                 width,
                 height,
                 age: self.camera_age,
