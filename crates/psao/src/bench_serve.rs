@@ -1,7 +1,8 @@
 //! `psao bench serve`: one `psao serve` (or, with `--edge-nats`, one `psao edge`) and N
-//! headless `psao view` processes on loopback for a fixed number of client frames; reports
-//! per-client Mbit/s, server ms per frame and the updates coalesced because a client had no
-//! room.
+//! headless viewers on loopback for a fixed number of client frames — N `psao view`
+//! processes, or with `--one-client-process` one `psao view --viewers N` process that loads
+//! the scene once — and reports per-client Mbit/s, server ms per frame and the updates
+//! coalesced because a client had no room.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -79,6 +80,12 @@ pub struct BenchServeArgs {
     /// first; docs/SCALE-OUT.md).
     #[arg(long)]
     pub edge_nats: Option<String>,
+    /// Run the N viewers as threads of one `psao view --viewers N` process (one scene load,
+    /// decode and apply only) instead of N processes that each load the scene: many viewers
+    /// of a large scene then fit beside the server on one machine. Per-client `cores` is
+    /// that process's share divided by N.
+    #[arg(long)]
+    pub one_client_process: bool,
     /// Write the report as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -209,7 +216,12 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
     drop(input);
     let total = path.frame_count() as u32;
     let mut views = Vec::new();
-    for k in 0..args.load.clients {
+    let processes = if args.one_client_process {
+        1
+    } else {
+        args.load.clients
+    };
+    for k in 0..processes {
         let (mut c, through) = match (args.client_nice, args.client_idle) {
             (Some(n), _) => {
                 let mut c = Command::new("nice");
@@ -240,6 +252,9 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
         .arg("--json")
         .arg(dir.join(format!("view_{k}.json")))
         .stdout(Stdio::null());
+        if args.one_client_process {
+            c.args(["--viewers", &args.load.clients.to_string()]);
+        }
         if !args.verify {
             c.arg("--no-verify");
         }
@@ -270,9 +285,31 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
             .filter_map(|c| c["coalesced"].as_u64())
             .sum::<u64>()
     };
+    let summaries: Vec<serde_json::Value> = if args.one_client_process {
+        match read_json(&dir.join("view_0.json"))? {
+            serde_json::Value::Array(list) => list,
+            other => bail!("psao view --viewers wrote no list: {other}"),
+        }
+    } else {
+        (0..processes)
+            .map(|k| read_json(&dir.join(format!("view_{k}.json"))))
+            .collect::<Result<_>>()?
+    };
+    if summaries.len() != args.load.clients as usize {
+        bail!(
+            "{} viewer summaries for {} clients",
+            summaries.len(),
+            args.load.clients
+        );
+    }
+    // Viewers sharing one process share its CPU time.
+    let sharing = if args.one_client_process {
+        f64::from(args.load.clients)
+    } else {
+        1.0
+    };
     let mut per_client = Vec::new();
-    for k in 0..args.load.clients as usize {
-        let v = read_json(&dir.join(format!("view_{k}.json")))?;
+    for v in &summaries {
         per_client.push(BenchClient {
             mbit_s: v["mbit_s"].as_f64().unwrap_or(0.0),
             updates: v["updates"].as_u64().unwrap_or(0),
@@ -283,7 +320,8 @@ pub fn run(args: &BenchServeArgs) -> Result<()> {
                 .verify
                 .then(|| v["state_hash"] == v["server_state_hash"]),
             cores: v["cpu_seconds"].as_f64().unwrap_or(0.0)
-                / v["seconds"].as_f64().unwrap_or(0.0).max(1e-9),
+                / v["seconds"].as_f64().unwrap_or(0.0).max(1e-9)
+                / sharing,
         });
     }
     let report = BenchServeReport {

@@ -64,30 +64,24 @@ pub struct ViewArgs {
     pub record: Option<PathBuf>,
     #[command(flatten)]
     pub corrective: crate::corrective::split_args::CorrectiveArgs,
+    /// Run this many headless viewers in this one process, for load tests (`psao bench serve
+    /// --one-client-process`): one scene load, a thread each, viewer k starting k/N of the way
+    /// along the path (after `--path-offset`); `--json` then writes a list of their summaries.
+    /// Not with `--out` or `--corrective`.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub viewers: Option<u32>,
 }
 
 /// Runs `psao view`.
 pub fn run(args: &ViewArgs) -> Result<()> {
+    if let Some(n) = args.viewers {
+        return run_viewers(args, n);
+    }
     let (input, path) = args.input.load()?;
     if let Some(out) = &args.out {
         std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     }
-    let config = ViewConfig {
-        connect: args.connect.clone(),
-        tls_ca: args.tls_ca.clone(),
-        token: args.token.clone(),
-        frames: args.frames,
-        res: args.res,
-        render: args.out.is_some(),
-        latency_ms: args.latency_ms,
-        max_mbit: args.max_mbit,
-        retry_secs: args.retry_secs,
-        no_verify: args.no_verify,
-        path_offset: args.path_offset,
-        drop_at: args.drop_at,
-        record: args.record.clone(),
-        corrective: args.corrective.config()?.map(|c| c.client),
-    };
+    let config = view_config(args)?;
     let stats = view(&input.scene, &path, &config, &mut |frame, img| {
         if let Some(out) = &args.out {
             write_frame_images(out, frame, &input.scene, img)?;
@@ -111,4 +105,65 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// `psao view --viewers n`: n headless viewers on threads of this process.
+fn run_viewers(args: &ViewArgs, n: u32) -> Result<()> {
+    if args.out.is_some() || args.corrective.config()?.is_some() {
+        bail!("--viewers runs headless viewers without --out or --corrective");
+    }
+    let (input, path) = args.input.load()?;
+    let total = path.frame_count() as u32;
+    let config = view_config(args)?;
+    let stats: Vec<_> = std::thread::scope(|scope| {
+        let viewers: Vec<_> = (0..n)
+            .map(|k| {
+                let config = ViewConfig {
+                    path_offset: args.path_offset + k * total / n,
+                    ..config.clone()
+                };
+                let scene = &input.scene;
+                let path = &path;
+                scope.spawn(move || view(scene, path, &config, &mut |_, _| Ok(())))
+            })
+            .collect();
+        viewers
+            .into_iter()
+            .enumerate()
+            .map(|(k, v)| match v.join() {
+                Ok(stats) => stats.with_context(|| format!("viewer {k}")),
+                Err(_) => Err(anyhow::anyhow!("viewer {k} panicked")),
+            })
+            .collect::<Result<_>>()
+    })?;
+    let updates: u64 = stats.iter().map(|s| u64::from(s.updates)).sum();
+    println!("{n} viewers, {updates} updates applied in all");
+    if let Some(json) = &args.json {
+        write_json(json, &stats)?;
+    }
+    let mismatches: u32 = stats.iter().map(|s| s.hash_mismatches).sum();
+    if mismatches > 0 {
+        bail!("{mismatches} updates left a viewer's state different from the server's");
+    }
+    Ok(())
+}
+
+/// The viewer settings of `args`.
+fn view_config(args: &ViewArgs) -> Result<ViewConfig> {
+    Ok(ViewConfig {
+        connect: args.connect.clone(),
+        tls_ca: args.tls_ca.clone(),
+        token: args.token.clone(),
+        frames: args.frames,
+        res: args.res,
+        render: args.out.is_some(),
+        latency_ms: args.latency_ms,
+        max_mbit: args.max_mbit,
+        retry_secs: args.retry_secs,
+        no_verify: args.no_verify,
+        path_offset: args.path_offset,
+        drop_at: args.drop_at,
+        record: args.record.clone(),
+        corrective: args.corrective.config()?.map(|c| c.client),
+    })
 }

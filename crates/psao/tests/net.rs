@@ -625,6 +625,45 @@ fn client_refuses_bombs_and_bad_frames_from_a_server() {
 }
 
 #[test]
+fn bench_serve_runs_its_viewers_in_one_process_when_asked() {
+    let fx = Fixture::new();
+    let report = fx.dir.path().join("bench.json");
+    let o = Command::new(BIN)
+        .args(["--log", "warn", "bench", "serve", "--clients", "3"])
+        .args(["--frames", "30", "--points", "64", "--one-client-process"])
+        .args(["--verify", "--scene"])
+        .arg(fx.dir.path().join(fx.scene))
+        .arg("--path")
+        .arg(fx.dir.path().join("path.toml"))
+        .arg("--json")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = json(&report);
+    let clients = r["per_client"].as_array().unwrap();
+    assert_eq!(clients.len(), 3, "{r}");
+    for c in clients {
+        assert!(c["updates"].as_u64().unwrap() > 0, "{r}");
+        assert_eq!(
+            c["exact"], true,
+            "every viewer ends with the server's state: {r}"
+        );
+    }
+    // Headless viewers in one process only: no images, no corrections.
+    let o = Command::new(BIN)
+        .args(["view", "--viewers", "2", "--out", "x", "--scene"])
+        .arg(fx.dir.path().join(fx.scene))
+        .output()
+        .unwrap();
+    assert!(
+        !o.status.success() && stderr(&o).contains("--viewers"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
 fn bench_serve_runs_idle_priority_clients_and_reports_the_step_phases() {
     let fx = Fixture::new();
     let report = fx.dir.path().join("bench.json");
