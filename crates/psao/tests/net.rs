@@ -624,14 +624,13 @@ fn client_refuses_bombs_and_bad_frames_from_a_server() {
     assert!(stderr(&o).contains("magic"), "{}", stderr(&o));
 }
 
-#[test]
-fn bench_serve_runs_its_viewers_in_one_process_when_asked() {
-    let fx = Fixture::new();
+/// `psao bench serve` on the fixture's scene and path with `args`; its JSON report.
+fn bench_serve(fx: &Fixture, args: &[&str]) -> serde_json::Value {
     let report = fx.dir.path().join("bench.json");
     let o = Command::new(BIN)
-        .args(["--log", "warn", "bench", "serve", "--clients", "3"])
-        .args(["--frames", "30", "--points", "64", "--one-client-process"])
-        .args(["--verify", "--scene"])
+        .args(["--log", "warn", "bench", "serve", "--points", "64"])
+        .args(args)
+        .arg("--scene")
         .arg(fx.dir.path().join(fx.scene))
         .arg("--path")
         .arg(fx.dir.path().join("path.toml"))
@@ -640,7 +639,23 @@ fn bench_serve_runs_its_viewers_in_one_process_when_asked() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
-    let r = json(&report);
+    json(&report)
+}
+
+#[test]
+fn bench_serve_runs_its_viewers_in_one_process_when_asked() {
+    let fx = Fixture::new();
+    let r = bench_serve(
+        &fx,
+        &[
+            "--clients",
+            "3",
+            "--frames",
+            "30",
+            "--one-client-process",
+            "--verify",
+        ],
+    );
     let clients = r["per_client"].as_array().unwrap();
     assert_eq!(clients.len(), 3, "{r}");
     for c in clients {
@@ -666,28 +681,7 @@ fn bench_serve_runs_its_viewers_in_one_process_when_asked() {
 #[test]
 fn bench_serve_runs_idle_priority_clients_and_reports_the_step_phases() {
     let fx = Fixture::new();
-    let report = fx.dir.path().join("bench.json");
-    let scene = fx.dir.path().join(fx.scene);
-    let path = fx.dir.path().join("path.toml");
-    let o = Command::new(BIN)
-        .args(["--log", "warn", "bench", "serve", "--clients", "2"])
-        .args([
-            "--frames",
-            "40",
-            "--points",
-            "64",
-            "--client-idle",
-            "--scene",
-        ])
-        .arg(&scene)
-        .arg("--path")
-        .arg(&path)
-        .arg("--json")
-        .arg(&report)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
-    let r = json(&report);
+    let r = bench_serve(&fx, &["--clients", "2", "--frames", "40", "--client-idle"]);
     assert!(r["server_frames"].as_u64().unwrap() > 0, "{r}");
     let ms = |k: &str| r[k].as_f64().unwrap();
     let phases = ms("server_cull_ms") + ms("server_trace_ms") + ms("server_publish_ms");

@@ -16,7 +16,7 @@ use psao_server::{PointRecord, Server, StepStats, View};
 use serde::Serialize;
 use tokio::sync::{mpsc, Notify};
 
-use super::join::{join, records_from, Joiner};
+use super::join::{join, last_sequence, records_from, Joiner};
 use super::wire::{Batch, ViewSet};
 use super::{connect, records_stream, Names};
 use crate::serve::Stepper;
@@ -197,12 +197,7 @@ impl EdgeStepper {
             let js = async_nats::jetstream::new(client.clone());
             let mut stream = records_stream(&js, &names).await?;
             let joined = join(&js, &names, server, Joiner::Replica).await?;
-            let backlog = stream
-                .info()
-                .await
-                .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?
-                .state
-                .last_sequence;
+            let backlog = last_sequence(&mut stream, "the records stream").await?;
             let messages = records_from(&stream, &names, joined.next)
                 .await
                 .map_err(|e| NetError::Nats(format!("cannot read the records stream: {e}")))?;

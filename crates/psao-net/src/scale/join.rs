@@ -359,12 +359,7 @@ pub async fn join(
         NetError::Nats(format!("cannot read the records stream while joining: {e}"))
     };
     let mut stream = records_stream(js, names).await?;
-    let last = stream
-        .info()
-        .await
-        .map_err(|e| failed(&e))?
-        .state
-        .last_sequence;
+    let last = last_sequence(&mut stream, "the records stream while joining").await?;
     let done = |fold: &Fold| joiner == Joiner::TraceNode || fold.complete();
     if last < first && done(&fold) {
         return Ok(Joined {
@@ -433,12 +428,7 @@ async fn read_published(
     let failed =
         |e: &dyn std::fmt::Display| NetError::Nats(format!("cannot read the snapshots: {e}"));
     let mut stream = snapshot_stream(js, names).await?;
-    let last = stream
-        .info()
-        .await
-        .map_err(|e| failed(&e))?
-        .state
-        .last_sequence;
+    let last = last_sequence(&mut stream, "the snapshots").await?;
     let mut published = Published::default();
     if last == 0 {
         return Ok(published);
@@ -480,6 +470,17 @@ async fn read_published(
 }
 
 /// An ordered consumer of the records stream from sequence number `first`.
+/// The sequence number of `stream`'s last message (0 when it never held one); an error
+/// names `what` could not be read.
+pub(super) async fn last_sequence(
+    stream: &mut async_nats::jetstream::stream::Stream,
+    what: &str,
+) -> Result<u64, NetError> {
+    let info =
+        (stream.info().await).map_err(|e| NetError::Nats(format!("cannot read {what}: {e}")))?;
+    Ok(info.state.last_sequence)
+}
+
 pub(super) async fn records_from(
     stream: &async_nats::jetstream::stream::Stream,
     names: &Names,
