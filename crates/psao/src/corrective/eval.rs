@@ -87,8 +87,9 @@ pub struct EvalArgs {
     /// Priority reduction per finished √5 level, in [0, 1).
     #[arg(long, default_value_t = DEFAULT_DECAY)]
     pub decay: f32,
-    /// Frames between analyses (9 = 0.3 s at the paths' 30 Hz).
-    #[arg(long, default_value_t = 9)]
+    /// Frames between analyses (path frames are 1/60 s apart: 18 = 0.3 s, as the split's
+    /// clients analyse).
+    #[arg(long, default_value_t = psao_net::corrective::DEFAULT_ANALYZE_EVERY)]
     pub analyze_every: u32,
     /// AO rays per point of the base shading.
     #[arg(long, default_value_t = 8)]
