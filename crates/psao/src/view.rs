@@ -67,7 +67,7 @@ pub struct ViewArgs {
     /// Run this many headless viewers in this one process, for load tests (`psao bench serve
     /// --one-client-process`): one scene load, a thread each, viewer k starting k/N of the way
     /// along the path (after `--path-offset`); `--json` then writes a list of their summaries.
-    /// Not with `--out` or `--corrective`.
+    /// Not with `--out`, `--record` or `--corrective`.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub viewers: Option<u32>,
 }
@@ -109,8 +109,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 
 /// `psao view --viewers n`: n headless viewers on threads of this process.
 fn run_viewers(args: &ViewArgs, n: u32) -> Result<()> {
-    if args.out.is_some() || args.corrective.config()?.is_some() {
-        bail!("--viewers runs headless viewers without --out or --corrective");
+    if args.out.is_some() || args.record.is_some() || args.corrective.config()?.is_some() {
+        bail!("--viewers runs headless viewers without --out, --record or --corrective");
     }
     let (input, path) = args.input.load()?;
     let total = path.frame_count() as u32;
