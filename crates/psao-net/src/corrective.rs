@@ -31,7 +31,7 @@ use psao_wire::{CameraMsg, Message, Region, RegionsMsg, SampleMsg, SamplesMsg, M
 use rayon::prelude::*;
 
 use crate::convert::view_of;
-use crate::pipeline::CLIENT_HZ;
+use crate::pipeline::{client_time, CLIENT_HZ};
 use crate::NetError;
 
 /// Default sample budget per client and second (the paper: 10 000–50 000 per second on 2–6
@@ -65,11 +65,6 @@ struct PosedGeometry {
     pose: Option<ScenePose>,
     primary: Tracer,
     occlusion: Tracer,
-}
-
-/// The scene time of client frame `frame` (the client plays its scene at [`CLIENT_HZ`]).
-pub fn client_time(frame: u32) -> f32 {
-    frame as f32 / CLIENT_HZ as f32
 }
 
 impl CorrectionEngine {
@@ -173,15 +168,33 @@ fn read<T>(lock: &RwLock<T>) -> RwLockReadGuard<'_, T> {
     lock.read().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// A client's latest camera, the frame it was sent for, and its camera age (how many times
+/// the camera changed).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ClientCamera {
+    pub(crate) latest: Option<(Camera, u32)>,
+    pub(crate) age: u32,
+}
+
+impl ClientCamera {
+    /// Take the client's camera message: a camera different from the last one (all fields but
+    /// `frame` and `aspect`) advances the age.
+    pub(crate) fn update(&mut self, msg: &CameraMsg) {
+        let camera = view_of(msg).camera;
+        if self.latest.is_some_and(|(c, _)| c != camera) {
+            self.age = self.age.wrapping_add(1);
+        }
+        self.latest = Some((camera, msg.frame));
+    }
+}
+
 /// The server's correction state of one client: its camera and camera age, its region queue
 /// and its sample budget clock.
 pub struct RemoteCorrections {
     samples_per_second: u32,
     /// The planner and the image size it was made for.
     planner: Option<(Planner, u32, u32)>,
-    /// The client's camera and the frame it was sent for.
-    camera: Option<(Camera, u32)>,
-    camera_age: u32,
+    camera: ClientCamera,
     /// Budget ticks so far.
     ticks: u64,
     /// Samples sent so far.
@@ -194,8 +207,7 @@ impl RemoteCorrections {
         Self {
             samples_per_second,
             planner: None,
-            camera: None,
-            camera_age: 0,
+            camera: ClientCamera::default(),
             ticks: 0,
             samples_sent: 0,
         }
@@ -209,20 +221,16 @@ impl RemoteCorrections {
             self.planner = Some((new_planner(msg.width, msg.height), msg.width, msg.height));
         }
         if let Some((planner, _, _)) = &mut self.planner {
-            planner.set_camera_age(self.camera_age);
-            planner.analyze(&object_regions(msg), self.camera_age);
+            planner.set_camera_age(self.camera.age);
+            planner.analyze(&object_regions(msg), self.camera.age);
         }
     }
 
     /// The client's camera; a camera different from the last one advances the camera age.
     pub fn camera(&mut self, msg: &CameraMsg) {
-        let camera = view_of(msg).camera;
-        if self.camera.is_some_and(|(c, _)| c != camera) {
-            self.camera_age = self.camera_age.wrapping_add(1);
-        }
-        self.camera = Some((camera, msg.frame));
+        self.camera.update(msg);
         if let Some((planner, _, _)) = &mut self.planner {
-            planner.set_camera_age(self.camera_age);
+            planner.set_camera_age(self.camera.age);
         }
     }
 
@@ -243,8 +251,8 @@ impl RemoteCorrections {
     ) -> Option<SamplesMsg> {
         let (planner, w, h) = self.planner.as_mut()?;
         let (w, h) = (*w, *h);
-        let (camera, frame) = self.camera?;
-        let age = self.camera_age;
+        let (camera, frame) = self.camera.latest?;
+        let age = self.camera.age;
         let budget = budget.min(MAX_SAMPLES);
         let traced = engine.with_tracer(client_time(frame), |tracer| {
             let examine = budget.saturating_mul(EXAMINE_PER_SAMPLE) + DEFAULT_JOB_SIZE as usize;
@@ -469,8 +477,7 @@ impl MotionWatch {
         if self.frame == Some(frame) {
             return;
         }
-        self.animator
-            .pose_into(frame as f32 / CLIENT_HZ as f32, &mut self.pose);
+        self.animator.pose_into(client_time(frame), &mut self.pose);
         let motion = self.animator.motion();
         self.moving = (0..self.pose.transforms.len())
             .filter(|&i| {

@@ -18,6 +18,11 @@ use std::time::Instant;
 /// Client frames per second of scene time (camera paths are sampled at this rate).
 pub const CLIENT_HZ: u32 = 60;
 
+/// The scene time of client frame `frame` (a client plays its scene at [`CLIENT_HZ`]).
+pub fn client_time(frame: u32) -> f32 {
+    frame as f32 / CLIENT_HZ as f32
+}
+
 /// Settings of one pipeline run.
 #[derive(Clone, Debug)]
 pub struct PipelineConfig {
@@ -268,7 +273,7 @@ impl<'a> Pipeline<'a> {
         let mut out = None;
         // The client analyses every frame it shows when it corrects them.
         if render || self.corrective.is_some() {
-            let time = frame as f32 / CLIENT_HZ as f32;
+            let time = client_time(frame);
             let mut img = self
                 .renderer
                 .render(self.scene, &self.client, camera, self.res, time)?;

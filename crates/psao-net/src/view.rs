@@ -23,7 +23,7 @@ use tokio::sync::mpsc;
 use crate::convert::{camera_msg, client_decoder, table_of};
 use crate::corrective::{CorrectiveClient, CorrectiveClientConfig};
 use crate::cpu_time::cpu_seconds;
-use crate::pipeline::{ClientFrame, ClientRenderer, CLIENT_HZ};
+use crate::pipeline::{client_time, ClientFrame, ClientRenderer, CLIENT_HZ};
 use crate::transport::{connect, ReadError};
 use crate::view_analyzer::Analyzer;
 use crate::{NetError, Resolution};
@@ -237,7 +237,7 @@ pub fn view(
         }
         if args.render || client.corrective.is_some() {
             // The client's clock: frame / 60 s (equal to the server's in lockstep).
-            let time = frame as f32 / CLIENT_HZ as f32;
+            let time = client_time(frame);
             let mut img = renderer.render(scene, &client.state, &camera, args.res, time)?;
             if let Some(c) = &mut client.corrective {
                 let corrected = match (&mut analyzer, lockstep) {

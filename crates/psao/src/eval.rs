@@ -12,7 +12,7 @@ use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{compare, ssao, AoImage, Lpips, Metrics, SsaoSettings};
-use psao_net::pipeline::{composite_rgb8, luma, Pipeline, CLIENT_HZ};
+use psao_net::pipeline::{client_time, composite_rgb8, luma, Pipeline, CLIENT_HZ};
 use psao_raster::GBuffer;
 use psao_scene::path::CameraPath;
 use psao_scene::{Animator, Scene};
@@ -211,7 +211,7 @@ fn reference_key(
     let animator = Animator::new(&input.scene).context("the scene's animation cannot be played")?;
     if animator.is_dynamic() {
         for &frame in eval_frames {
-            let pose = animator.pose_at(frame as f32 / CLIENT_HZ as f32);
+            let pose = animator.pose_at(client_time(frame));
             format!("{:?}", pose.transforms).hash(&mut h);
             for g in pose.skinned.iter().flatten() {
                 let sum = g.positions.iter().fold(glam::Vec3::ZERO, |a, p| a + *p);

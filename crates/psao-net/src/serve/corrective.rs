@@ -25,11 +25,11 @@ use psao_wire::{
 };
 
 use super::{Serve, Session, Simulation};
-use crate::convert::view_of;
 use crate::corrective::{
-    budget_of_tick, client_time, new_planner, object_regions, sample_msg, CorrectionEngine,
+    budget_of_tick, new_planner, object_regions, sample_msg, ClientCamera, CorrectionEngine,
     RemoteCorrections,
 };
+use crate::pipeline::client_time;
 
 /// Default tracing workers of a server, shared by all its clients (both cores of the
 /// reference machine).
@@ -179,9 +179,7 @@ impl JobTracer for EngineJobs {
 pub(super) struct ThreadedCorrections {
     lane: Lane<EngineJobs>,
     samples_per_second: u32,
-    /// The client's camera and the frame it was sent for.
-    camera: Option<(Camera, u32)>,
-    camera_age: u32,
+    camera: ClientCamera,
     size: Option<(u32, u32)>,
     ticks: u64,
 }
@@ -194,19 +192,14 @@ impl ThreadedCorrections {
         Self {
             lane: c.pool().lane(new_planner(1, 1), outstanding),
             samples_per_second: c.samples_per_second,
-            camera: None,
-            camera_age: 0,
+            camera: ClientCamera::default(),
             size: None,
             ticks: 0,
         }
     }
 
     fn camera(&mut self, msg: &CameraMsg) {
-        let camera = view_of(msg).camera;
-        if self.camera.is_some_and(|(c, _)| c != camera) {
-            self.camera_age = self.camera_age.wrapping_add(1);
-        }
-        self.camera = Some((camera, msg.frame));
+        self.camera.update(msg);
         self.set_view();
     }
 
@@ -218,19 +211,19 @@ impl ThreadedCorrections {
             self.size = Some(size);
             self.set_view();
         }
-        self.lane.analyze(&object_regions(msg), self.camera_age);
+        self.lane.analyze(&object_regions(msg), self.camera.age);
     }
 
     /// The workers' view, once both a camera and an image size are known.
     fn set_view(&self) {
-        self.lane.set_camera_age(self.camera_age);
-        if let (Some((camera, frame)), Some((width, height))) = (self.camera, self.size) {
+        self.lane.set_camera_age(self.camera.age);
+        if let (Some((camera, frame)), Some((width, height))) = (self.camera.latest, self.size) {
             self.lane.set_view(TraceView {
                 camera,
                 time: client_time(frame),
                 width,
                 height,
-                age: self.camera_age,
+                age: self.camera.age,
             });
         }
     }
