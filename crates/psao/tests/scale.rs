@@ -221,20 +221,39 @@ fn serve_alone(
     view_hashes(&files)
 }
 
-/// Trace nodes for partitions 0/2 and 1/2, each waiting for two lockstep edges.
-fn lockstep_trace_nodes(url: &str, scene: &str) -> Vec<Proc> {
+/// Trace nodes for partitions 0/2 and 1/2, each waiting for two lockstep edges, with
+/// `extra` arguments; with `reports`, node `k` writes its report to `reports/t{k}.json`
+/// when it stops.
+fn lockstep_trace_nodes(
+    url: &str,
+    scene: &str,
+    reports: Option<&Path>,
+    extra: &[&str],
+) -> Vec<Proc> {
     (0..2)
         .map(|k| {
             let partition = format!("{k}/2");
-            let args = [
-                "--nats",
-                url,
-                "--partition",
-                &partition,
-                "--lockstep-edges",
-                "2",
+            let mut args = vec![
+                "--nats".to_string(),
+                url.to_string(),
+                "--partition".into(),
+                partition,
+                "--lockstep-edges".into(),
+                "2".into(),
             ];
-            start("trace-node", scene, &args).0
+            args.extend(extra.iter().map(|a| a.to_string()));
+            if let Some(dir) = reports {
+                args.push("--json".into());
+                args.push(
+                    dir.join(format!("t{k}.json"))
+                        .to_string_lossy()
+                        .into_owned(),
+                );
+            }
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let (p, line) = start("trace-node", scene, &args);
+            assert!(line.starts_with("trace node"), "{line}");
+            p
         })
         .collect()
 }
@@ -271,27 +290,7 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
     let alone = serve_alone(dir.path(), &scene, &path, 4, FRAMES, &[], &[]);
 
     // Two trace nodes, two edges with two viewers each.
-    let nodes: Vec<Proc> = (0..2)
-        .map(|k| {
-            let partition = format!("{k}/2");
-            let (p, line) = start(
-                "trace-node",
-                &scene,
-                &[
-                    "--nats",
-                    &url,
-                    "--partition",
-                    &partition,
-                    "--lockstep-edges",
-                    "2",
-                    "--snapshot-every",
-                    "3",
-                ],
-            );
-            assert!(line.starts_with("trace node"), "{line}");
-            p
-        })
-        .collect();
+    let nodes = lockstep_trace_nodes(&url, &scene, None, &["--snapshot-every", "3"]);
     let edges: Vec<(Proc, String)> = (0..2)
         .map(|e| {
             let (p, line) = start(
@@ -341,25 +340,12 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
 
     // A late edge (clocked) starts from the latest snapshot and reads only the batches
     // after it: the same state as the lockstep edges.
-    let (late, line) = start(
-        "edge",
-        &scene,
-        &[
-            "--nats",
-            &url,
-            "--listen",
-            "127.0.0.1:0",
-            "--once",
-            "--json",
-            out("late.json").to_str().unwrap(),
-        ],
+    let late = late_edge(dir.path(), &url, &scene, &path);
+    assert_eq!(
+        late["state_hash"].as_str(),
+        Some(edge_hash("e0.json").as_str())
     );
-    let v = view(&addr(&line), &scene, &path, 30, &out("lv.json"));
-    finished(v);
-    let mut late = late;
-    late.wait(20);
-    assert_eq!(edge_hash("late.json"), edge_hash("e0.json"));
-    let (late, e0) = (json(&out("late.json")), json(&out("e0.json")));
+    let e0 = json(&out("e0.json"));
     let started = late["edge"]["snapshot_frame"].as_u64().unwrap();
     assert!(started >= 3 && started.is_multiple_of(3), "{late}");
     assert!(
@@ -368,7 +354,33 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
     );
     let (read, all) = (&late["edge"]["batches"], &e0["edge"]["batches"]);
     assert!(read.as_u64() < all.as_u64(), "{read} of {all} batches read");
-    assert_eq!(view_hashes(&[out("lv.json")]), vec![edge_hash("e0.json")]);
+}
+
+/// A clocked edge joining the session at `url` after its trace nodes stopped, serving one
+/// viewer 30 frames of `path` (its report `late.json`, the viewer's `lv.json` in `dir`);
+/// returns the edge's report, after checking the viewer ended with the edge's state.
+fn late_edge(dir: &Path, url: &str, scene: &str, path: &str) -> serde_json::Value {
+    let report = dir.join("late.json");
+    let (mut late, line) = start(
+        "edge",
+        scene,
+        &[
+            "--nats",
+            url,
+            "--listen",
+            "127.0.0.1:0",
+            "--once",
+            "--json",
+            report.to_str().unwrap(),
+        ],
+    );
+    let v = view(&addr(&line), scene, path, 30, &dir.join("lv.json"));
+    finished(v);
+    late.wait(20);
+    let late = json(&report);
+    let hash = late["state_hash"].as_str().unwrap().to_string();
+    assert_eq!(view_hashes(&[dir.join("lv.json")]), vec![hash]);
+    late
 }
 
 #[test]
@@ -426,12 +438,24 @@ fn a_dead_trace_node_and_a_dead_edge_are_survived() {
     assert!(after <= 5.0, "partition taken over after {after} s");
 }
 
-#[test]
-fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
+/// How the NATS server goes away mid-path in [`nats_outage`].
+#[derive(Clone, Copy, PartialEq)]
+enum Outage {
+    /// Killed and started again on its port and store.
+    Restart,
+    /// As if killed hard before it wrote the last 0.4 s of messages to disk: its store is
+    /// copied while it is frozen (SIGSTOP: what a kill then would leave on disk), it runs on
+    /// for 0.4 s, then it is killed and started again on the copy. It has lost messages it
+    /// acknowledged, and hands their sequence numbers to new ones.
+    LoseMessages,
+}
+
+/// 2 lockstep trace nodes, 2 edges and 2 viewers, the NATS server going away mid-path as
+/// `outage` says: every frame is applied and both viewers end with the state of
+/// `psao serve` alone. Returns the edges' and the trace nodes' reports.
+fn nats_outage(outage: Outage) -> Option<(Vec<serde_json::Value>, Vec<serde_json::Value>)> {
     let dir = tempfile::tempdir().unwrap();
-    let Some((nats_server, url)) = nats(dir.path()) else {
-        return;
-    };
+    let (nats_server, url) = nats(dir.path())?;
     let port: u16 = url.rsplit(':').next().unwrap().parse().unwrap();
     let (scene, path) = fixture(dir.path());
     let out = |n: &str| dir.path().join(n);
@@ -441,7 +465,7 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
 
     let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &slow, &[]);
 
-    let nodes = lockstep_trace_nodes(&url, &scene);
+    let nodes = lockstep_trace_nodes(&url, &scene, Some(dir.path()), &["--snapshot-every", "4"]);
     let edges: Vec<(Proc, String)> = (0..2)
         .map(|e| {
             let json = out(&format!("e{e}.json"));
@@ -471,31 +495,83 @@ fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
         .enumerate()
         .map(|(i, f)| view_with(&edges[i].1, &scene, &path, STEPS, f, &slow))
         .collect();
-    // Mid-path: the NATS server dies and comes back on the same port and store.
     std::thread::sleep(Duration::from_millis(700));
+    let (store, copy) = (out("js"), out("js-copy"));
+    if outage == Outage::LoseMessages {
+        let pid = nats_server.0.id().to_string();
+        Command::new("kill").args(["-STOP", &pid]).status().unwrap();
+        copy_dir(&store, &copy);
+        Command::new("kill").args(["-CONT", &pid]).status().unwrap();
+        std::thread::sleep(Duration::from_millis(400));
+    }
     drop(nats_server);
+    if outage == Outage::LoseMessages {
+        std::fs::remove_dir_all(&store).unwrap();
+        std::fs::rename(&copy, &store).unwrap();
+    }
     std::thread::sleep(Duration::from_millis(500));
     let _nats_again = nats_on(dir.path(), port);
     views.into_iter().for_each(finished);
     for (mut p, _) in edges {
         p.wait(30);
     }
-    // On a mismatch, the edges' reports say where the state went apart.
-    let edge_reports = [json(&out("e0.json")), json(&out("e1.json"))];
+    for n in nodes {
+        n.interrupt(20);
+    }
+    // A late edge joins from the snapshots published after the outage and the batches.
+    let late = late_edge(dir.path(), &url, &scene, &path);
+    // On a mismatch, the reports say where the state went apart.
+    let edge_reports = vec![json(&out("e0.json")), json(&out("e1.json"))];
+    let node_reports = vec![json(&out("t0.json")), json(&out("t1.json"))];
     assert_eq!(
         view_hashes(&files),
         alone,
-        "the state of psao serve alone; edges: {edge_reports:?}"
+        "the state of psao serve alone; edges: {edge_reports:?}; nodes: {node_reports:?}"
     );
-    for s in edge_reports {
+    for s in edge_reports.iter().chain([&late]) {
         assert_eq!(s["state_hash"].as_str(), Some(alone[0].as_str()), "{s}");
         assert_eq!(s["edge"]["malformed"], 0, "{s}");
         assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
+    }
+    for s in &edge_reports {
         // Every server frame applied, none skipped: one per two client frames at --hz 30.
         assert_eq!(s["edge"]["frames"], STEPS / 2, "{s}");
     }
-    for n in nodes {
-        n.interrupt(20);
+    assert!(late["edge"]["snapshot_frame"].as_u64() > Some(0), "{late}");
+    Some((edge_reports, node_reports))
+}
+
+/// Copy directory `from` to `to`, recursively.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+#[test]
+fn a_nats_restart_is_survived_by_trace_nodes_and_edges() {
+    nats_outage(Outage::Restart);
+}
+
+#[test]
+fn a_nats_server_that_lost_acknowledged_messages_is_survived() {
+    let Some((edges, nodes)) = nats_outage(Outage::LoseMessages) else {
+        return;
+    };
+    // The loss was noticed: both nodes published batches again, both edges read again
+    // after the last record the stream still held.
+    for n in &nodes {
+        assert!(n["republished"].as_u64().unwrap() > 0, "{n}");
+    }
+    for e in &edges {
+        assert!(e["edge"]["rewinds"].as_u64().unwrap() >= 1, "{e}");
     }
 }
 
@@ -645,7 +721,7 @@ fn an_animated_scene_replicates_like_one_serve() {
 
     let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[], &[]);
 
-    let nodes = lockstep_trace_nodes(&url, &scene);
+    let nodes = lockstep_trace_nodes(&url, &scene, None, &[]);
     let edges: Vec<(Proc, String)> = (0..2)
         .map(|e| {
             let id = format!("e{e}");

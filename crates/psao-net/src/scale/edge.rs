@@ -17,6 +17,7 @@ use serde::Serialize;
 use tokio::sync::{mpsc, Notify};
 
 use super::join::{join, last_sequence, records_from, Joiner};
+use super::lost::Received;
 use super::wire::{Batch, ViewSet};
 use super::{connect, records_stream, Names};
 use crate::serve::Stepper;
@@ -53,6 +54,7 @@ pub struct EdgeCounters {
     malformed: AtomicU64,
     duplicates: AtomicU64,
     sequence_gaps: AtomicU64,
+    rewinds: AtomicU64,
     frames: AtomicU64,
     snapshot_bytes: AtomicU64,
     snapshot_frame: AtomicU64,
@@ -71,6 +73,9 @@ pub struct EdgeStats {
     pub duplicates: u64,
     /// Stream sequence numbers that did not follow the previous one.
     pub sequence_gaps: u64,
+    /// Times the NATS server was found to have lost records this edge had received (it
+    /// read again after the last one still held).
+    pub rewinds: u64,
     /// Server frames applied.
     pub frames: u64,
     /// Bytes of the snapshot chunks and marks read when the edge joined.
@@ -89,6 +94,7 @@ impl EdgeCounters {
             malformed: get(&self.malformed),
             duplicates: get(&self.duplicates),
             sequence_gaps: get(&self.sequence_gaps),
+            rewinds: get(&self.rewinds),
             frames: get(&self.frames),
             snapshot_bytes: get(&self.snapshot_bytes),
             snapshot_frame: get(&self.snapshot_frame),
@@ -209,7 +215,11 @@ impl EdgeStepper {
                 tx,
                 counters: counters.clone(),
             };
-            tokio::spawn(reader.run(messages, joined.next));
+            let mut received = Received::default();
+            if let Some((seq, nanos)) = joined.last_read {
+                received.note(seq, nanos);
+            }
+            tokio::spawn(reader.run(messages, received, joined.next));
             Ok::<_, NetError>((client, rx, backlog, joined))
         })?;
         let c = joined.counts;
@@ -323,7 +333,8 @@ impl EdgeStepper {
 /// Forwards the records stream's batches to the edge, checking that sequence numbers
 /// follow one another. The consumer lives in the NATS server, which forgets it when it
 /// restarts: at every reconnection, and when the consumer fails, a new one resumes after
-/// the last sequence number received.
+/// the last message received that the stream still holds ([`Received::last_held`]; a NATS
+/// server killed hard can lose the newest messages and reuse their sequence numbers).
 struct StreamReader {
     stream: async_nats::jetstream::stream::Stream,
     names: Names,
@@ -333,7 +344,8 @@ struct StreamReader {
 }
 
 impl StreamReader {
-    async fn run(self, mut messages: pull::Ordered, first: u64) {
+    /// Forward from `messages`; `received` holds the last message the join read.
+    async fn run(self, mut messages: pull::Ordered, mut received: Received, first: u64) {
         let mut last: Option<u64> = first.checked_sub(1).filter(|&l| l > 0);
         loop {
             let message = tokio::select! {
@@ -349,16 +361,8 @@ impl StreamReader {
                     if let Some(Err(e)) = failed {
                         tracing::warn!("records stream: {e}");
                     }
-                    let resume = last.map_or(1, |l| l + 1);
-                    messages = loop {
-                        match records_from(&self.stream, &self.names, resume).await {
-                            Ok(m) => break m,
-                            Err(e) => {
-                                tracing::warn!("cannot read the records stream again: {e}");
-                                tokio::time::sleep(VIEWS_AGAIN).await;
-                            }
-                        }
-                    };
+                    let (resume, m) = self.read_again(&mut received, last).await;
+                    (last, messages) = (resume, m);
                     continue;
                 }
             };
@@ -376,6 +380,7 @@ impl StreamReader {
                     }
                 }
                 last = Some(seq);
+                received.note(seq, info.published.unix_timestamp_nanos());
             }
             self.counters.batches.fetch_add(1, Ordering::Relaxed);
             self.counters
@@ -392,6 +397,41 @@ impl StreamReader {
                     self.counters.malformed.fetch_add(1, Ordering::Relaxed);
                 }
             }
+        }
+    }
+
+    /// A new consumer after the last message received that the stream still holds (from
+    /// the stream's start when it holds none of those remembered), and that message's
+    /// sequence number; retries until the NATS server answers.
+    async fn read_again(
+        &self,
+        received: &mut Received,
+        last: Option<u64>,
+    ) -> (Option<u64>, pull::Ordered) {
+        loop {
+            let resume = match received.last_held(&self.stream).await {
+                // Nothing received since the join, which read nothing: nothing to check.
+                _ if received.is_empty() => Ok(last),
+                Ok(held) if held == last => Ok(last),
+                Ok(held) => {
+                    tracing::warn!(
+                        "the NATS server lost records after message {}: reading them again",
+                        held.unwrap_or(0)
+                    );
+                    self.counters.rewinds.fetch_add(1, Ordering::Relaxed);
+                    Ok(held)
+                }
+                Err(e) => Err(e.to_string()),
+            };
+            let from = resume.map(|r| r.map_or(1, |l| l + 1));
+            match from {
+                Ok(from) => match records_from(&self.stream, &self.names, from).await {
+                    Ok(m) => return (from.checked_sub(1).filter(|&l| l > 0), m),
+                    Err(e) => tracing::warn!("cannot read the records stream again: {e}"),
+                },
+                Err(e) => tracing::warn!("{e}"),
+            }
+            tokio::time::sleep(VIEWS_AGAIN).await;
         }
     }
 }

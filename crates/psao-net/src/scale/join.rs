@@ -17,6 +17,7 @@ use async_nats::jetstream::consumer::{pull, DeliverPolicy};
 use futures_util::StreamExt;
 use psao_server::{Owners, PointRecord, PointState, Server};
 
+use super::lost::stored;
 use super::wire::{Batch, Snapshot, SnapshotMark, CHUNK_POINTS};
 use super::{records_stream, snapshot_stream, Names};
 use crate::NetError;
@@ -66,6 +67,9 @@ pub struct Plan {
     pub first: u64,
     /// Per (partition, chunk): its validity.
     pub valid: BTreeMap<(u32, u32), u64>,
+    /// Per (partition, frame) of a validity: the records-stream sequence number of the
+    /// partition's batch of that frame.
+    pub sequences: BTreeMap<(u32, u64), u64>,
     /// Every chunk's points.
     pub points: Vec<PointState>,
 }
@@ -77,6 +81,7 @@ pub fn plan(published: Published) -> Option<Plan> {
     let n = published.marks.values().max_by_key(|m| m.frame)?.partitions;
     // (frame, records sequence, scene time) of the validity of each chunk.
     let mut valid = BTreeMap::new();
+    let mut sequences = BTreeMap::new();
     let mut at = Vec::new();
     for k in 0..n {
         let mark = published.marks.get(&k).filter(|m| m.partitions == n)?;
@@ -91,6 +96,7 @@ pub fn plan(published: Published) -> Option<Plan> {
                 (mark.frame, mark.sequence, mark.seconds)
             };
             valid.insert((k, c), v.0);
+            sequences.insert((k, v.0), v.1);
             at.push(v);
         }
     }
@@ -107,6 +113,7 @@ pub fn plan(published: Published) -> Option<Plan> {
         seconds,
         first,
         valid,
+        sequences,
         points,
     })
 }
@@ -325,6 +332,9 @@ pub struct Joined {
     pub later: Vec<Batch>,
     /// The records-stream sequence number to continue reading from.
     pub next: u64,
+    /// The last records message read: its sequence number and the time the stream stored
+    /// it (Unix ns), to notice a NATS server that lost it ([`super::lost`]).
+    pub last_read: Option<(u64, i128)>,
     /// What was read.
     pub counts: JoinCounts,
 }
@@ -340,7 +350,17 @@ pub async fn join(
     let mut counts = JoinCounts::default();
     let published = read_published(js, names, &mut counts).await?;
     let plan = plan(published);
-    let first = plan.as_ref().map_or(1, |p| p.first);
+    let mut stream = records_stream(js, names).await?;
+    let mut first = plan.as_ref().map_or(1, |p| p.first);
+    if let Some(p) = &plan {
+        if !batches_held(&stream, &p.sequences).await? {
+            tracing::warn!(
+                "the snapshots name batches the records stream no longer holds (the NATS \
+                 server lost messages): reading the records stream from its start"
+            );
+            first = 1;
+        }
+    }
     let mut fold = Fold::new(plan, server);
     let mut later = Vec::new();
     if joiner == Joiner::Replica && fold.snapshot_frame() == 0 {
@@ -348,6 +368,7 @@ pub async fn join(
             fold,
             later,
             next: 1,
+            last_read: None,
             counts,
         });
     }
@@ -358,7 +379,6 @@ pub async fn join(
     let failed = |e: &dyn std::fmt::Display| {
         NetError::Nats(format!("cannot read the records stream while joining: {e}"))
     };
-    let mut stream = records_stream(js, names).await?;
     let last = last_sequence(&mut stream, "the records stream while joining").await?;
     let done = |fold: &Fold| joiner == Joiner::TraceNode || fold.complete();
     if last < first && done(&fold) {
@@ -366,6 +386,7 @@ pub async fn join(
             fold,
             later,
             next: first,
+            last_read: None,
             counts,
         });
     }
@@ -383,7 +404,9 @@ pub async fn join(
             }
             Ok(Some(Ok(m))) => m,
         };
-        let seq = message.info().map_or(prev + 1, |i| i.stream_sequence);
+        let info = message.info().ok();
+        let seq = info.as_ref().map_or(prev + 1, |i| i.stream_sequence);
+        let stored = info.map(|i| i.published.unix_timestamp_nanos());
         if seq <= prev {
             counts.duplicates += 1;
             continue;
@@ -412,10 +435,30 @@ pub async fn join(
                 fold,
                 later,
                 next: seq + 1,
+                last_read: stored.map(|t| (seq, t)),
                 counts,
             });
         }
     }
+}
+
+/// Whether the records stream still holds, under each of `sequences`, the batch of the
+/// (partition, frame) naming it. A NATS server that lost acknowledged messages reuses
+/// their sequence numbers, and the snapshots may name some of them.
+async fn batches_held(
+    stream: &async_nats::jetstream::stream::Stream,
+    sequences: &BTreeMap<(u32, u64), u64>,
+) -> Result<bool, NetError> {
+    for (&(k, frame), &seq) in sequences {
+        let held = stored(stream, seq)
+            .await?
+            .and_then(|m| Batch::decode(&m.payload).ok())
+            .is_some_and(|b| b.partition == k && b.frame == frame);
+        if !held {
+            return Ok(false);
+        }
+    }
+    Ok(true)
 }
 
 /// The latest message of every snapshot subject (chunks and marks); messages that do not
@@ -469,7 +512,6 @@ async fn read_published(
     Ok(published)
 }
 
-/// An ordered consumer of the records stream from sequence number `first`.
 /// The sequence number of `stream`'s last message (0 when it never held one); an error
 /// names `what` could not be read.
 pub(super) async fn last_sequence(
@@ -481,6 +523,7 @@ pub(super) async fn last_sequence(
     Ok(info.state.last_sequence)
 }
 
+/// An ordered consumer of the records stream from sequence number `first`.
 pub(super) async fn records_from(
     stream: &async_nats::jetstream::stream::Stream,
     names: &Names,
@@ -578,6 +621,12 @@ mod tests {
             (got.frame, got.first),
             (8, 41),
             "after partition 0's batch of 4"
+        );
+        let sequences: Vec<_> = got.sequences.into_iter().collect();
+        assert_eq!(
+            sequences,
+            [((0, 4), 40), ((0, 8), 80), ((1, 8), 81)],
+            "the batches a joiner checks the records stream still holds"
         );
         assert_eq!(got.points.len(), 4);
 

@@ -5,6 +5,7 @@
 
 pub mod edge;
 pub mod join;
+mod lost;
 mod names;
 pub mod trace_node;
 pub mod wire;

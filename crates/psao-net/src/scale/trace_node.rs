@@ -5,18 +5,19 @@
 //! key-value bucket; a node adopts partitions whose lease expired (docs/SCALE-OUT.md). A
 //! node starts from the published state ([`super::join`]), not from zero.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use async_nats::jetstream::kv;
-use futures_util::StreamExt;
+use futures_util::{FutureExt, StreamExt};
 use psao_server::{Partition, PointRecord, PointState, Server, View};
 use serde::{Deserialize, Serialize};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, Notify};
 
 use super::join::{join, Joiner};
+use super::lost::{lost, Sent};
 use super::wire::{Batch, Snapshot, SnapshotMark, ViewSet, CHUNK_POINTS};
 use super::{connect, records_stream, snapshot_stream, Names, LEASE_CHECK, LEASE_TTL};
 use crate::cpu_time::cpu_seconds;
@@ -31,6 +32,13 @@ const RECENT_FRAMES: usize = 4096;
 const OUTAGE: Duration = Duration::from_secs(60);
 /// Pause between attempts to store a batch.
 const RETRY: Duration = Duration::from_millis(200);
+/// Longest wait for the NATS server's answer (a store's acknowledgement, a lease update):
+/// well under [`LEASE_TTL`], so that a message published into a restart is sent again,
+/// and the leases refreshed, before they expire.
+const ACK_WAIT: Duration = Duration::from_secs(1);
+/// Batch messages a node keeps to publish again should the NATS server lose them
+/// ([`super::lost`]): a hard kill loses the messages of the last moments, far fewer.
+const SENT_WINDOW: usize = 512;
 
 /// How a trace node runs.
 #[derive(Clone, Debug)]
@@ -100,6 +108,8 @@ pub struct TraceNodeStats {
     pub malformed: u64,
     /// Messages dropped because the inbox was full.
     pub dropped: u64,
+    /// Batches published again because the NATS server lost them.
+    pub republished: u64,
     /// Partitions held at the end.
     pub partitions: Vec<u32>,
     /// Partitions adopted from dead nodes.
@@ -272,6 +282,12 @@ struct Node {
     noted: BTreeMap<u32, u64>,
     /// The points of every snapshot chunk this node published last, per (partition, chunk).
     published_chunks: BTreeMap<(u32, u32), Vec<PointState>>,
+    /// The last batch messages stored, in the order they were stored.
+    sent: VecDeque<Sent>,
+    /// Notified at every (re)connection to the NATS server.
+    connected: Arc<Notify>,
+    /// Whether the stream is still to be checked for lost batches (after a reconnection).
+    check_lost: bool,
     last_upkeep: Instant,
     /// No partition is adopted before this: after the NATS server was away, the other
     /// nodes get a lease's lifetime to refresh theirs.
@@ -298,8 +314,10 @@ pub fn run(
         }
     });
     let names = Names::new(&config.scene);
-    let client = rt.block_on(connect(&config.nats, Arc::default()))?;
-    let js = async_nats::jetstream::new(client.clone());
+    let connected = Arc::new(Notify::new());
+    let client = rt.block_on(connect(&config.nats, connected.clone()))?;
+    let mut js = async_nats::jetstream::new(client.clone());
+    js.set_timeout(ACK_WAIT);
     rt.block_on(records_stream(&js, &names))?;
     rt.block_on(snapshot_stream(&js, &names))?;
     let store = rt.block_on(leases_bucket(&js, &names))?;
@@ -385,6 +403,9 @@ pub fn run(
         last_seen,
         noted,
         published_chunks: BTreeMap::new(),
+        sent: VecDeque::new(),
+        connected,
+        check_lost: false,
         last_upkeep: Instant::now(),
         adopt_after: Instant::now(),
         stats: TraceNodeStats {
@@ -698,7 +719,68 @@ impl Node {
         let sequences = self.store_retrying(&messages)?;
         self.stats.batch_bytes += messages.iter().map(|m| m.2.len() as u64).sum::<u64>();
         self.stats.records += batches.iter().map(|b| b.records.len() as u64).sum::<u64>();
+        self.remember(messages, &sequences);
         Ok(sequences)
+    }
+
+    /// Keep the last [`SENT_WINDOW`] batch messages stored, with their sequence numbers.
+    fn remember(&mut self, messages: Vec<(String, String, bytes::Bytes)>, sequences: &[u64]) {
+        for ((subject, id, payload), &sequence) in messages.into_iter().zip(sequences) {
+            if self.sent.len() == SENT_WINDOW {
+                self.sent.pop_front();
+            }
+            self.sent.push_back(Sent {
+                sequence,
+                subject,
+                id,
+                payload,
+            });
+        }
+    }
+
+    /// After a reconnection: publish again the batches the NATS server lost (it may have
+    /// been killed hard), and every snapshot chunk at the next round (lost chunks would
+    /// otherwise be vouched for by later marks). Returns false when the NATS server could
+    /// not be asked (try again later).
+    fn republish_lost(&mut self) -> Result<bool, NetError> {
+        let found = self.rt.block_on(async {
+            let stream = records_stream(&self.js, &self.names).await?;
+            lost(&stream, &self.sent).await
+        });
+        let lost = match found {
+            Ok(lost) => lost,
+            Err(e) => {
+                tracing::warn!("{e}: checking again later");
+                return Ok(false);
+            }
+        };
+        self.published_chunks.clear();
+        if lost.is_empty() {
+            return Ok(true);
+        }
+        if lost[0] == 0 && self.sent.len() == SENT_WINDOW {
+            tracing::error!(
+                "the NATS server lost the oldest batch this node remembers: edges that \
+                 missed older ones stall"
+            );
+        }
+        tracing::warn!(
+            "the NATS server lost {} batches: publishing them again",
+            lost.len()
+        );
+        let mut again = Vec::with_capacity(lost.len());
+        for &i in lost.iter().rev() {
+            again.push(self.sent.remove(i).expect("an index of sent"));
+        }
+        let messages: Vec<(String, String, bytes::Bytes)> = again
+            .into_iter()
+            .rev()
+            .map(|s| (s.subject, s.id, s.payload))
+            .collect();
+        let sequences = self.store_retrying(&messages)?;
+        self.remember(messages, &sequences);
+        self.stats.republished += lost.len() as u64;
+        Ok(true)
     }
 
     /// Publish `messages` (subject, message id, payload) and wait for the streams to store
@@ -716,6 +798,9 @@ impl Node {
                     tracing::warn!("{e}: retrying");
                     // The other nodes may miss refreshing their leases meanwhile.
                     self.adopt_after = Instant::now() + LEASE_TTL;
+                    // This node's may expire while the server answers leases but not
+                    // stores.
+                    self.rt.block_on(self.leases.refresh())?;
                     std::thread::sleep(RETRY);
                 }
                 Err(e) => return Err(e),
@@ -735,6 +820,12 @@ impl Node {
             tracing::warn!("cannot refresh the leases: is the NATS server away?");
             self.adopt_after = Instant::now() + LEASE_TTL;
             return Ok(());
+        }
+        if self.connected.notified().now_or_never().is_some() {
+            self.check_lost = true;
+        }
+        if self.check_lost && self.republish_lost()? {
+            self.check_lost = false;
         }
         if Instant::now() < self.adopt_after {
             return Ok(());
