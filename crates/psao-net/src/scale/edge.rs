@@ -409,9 +409,13 @@ impl StreamReader {
         last: Option<u64>,
     ) -> (Option<u64>, pull::Ordered) {
         loop {
-            let resume = match received.last_held(&self.stream).await {
-                // Nothing received since the join, which read nothing: nothing to check.
-                _ if received.is_empty() => Ok(last),
+            // Nothing received since the join, which read nothing: nothing to check.
+            let checked = if received.is_empty() {
+                Ok(last)
+            } else {
+                received.last_held(&self.stream).await
+            };
+            let resume = match checked {
                 Ok(held) if held == last => Ok(last),
                 Ok(held) => {
                     tracing::warn!(

@@ -5,6 +5,7 @@
 //! node remembers that the stream still holds, as they were, are the oldest of them.
 
 use std::collections::VecDeque;
+use std::future::Future;
 
 use async_nats::jetstream::message::StreamMessage;
 use async_nats::jetstream::stream::{LastRawMessageErrorKind, Stream};
@@ -55,17 +56,28 @@ impl Received {
     /// first; messages received since the server came back are held too, but come after
     /// the lost ones: the window is scanned from its oldest message.
     pub async fn last_held(&mut self, stream: &Stream) -> Result<Option<u64>, NetError> {
-        let mut held = 0;
+        self.last_held_by(|sequence, nanos| async move {
+            let m = stored(stream, sequence).await?;
+            Ok(m.is_some_and(|m| m.time.unix_timestamp_nanos() == nanos))
+        })
+        .await
+    }
+
+    /// [`Received::last_held`] with `held(sequence, nanos)` saying whether the stream
+    /// still holds that message as it was.
+    async fn last_held_by<F, Fut>(&mut self, mut held: F) -> Result<Option<u64>, NetError>
+    where
+        F: FnMut(u64, i128) -> Fut,
+        Fut: Future<Output = Result<bool, NetError>>,
+    {
+        let mut kept = 0;
         for &(sequence, nanos) in &self.window {
-            let same = stored(stream, sequence)
-                .await?
-                .is_some_and(|m| m.time.unix_timestamp_nanos() == nanos);
-            if !same {
+            if !held(sequence, nanos).await? {
                 break;
             }
-            held += 1;
+            kept += 1;
         }
-        self.window.truncate(held);
+        self.window.truncate(kept);
         Ok(self.window.back().map(|&(s, _)| s))
     }
 
@@ -91,16 +103,87 @@ pub struct Sent {
 /// asked: those stored since the server came back are held, but may be newer than lost
 /// ones.
 pub async fn lost(stream: &Stream, sent: &VecDeque<Sent>) -> Result<Vec<usize>, NetError> {
-    let mut lost = Vec::new();
-    for (i, s) in sent.iter().enumerate() {
-        let same = stored(stream, s.sequence).await?.is_some_and(|m| {
+    lost_by(sent, |s| async move {
+        let m = stored(stream, s.sequence).await?;
+        Ok(m.is_some_and(|m| {
             m.headers
                 .get(async_nats::header::NATS_MESSAGE_ID)
                 .is_some_and(|id| id.as_str() == s.id)
-        });
-        if !same {
+        }))
+    })
+    .await
+}
+
+/// [`lost`] with `held(s)` saying whether the stream still holds `s`.
+async fn lost_by<'a, F, Fut>(sent: &'a VecDeque<Sent>, mut held: F) -> Result<Vec<usize>, NetError>
+where
+    F: FnMut(&'a Sent) -> Fut,
+    Fut: Future<Output = Result<bool, NetError>>,
+{
+    let mut lost = Vec::new();
+    for (i, s) in sent.iter().enumerate() {
+        if !held(s).await? {
             lost.push(i);
         }
     }
     Ok(lost)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use futures_util::FutureExt;
+
+    #[test]
+    fn an_edge_reads_again_after_the_last_message_before_the_first_lost() {
+        // Stored as received: 1 to 3. Lost: 4 (missing) and 5 (its number reused by a
+        // later message). 6 was received from the server after it came back.
+        let stream = |seq: u64, nanos: i128| match seq {
+            1..=3 | 6 => nanos == seq as i128 * 10,
+            5 => nanos == 999,
+            _ => false,
+        };
+        let ask = |seq, nanos| futures_util::future::ready(Ok(stream(seq, nanos)));
+        let mut r = Received::default();
+        assert_eq!(r.last_held_by(ask).now_or_never().unwrap().unwrap(), None);
+        for seq in 1..=6 {
+            r.note(seq, seq as i128 * 10);
+        }
+        let got = r.last_held_by(ask).now_or_never().unwrap().unwrap();
+        assert_eq!(got, Some(3), "6 is held, but 4 and 5 before it are not");
+        assert_eq!(r.window.len(), 3);
+        assert_eq!(
+            r.last_held_by(ask).now_or_never().unwrap().unwrap(),
+            Some(3)
+        );
+
+        let mut gone = Received::default();
+        gone.note(4, 40);
+        let got = gone.last_held_by(ask).now_or_never().unwrap().unwrap();
+        assert_eq!(got, None, "nothing remembered is held: from the start");
+        assert!(gone.is_empty());
+
+        let mut full = Received::default();
+        for seq in 0..RECEIVED_WINDOW as u64 + 10 {
+            full.note(seq, 0);
+        }
+        assert_eq!(full.window.len(), RECEIVED_WINDOW);
+        assert_eq!(full.window[0].0, 10, "the oldest are forgotten");
+    }
+
+    #[test]
+    fn a_trace_node_republishes_every_lost_batch_also_before_newer_held_ones() {
+        let sent: VecDeque<Sent> = (1..=6)
+            .map(|sequence| Sent {
+                sequence,
+                subject: "psao.s.rec.0".into(),
+                id: format!("n.0.{sequence}"),
+                payload: bytes::Bytes::new(),
+            })
+            .collect();
+        // 4 and 5 lost; 6 stored after the server came back.
+        let held = |s: &Sent| futures_util::future::ready(Ok(![4, 5].contains(&s.sequence)));
+        let got = lost_by(&sent, held).now_or_never().unwrap().unwrap();
+        assert_eq!(got, [3, 4], "indexes of sequences 4 and 5");
+    }
 }

@@ -768,15 +768,16 @@ impl Node {
             "the NATS server lost {} batches: publishing them again",
             lost.len()
         );
-        let mut again = Vec::with_capacity(lost.len());
-        for &i in lost.iter().rev() {
-            again.push(self.sent.remove(i).expect("an index of sent"));
+        let mut messages = Vec::with_capacity(lost.len());
+        let mut kept = VecDeque::with_capacity(self.sent.len());
+        for (i, s) in std::mem::take(&mut self.sent).into_iter().enumerate() {
+            if lost.binary_search(&i).is_ok() {
+                messages.push((s.subject, s.id, s.payload));
+            } else {
+                kept.push_back(s);
+            }
         }
-        let messages: Vec<(String, String, bytes::Bytes)> = again
-            .into_iter()
-            .rev()
-            .map(|s| (s.subject, s.id, s.payload))
-            .collect();
+        self.sent = kept;
         let sequences = self.store_retrying(&messages)?;
         self.remember(messages, &sequences);
         self.stats.republished += lost.len() as u64;
