@@ -221,6 +221,30 @@ fn serve_alone(
     view_hashes(&files)
 }
 
+/// Two processes of `role`, `0` and `1`, with `args(i)` and `extra` arguments; with
+/// `reports`, process `i` writes its report to `reports/{prefix}{i}.json`. Returns each one
+/// and the first line it printed.
+fn pair(
+    role: &str,
+    scene: &str,
+    args: impl Fn(u32) -> Vec<String>,
+    extra: &[&str],
+    reports: Option<(&Path, &str)>,
+) -> Vec<(Proc, String)> {
+    (0..2)
+        .map(|i| {
+            let mut all = args(i);
+            all.extend(extra.iter().map(|a| a.to_string()));
+            if let Some((dir, prefix)) = reports {
+                let report = dir.join(format!("{prefix}{i}.json"));
+                all.extend(["--json".into(), report.to_string_lossy().into_owned()]);
+            }
+            let all: Vec<&str> = all.iter().map(String::as_str).collect();
+            start(role, scene, &all)
+        })
+        .collect()
+}
+
 /// Trace nodes for partitions 0/2 and 1/2, each waiting for two lockstep edges, with
 /// `extra` arguments; with `reports`, node `k` writes its report to `reports/t{k}.json`
 /// when it stops.
@@ -230,31 +254,50 @@ fn lockstep_trace_nodes(
     reports: Option<&Path>,
     extra: &[&str],
 ) -> Vec<Proc> {
-    (0..2)
-        .map(|k| {
-            let partition = format!("{k}/2");
-            let mut args = vec![
-                "--nats".to_string(),
-                url.to_string(),
-                "--partition".into(),
-                partition,
-                "--lockstep-edges".into(),
-                "2".into(),
-            ];
-            args.extend(extra.iter().map(|a| a.to_string()));
-            if let Some(dir) = reports {
-                args.push("--json".into());
-                args.push(
-                    dir.join(format!("t{k}.json"))
-                        .to_string_lossy()
-                        .into_owned(),
-                );
-            }
-            let args: Vec<&str> = args.iter().map(String::as_str).collect();
-            let (p, line) = start("trace-node", scene, &args);
+    let args = |k| {
+        let partition = format!("{k}/2");
+        [
+            "--nats",
+            url,
+            "--partition",
+            &partition,
+            "--lockstep-edges",
+            "2",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let nodes = pair("trace-node", scene, args, extra, reports.map(|d| (d, "t")));
+    nodes
+        .into_iter()
+        .map(|(p, line)| {
             assert!(line.starts_with("trace node"), "{line}");
             p
         })
+        .collect()
+}
+
+/// Edges `e0` and `e1` in lockstep, serving once, with `extra` arguments; with `reports`,
+/// edge `e` writes its report to `reports/e{e}.json`. Returns each one and its address.
+fn lockstep_edges(
+    url: &str,
+    scene: &str,
+    reports: Option<&Path>,
+    extra: &[&str],
+) -> Vec<(Proc, String)> {
+    let args = |e| {
+        let id = format!("e{e}");
+        let listen = ["--listen", "127.0.0.1:0", "--lockstep", "--once"];
+        ["--nats", url, "--edge-id", &id]
+            .into_iter()
+            .chain(listen)
+            .map(String::from)
+            .collect()
+    };
+    let edges = pair("edge", scene, args, extra, reports.map(|d| (d, "e")));
+    edges
+        .into_iter()
+        .map(|(p, line)| (p, addr(&line)))
         .collect()
 }
 
@@ -291,29 +334,7 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
 
     // Two trace nodes, two edges with two viewers each.
     let nodes = lockstep_trace_nodes(&url, &scene, None, &["--snapshot-every", "3"]);
-    let edges: Vec<(Proc, String)> = (0..2)
-        .map(|e| {
-            let (p, line) = start(
-                "edge",
-                &scene,
-                &[
-                    "--nats",
-                    &url,
-                    "--listen",
-                    "127.0.0.1:0",
-                    "--lockstep",
-                    "--wait-clients",
-                    "2",
-                    "--once",
-                    "--edge-id",
-                    &format!("e{e}"),
-                    "--json",
-                    out(&format!("e{e}.json")).to_str().unwrap(),
-                ],
-            );
-            (p, addr(&line))
-        })
-        .collect();
+    let edges = lockstep_edges(&url, &scene, Some(dir.path()), &["--wait-clients", "2"]);
     let files: Vec<PathBuf> = (0..4).map(|i| out(&format!("v{i}.json"))).collect();
     let views: Vec<Child> = files
         .iter()
@@ -466,29 +487,7 @@ fn nats_outage(outage: Outage) -> Option<(Vec<serde_json::Value>, Vec<serde_json
     let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &slow, &[]);
 
     let nodes = lockstep_trace_nodes(&url, &scene, Some(dir.path()), &["--snapshot-every", "4"]);
-    let edges: Vec<(Proc, String)> = (0..2)
-        .map(|e| {
-            let json = out(&format!("e{e}.json"));
-            let id = format!("e{e}");
-            let (p, line) = start(
-                "edge",
-                &scene,
-                &[
-                    "--nats",
-                    &url,
-                    "--listen",
-                    "127.0.0.1:0",
-                    "--lockstep",
-                    "--once",
-                    "--edge-id",
-                    &id,
-                    "--json",
-                    json.to_str().unwrap(),
-                ],
-            );
-            (p, addr(&line))
-        })
-        .collect();
+    let edges = lockstep_edges(&url, &scene, Some(dir.path()), &[]);
     let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("v{i}.json"))).collect();
     let views: Vec<Child> = files
         .iter()
@@ -722,26 +721,7 @@ fn an_animated_scene_replicates_like_one_serve() {
     let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[], &[]);
 
     let nodes = lockstep_trace_nodes(&url, &scene, None, &[]);
-    let edges: Vec<(Proc, String)> = (0..2)
-        .map(|e| {
-            let id = format!("e{e}");
-            let (p, line) = start(
-                "edge",
-                &scene,
-                &[
-                    "--nats",
-                    &url,
-                    "--listen",
-                    "127.0.0.1:0",
-                    "--lockstep",
-                    "--once",
-                    "--edge-id",
-                    &id,
-                ],
-            );
-            (p, addr(&line))
-        })
-        .collect();
+    let edges = lockstep_edges(&url, &scene, None, &[]);
     let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("v{i}.json"))).collect();
     let views: Vec<Child> = files
         .iter()
