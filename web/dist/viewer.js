@@ -2952,6 +2952,8 @@ void main() {
     camera: null,
     autoOrbit: true,
     mode: MODE_COMPOSITED,
+    edge: location.host,
+    rttEdge: null,
     rttMs: null,
     path: null,
     pathFrame: 0,
@@ -2973,13 +2975,19 @@ void main() {
   var scale = Math.max(1, Math.floor(Number(params.get("scale") ?? "1")) | 1);
   var MODES = { composited: MODE_COMPOSITED, ao: MODE_AO, noao: MODE_NO_AO };
   status.mode = MODES[params.get("mode") ?? ""] ?? MODE_COMPOSITED;
-  var wsUrl = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`;
+  var edges = [location.host];
+  for (const e of (params.get("edges") ?? "").split(",").map((e2) => e2.trim())) {
+    if (/^[\w.-]+:\d+$|^\[[0-9a-fA-F:.]+\]:\d+$/.test(e) && !edges.includes(e)) edges.push(e);
+  }
+  var edgeIndex = 0;
+  var wsUrl = (host) => `${location.protocol === "https:" ? "wss" : "ws"}://${host}/ws`;
   var session = null;
   var backoff = 200;
   var received = [];
   function connect() {
+    status.edge = edges[edgeIndex];
     session = new Session(
-      { url: wsUrl, token, verify, name: "psao browser viewer" },
+      { url: wsUrl(status.edge), token, verify, name: "psao browser viewer" },
       {
         welcome: () => {
           var _a;
@@ -3013,6 +3021,7 @@ void main() {
           status.message = reason;
           status.fatal = fatal;
           if (!fatal) {
+            edgeIndex = (edgeIndex + 1) % edges.length;
             setTimeout(connect, backoff);
             backoff = Math.min(backoff * 2, 5e3);
           }
@@ -3193,7 +3202,11 @@ void main() {
     if (now - lastPing < 2e3) return;
     lastPing = now;
     const t0 = performance.now();
-    fetch("/health", { cache: "no-store" }).then((r) => r.arrayBuffer()).then(() => status.rttMs = performance.now() - t0).catch(() => status.rttMs = null);
+    const edge = status.edge;
+    fetch(`${location.protocol}//${edge}/health`, { cache: "no-store" }).then((r) => r.arrayBuffer()).then(() => {
+      status.rttMs = performance.now() - t0;
+      status.rttEdge = edge;
+    }).catch(() => status.rttMs = null);
   }
   function tick(now) {
     frames.push(now);
@@ -3243,7 +3256,7 @@ void main() {
     const w = session?.welcomeMsg;
     const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
     overlay.textContent = [
-      `psao viewer \u2014 ${status.connected ? `connected, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}`,
+      `psao viewer \u2014 ${status.connected ? `connected to ${status.edge}, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}${edges.length > 1 ? ` (server ${edgeIndex + 1} of ${edges.length})` : ""}`,
       `${status.fps} fps \xB7 ${status.mbitS.toFixed(2)} Mbit/s \xB7 server frame ${status.serverFrame} \xB7 round trip ${status.rttMs === null ? "-" : `${status.rttMs.toFixed(1)} ms`}`,
       `${status.updates} updates \xB7 ${status.points} points received \xB7 ${status.decodeMs ? status.decodeMs.toFixed(2) : "-"} ms decode per update`,
       !renderer ? "WebGL2 unavailable: nothing drawn" : grids?.problem ? grids.problem : `view: ${modeName} (keys 1 2 3)${cost ? ` \xB7 AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " \xB7 C: shader cost"}`,

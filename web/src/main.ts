@@ -12,6 +12,9 @@
 // with `--lockstep`), the view after the answer to frame N − 1 stays on screen and
 // `window.psao.done` turns true: the same frames `psao view --frames N` renders;
 // `&scale=K` rasterizes the G-buffer at K× (see `scale` below).
+// `?edges=HOST:PORT,…` lists further servers (edges of a scaled-out session, docs/SCALE-OUT.md)
+// to use in turn, after the page's own, when a connection ends: a viewer whose edge dies
+// moves to the next one.
 // `window.psao` exposes the numbers to tests; `window.psaoCost()` measures the shader's cost.
 
 import { Session } from "./session";
@@ -42,7 +45,10 @@ interface Status {
   autoOrbit: boolean;
   /// The drawn view: 0 composited, 1 AO only, 2 no AO.
   mode: number;
-  /// Round-trip time of a GET /health, ms.
+  /// The server (HOST:PORT) of the current or last session, and of the last answered
+  /// GET /health with its round-trip time, ms.
+  edge: string;
+  rttEdge: string | null;
   rttMs: number | null;
   /// The followed camera path's name and frame.
   path: string | null;
@@ -78,6 +84,8 @@ const status: Status = {
   camera: null,
   autoOrbit: true,
   mode: MODE_COMPOSITED,
+  edge: location.host,
+  rttEdge: null,
   rttMs: null,
   path: null,
   pathFrame: 0,
@@ -103,15 +111,22 @@ const fixedRes = /^(\d+)x(\d+)$/.exec(params.get("res") ?? "");
 const scale = Math.max(1, Math.floor(Number(params.get("scale") ?? "1")) | 1);
 const MODES: Record<string, number> = { composited: MODE_COMPOSITED, ao: MODE_AO, noao: MODE_NO_AO };
 status.mode = MODES[params.get("mode") ?? ""] ?? MODE_COMPOSITED;
-const wsUrl = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`;
+/// The page's own server, then those of `?edges=` (HOST:PORT, malformed ones left out).
+const edges = [location.host];
+for (const e of (params.get("edges") ?? "").split(",").map((e) => e.trim())) {
+  if (/^[\w.-]+:\d+$|^\[[0-9a-fA-F:.]+\]:\d+$/.test(e) && !edges.includes(e)) edges.push(e);
+}
+let edgeIndex = 0;
+const wsUrl = (host: string) => `${location.protocol === "https:" ? "wss" : "ws"}://${host}/ws`;
 
 let session: Session | null = null;
 let backoff = 200;
 let received: { t: number; bytes: number }[] = [];
 
 function connect() {
+  status.edge = edges[edgeIndex];
   session = new Session(
-    { url: wsUrl, token, verify, name: "psao browser viewer" },
+    { url: wsUrl(status.edge), token, verify, name: "psao browser viewer" },
     {
       welcome: () => {
         status.milestones.welcome ??= performance.now();
@@ -144,6 +159,7 @@ function connect() {
         status.message = reason;
         status.fatal = fatal;
         if (!fatal) {
+          edgeIndex = (edgeIndex + 1) % edges.length;
           setTimeout(connect, backoff);
           backoff = Math.min(backoff * 2, 5000);
         }
@@ -349,9 +365,13 @@ function ping(now: number) {
   if (now - lastPing < 2000) return;
   lastPing = now;
   const t0 = performance.now();
-  fetch("/health", { cache: "no-store" })
+  const edge = status.edge;
+  fetch(`${location.protocol}//${edge}/health`, { cache: "no-store" })
     .then((r) => r.arrayBuffer())
-    .then(() => (status.rttMs = performance.now() - t0))
+    .then(() => {
+      status.rttMs = performance.now() - t0;
+      status.rttEdge = edge;
+    })
     .catch(() => (status.rttMs = null));
 }
 
@@ -405,7 +425,9 @@ function tick(now: number) {
   const w = session?.welcomeMsg;
   const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
   overlay.textContent = [
-    `psao viewer — ${status.connected ? `connected, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}`,
+    `psao viewer — ${
+      status.connected ? `connected to ${status.edge}, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"
+    }${edges.length > 1 ? ` (server ${edgeIndex + 1} of ${edges.length})` : ""}`,
     `${status.fps} fps · ${status.mbitS.toFixed(2)} Mbit/s · server frame ${status.serverFrame} · round trip ${
       status.rttMs === null ? "-" : `${status.rttMs.toFixed(1)} ms`
     }`,

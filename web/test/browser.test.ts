@@ -1,7 +1,8 @@
 // The bundled viewer in Debian's headless chromium (puppeteer-core; CHROMIUM overrides
 // /usr/bin/chromium) against a real `psao serve`: it reaches the server's state hash on every
-// update, shows a clear message for a wrong token, and reconnects to a restarted server and
-// converges again; WebGL2 (SwiftShader) draws the scene.
+// update, shows a clear message for a wrong token, reconnects to a restarted server and
+// converges again, and moves to the next server of `?edges=` when its own dies; WebGL2
+// (SwiftShader) draws the scene.
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { spawn, type ChildProcess } from "node:child_process";
@@ -66,7 +67,20 @@ function drive(addr: string, frames: number): Promise<number> {
 }
 
 type Cam = { position: number[]; target: number[] };
-type Status = { autoOrbit: boolean; camera: Cam | null; drawn: number; sessions: number; updates: number; verified: number; mismatches: number; message: string | null; fatal: boolean };
+type Status = {
+  autoOrbit: boolean;
+  camera: Cam | null;
+  drawn: number;
+  sessions: number;
+  connected: boolean;
+  edge: string;
+  rttEdge: string | null;
+  updates: number;
+  verified: number;
+  mismatches: number;
+  message: string | null;
+  fatal: boolean;
+};
 
 async function statusOf(page: Page): Promise<Status> {
   return page.evaluate(() => (window as unknown as { psao: Status }).psao);
@@ -172,6 +186,29 @@ test("in chromium the viewer reconnects to a restarted server and converges", { 
   } finally {
     await page.close();
     server.child.kill();
+  }
+});
+
+test("in chromium the viewer moves to the next server of ?edges= when its own dies", { timeout: 120_000 }, async () => {
+  // Two `psao serve` stand in for two edges of a session (they serve with the same code).
+  const a = await serve("127.0.0.1:0");
+  const b = await serve("127.0.0.1:0");
+  const page = await browser.newPage();
+  try {
+    await page.goto(`http://${a.addr}/?verify=1&edges=${b.addr},not%20a%20host`);
+    await until(page, "the first session", (s) => s.sessions === 1 && s.updates >= 1 && s.edge === a.addr);
+    a.child.kill();
+    const before = (await statusOf(page)).verified;
+    await until(page, "the session on the other server", (s) => s.sessions === 2 && s.connected && s.edge === b.addr);
+    assert.equal(await drive(b.addr, 60), 0);
+    const s = await until(page, "verified updates from the other server", (s) => s.verified >= before + 2);
+    assert.equal(s.mismatches, 0);
+    // Its /health answers the page, which another server loaded (cross-origin).
+    await until(page, "a round trip to the other server", (s) => s.rttEdge === b.addr, 10_000);
+  } finally {
+    await page.close();
+    a.child.kill();
+    b.child.kill();
   }
 });
 

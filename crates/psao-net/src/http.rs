@@ -1,6 +1,7 @@
 //! HTTP on the serve port, through hyper: `/` the browser viewer (embedded in the binary),
 //! `/viewer.js` its script, `/scene.glb` the served scene as binary glTF, `/health` a JSON
-//! status, and the WebSocket upgrade at `/ws`, after which the connection speaks frames.
+//! status (readable from any origin: a viewer loaded from another edge of a session asks
+//! it), and the WebSocket upgrade at `/ws`, after which the connection speaks frames.
 //! Only GET and HEAD are answered (405 otherwise); unknown paths get 404, a `/ws` request
 //! that is no valid upgrade 400; request heads are limited in size and time.
 
@@ -99,7 +100,13 @@ fn route(req: Request<Incoming>, ctx: &Arc<HttpContext>) -> Response<Full<Bytes>
                 "clients": ctx.health.clients.load(Ordering::Relaxed),
                 "server_frame": ctx.health.server_frame.load(Ordering::Relaxed),
             });
-            body("application/json", Bytes::from(status.to_string()))
+            let mut r = body("application/json", Bytes::from(status.to_string()));
+            // Viewers loaded from another edge of the session ask this one too.
+            r.headers_mut().insert(
+                header::ACCESS_CONTROL_ALLOW_ORIGIN,
+                HeaderValue::from_static("*"),
+            );
+            r
         }
         "/ws" => upgrade(req, ctx),
         _ => text(StatusCode::NOT_FOUND, "not found\n"),
