@@ -245,35 +245,37 @@ fn pair(
         .collect()
 }
 
-/// Trace nodes for partitions 0/2 and 1/2, each waiting for two lockstep edges, with
-/// `extra` arguments; with `reports`, node `k` writes its report to `reports/t{k}.json`
-/// when it stops.
+/// A trace node for partition `k/2` waiting for two lockstep edges, with `extra`
+/// arguments; with `reports`, it writes its report to `reports/t{k}.json` when it stops.
+fn lockstep_trace_node(
+    url: &str,
+    scene: &str,
+    k: u32,
+    reports: Option<&Path>,
+    extra: &[&str],
+) -> Proc {
+    let partition = format!("{k}/2");
+    let mut args = vec!["--nats", url, "--partition", &partition];
+    args.extend(["--lockstep-edges", "2"]);
+    args.extend(extra);
+    let report = reports.map(|d| d.join(format!("t{k}.json")));
+    if let Some(r) = &report {
+        args.extend(["--json", r.to_str().unwrap()]);
+    }
+    let (p, line) = start("trace-node", scene, &args);
+    assert!(line.starts_with("trace node"), "{line}");
+    p
+}
+
+/// Trace nodes for partitions 0/2 and 1/2 ([`lockstep_trace_node`]).
 fn lockstep_trace_nodes(
     url: &str,
     scene: &str,
     reports: Option<&Path>,
     extra: &[&str],
 ) -> Vec<Proc> {
-    let args = |k| {
-        let partition = format!("{k}/2");
-        [
-            "--nats",
-            url,
-            "--partition",
-            &partition,
-            "--lockstep-edges",
-            "2",
-        ]
-        .map(String::from)
-        .to_vec()
-    };
-    let nodes = pair("trace-node", scene, args, extra, reports.map(|d| (d, "t")));
-    nodes
-        .into_iter()
-        .map(|(p, line)| {
-            assert!(line.starts_with("trace node"), "{line}");
-            p
-        })
+    (0..2)
+        .map(|k| lockstep_trace_node(url, scene, k, reports, extra))
         .collect()
 }
 
@@ -332,8 +334,11 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
     // psao serve alone, four lockstep viewers.
     let alone = serve_alone(dir.path(), &scene, &path, 4, FRAMES, &[], &[]);
 
-    // Two trace nodes, two edges with two viewers each.
-    let nodes = lockstep_trace_nodes(&url, &scene, None, &["--snapshot-every", "3"]);
+    // Two trace nodes, two edges with two viewers each. Node 1 starts after node 0 traced
+    // frame 1 (the edges then wait for partition 1's batch of it): it steps on from its own
+    // partition's frame, not from the latest.
+    let every = ["--snapshot-every", "3"];
+    let node0 = lockstep_trace_node(&url, &scene, 0, None, &every);
     let edges = lockstep_edges(&url, &scene, Some(dir.path()), &["--wait-clients", "2"]);
     let files: Vec<PathBuf> = (0..4).map(|i| out(&format!("v{i}.json"))).collect();
     let views: Vec<Child> = files
@@ -341,6 +346,8 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
         .enumerate()
         .map(|(i, f)| view(&edges[i % 2].1, &scene, &path, FRAMES, f))
         .collect();
+    std::thread::sleep(Duration::from_millis(1500));
+    let node1 = lockstep_trace_node(&url, &scene, 1, Some(dir.path()), &every);
     views.into_iter().for_each(finished);
     for (mut p, _) in edges {
         p.wait(20);
@@ -355,9 +362,13 @@ fn two_trace_nodes_and_two_edges_equal_one_serve_and_a_late_edge_catches_up() {
         assert_eq!(s["edge"]["sequence_gaps"], 0, "{s}");
         assert!(s["edge"]["frames"].as_u64().unwrap() > 0, "{s}");
     }
-    for n in nodes {
+    for n in [node0, node1] {
         n.interrupt(20);
     }
+    let t1 = json(&out("t1.json"));
+    // It read partition 0's records of frame 1, and stepped frame 1 itself.
+    assert_eq!(t1["restored"]["frame"], 0, "{t1}");
+    assert!(t1["restored"]["records"].as_u64().unwrap() > 0, "{t1}");
 
     // A late edge (clocked) starts from the latest snapshot and reads only the batches
     // after it: the same state as the lockstep edges.
@@ -404,6 +415,60 @@ fn late_edge(dir: &Path, url: &str, scene: &str, path: &str) -> serde_json::Valu
     late
 }
 
+/// Few samples per point: a clocked session's state converges within a second of the path.
+const QUICK: &[&str] = &["--max-samples", "16"];
+
+/// A clocked trace node for partition `k/2` writing its report to `dir/t{k}.json`.
+fn clocked_trace_node(url: &str, scene: &str, dir: &Path, k: u32) -> Proc {
+    let partition = format!("{k}/2");
+    let json = dir.join(format!("t{k}.json"));
+    let mut args = vec!["--nats", url, "--partition", &partition];
+    args.extend(QUICK);
+    args.extend(["--json", json.to_str().unwrap()]);
+    start("trace-node", scene, &args).0
+}
+
+/// A clocked edge `e` serving once, writing its report to `dir/e{e}.json`; returns it and
+/// its address.
+fn clocked_edge(url: &str, scene: &str, dir: &Path, e: u32) -> (Proc, String) {
+    let json = dir.join(format!("e{e}.json"));
+    let mut args = vec!["--nats", url, "--listen", "127.0.0.1:0", "--once"];
+    args.extend(QUICK);
+    args.extend(["--json", json.to_str().unwrap()]);
+    let (p, line) = start("edge", scene, &args);
+    (p, addr(&line))
+}
+
+#[test]
+fn clocked_trace_nodes_started_apart_serve_an_edge_that_came_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_nats, url)) = nats(dir.path()) else {
+        return;
+    };
+    let (scene, path) = fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+    let (mut edge, at) = clocked_edge(&url, &scene, dir.path(), 0);
+    let t0 = clocked_trace_node(&url, &scene, dir.path(), 0);
+    // Partition 1 has no node for a second of frames: the edge holds partition 0's
+    // batches of them, and takes partition 1 to start with its node's first batch.
+    std::thread::sleep(Duration::from_millis(1000));
+    let t1 = clocked_trace_node(&url, &scene, dir.path(), 1);
+    let v = view(&at, &scene, &path, 150, &out("v0.json"));
+    finished(v);
+    edge.wait(20);
+    t0.interrupt(20);
+    t1.interrupt(20);
+    let hash = view_hashes(&[out("v0.json")]);
+    let e0 = json(&out("e0.json"));
+    assert_eq!(e0["state_hash"].as_str(), Some(hash[0].as_str()), "{e0}");
+    let started = json(&out("t1.json"))["restored"]["frame"].as_u64().unwrap();
+    assert!(started >= 15, "node 1 started at frame {started}");
+    let v0 = json(&out("v0.json"));
+    let reached = v0["last_server_frame"].as_u64().unwrap();
+    assert!(reached > started, "{v0}");
+    assert!(v0["updates"].as_u64().unwrap() > 0, "{v0}");
+}
+
 #[test]
 fn a_dead_trace_node_and_a_dead_edge_are_survived() {
     let dir = tempfile::tempdir().unwrap();
@@ -412,29 +477,9 @@ fn a_dead_trace_node_and_a_dead_edge_are_survived() {
     };
     let (scene, path) = fixture(dir.path());
     let out = |n: &str| dir.path().join(n);
-    // Few samples per point: the state converges within a second of the path.
-    let quick = ["--nats", &url, "--max-samples", "16"];
-    let node = |k: u32| {
-        let partition = format!("{k}/2");
-        let json = out(&format!("t{k}.json"));
-        let mut args = quick.to_vec();
-        args.extend(["--partition", &partition, "--json", json.to_str().unwrap()]);
-        start("trace-node", &scene, &args).0
-    };
+    let node = |k: u32| clocked_trace_node(&url, &scene, dir.path(), k);
     let (t0, t1) = (node(0), node(1));
-    let edge = |e: u32| {
-        let json = out(&format!("e{e}.json"));
-        let mut args = quick.to_vec();
-        args.extend([
-            "--listen",
-            "127.0.0.1:0",
-            "--once",
-            "--json",
-            json.to_str().unwrap(),
-        ]);
-        let (p, line) = start("edge", &scene, &args);
-        (p, addr(&line))
-    };
+    let edge = |e: u32| clocked_edge(&url, &scene, dir.path(), e);
     let ((e0, a0), (mut e1, a1)) = (edge(0), edge(1));
     let v0 = view(&format!("{a0},{a1}"), &scene, &path, 600, &out("v0.json"));
     let v1 = view(&format!("{a1},{a0}"), &scene, &path, 600, &out("v1.json"));
@@ -588,9 +633,8 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
     const STEPS: u32 = 104;
     // The first two nodes trace this many frames and stop, releasing their leases.
     const FIRST: &str = "50";
-    let quick = ["--max-samples", "16"];
 
-    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[], &quick);
+    let alone = serve_alone(dir.path(), &scene, &path, 2, STEPS, &[], QUICK);
 
     let node = |k: u32, extra: &[&str]| {
         let partition = format!("{k}/2");
@@ -604,7 +648,7 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
             "--snapshot-every",
             "5",
         ];
-        args.extend(quick);
+        args.extend(QUICK);
         args.extend(extra);
         start("trace-node", &scene, &args).0
     };
@@ -631,7 +675,7 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
                 "--json",
                 json.to_str().unwrap(),
             ];
-            args.extend(quick);
+            args.extend(QUICK);
             let (p, line) = start("edge", &scene, &args);
             (p, addr(&line))
         })

@@ -126,9 +126,19 @@ pub enum Added {
 pub struct Assembler {
     partitions: Option<u32>,
     frames: BTreeMap<u64, Parts>,
+    /// Per partition, the frame of the first batch taken in (0 for the partitions whose
+    /// state the edge's join knew). A partition first heard of at frame g had no node
+    /// before (a clocked node that started late steps on from the others' frame), so the
+    /// frames before g do not wait for it.
+    first: BTreeMap<u32, u64>,
 }
 
 impl Assembler {
+    /// Partition `k`'s state is known from the join: every later frame waits for it.
+    pub fn known(&mut self, k: u32) {
+        self.first.insert(k, 0);
+    }
+
     /// Take in `batch`; frames up to `applied` are done.
     pub fn add(&mut self, batch: Batch, applied: u64) -> Added {
         if *self.partitions.get_or_insert(batch.partitions) != batch.partitions {
@@ -149,13 +159,21 @@ impl Assembler {
             return Added::Duplicate;
         }
         parts.records.extend(batch.records);
+        self.first.entry(batch.partition).or_insert(batch.frame);
         Added::Kept
     }
 
-    /// Whether every partition's batch of `frame` is in.
+    /// Whether every partition's batch of `frame` is in (or the partition started later).
     pub fn ready(&self, frame: u64) -> bool {
         match (self.partitions, self.frames.get(&frame)) {
-            (Some(n), Some(parts)) => parts.partitions.len() >= n as usize,
+            (Some(n), Some(parts)) => {
+                let started_later = self
+                    .first
+                    .iter()
+                    .filter(|&(k, &g)| frame < g && !parts.partitions.contains(k))
+                    .count();
+                parts.partitions.len() + started_later >= n as usize
+            }
             _ => false,
         }
     }
@@ -230,6 +248,10 @@ impl EdgeStepper {
         add(&counters.malformed, c.malformed);
         add(&counters.duplicates, c.duplicates);
         add(&counters.sequence_gaps, c.sequence_gaps);
+        let mut assembler = Assembler::default();
+        for &k in joined.fold.latest_frames().keys() {
+            assembler.known(k);
+        }
         let frame = joined.fold.snapshot_frame();
         if frame > 0 {
             let records = joined.fold.records();
@@ -249,7 +271,7 @@ impl EdgeStepper {
             batches,
             backlog,
             first: joined.next,
-            assembler: Assembler::default(),
+            assembler,
             counters,
         };
         for batch in joined.later {
@@ -548,6 +570,32 @@ mod tests {
         assert!(!a.ready(2));
         assert_eq!(a.add(batch(0, 2, 5), 1), Added::Kept);
         assert!(a.ready(2));
+    }
+
+    #[test]
+    fn frames_before_a_partitions_first_batch_do_not_wait_for_it() {
+        let mut a = Assembler::default();
+        for f in 1..=3 {
+            assert_eq!(a.add(batch(0, f, f as u32), 0), Added::Kept);
+        }
+        assert!(!a.ready(1), "partition 1 not heard of yet");
+        assert_eq!(
+            a.add(batch(1, 3, 9), 0),
+            Added::Kept,
+            "its node started late"
+        );
+        assert!(a.ready(1) && a.ready(2) && a.ready(3));
+        let (_, records) = a.take(3).unwrap();
+        assert_eq!(records.iter().map(|r| r.index).collect::<Vec<_>>(), [3, 9]);
+        assert_eq!(a.add(batch(0, 4, 4), 3), Added::Kept);
+        assert!(!a.ready(4), "started: later frames wait for it");
+
+        // A partition the join knew waits, whatever frame its next batch has.
+        let mut a = Assembler::default();
+        a.known(1);
+        assert_eq!(a.add(batch(0, 5, 0), 4), Added::Kept);
+        assert_eq!(a.add(batch(1, 6, 0), 4), Added::Kept);
+        assert!(!a.ready(5));
     }
 
     #[test]

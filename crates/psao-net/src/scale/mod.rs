@@ -12,6 +12,7 @@ pub mod wire;
 
 pub use names::{scene_id, Names};
 
+use std::sync::atomic::{AtomicBool, Ordering::SeqCst};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -35,9 +36,10 @@ const RECONNECT_DELAY_STEP: Duration = Duration::from_millis(25);
 const RECONNECT_DELAY_MAX: Duration = Duration::from_millis(250);
 
 /// Connects to the NATS server at `url`. Clients reconnect by themselves after a restart;
-/// `connected` is notified at every (re)connection, for what the NATS server may have
-/// forgotten meanwhile (consumers).
+/// `connected` is notified at every reconnection (not the first connection), for what the
+/// NATS server may have forgotten meanwhile (consumers).
 async fn connect(url: &str, connected: Arc<Notify>) -> Result<async_nats::Client, NetError> {
+    let first = Arc::new(AtomicBool::new(true));
     async_nats::ConnectOptions::new()
         .connection_timeout(Duration::from_secs(5))
         // Reconnect within RECONNECT_DELAY_MAX of the server's return (the client's default
@@ -47,10 +49,10 @@ async fn connect(url: &str, connected: Arc<Notify>) -> Result<async_nats::Client
             (RECONNECT_DELAY_STEP * attempts.min(10) as u32).min(RECONNECT_DELAY_MAX)
         })
         .event_callback(move |event| {
-            let connected = connected.clone();
+            let (connected, first) = (connected.clone(), first.clone());
             async move {
                 tracing::info!("NATS: {event}");
-                if matches!(event, async_nats::Event::Connected) {
+                if matches!(event, async_nats::Event::Connected) && !first.swap(false, SeqCst) {
                     connected.notify_one();
                 }
             }

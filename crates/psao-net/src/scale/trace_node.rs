@@ -359,7 +359,10 @@ pub fn run(
     // of the snapshots.
     let mut server = server;
     let joined = rt.block_on(join(&js, &names, &server, Joiner::TraceNode))?;
-    let (frame, seconds) = joined.fold.last_frame();
+    let (last, seconds) = joined.fold.last_frame();
+    let latest = joined.fold.latest_frames();
+    let own = latest.get(&partition.index).map(|&(f, _)| f);
+    let frame = start_frame(last, own, config.lockstep_edges.is_some());
     let records = joined.fold.records();
     let mut restored = Restored {
         frame,
@@ -369,7 +372,8 @@ pub fn run(
         batch_bytes: joined.counts.batch_bytes,
         ..Restored::default()
     };
-    if frame > 0 {
+    if last > 0 {
+        // In the pose of the latest frame: a lockstep node one frame behind steps that one.
         server.restore_replica(frame, seconds as f32, &records)?;
         restored.samples = server.restore_samples(joined.fold.snapshot_points())? as u64;
         tracing::info!(
@@ -379,7 +383,6 @@ pub fn run(
         );
     }
     let now = Instant::now();
-    let latest = joined.fold.latest_frames();
     let last_seen = latest.iter().map(|(&k, &(f, _))| (k, (f, now))).collect();
     let noted = latest.iter().map(|(&k, &(f, _))| (k, f)).collect();
     let recent_seconds = latest.values().copied().collect();
@@ -413,9 +416,28 @@ pub fn run(
             ..TraceNodeStats::default()
         },
     };
+    // Clocked, the frames this partition missed while it had no node are published empty
+    // (the edges wait for them).
+    if let Some(own) = own.filter(|&own| own < frame) {
+        node.fill(partition.index, own, frame)?;
+    }
     // Adopt at once the partitions nobody holds (their nodes died before this one started).
     node.upkeep(true)?;
     node.run(&stop)
+}
+
+/// The frame a node starts after, given the latest frame any partition published (`last`)
+/// and its own partition's latest (`own`, `None` when it never published). Lockstep edges
+/// wait for the node's partition before they send the views of a later frame, so the others
+/// are at most one frame ahead: the node steps on from its own frame. Clocked, it steps
+/// the clock's frames from the latest on, and the frames its partition missed are published
+/// empty (or, when it never published, edges take it to have started there).
+fn start_frame(last: u64, own: Option<u64>, lockstep: bool) -> u64 {
+    match own {
+        Some(own) if lockstep => own.min(last),
+        None if lockstep => 0,
+        _ => last,
+    }
 }
 
 /// Subscribes to `subject`, forwarding what `parse` accepts (counting what it refuses).
@@ -863,22 +885,28 @@ impl Node {
                 after_s: at.elapsed().as_secs_f64(),
                 points,
             });
-            let owners_count = self.server.partition_owners().map_or(1, |o| o.count());
-            let fill: Vec<Batch> = (last + 1..=frame)
-                .map(|f| Batch {
-                    partition: k,
-                    partitions: owners_count,
-                    frame: f,
-                    seconds: self
-                        .recent_seconds
-                        .get(&f)
-                        .copied()
-                        .unwrap_or(f as f64 / f64::from(self.config.hz.max(1))),
-                    records: Vec::new(),
-                })
-                .collect();
-            self.send(&fill)?;
+            self.fill(k, last, frame)?;
         }
+        Ok(())
+    }
+
+    /// Publish empty batches of partition `k` for the frames after `last` up to `frame`.
+    fn fill(&mut self, k: u32, last: u64, frame: u64) -> Result<(), NetError> {
+        let partitions = self.server.partition_owners().map_or(1, |o| o.count());
+        let fill: Vec<Batch> = (last + 1..=frame)
+            .map(|f| Batch {
+                partition: k,
+                partitions,
+                frame: f,
+                seconds: self
+                    .recent_seconds
+                    .get(&f)
+                    .copied()
+                    .unwrap_or(f as f64 / f64::from(self.config.hz.max(1))),
+                records: Vec::new(),
+            })
+            .collect();
+        self.send(&fill)?;
         Ok(())
     }
 }
