@@ -502,7 +502,10 @@ impl Node {
             }
             let records = self.server.take_records();
             self.publish(frame, seconds, records)?;
-            self.upkeep(false)?;
+            // A node done with its frames adopts nothing (the others stop there too).
+            if self.config.frames != Some(frame) {
+                self.upkeep(false)?;
+            }
         }
         let frames = self.server.frame();
         let n = (frames.max(1)) as f64;
