@@ -437,24 +437,21 @@ impl StreamReader {
             } else {
                 received.last_held(&self.stream).await
             };
-            let resume = match checked {
-                Ok(held) if held == last => Ok(last),
+            match checked {
                 Ok(held) => {
-                    tracing::warn!(
-                        "the NATS server lost records after message {}: reading them again",
-                        held.unwrap_or(0)
-                    );
-                    self.counters.rewinds.fetch_add(1, Ordering::Relaxed);
-                    Ok(held)
+                    if held != last {
+                        tracing::warn!(
+                            "the NATS server lost records after message {}: reading them again",
+                            held.unwrap_or(0)
+                        );
+                        self.counters.rewinds.fetch_add(1, Ordering::Relaxed);
+                    }
+                    let from = held.map_or(1, |l| l + 1);
+                    match records_from(&self.stream, &self.names, from).await {
+                        Ok(m) => return (held, m),
+                        Err(e) => tracing::warn!("cannot read the records stream again: {e}"),
+                    }
                 }
-                Err(e) => Err(e.to_string()),
-            };
-            let from = resume.map(|r| r.map_or(1, |l| l + 1));
-            match from {
-                Ok(from) => match records_from(&self.stream, &self.names, from).await {
-                    Ok(m) => return (from.checked_sub(1).filter(|&l| l > 0), m),
-                    Err(e) => tracing::warn!("cannot read the records stream again: {e}"),
-                },
                 Err(e) => tracing::warn!("{e}"),
             }
             tokio::time::sleep(VIEWS_AGAIN).await;

@@ -284,7 +284,7 @@ struct Node {
     published_chunks: BTreeMap<(u32, u32), Vec<PointState>>,
     /// The last batch messages stored, in the order they were stored.
     sent: VecDeque<Sent>,
-    /// Notified at every (re)connection to the NATS server.
+    /// Notified at every reconnection to the NATS server.
     connected: Arc<Notify>,
     /// Whether the stream is still to be checked for lost batches (after a reconnection).
     check_lost: bool,
@@ -433,10 +433,10 @@ pub fn run(
 /// the clock's frames from the latest on, and the frames its partition missed are published
 /// empty (or, when it never published, edges take it to have started there).
 fn start_frame(last: u64, own: Option<u64>, lockstep: bool) -> u64 {
-    match own {
-        Some(own) if lockstep => own.min(last),
-        None if lockstep => 0,
-        _ => last,
+    if lockstep {
+        own.unwrap_or(0).min(last)
+    } else {
+        last
     }
 }
 
