@@ -1259,6 +1259,7 @@
   var MAX_SERVER_FRAME = 256 << 20;
   var CAP_CODEC_COMPACT = 2;
   var CAP_STATE_HASH = 4;
+  var CAP_STATUS = 16;
   var ERROR_CODES = ["Version", "Token", "Frame", "Protocol", "Update", "Server"];
   var WireError = class extends Error {
   };
@@ -1486,6 +1487,9 @@
       case 8:
         m = { kind: "bye", reason: r.string("reason") };
         break;
+      case 11:
+        m = { kind: "status", stalled: r.bool("stalled"), text: r.string("status text") };
+        break;
       default:
         throw new WireError(`unknown message kind ${variant}`);
     }
@@ -1548,6 +1552,7 @@
   }
 
   // src/session.ts
+  var KEEP_ALIVE_MS = 5e3;
   function decodeLimit(table) {
     let total = 4096;
     for (const e of table) total += 64 + e.bucketCount * 110 + e.bucketCount * 8 * 40;
@@ -1567,11 +1572,18 @@
       this.decodeMs = 0;
       this.decoder = null;
       this.done = false;
+      /// When the last frame went to the server (ms, `performance.now()`).
+      this.lastSent = 0;
+      this.lastAck = 0;
+      this.keepAlive = null;
       this.ws = new WebSocket(opts.url);
       this.ws.binaryType = "arraybuffer";
       this.ws.onopen = () => {
-        const caps = CAP_CODEC_COMPACT | (opts.verify ? CAP_STATE_HASH : 0);
-        this.ws.send(helloFrame({ version: PROTOCOL_VERSION, capabilities: caps, token: opts.token, name: opts.name }));
+        const caps = CAP_CODEC_COMPACT | CAP_STATUS | (opts.verify ? CAP_STATE_HASH : 0);
+        this.send(helloFrame({ version: PROTOCOL_VERSION, capabilities: caps, token: opts.token, name: opts.name }));
+        this.keepAlive = setInterval(() => {
+          if (performance.now() - this.lastSent >= KEEP_ALIVE_MS) this.send(ackFrame(this.lastAck));
+        }, KEEP_ALIVE_MS);
       };
       this.ws.onmessage = (ev) => {
         if (this.done) return;
@@ -1622,7 +1634,8 @@
             verified = this.lastHash === m.delta.stateHash;
             if (!verified) this.mismatches++;
           }
-          this.ws.send(ackFrame(m.delta.frame));
+          this.lastAck = m.delta.frame;
+          this.send(ackFrame(m.delta.frame));
           this.handler.update(u, size, verified);
           this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame, m.delta.sceneTime);
           return;
@@ -1637,17 +1650,24 @@
         }
         case "bye":
           return this.end(`the server said bye: ${m.reason}`, false);
+        case "status":
+          this.handler.status?.(m.stalled ? m.text : null);
+          return;
         default:
           return this.fail(`unexpected ${m.kind} from the server`, true);
       }
     }
     /// Sends the client's camera.
     sendCamera(c) {
-      if (!this.done && this.ws.readyState === WebSocket.OPEN) this.ws.send(cameraFrame(c));
+      if (!this.done && this.ws.readyState === WebSocket.OPEN) this.send(cameraFrame(c));
+    }
+    send(frame) {
+      this.lastSent = performance.now();
+      this.ws.send(frame);
     }
     /// Ends the session with a bye.
     close() {
-      if (!this.done && this.ws.readyState === WebSocket.OPEN) this.ws.send(byeFrame("done"));
+      if (!this.done && this.ws.readyState === WebSocket.OPEN) this.send(byeFrame("done"));
       this.end("closed by the viewer", true);
       this.ws.close();
     }
@@ -1658,6 +1678,7 @@
     end(reason, fatal) {
       if (this.done) return;
       this.done = true;
+      if (this.keepAlive !== null) clearInterval(this.keepAlive);
       this.handler.closed(reason, fatal);
     }
   };
@@ -2946,6 +2967,7 @@ void main() {
     hash: null,
     message: null,
     fatal: false,
+    stalled: null,
     mbitS: 0,
     fps: 0,
     drawn: 0,
@@ -2966,7 +2988,8 @@ void main() {
   };
   window.psao = status;
   var params = new URLSearchParams(location.search);
-  var token = params.get("token");
+  var token = new URLSearchParams(location.hash.slice(1)).get("token");
+  if (token !== null) history.replaceState(null, "", location.pathname + location.search);
   var verify = params.get("verify") === "1";
   var pathName = params.get("path");
   var testFrames = params.has("frames") ? Math.max(1, Number(params.get("frames"))) : null;
@@ -2995,6 +3018,7 @@ void main() {
           status.connected = true;
           status.sessions++;
           status.message = null;
+          status.stalled = null;
           backoff = 200;
           if (session?.state) grids?.reset(session.state);
           pathFrame = 0;
@@ -3016,6 +3040,7 @@ void main() {
           received.push({ t: performance.now(), bytes });
           if (session?.lastHash != null) status.hash = session.lastHash.toString(16).padStart(16, "0");
         },
+        status: (text) => status.stalled = text,
         closed: (reason, fatal) => {
           status.connected = false;
           status.message = reason;
@@ -3263,13 +3288,17 @@ void main() {
       status.path ? `camera path ${status.path}, frame ${status.pathFrame}` : "camera: orbit (drag, wheel, W A S D Q E; Space: auto)",
       verify ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ` : "state hash not checked (add ?verify=1)"
     ].join("\n");
-    message.textContent = status.message ? status.fatal ? `error: ${status.message}` : `${status.message}; reconnecting` : "";
+    message.textContent = status.message ? status.fatal ? `error: ${status.message}` : `${status.message}; reconnecting` : status.stalled ? `updates stalled: ${status.stalled}` : "";
     requestAnimationFrame(tick);
   }
   window.addEventListener("keydown", (e) => {
     if (e.key === "c") cost = measureCost();
   });
-  fetch("/scene.glb").then((r) => r.arrayBuffer()).then((b) => {
+  fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${token}` } }).then((r) => {
+    if (r.status === 401) throw new Error("wrong or missing token (open the page with #token=\u2026)");
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    return r.arrayBuffer();
+  }).then((b) => {
     const glb = new Uint8Array(b);
     orbit = sceneBounds(glb);
     if (gl) {

@@ -1,4 +1,6 @@
-// The page served at `/`: connects to the server's WebSocket (`/ws`, token from `?token=`),
+// The page served at `/`: connects to the server's WebSocket (`/ws`; the token comes from the
+// URL fragment, `#token=…`, which the browser never sends to a server, and goes in the hello
+// and as `Authorization: Bearer` for `/scene.glb`),
 // keeps the client state current and its grids in GPU textures, draws the scene with
 // per-pixel AO (keys 1/2/3 or the overlay's buttons: composited, AO only, no AO), orbits a
 // camera around the scene (bounds from `/scene.glb`) or follows a camera path of the scene
@@ -35,6 +37,8 @@ interface Status {
   hash: string | null;
   message: string | null;
   fatal: boolean;
+  /// What the server said about its updates stalling (null while they flow).
+  stalled: string | null;
   mbitS: number;
   fps: number;
   /// Frames drawn with WebGL2 (0 when it is unavailable).
@@ -78,6 +82,7 @@ const status: Status = {
   hash: null,
   message: null,
   fatal: false,
+  stalled: null,
   mbitS: 0,
   fps: 0,
   drawn: 0,
@@ -99,7 +104,10 @@ const status: Status = {
 (window as unknown as { psao: Status }).psao = status;
 
 const params = new URLSearchParams(location.search);
-const token = params.get("token");
+/// The access token: `#token=…` in the URL (never sent in a request line, kept out of the
+/// server's logs); removed from the address bar once read.
+const token = new URLSearchParams(location.hash.slice(1)).get("token");
+if (token !== null) history.replaceState(null, "", location.pathname + location.search);
 const verify = params.get("verify") === "1";
 const pathName = params.get("path");
 const testFrames = params.has("frames") ? Math.max(1, Number(params.get("frames"))) : null;
@@ -133,6 +141,7 @@ function connect() {
         status.connected = true;
         status.sessions++;
         status.message = null;
+        status.stalled = null;
         backoff = 200;
         if (session?.state) grids?.reset(session.state);
         // A new session (also after a restart) starts the path again.
@@ -154,6 +163,7 @@ function connect() {
         received.push({ t: performance.now(), bytes });
         if (session?.lastHash != null) status.hash = session.lastHash.toString(16).padStart(16, "0");
       },
+      status: (text) => (status.stalled = text),
       closed: (reason, fatal) => {
         status.connected = false;
         status.message = reason;
@@ -446,7 +456,13 @@ function tick(now: number) {
       ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ`
       : "state hash not checked (add ?verify=1)",
   ].join("\n");
-  message.textContent = status.message ? (status.fatal ? `error: ${status.message}` : `${status.message}; reconnecting`) : "";
+  message.textContent = status.message
+    ? status.fatal
+      ? `error: ${status.message}`
+      : `${status.message}; reconnecting`
+    : status.stalled
+      ? `updates stalled: ${status.stalled}`
+      : "";
   requestAnimationFrame(tick);
 }
 
@@ -454,8 +470,12 @@ window.addEventListener("keydown", (e) => {
   if (e.key === "c") cost = measureCost();
 });
 
-fetch("/scene.glb")
-  .then((r) => r.arrayBuffer())
+fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${token}` } })
+  .then((r) => {
+    if (r.status === 401) throw new Error("wrong or missing token (open the page with #token=…)");
+    if (!r.ok) throw new Error(`HTTP ${r.status}`);
+    return r.arrayBuffer();
+  })
   .then((b) => {
     const glb = new Uint8Array(b);
     orbit = sceneBounds(glb);

@@ -10,6 +10,7 @@ import {
   byeFrame,
   CAP_CODEC_COMPACT,
   CAP_STATE_HASH,
+  CAP_STATUS,
   cameraFrame,
   decodeFrame,
   helloFrame,
@@ -19,6 +20,10 @@ import {
   type Message,
   type Welcome,
 } from "./wire";
+
+/// Longest a session goes without sending (psao-net's `KEEP_ALIVE`); the server drops clients
+/// silent for 30 s.
+const KEEP_ALIVE_MS = 5000;
 
 /// Most bytes one decoded update can legitimately take for this table (psao-net's
 /// `decode_limit`: a snapshot of every bucket and addressable cell, generous per record).
@@ -36,6 +41,9 @@ export interface SessionHandler {
   /// The server's frame and scene time (seconds) with every update and scene-time message;
   /// `clientFrame` is the lockstep client frame answered, if any.
   sceneTime?(frame: number, clientFrame: number | null, seconds: number): void;
+  /// The server's updates stalled (`text` says why; a scale-out edge waiting for its trace
+  /// nodes), or flow again (`null`).
+  status?(text: string | null): void;
   /// The session ended: `fatal` when reconnecting cannot help (wrong token or version).
   closed(reason: string, fatal: boolean): void;
 }
@@ -62,6 +70,10 @@ export class Session {
   private decoder: CompactDecoder | null = null;
   private ws: WebSocket;
   private done = false;
+  /// When the last frame went to the server (ms, `performance.now()`).
+  private lastSent = 0;
+  private lastAck = 0;
+  private keepAlive: ReturnType<typeof setInterval> | null = null;
 
   constructor(
     private opts: SessionOptions,
@@ -70,8 +82,13 @@ export class Session {
     this.ws = new WebSocket(opts.url);
     this.ws.binaryType = "arraybuffer";
     this.ws.onopen = () => {
-      const caps = CAP_CODEC_COMPACT | (opts.verify ? CAP_STATE_HASH : 0);
-      this.ws.send(helloFrame({ version: PROTOCOL_VERSION, capabilities: caps, token: opts.token, name: opts.name }));
+      const caps = CAP_CODEC_COMPACT | CAP_STATUS | (opts.verify ? CAP_STATE_HASH : 0);
+      this.send(helloFrame({ version: PROTOCOL_VERSION, capabilities: caps, token: opts.token, name: opts.name }));
+      // The server drops a client silent for 30 s: when no camera went out for KEEP_ALIVE_MS
+      // (a hidden tab draws no frames), an ack of the last acknowledged frame says we are here.
+      this.keepAlive = setInterval(() => {
+        if (performance.now() - this.lastSent >= KEEP_ALIVE_MS) this.send(ackFrame(this.lastAck));
+      }, KEEP_ALIVE_MS);
     };
     this.ws.onmessage = (ev) => {
       if (this.done) return;
@@ -124,7 +141,8 @@ export class Session {
           verified = this.lastHash === m.delta.stateHash;
           if (!verified) this.mismatches++;
         }
-        this.ws.send(ackFrame(m.delta.frame));
+        this.lastAck = m.delta.frame;
+        this.send(ackFrame(m.delta.frame));
         this.handler.update(u, size, verified);
         this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame, m.delta.sceneTime);
         return;
@@ -144,6 +162,9 @@ export class Session {
       }
       case "bye":
         return this.end(`the server said bye: ${m.reason}`, false);
+      case "status":
+        this.handler.status?.(m.stalled ? m.text : null);
+        return;
       default:
         return this.fail(`unexpected ${m.kind} from the server`, true);
     }
@@ -151,12 +172,17 @@ export class Session {
 
   /// Sends the client's camera.
   sendCamera(c: Camera) {
-    if (!this.done && this.ws.readyState === WebSocket.OPEN) this.ws.send(cameraFrame(c));
+    if (!this.done && this.ws.readyState === WebSocket.OPEN) this.send(cameraFrame(c));
+  }
+
+  private send(frame: Uint8Array<ArrayBuffer>) {
+    this.lastSent = performance.now();
+    this.ws.send(frame);
   }
 
   /// Ends the session with a bye.
   close() {
-    if (!this.done && this.ws.readyState === WebSocket.OPEN) this.ws.send(byeFrame("done"));
+    if (!this.done && this.ws.readyState === WebSocket.OPEN) this.send(byeFrame("done"));
     this.end("closed by the viewer", true);
     this.ws.close();
   }
@@ -169,6 +195,7 @@ export class Session {
   private end(reason: string, fatal: boolean) {
     if (this.done) return;
     this.done = true;
+    if (this.keepAlive !== null) clearInterval(this.keepAlive);
     this.handler.closed(reason, fatal);
   }
 }

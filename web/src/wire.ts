@@ -15,6 +15,7 @@ export const MAX_SERVER_FRAME = 256 << 20;
 export const CAP_CODEC_PAPER = 1;
 export const CAP_CODEC_COMPACT = 2;
 export const CAP_STATE_HASH = 4;
+export const CAP_STATUS = 16;
 
 /// Error codes of an error message, in wire order.
 export const ERROR_CODES = ["Version", "Token", "Frame", "Protocol", "Update", "Server"] as const;
@@ -78,7 +79,8 @@ export type Message =
   | { kind: "delta"; delta: Delta }
   | { kind: "snapshot"; delta: Delta }
   | { kind: "error"; code: ErrorCode; message: string }
-  | { kind: "bye"; reason: string };
+  | { kind: "bye"; reason: string }
+  | { kind: "status"; stalled: boolean; text: string };
 
 /// A frame or message that is not valid.
 export class WireError extends Error {}
@@ -319,6 +321,9 @@ export function decodePayload(payload: Uint8Array): Message {
     }
     case 8:
       m = { kind: "bye", reason: r.string("reason") };
+      break;
+    case 11:
+      m = { kind: "status", stalled: r.bool("stalled"), text: r.string("status text") };
       break;
     default:
       throw new WireError(`unknown message kind ${variant}`);

@@ -61,6 +61,18 @@ impl DiffuseShade for TracedAoShade<'_> {
     }
 }
 
+/// Whether a pixel can show `object` (see [`object_ids`]): it is `instance + 1` of an instance
+/// of `scene` whose mesh has a non-diffuse material.
+pub fn is_object(scene: &Scene, object: u32) -> bool {
+    let Some(instance) = object.checked_sub(1) else {
+        return false;
+    };
+    (scene.instances.get(instance as usize))
+        .and_then(|i| scene.meshes.get(i.mesh))
+        .and_then(|m| scene.materials.get(m.material))
+        .is_some_and(Material::is_non_diffuse)
+}
+
 /// Object id per pixel: `instance + 1` where the pixel shows a non-diffuse material (each
 /// instance has one mesh with one material, so this is instance × non-diffuse material), 0
 /// elsewhere.

@@ -116,18 +116,19 @@ impl Planner {
     }
 
     /// Positions to trace: jobs in priority order until `budget` positions satisfy `on_object`
-    /// (`(x, y, object)` → whether the pixel shows the object), the queue runs dry, or more
-    /// than `examine` positions were looked at (checked between jobs).
+    /// (`(x, y, object)` → whether the pixel shows the object), the queue runs dry, or
+    /// `examine` positions were looked at (never more: the last job is cut to what is left).
     pub fn plan(
         &mut self,
         budget: usize,
         examine: usize,
         mut on_object: impl FnMut(i32, i32, u32) -> bool,
     ) -> Vec<Planned> {
-        let mut out = Vec::with_capacity(budget);
+        let mut out = Vec::with_capacity(budget.min(examine));
         let mut examined = 0usize;
-        while out.len() < budget && examined <= examine {
-            let Some(job) = self.take_job((budget - out.len()) as u64) else {
+        while out.len() < budget && examined < examine {
+            let left = (budget - out.len()).min(examine - examined);
+            let Some(job) = self.take_job(left as u64) else {
                 break;
             };
             for (x, y) in self.positions(&job) {
@@ -262,6 +263,38 @@ mod tests {
             }
         }
         assert_eq!(seen.len(), ids.iter().filter(|&&i| i != 0).count());
+    }
+
+    #[test]
+    fn planning_a_missing_objects_region_examines_no_more_than_allowed() {
+        // The largest region a client may send (16384², psao-wire's MAX_REGION_IMAGE_SIDE) of
+        // an object no pixel shows.
+        let side = 16_384;
+        let region = ObjectRegion {
+            id: 99,
+            rect: PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: side,
+                y1: side,
+            },
+            pixels: 0,
+            saliency: 0.0,
+            importance: 0.0,
+            priority: 1.0,
+        };
+        let mut p = Planner::new(Hierarchy::for_spacing(side as f32 / 4.0), 64, 0.8);
+        p.analyze(&[region], 0);
+        let mut examined = 0;
+        for budget in [50, 1, 64, 65, 1000] {
+            let before = examined;
+            let plan = p.plan(budget, budget, |_, _, _| {
+                examined += 1;
+                false
+            });
+            assert!(plan.is_empty());
+            assert_eq!(examined - before, budget, "budget {budget}");
+        }
     }
 
     #[test]

@@ -4,8 +4,11 @@
 //! lane's sample queue, which that viewer's frame loop drains within its per-frame time
 //! budget. Per lane, the analyzer (at its own rate) replaces the queue's regions with
 //! [`Lane::analyze`], the frame loop gives the current view with [`Lane::set_view`] and the
-//! sample budget with [`Lane::grant`]: workers trace at most as many samples as were granted,
-//! and never more than the lane's `max_outstanding` are granted but not yet drained.
+//! sample budget with [`Lane::grant`]: every position a worker examines costs one sample of
+//! the budget, whether it gives a sample or misses the job's object (its primary ray is
+//! traced either way), so workers examine at most as many positions as were granted, and
+//! never more than the lane's `max_outstanding` are granted but not yet drained. A region of
+//! an object that is nowhere on screen thus costs its lane's budget, not unbounded work.
 //!
 //! Plain `std` threads rather than rayon: the workers block on a condition variable between
 //! jobs and run for the pool's lifetime, which rayon's task pool is not made for.
@@ -26,7 +29,8 @@ pub trait JobTracer: Send + Sync + 'static {
     /// One traced sample.
     type Sample: Send + 'static;
     /// Trace the positions of `job` (pixel centres in iteration order) for `view`; positions
-    /// not on the job's object give no sample.
+    /// not on the job's object give no sample (and cost their share of the budget all the
+    /// same).
     fn trace_job(
         &self,
         view: &Self::View,
@@ -38,10 +42,12 @@ pub trait JobTracer: Send + Sync + 'static {
 /// Counters of a lane since it was opened.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PoolStats {
-    /// Samples granted.
+    /// Samples granted (each pays for one examined position).
     pub granted: u64,
     /// Jobs traced.
     pub jobs: u64,
+    /// Positions examined (at most `granted`).
+    pub examined: u64,
     /// Samples traced (pushed into the sample queue).
     pub traced: u64,
     /// Samples drained.
@@ -53,9 +59,9 @@ struct LaneState<T: JobTracer> {
     planner: Planner,
     view: Option<Arc<T::View>>,
     max_outstanding: u64,
-    /// Samples the workers may still trace.
+    /// Positions the workers may still examine.
     allowance: u64,
-    /// Samples reserved by jobs in flight.
+    /// Positions of jobs in flight (their samples not yet queued).
     reserved: u64,
     /// Jobs in flight.
     busy: usize,
@@ -228,7 +234,8 @@ impl<T: JobTracer> Lane<T> {
     }
 
     /// Allow `samples` more samples, as far as `max_outstanding` leaves room (granted, in
-    /// flight and queued samples count); returns the samples actually granted.
+    /// flight and queued samples count); returns the samples actually granted. Each pays for
+    /// one examined position, which gives at most one sample.
     pub fn grant(&self, samples: u64) -> u64 {
         let granted = self.with(|l| {
             let outstanding = l.allowance + l.reserved + l.samples.len() as u64;
@@ -306,9 +313,9 @@ impl<T: JobTracer> Drop for Lane<T> {
     }
 }
 
-/// A worker's loop: wait for work, take a job within the allowance of the lane next in turn,
-/// trace it without the lock, queue its samples in its lane (if still open) and give back
-/// the unused allowance.
+/// A worker's loop: wait for work, take a job of at most the allowance of the lane next in
+/// turn (each of its positions spent from the allowance, on the object or not), trace it
+/// without the lock and queue its samples in its lane (if still open).
 fn work<T: JobTracer>(shared: &Shared<T>, tracer: &T) {
     let mut s = shared.lock();
     loop {
@@ -330,22 +337,22 @@ fn work<T: JobTracer>(shared: &Shared<T>, tracer: &T) {
         let Some(view) = lane.view.clone() else {
             continue;
         };
-        let positions = lane.planner.positions(&job);
-        let reserve = job.len.min(allowance);
-        lane.allowance -= reserve;
-        lane.reserved += reserve;
+        let mut positions = lane.planner.positions(&job);
+        positions.truncate(allowance.try_into().unwrap_or(usize::MAX));
+        let cost = positions.len() as u64;
+        lane.allowance -= cost;
+        lane.reserved += cost;
         lane.busy += 1;
         drop(s);
         let mut samples = tracer.trace_job(&view, &job, &positions);
-        samples.truncate(reserve as usize);
+        samples.truncate(positions.len());
         s = shared.lock();
         if let Some(lane) = s.lanes.get_mut(&id) {
-            let n = samples.len() as u64;
-            lane.reserved -= reserve;
-            lane.allowance += reserve - n;
+            lane.reserved -= cost;
             lane.busy -= 1;
             lane.stats.jobs += 1;
-            lane.stats.traced += n;
+            lane.stats.examined += cost;
+            lane.stats.traced += samples.len() as u64;
             lane.samples.extend(samples);
         }
         shared.done.notify_all();
@@ -440,19 +447,23 @@ mod tests {
     }
 
     #[test]
-    fn workers_trace_no_more_samples_than_granted() {
+    fn workers_examine_exactly_the_positions_granted() {
         for workers in [1, 2] {
             let (_pool, p) = pool(workers, u64::MAX);
             let mut granted = 0;
             for budget in [1, 5, 40, 3, 100] {
                 granted += p.grant(budget);
                 assert!(p.wait_idle(WAIT));
-                assert_eq!(p.stats().traced, granted, "{workers} workers");
+                let stats = p.stats();
+                assert_eq!(stats.examined, granted, "{workers} workers");
+                // Positions off the object (odd columns) cost their share too.
+                assert!(stats.traced < stats.examined, "{stats:?}");
             }
-            assert_eq!(p.queued() as u64, granted);
+            let traced = p.stats().traced;
+            assert_eq!(p.queued() as u64, traced);
             // The drain takes at most what it is asked for.
             assert_eq!(p.drain(10, Instant::now() + WAIT).len(), 10);
-            assert_eq!(p.queued() as u64, granted - 10);
+            assert_eq!(p.queued() as u64, traced - 10);
         }
     }
 
@@ -462,10 +473,17 @@ mod tests {
         assert_eq!(p.grant(40), 40);
         assert_eq!(p.grant(40), 10);
         assert!(p.wait_idle(WAIT));
-        assert_eq!(p.queued(), 50);
-        assert_eq!(p.grant(1), 0);
-        assert_eq!(p.drain(30, Instant::now() + WAIT).len(), 30);
-        assert_eq!(p.grant(100), 30);
+        // The spent allowance is free again; the queued samples still count.
+        let queued = p.queued() as u64;
+        assert!(queued > 0 && queued < 50, "{queued}");
+        assert_eq!(p.grant(100), 50 - queued);
+        assert!(p.wait_idle(WAIT));
+        let queued = p.queued() as u64;
+        assert_eq!(
+            p.drain(usize::MAX, Instant::now() + WAIT).len() as u64,
+            queued
+        );
+        assert_eq!(p.grant(100), 50);
     }
 
     #[test]
@@ -473,6 +491,7 @@ mod tests {
         let (_pool, p) = pool(2, u64::MAX);
         p.grant(10);
         assert!(p.wait_idle(WAIT));
+        let first = p.stats().traced as usize;
         p.set_view(8);
         p.grant(10);
         assert!(p.wait_idle(WAIT));
@@ -481,8 +500,9 @@ mod tests {
             .iter()
             .map(|s| s.2)
             .collect();
-        assert_eq!(views.len(), 20);
-        assert!(views[..10].iter().all(|&v| v == 7) && views[10..].iter().all(|&v| v == 8));
+        assert_eq!(views.len() as u64, p.stats().traced);
+        assert!(first > 0 && views.len() > first, "{views:?}");
+        assert!(views[..first].iter().all(|&v| v == 7) && views[first..].iter().all(|&v| v == 8));
         // A dry queue idles with allowance left; a new camera age restarts the regions.
         p.grant(u64::MAX / 2);
         assert!(p.wait_idle(WAIT));
@@ -512,6 +532,55 @@ mod tests {
         p.grant(100);
         assert!(p.wait_idle(WAIT));
         assert_eq!(p.stats().traced, 0);
+    }
+
+    /// The job's object is nowhere on screen: no position gives a sample; counts the
+    /// positions it was asked to trace.
+    struct Nowhere(Arc<std::sync::atomic::AtomicU64>);
+
+    impl JobTracer for Nowhere {
+        type View = u32;
+        type Sample = ();
+        fn trace_job(&self, _: &u32, _: &Job, positions: &[(i32, i32)]) -> Vec<()> {
+            (self.0).fetch_add(positions.len() as u64, std::sync::atomic::Ordering::Relaxed);
+            Vec::new()
+        }
+    }
+
+    #[test]
+    fn a_region_of_a_missing_object_costs_the_positions_it_examines() {
+        // The largest region a client may send (a 16384² image, psao-wire's
+        // MAX_REGION_IMAGE_SIDE), of an object that does not exist: 2.7·10⁸ positions that
+        // all miss. The work done is the budget granted, not the region.
+        const SIDE: i32 = 16_384;
+        let region = ObjectRegion {
+            id: 99,
+            rect: PixelRect {
+                x0: 0,
+                y0: 0,
+                x1: SIDE,
+                y1: SIDE,
+            },
+            ..region()
+        };
+        for workers in [1, 2] {
+            let examined = Arc::new(std::sync::atomic::AtomicU64::new(0));
+            let pool = WorkerPool::new(Nowhere(examined.clone()), workers);
+            let hierarchy = Hierarchy::for_spacing(SIDE as f32 / 4.0);
+            let p = pool.lane(Planner::new(hierarchy, 64, 0.8), 1500);
+            p.analyze(std::slice::from_ref(&region), 0);
+            p.set_view(0);
+            let mut granted = 0;
+            for frame in 0..10 {
+                granted += p.grant(1000);
+                assert!(p.wait_idle(WAIT), "frame {frame}: still tracing");
+                let traced = examined.load(std::sync::atomic::Ordering::Relaxed);
+                assert_eq!(traced, granted, "frame {frame}, {workers} workers");
+            }
+            assert_eq!(granted, 10_000);
+            let stats = p.stats();
+            assert_eq!((stats.examined, stats.traced), (granted, 0));
+        }
     }
 
     /// Logs the view of every job; the first job waits until the gate opens.

@@ -13,7 +13,7 @@ mod error;
 mod model;
 mod paper;
 mod words;
-mod zstd_io;
+pub mod zstd_io;
 
 pub use codec::{codec_by_name, Codec, CODEC_NAMES};
 pub use compact::{CompactCodec, COMPACT_LEVEL};

@@ -1,5 +1,5 @@
-//! zstd framing shared by the codecs: content size and checksum always recorded, bounded
-//! decompression.
+//! zstd framing shared by the codecs (and by psao-net's scale-out record batches): content
+//! size and checksum always recorded, bounded decompression.
 
 use zstd::zstd_safe::CParameter;
 
@@ -26,12 +26,12 @@ pub(crate) fn compress_with(payload: &[u8], level: i32, extra: &[CParameter]) ->
 }
 
 /// Compress `payload` at `level` (content size and checksum recorded).
-pub(crate) fn compress(payload: &[u8], level: i32) -> Vec<u8> {
+pub fn compress(payload: &[u8], level: i32) -> Vec<u8> {
     compress_with(payload, level, &[])
 }
 
 /// Decompress at most `limit` bytes, allocating exactly the recorded size.
-pub(crate) fn decompress(bytes: &[u8], limit: u64) -> Result<Vec<u8>, DeltaError> {
+pub fn decompress(bytes: &[u8], limit: u64) -> Result<Vec<u8>, DeltaError> {
     let size = zstd::bulk::Decompressor::upper_bound(bytes).ok_or(DeltaError::UnknownSize)?;
     if size as u64 > limit {
         return Err(DeltaError::TooLarge {

@@ -1,5 +1,5 @@
-//! Evaluation: the per-pixel reference AO (DESIGN §2) and image quality metrics (LPIPS, PSNR,
-//! SSIM, FLIP).
+//! Evaluation: the per-pixel reference AO (DESIGN §2), the per-pixel reference of the diffuse
+//! lighting (DESIGN §12) and image quality metrics (LPIPS, PSNR, SSIM, FLIP).
 //!
 //! Pure code: images come in and numbers go out; reading and writing files is the CLI's job.
 
@@ -7,10 +7,12 @@ pub mod ao_image;
 pub mod lpips;
 pub mod metrics;
 pub mod reference;
+pub mod reference_gi;
 pub mod ssao;
 
 pub use ao_image::AoImage;
 pub use lpips::{Lpips, LpipsError};
 pub use metrics::{compare, Metrics, MetricsError};
 pub use reference::{reference_ao_in, ReferenceSettings};
+pub use reference_gi::{reference_gi, GiSettings, RgbImage};
 pub use ssao::{ssao, SsaoSettings};

@@ -14,7 +14,7 @@ use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard};
 use glam::{Affine3A, Vec3};
 use psao_client::Shading;
 use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
-use psao_corrective::base::{object_ids, TracedAoShade};
+use psao_corrective::base::{is_object, object_ids, TracedAoShade};
 use psao_corrective::cache::{CacheConfig, SampleCache};
 use psao_corrective::saliency::{saliency, RgbImage};
 use psao_corrective::schedule::{DEFAULT_DECAY, DEFAULT_JOB_SIZE};
@@ -39,9 +39,6 @@ use crate::NetError;
 pub const DEFAULT_SAMPLES_PER_SECOND: u32 = 6000;
 /// Default client frames between analyses (0.3 s at 60 Hz).
 pub const DEFAULT_ANALYZE_EVERY: u32 = 18;
-/// Positions examined per sample of the budget at most in one planning (positions off their
-/// object cost one primary ray each and are not traced).
-const EXAMINE_PER_SAMPLE: usize = 16;
 
 /// The √5 hierarchy both ends use for a `width × height` image: the coarsest spacing about a
 /// quarter of the shorter side.
@@ -199,6 +196,20 @@ pub struct RemoteCorrections {
     ticks: u64,
     /// Samples sent so far.
     pub samples_sent: u64,
+    /// What the client's corrections cost so far.
+    pub counters: CorrectionCounters,
+}
+
+/// What a client's corrections cost on the server.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CorrectionCounters {
+    /// Positions the client's sample budget paid for.
+    pub budget: u64,
+    /// Positions examined (a primary ray each, whether or not it showed the region's object
+    /// and gave a sample): never more than `budget`.
+    pub examined: u64,
+    /// Regions dropped on arrival because the scene has no such object.
+    pub regions_dropped: u64,
 }
 
 impl RemoteCorrections {
@@ -210,19 +221,23 @@ impl RemoteCorrections {
             camera: ClientCamera::default(),
             ticks: 0,
             samples_sent: 0,
+            counters: CorrectionCounters::default(),
         }
     }
 
-    /// The client's new analysis; a new image size starts a new queue.
-    pub fn regions(&mut self, msg: &RegionsMsg) {
+    /// The client's new analysis of the scene `engine` traces (regions of objects it does not
+    /// have are dropped); a new image size starts a new queue.
+    pub fn regions(&mut self, msg: &RegionsMsg, engine: &CorrectionEngine) {
         let fresh =
             !matches!(&self.planner, Some((_, w, h)) if (*w, *h) == (msg.width, msg.height));
         if fresh {
             self.planner = Some((new_planner(msg.width, msg.height), msg.width, msg.height));
         }
+        let (regions, dropped) = object_regions(msg, engine);
+        self.counters.regions_dropped += dropped;
         if let Some((planner, _, _)) = &mut self.planner {
             planner.set_camera_age(self.camera.age);
-            planner.analyze(&object_regions(msg), self.camera.age);
+            planner.analyze(&regions, self.camera.age);
         }
     }
 
@@ -237,12 +252,16 @@ impl RemoteCorrections {
     /// The budget of the next tick of a clock at `hz` ticks per second (the ticks' budgets
     /// add up to exactly `samples_per_second` per second).
     pub fn next_budget(&mut self, hz: u32) -> usize {
-        budget_of_tick(self.samples_per_second, hz, &mut self.ticks)
+        let budget = budget_of_tick(self.samples_per_second, hz, &mut self.ticks);
+        self.counters.budget += budget as u64;
+        budget
     }
 
     /// Plan and trace up to `budget` samples for the current camera, in the scene at its
-    /// frame's time (in parallel); `None` when there is nothing to do yet (no camera, no
-    /// regions, or the queue is dry) or the scene cannot be posed (logged).
+    /// frame's time (in parallel), examining at most `budget` positions (a position off its
+    /// object costs its primary ray like one that gives a sample); `None` when there is
+    /// nothing to do yet (no camera, no regions, or the queue is dry) or the scene cannot be
+    /// posed (logged).
     pub fn trace(
         &mut self,
         engine: &CorrectionEngine,
@@ -254,9 +273,10 @@ impl RemoteCorrections {
         let (camera, frame) = self.camera.latest?;
         let age = self.camera.age;
         let budget = budget.min(MAX_SAMPLES);
+        let examined = &mut self.counters.examined;
         let traced = engine.with_tracer(client_time(frame), |tracer| {
-            let examine = budget.saturating_mul(EXAMINE_PER_SAMPLE) + DEFAULT_JOB_SIZE as usize;
-            let planned = planner.plan(budget, examine, |x, y, object| {
+            let planned = planner.plan(budget, budget, |x, y, object| {
+                *examined += 1;
                 tracer.object_at(&camera, w, h, x, y) == object
             });
             planned
@@ -305,10 +325,35 @@ pub(crate) fn new_planner(width: u32, height: u32) -> Planner {
     )
 }
 
-/// The regions of a (validated) analysis as the planner takes them.
-pub(crate) fn object_regions(msg: &RegionsMsg) -> Vec<ObjectRegion> {
-    msg.regions
+/// The regions of a (validated) analysis as the planner takes them, without those of objects
+/// that `engine`'s scene does not have (no pixel can show them: see [`is_object`]), and how
+/// many were dropped (logged at debug level).
+///
+/// Nothing else needs dropping: the wire's validation keeps every rectangle inside the
+/// message's image of at most [`psao_wire::MAX_REGION_IMAGE_SIDE`]² pixels (the largest
+/// resolution `psao view` takes, [`crate::MAX_IMAGE_SIDE`]) and one object's regions from
+/// overlapping, so a client's regions cover at most that area once per object of the scene:
+/// the largest legitimate analysis, every object covering the whole image. Their area does
+/// not bound the work they cause; the budget does (every examined position costs one sample
+/// of it, [`RemoteCorrections::trace`] and [`psao_corrective::workers`]).
+pub(crate) fn object_regions(
+    msg: &RegionsMsg,
+    engine: &CorrectionEngine,
+) -> (Vec<ObjectRegion>, u64) {
+    let (known, unknown): (Vec<&Region>, Vec<&Region>) = msg
+        .regions
         .iter()
+        .partition(|r| is_object(&engine.scene, r.object));
+    if let Some(r) = unknown.first() {
+        tracing::debug!(
+            "dropped {} of {} regions: objects the scene does not have (e.g. {})",
+            unknown.len(),
+            msg.regions.len(),
+            r.object
+        );
+    }
+    let regions = known
+        .into_iter()
         .map(|r| ObjectRegion {
             id: r.object,
             rect: PixelRect {
@@ -322,7 +367,8 @@ pub(crate) fn object_regions(msg: &RegionsMsg) -> Vec<ObjectRegion> {
             importance: 0.0,
             priority: r.priority,
         })
-        .collect()
+        .collect();
+    (regions, unknown.len() as u64)
 }
 
 /// The wire form of a sample.
@@ -758,7 +804,7 @@ impl InProcessCorrections {
             let (m, size) = over_the_wire(&Message::Regions(regions), limit)?;
             out.bytes += size;
             if let Message::Regions(r) = m {
-                self.remote.regions(&r);
+                self.remote.regions(&r, &self.engine);
             }
         }
         let (m, size) = over_the_wire(&Message::Camera(*camera), limit)?;
@@ -892,6 +938,29 @@ mod tests {
             shown > 100 && changed > 10,
             "{changed} of the mirror's {shown} samples show the ball"
         );
+    }
+
+    #[test]
+    fn regions_of_objects_the_scene_cannot_show_are_dropped() {
+        // Object 1 is the mirror; object 2 the diffuse ball (no corrections), 3 is no instance.
+        let engine = CorrectionEngine::new(Arc::new(mirror_scene()), Backend::Obvhs, 1, 1).unwrap();
+        let region = |object| Region {
+            object,
+            x0: 0,
+            y0: 0,
+            x1: 8,
+            y1: 8,
+            priority: 0.5,
+        };
+        let msg = RegionsMsg {
+            frame: 0,
+            width: 16,
+            height: 16,
+            regions: [3, 1, 2, u32::MAX].map(region).to_vec(),
+        };
+        let (kept, dropped) = object_regions(&msg, &engine);
+        assert_eq!(kept.iter().map(|r| r.id).collect::<Vec<_>>(), [1]);
+        assert_eq!(dropped, 3);
     }
 
     #[test]

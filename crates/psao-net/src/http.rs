@@ -1,9 +1,15 @@
 //! HTTP on the serve port, through hyper: `/` the browser viewer (embedded in the binary),
 //! `/viewer.js` its script, `/scene.glb` the served scene as binary glTF, `/health` a JSON
-//! status (readable from any origin: a viewer loaded from another edge of a session asks
-//! it), and the WebSocket upgrade at `/ws`, after which the connection speaks frames.
+//! status, and the WebSocket upgrade at `/ws`, after which the connection speaks frames.
 //! Only GET and HEAD are answered (405 otherwise); unknown paths get 404, a `/ws` request
 //! that is no valid upgrade 400; request heads are limited in size and time.
+//!
+//! With a token ([`Access`]), `/scene.glb` needs `Authorization: Bearer TOKEN` (401 without)
+//! and `/health` tells only that the server is up; `/` and `/viewer.js` are the viewer
+//! program itself (the same bytes in every psao build, no scene data) and answer anyone, so
+//! that a page opened with `#token=…` can start. Every request's `Host` and every upgrade's
+//! `Origin` must be allowed (403 otherwise); `/health` is readable cross-origin by allowed
+//! origins only (a viewer loaded from another edge of a session asks it).
 
 use std::convert::Infallible;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -21,6 +27,8 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use psao_wire::{MAX_CLIENT_FRAME, PROTOCOL_VERSION};
 use tokio_tungstenite::tungstenite::handshake::derive_accept_key;
 
+use crate::access::Access;
+use crate::admission::Permit;
 use crate::io::BoxIo;
 use crate::transport::{websocket_server, FrameReader, FrameWriter};
 
@@ -40,10 +48,14 @@ pub struct Health {
     pub clients: AtomicUsize,
     /// Server frames stepped.
     pub server_frame: AtomicU64,
+    /// Scale-out edges: the frame whose record batches are overdue, which partitions', since
+    /// when (`scale::edge::Stall`); `None` when nothing is.
+    pub stalled: std::sync::Mutex<Option<serde_json::Value>>,
 }
 
-/// Receives the frame transport of each WebSocket that completed its upgrade.
-pub type WebSocketHandler = dyn Fn(FrameReader, FrameWriter) + Send + Sync;
+/// Receives the frame transport of each WebSocket that completed its upgrade, with the
+/// connection's permit (held until the session ends).
+pub type WebSocketHandler = dyn Fn(FrameReader, FrameWriter, Permit) + Send + Sync;
 
 /// What the HTTP side serves.
 pub struct HttpContext {
@@ -53,16 +65,22 @@ pub struct HttpContext {
     pub scene_name: String,
     /// `/health`'s live numbers.
     pub health: Arc<Health>,
+    /// The token and the allowed origins.
+    pub access: Arc<Access>,
     /// Takes over upgraded `/ws` connections.
     pub on_websocket: Box<WebSocketHandler>,
 }
 
 /// Answers HTTP requests on `io` until the peer closes, the head timeout passes or a
-/// WebSocket upgrade takes the connection over.
-pub async fn serve_http(io: BoxIo, ctx: Arc<HttpContext>) -> Result<(), hyper::Error> {
+/// WebSocket upgrade takes the connection over (`permit` then passes to its session).
+pub async fn serve_http(
+    io: BoxIo,
+    ctx: Arc<HttpContext>,
+    permit: Permit,
+) -> Result<(), hyper::Error> {
     let service = service_fn(move |req| {
-        let ctx = ctx.clone();
-        async move { Ok::<_, Infallible>(route(req, &ctx)) }
+        let (ctx, permit) = (ctx.clone(), permit.clone());
+        async move { Ok::<_, Infallible>(route(req, &ctx, permit)) }
     });
     let mut builder = http1::Builder::new();
     builder
@@ -75,7 +93,17 @@ pub async fn serve_http(io: BoxIo, ctx: Arc<HttpContext>) -> Result<(), hyper::E
         .await
 }
 
-fn route(req: Request<Incoming>, ctx: &Arc<HttpContext>) -> Response<Full<Bytes>> {
+fn route(req: Request<Incoming>, ctx: &Arc<HttpContext>, permit: Permit) -> Response<Full<Bytes>> {
+    let host = req
+        .headers()
+        .get(header::HOST)
+        .map(|h| h.to_str().unwrap_or("\u{fffd}"));
+    if !ctx.access.host_allowed(host) {
+        return text(
+            StatusCode::FORBIDDEN,
+            "this Host is not served (a name must be allowed with --allow-origin)\n",
+        );
+    }
     if req.method() != Method::GET && req.method() != Method::HEAD {
         let mut r = text(StatusCode::METHOD_NOT_ALLOWED, "only GET and HEAD\n");
         r.headers_mut()
@@ -91,30 +119,63 @@ fn route(req: Request<Incoming>, ctx: &Arc<HttpContext>) -> Response<Full<Bytes>
             "text/javascript; charset=utf-8",
             Bytes::from_static(VIEWER_JS.as_bytes()),
         ),
-        "/scene.glb" => body("model/gltf-binary", ctx.scene_glb.clone()),
-        "/health" => {
-            let status = serde_json::json!({
-                "status": "ok",
-                "protocol": PROTOCOL_VERSION,
-                "scene": ctx.scene_name,
-                "clients": ctx.health.clients.load(Ordering::Relaxed),
-                "server_frame": ctx.health.server_frame.load(Ordering::Relaxed),
-            });
-            let mut r = body("application/json", Bytes::from(status.to_string()));
-            // Viewers loaded from another edge of the session ask this one too.
-            r.headers_mut().insert(
-                header::ACCESS_CONTROL_ALLOW_ORIGIN,
-                HeaderValue::from_static("*"),
+        "/scene.glb" if !ctx.access.request_authorized(req.headers()) => {
+            let mut r = text(
+                StatusCode::UNAUTHORIZED,
+                "/scene.glb needs the token (Authorization: Bearer TOKEN)\n",
             );
+            r.headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
             r
         }
-        "/ws" => upgrade(req, ctx),
+        "/scene.glb" => body("model/gltf-binary", ctx.scene_glb.clone()),
+        "/health" => health(&req, ctx, host),
+        "/ws" => match req.headers().get(header::ORIGIN) {
+            Some(o) if !ctx.access.origin_allowed(o.to_str().unwrap_or(""), host) => text(
+                StatusCode::FORBIDDEN,
+                "WebSocket from a page of another origin (allow it with --allow-origin)\n",
+            ),
+            _ => upgrade(req, ctx, permit),
+        },
         _ => text(StatusCode::NOT_FOUND, "not found\n"),
     }
 }
 
+/// `/health`: the full status with the token (or when none is needed), else only that the
+/// server is up; readable cross-origin by allowed origins.
+fn health(req: &Request<Incoming>, ctx: &HttpContext, host: Option<&str>) -> Response<Full<Bytes>> {
+    let status = if ctx.access.request_authorized(req.headers()) {
+        serde_json::json!({
+            "status": "ok",
+            "protocol": PROTOCOL_VERSION,
+            "scene": ctx.scene_name,
+            "clients": ctx.health.clients.load(Ordering::Relaxed),
+            "server_frame": ctx.health.server_frame.load(Ordering::Relaxed),
+            "stalled": ctx.health.stalled.lock().ok().and_then(|s| s.clone()),
+        })
+    } else {
+        serde_json::json!({ "status": "ok" })
+    };
+    let mut r = body("application/json", Bytes::from(status.to_string()));
+    let h = r.headers_mut();
+    h.insert(header::VARY, HeaderValue::from_static("Origin"));
+    if let Some(origin) = req.headers().get(header::ORIGIN) {
+        if ctx
+            .access
+            .origin_allowed(origin.to_str().unwrap_or(""), host)
+        {
+            h.insert(header::ACCESS_CONTROL_ALLOW_ORIGIN, origin.clone());
+        }
+    }
+    r
+}
+
 /// Accepts a WebSocket upgrade (RFC 6455 §4.2) and hands the upgraded connection over.
-fn upgrade(mut req: Request<Incoming>, ctx: &Arc<HttpContext>) -> Response<Full<Bytes>> {
+fn upgrade(
+    mut req: Request<Incoming>,
+    ctx: &Arc<HttpContext>,
+    permit: Permit,
+) -> Response<Full<Bytes>> {
     let has = |name: header::HeaderName, token: &str| {
         req.headers().get_all(name).iter().any(|v| {
             v.to_str()
@@ -142,7 +203,7 @@ fn upgrade(mut req: Request<Incoming>, ctx: &Arc<HttpContext>) -> Response<Full<
             Ok(upgraded) => {
                 let io: BoxIo = Box::new(TokioIo::new(upgraded));
                 let (reader, writer) = websocket_server(io, MAX_CLIENT_FRAME).await;
-                (ctx.on_websocket)(reader, writer);
+                (ctx.on_websocket)(reader, writer, permit);
             }
             Err(e) => tracing::debug!("WebSocket upgrade failed: {e}"),
         }

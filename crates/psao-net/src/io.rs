@@ -1,6 +1,7 @@
 //! Type-erased byte streams (plain TCP, TLS, an upgraded HTTP connection) and a stream that
 //! gives back bytes already read from it.
 
+use std::io::IoSlice;
 use std::pin::Pin;
 use std::task::{Context, Poll};
 
@@ -58,6 +59,20 @@ impl AsyncWrite for Prefixed {
         Pin::new(&mut self.inner).poll_write(cx, buf)
     }
 
+    // Forwarded so that hyper writes response bodies straight from their shared buffers
+    // (`writev`) instead of copying each body into a buffer of every connection.
+    fn poll_write_vectored(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[IoSlice<'_>],
+    ) -> Poll<std::io::Result<usize>> {
+        Pin::new(&mut self.inner).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
+    }
+
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
         Pin::new(&mut self.inner).poll_flush(cx)
     }
@@ -81,5 +96,21 @@ mod tests {
         let mut all = Vec::new();
         p.read_to_end(&mut all).await.unwrap();
         assert_eq!(all, b"PSW1rest");
+    }
+
+    #[test]
+    fn vectored_writes_reach_a_tcp_stream_unflattened() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let tcp = tokio::net::TcpStream::connect(listener.local_addr().unwrap())
+                .await
+                .unwrap();
+            let p = Prefixed::new(Vec::new(), Box::new(tcp));
+            assert!(p.is_write_vectored());
+        });
     }
 }

@@ -7,9 +7,12 @@
 //! Everything here is a library: the `psao` binary only parses arguments, loads scenes and
 //! prints; another program can embed a server or a client the same way.
 
+pub mod access;
+pub mod admission;
 pub mod convert;
 pub mod corrective;
 pub mod cpu_time;
+pub mod deadline;
 mod error;
 pub mod glb;
 pub mod http;
@@ -17,6 +20,7 @@ pub mod io;
 pub mod pipeline;
 mod resolution;
 pub mod scale;
+pub mod secret;
 pub mod serve;
 pub mod start_cache;
 pub mod tls;

@@ -75,6 +75,9 @@ pub type FrameSink<'a> =
 const RECORD_MAX: u32 = 8;
 /// How long a leaving client waits for the server to close after its bye.
 const LEAVE_TIMEOUT: Duration = Duration::from_secs(3);
+/// Longest a session goes without sending: then a keep-alive goes out (the server drops
+/// clients silent for [`crate::serve::CLIENT_IDLE_TIMEOUT`]).
+pub const KEEP_ALIVE: Duration = Duration::from_secs(5);
 
 /// What a client run measured (`psao view --json` writes it).
 #[derive(Debug, Default, Serialize)]
@@ -110,6 +113,10 @@ pub struct ViewStats {
     pub corrective_state_hash: Option<String>,
     /// With corrections: samples received (over every session).
     pub samples: u64,
+    /// The server's last status text while updates were stalled (a scale-out edge waiting
+    /// for its trace nodes), and status messages received.
+    pub stalled: Option<String>,
+    pub status_messages: u32,
 }
 
 /// From the network task to the frame loop.
@@ -300,6 +307,8 @@ pub fn view(
             .as_ref()
             .map(|c| format!("{:016x}", c.state_hash())),
         samples: client.samples,
+        stalled: client.stalled.clone(),
+        status_messages: client.status_messages,
     };
     Ok(stats)
 }
@@ -333,6 +342,9 @@ struct Client {
     regions: Option<RegionsMsg>,
     /// Samples received over every session.
     samples: u64,
+    /// The last stall the server told of, and status messages received.
+    stalled: Option<String>,
+    status_messages: u32,
 }
 
 impl Default for Client {
@@ -359,6 +371,8 @@ impl Default for Client {
             corrective: None,
             regions: None,
             samples: 0,
+            stalled: None,
+            status_messages: 0,
         }
     }
 }
@@ -413,6 +427,15 @@ impl Client {
                         })
                     }
                     Message::Bye(b) => tracing::info!("server said bye: {}", b.reason),
+                    Message::Status(s) => {
+                        self.status_messages += 1;
+                        if s.stalled {
+                            tracing::warn!("the server's updates stalled: {}", s.text);
+                            self.stalled = Some(s.text);
+                        } else {
+                            tracing::info!("the server's updates flow again");
+                        }
+                    }
                     Message::Samples(samples) => {
                         let c = self.corrective.as_mut().ok_or_else(|| {
                             NetError::Protocol("samples from the server without asking".into())
@@ -575,7 +598,11 @@ async fn session(
             } else {
                 0
             };
-            capabilities::CODEC_PAPER | capabilities::CODEC_COMPACT | verify | corrective
+            capabilities::CODEC_PAPER
+                | capabilities::CODEC_COMPACT
+                | capabilities::STATUS
+                | verify
+                | corrective
         },
         token: args.token.clone(),
         name: format!("psao view {}", std::process::id()),
@@ -641,8 +668,26 @@ async fn session(
         }
     });
     let mut reader_task = reader_task;
+    // The server drops a client that sends nothing for a while: when no camera or ack went
+    // out for KEEP_ALIVE (a lockstep client waiting for the others), an ack of the last
+    // acknowledged frame (a no-op for the server) says this one is still there.
+    let mut last_ack = 0u64;
+    let mut keep_alive =
+        tokio::time::interval_at(tokio::time::Instant::now() + KEEP_ALIVE, KEEP_ALIVE);
+    keep_alive.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         tokio::select! {
+            _ = keep_alive.tick() => {
+                let frame = encode_frame(&Message::Ack(Ack { frame: last_ack }));
+                let sent = match frame {
+                    Ok(f) => writer.send(f).await.is_ok(),
+                    Err(_) => false,
+                };
+                if !sent {
+                    reader_task.abort();
+                    return Ok(SessionEnd::Reconnect("send failed".into()));
+                }
+            }
             item = delay_rx.recv() => {
                 let Some((due, m, size)) = item else {
                     let why = match (&mut reader_task).await {
@@ -675,6 +720,10 @@ async fn session(
                         return Ok(SessionEnd::Reconnect("dropped on purpose".into()));
                     }
                     Some(Outgoing::Send(m)) => {
+                        keep_alive.reset();
+                        if let Message::Ack(a) = &m {
+                            last_ack = a.frame;
+                        }
                         let bye = matches!(m, Message::Bye(_));
                         let sent = match encode_frame(&m) {
                             Ok(f) => writer.send(f).await.is_ok(),

@@ -5,7 +5,7 @@
 
 use psao_wire::{
     encode_frame, Ack, Bye, CameraMsg, Delta, ErrorCode, ErrorMsg, Hello, InstanceEntry, Message,
-    SceneTime, Welcome, PROTOCOL_VERSION,
+    SceneTime, StatusMsg, Welcome, PROTOCOL_VERSION,
 };
 use serde_json::{json, Value};
 
@@ -137,6 +137,14 @@ fn cases() -> Vec<(Message, Value)> {
                 reason: "done".into(),
             }),
             json!({"kind": "bye", "reason": "done"}),
+        ),
+        (
+            Message::Status(StatusMsg {
+                stalled: true,
+                text: "frame 9: the record batches of partitions [1] are missing".into(),
+            }),
+            json!({"kind": "status", "stalled": true,
+                   "text": "frame 9: the record batches of partitions [1] are missing"}),
         ),
     ]
 }

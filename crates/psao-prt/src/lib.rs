@@ -10,6 +10,7 @@
 
 pub mod character;
 mod error;
+pub mod filter;
 pub mod fit;
 pub mod lighting;
 pub mod model;

@@ -1,11 +1,9 @@
-//! Environment lighting: an equirectangular (latitude–longitude) radiance map, its order-4
-//! SH projection per colour channel, and rotation about the vertical axis.
-//!
-//! Convention: +Y is up (glTF). Pixel row `y` (0 at the top) has polar angle
-//! `θ = π (y + ½) / h` from +Y, column `x` azimuth `φ = 2π (x + ½) / w`, and the direction
-//! is `(sin θ cos φ, cos θ, sin θ sin φ)`.
+//! Environment lighting: an equirectangular (latitude–longitude) radiance map (the
+//! convention of [`psao_scene::LatLongMap`]), its order-4 SH projection per colour channel,
+//! and rotation about the vertical axis.
 
 use glam::{Mat3, Vec3};
+use psao_scene::LatLongMap;
 
 use crate::rotation::ShRotation;
 use crate::sh::{self, ShVec, COEFFS};
@@ -14,67 +12,49 @@ use crate::PrtError;
 /// Rec. 709 luminance weights.
 pub const LUMINANCE: [f32; 3] = [0.2126, 0.7152, 0.0722];
 
-/// A linear-radiance latitude–longitude map.
+/// A linear-radiance latitude–longitude map (the scene crate's map, with the SH projection
+/// relighting needs).
 #[derive(Clone, Debug)]
 pub struct EnvMap {
-    width: usize,
-    height: usize,
-    pixels: Vec<[f32; 3]>,
+    map: LatLongMap,
+}
+
+impl From<LatLongMap> for EnvMap {
+    fn from(map: LatLongMap) -> Self {
+        Self { map }
+    }
 }
 
 impl EnvMap {
     /// A map of `width × height` RGB pixels, row-major from the top; negative or
     /// non-finite values are refused.
     pub fn new(width: usize, height: usize, pixels: Vec<[f32; 3]>) -> Result<Self, PrtError> {
-        if width == 0 || height == 0 || pixels.len() != width * height {
-            return Err(PrtError::Parameter(format!(
-                "environment map {width}x{height} with {} pixels",
-                pixels.len()
-            )));
-        }
-        if pixels.iter().flatten().any(|v| !v.is_finite() || *v < 0.0) {
-            return Err(PrtError::Parameter(
-                "environment map has negative or non-finite radiance".into(),
-            ));
-        }
-        Ok(Self {
-            width,
-            height,
-            pixels,
-        })
+        let map = LatLongMap::new(width, height, pixels).map_err(PrtError::Parameter)?;
+        Ok(Self { map })
     }
 
     /// The direction at the centre of pixel (x, y).
     pub fn direction(&self, x: usize, y: usize) -> Vec3 {
-        let theta = std::f32::consts::PI * (y as f32 + 0.5) / self.height as f32;
-        let phi = std::f32::consts::TAU * (x as f32 + 0.5) / self.width as f32;
-        Vec3::new(
-            theta.sin() * phi.cos(),
-            theta.cos(),
-            theta.sin() * phi.sin(),
-        )
+        self.map.direction(x, y)
     }
 
     /// Radiance in direction `d` (unit), nearest pixel.
     pub fn radiance(&self, d: Vec3) -> [f32; 3] {
-        let theta = d.y.clamp(-1.0, 1.0).acos();
-        let phi = d.z.atan2(d.x).rem_euclid(std::f32::consts::TAU);
-        let y = ((theta / std::f32::consts::PI) * self.height as f32) as usize;
-        let x = ((phi / std::f32::consts::TAU) * self.width as f32) as usize;
-        self.pixels[y.min(self.height - 1) * self.width + x.min(self.width - 1)]
+        self.map.radiance(d)
     }
 
     /// Order-4 SH projection of each channel (pixel solid angles `Δφ Δθ sin θ`).
     pub fn project(&self) -> ShLighting {
         let mut rgb = [[0.0f64; COEFFS]; 3];
-        let dphi = std::f64::consts::TAU / self.width as f64;
-        let dtheta = std::f64::consts::PI / self.height as f64;
-        for y in 0..self.height {
+        let (width, height) = (self.map.width(), self.map.height());
+        let dphi = std::f64::consts::TAU / width as f64;
+        let dtheta = std::f64::consts::PI / height as f64;
+        for y in 0..height {
             let theta = (y as f64 + 0.5) * dtheta;
             let w = dphi * dtheta * theta.sin();
-            for x in 0..self.width {
+            for x in 0..width {
                 let basis = sh::eval_f64(self.direction(x, y).as_dvec3().normalize());
-                let p = self.pixels[y * self.width + x];
+                let p = self.map.pixels()[y * width + x];
                 for (c, acc) in rgb.iter_mut().enumerate() {
                     let v = w * p[c] as f64;
                     for (a, b) in acc.iter_mut().zip(&basis) {

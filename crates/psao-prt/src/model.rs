@@ -7,8 +7,12 @@
 //! (φ jumps by 2π) and are singular at the poles, so a lobe moving smoothly can have
 //! angles that jump, which no linear model fits; the 3 components vary as smoothly as the
 //! lobe. Training solves `A·X = B` in least squares with faer (thin SVD of the centred
-//! pose matrix, so every ridge value costs one product), the ridge chosen by the SH
-//! visibility error on frames held back from training.
+//! pose matrix, so every ridge value costs one product), the ridge chosen by blocked
+//! cross-validation: the time-ordered training frames are cut into contiguous blocks, each
+//! block is predicted by a model trained on the others, and the ridge with the lowest SH
+//! visibility error over all blocks is kept. A held-out block is a stretch of poses the
+//! model never saw, as in use; frames between training frames would reward a model that
+//! interpolates well and extrapolates wildly (no ridge).
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -30,6 +34,9 @@ const RIDGE_GRID: [f64; 9] = [0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1, 1.0
 /// Rounds at most of refitting the lobes from the model's own prediction (see [`train`]).
 const REFIT_ROUNDS: usize = 1;
 
+/// Contiguous blocks of the training frames in the ridge's cross-validation.
+const FOLDS: usize = 4;
+
 /// One posed frame of training or validation data.
 #[derive(Clone, Debug)]
 pub struct Sample {
@@ -45,10 +52,13 @@ pub struct TrainReport {
     /// Mean and standard deviation over training vertices×frames of the direct lobe fit's
     /// RMS error over the sphere.
     pub lobe_fit_error: (f32, f32),
-    /// Per ridge candidate (absolute λ): mean RMS SH error on the validation frames.
+    /// Per ridge candidate (relative to the largest squared singular value of the pose
+    /// matrix): mean RMS SH error on the held-out blocks of the cross-validation.
     pub ridge_errors: Vec<(f64, f32)>,
-    /// The chosen λ.
+    /// The chosen ridge (relative, as in `ridge_errors`).
     pub ridge: f64,
+    /// Mean RMS SH error of the model on the validation frames (0 without them).
+    pub validation_error: f32,
 }
 
 /// A trained linear pose model for one character.
@@ -66,6 +76,43 @@ pub struct PoseModel {
     pub active: Vec<u32>,
     /// Row-major `(1 + 3·active) × (vertices·lobes·7)`: row 0 is the constant.
     pub weights: Vec<f32>,
+    /// Where training's poses lie (empty: poses are not limited).
+    pub limits: PoseLimits,
+}
+
+/// The training poses' box in their principal axes: a pose is moved into it before
+/// prediction, so the model never extrapolates beyond the coordinates it was trained on
+/// along any principal axis; a pose of the training set is left as it is. Moving a pose
+/// back along an axis is blending the prediction towards that of the training mean along
+/// that axis (the model is linear). Directions in which training poses did not vary carry
+/// no weight in the model and are dropped.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PoseLimits {
+    /// Mean of the training pose vectors (without the constant), `3·active` numbers.
+    pub mean: Vec<f32>,
+    /// Orthonormal principal axes, row-major `axes × 3·active`.
+    pub axes: Vec<f32>,
+    /// Per axis: the least and greatest coordinate of a training pose.
+    pub range: Vec<[f32; 2]>,
+}
+
+impl PoseLimits {
+    /// Moves the pose features `x` (`3·active` numbers) into the box; no-op when empty.
+    pub fn apply(&self, x: &mut [f32]) {
+        let p = self.mean.len();
+        if self.range.is_empty() || x.len() != p {
+            return;
+        }
+        let d: Vec<f32> = x.iter().zip(&self.mean).map(|(a, m)| a - m).collect();
+        x.copy_from_slice(&self.mean);
+        for (axis, &[lo, hi]) in self.axes.chunks_exact(p).zip(&self.range) {
+            let c: f32 = axis.iter().zip(&d).map(|(a, b)| a * b).sum();
+            let c = c.clamp(lo, hi);
+            for (o, a) in x.iter_mut().zip(axis) {
+                *o += c * a;
+            }
+        }
+    }
 }
 
 impl PoseModel {
@@ -79,18 +126,17 @@ impl PoseModel {
         self.vertices * self.lobes * LOBE_DIM
     }
 
-    /// The pose vector for all skin joints' rotation vectors.
+    /// The pose vector for all skin joints' rotation vectors, moved within the training
+    /// poses' limits (see [`PoseLimits`]).
     pub fn pose_vector(&self, joint_rotations: &[Vec3]) -> Vec<f32> {
-        let mut a = Vec::with_capacity(self.pose_len());
-        a.push(1.0);
-        for &j in &self.active {
-            let r = joint_rotations
-                .get(j as usize)
-                .copied()
-                .unwrap_or(Vec3::ZERO);
-            a.extend_from_slice(&r.to_array());
-        }
+        let mut a = self.raw_pose_vector(joint_rotations);
+        self.limits.apply(&mut a[1..]);
         a
+    }
+
+    /// The pose vector as the rotations give it, not limited.
+    pub fn raw_pose_vector(&self, joint_rotations: &[Vec3]) -> Vec<f32> {
+        features(&self.active, joint_rotations)
     }
 
     /// Raw predicted outputs (`vertices·lobes·7` numbers) for `pose` (from
@@ -161,7 +207,8 @@ pub fn mean_std(values: impl Iterator<Item = f32>) -> (f32, f32) {
 }
 
 /// Fits `lobes` lobes per vertex to the time-ordered `train` frames (in correspondence) and
-/// solves the linear model, choosing the ridge on `validate`. `progress(done, total)` is
+/// solves the linear model, choosing the ridge by blocked cross-validation over `train`
+/// (see the module's doc); `validate` frames are only measured. `progress(done, total)` is
 /// called as vertices finish fitting.
 pub fn train(
     character: &str,
@@ -209,7 +256,6 @@ pub fn train(
             fits
         })
         .collect();
-    let solver = Solver::new(train, &active)?;
     let shape = Shape {
         character,
         vertices,
@@ -217,15 +263,15 @@ pub fn train(
         lobes,
         active: &active,
     };
-    let mut best = solver.solve(&shape, &fits, validate)?;
+    let mut best = solve(train, &shape, &fits)?;
     let mut lobe_fit_error = mean_std(fits.iter().flat_map(|f| f.errors.iter().copied()));
     // Refit rounds: each frame's lobes again, started from (and pulled towards) the model's
     // own prediction at that frame's pose instead of the previous frame's lobes, then the
     // model solved again. A lobe that the frame-to-frame fit let jump or swap roles with
     // another is moved back to what a linear function of the pose can follow (block
     // coordinate descent on fit error + closeness to a linear model). A round is kept only
-    // if it lowers the error on the validation frames.
-    if lobes > 1 && !validate.is_empty() {
+    // if it lowers the cross-validated error.
+    if lobes > 1 {
         for _ in 0..REFIT_ROUNDS {
             let predictions: Vec<Vec<f32>> = train
                 .iter()
@@ -251,8 +297,8 @@ pub fn train(
                     VertexFits::pack(&per_frame, out_dim)
                 })
                 .collect();
-            let candidate = solver.solve(&shape, &refits, validate)?;
-            if candidate.validation_error >= best.validation_error {
+            let candidate = solve(train, &shape, &refits)?;
+            if candidate.cv_error >= best.cv_error {
                 break;
             }
             best = candidate;
@@ -260,14 +306,78 @@ pub fn train(
             lobe_fit_error = mean_std(fits.iter().flat_map(|f| f.errors.iter().copied()));
         }
     }
+    let validation_error = if validate.is_empty() {
+        0.0
+    } else {
+        model_error(&best.model, validate).0
+    };
     Ok((
         best.model,
         TrainReport {
             lobe_fit_error,
             ridge_errors: best.ridge_errors,
             ridge: best.ridge,
+            validation_error,
         },
     ))
+}
+
+/// The model of `fits` over all of `train` with the ridge that cross-validates best.
+fn solve(train: &[Sample], shape: &Shape, fits: &[VertexFits]) -> Result<Solved, PrtError> {
+    let ridge_errors = cross_validate(train, shape, fits)?;
+    let (ridge, cv_error) = ridge_errors
+        .iter()
+        .copied()
+        .fold(None, |b: Option<(f64, f32)>, (r, e)| match b {
+            Some((_, be)) if be <= e => b,
+            _ => Some((r, e)),
+        })
+        .expect("the ridge grid is not empty");
+    let all: Vec<usize> = (0..train.len()).collect();
+    let solver = Solver::new(train, shape.active, &all)?;
+    let model = solver.model(shape, fits, ridge);
+    Ok(Solved {
+        model,
+        ridge_errors,
+        ridge,
+        cv_error,
+    })
+}
+
+/// Per ridge of [`RIDGE_GRID`]: the mean RMS SH error over the frames of every contiguous
+/// block of `train` predicted by the model trained on the other blocks ([`FOLDS`] blocks,
+/// fewer when there are under `2·FOLDS` frames; at least 2).
+fn cross_validate(
+    train: &[Sample],
+    shape: &Shape,
+    fits: &[VertexFits],
+) -> Result<Vec<(f64, f32)>, PrtError> {
+    let frames = train.len();
+    let folds = FOLDS.min(frames / 2).max(2).min(frames);
+    let mut sums = vec![0.0f64; RIDGE_GRID.len()];
+    let mut count = 0usize;
+    for k in 0..folds {
+        let (a, b) = (k * frames / folds, (k + 1) * frames / folds);
+        let rest: Vec<usize> = (0..frames).filter(|f| !(a..b).contains(f)).collect();
+        if rest.len() < 2 || a == b {
+            continue;
+        }
+        let solver = Solver::new(train, shape.active, &rest)?;
+        let prepared = solver.prepare_lobes(shape, fits);
+        for (sum, &rel) in sums.iter_mut().zip(&RIDGE_GRID) {
+            let model = solver.lobe_model(shape, &prepared, rel);
+            *sum += model_errors(&model, &train[a..b])
+                .iter()
+                .map(|&e| e as f64)
+                .sum::<f64>();
+        }
+        count += (b - a) * shape.vertices;
+    }
+    Ok(RIDGE_GRID
+        .iter()
+        .zip(sums)
+        .map(|(&r, s)| (r, (s / count.max(1) as f64) as f32))
+        .collect())
 }
 
 /// One vertex's fitted lobes over the training frames, packed `frames × (lobes·7)`, and
@@ -307,13 +417,21 @@ struct Solved {
     model: PoseModel,
     ridge_errors: Vec<(f64, f32)>,
     ridge: f64,
-    /// Mean RMS SH error on the validation frames (0 without them).
-    validation_error: f32,
+    /// Its ridge's cross-validated error.
+    cv_error: f32,
 }
 
-/// The least-squares side of training: the thin SVD of the centred pose matrix, shared by
-/// every right-hand side and ridge value.
+/// A right-hand side's part shared by every ridge (see [`Solver::prepare`]).
+struct Prepared {
+    utb: faer::Mat<f64>,
+    mean_b: Vec<f64>,
+}
+
+/// The least-squares side of training on some of the frames: the thin SVD of their centred
+/// pose matrix, shared by every right-hand side and ridge value.
 struct Solver {
+    /// The training frames used (indices).
+    rows: Vec<usize>,
     mean_a: Vec<f64>,
     u: faer::Mat<f64>,
     s: Vec<f64>,
@@ -321,11 +439,12 @@ struct Solver {
 }
 
 impl Solver {
-    fn new(train: &[Sample], active: &[u32]) -> Result<Self, PrtError> {
-        let frames = train.len();
+    fn new(train: &[Sample], active: &[u32], rows: &[usize]) -> Result<Self, PrtError> {
+        let frames = rows.len();
         let p = 3 * active.len();
-        let feats: Vec<Vec<f64>> = train
+        let feats: Vec<Vec<f64>> = rows
             .iter()
+            .map(|&f| &train[f])
             .map(|s| {
                 active
                     .iter()
@@ -349,6 +468,7 @@ impl Solver {
             .map_err(|e| PrtError::Solve(format!("SVD did not converge: {e:?}")))?;
         let s = svd.S().column_vector();
         Ok(Self {
+            rows: rows.to_vec(),
             mean_a,
             u: svd.U().to_owned(),
             s: (0..s.nrows()).map(|i| s[i]).collect(),
@@ -356,84 +476,110 @@ impl Solver {
         })
     }
 
-    /// Solves `A·X = B` for the packed lobes `fits` with the ridge (among [`RIDGE_GRID`])
-    /// that gives the lowest error on `validate` (the first when there is none).
-    fn solve(
-        &self,
-        shape: &Shape,
-        fits: &[VertexFits],
-        validate: &[Sample],
-    ) -> Result<Solved, PrtError> {
-        let frames = self.u.nrows();
-        let out_dim = shape.lobes * LOBE_DIM;
-        let cols = shape.vertices * out_dim;
-        let p = self.mean_a.len();
-        // B: frames × (vertices·out_dim), column v·out_dim + k.
-        let value = |f: usize, c: usize| fits[c / out_dim].packed[f * out_dim + c % out_dim] as f64;
+    /// The right-hand side's part shared by every ridge, for `B` with `cols` columns whose
+    /// entry at training frame `f` and column `c` is `value(f, c)`: `Uᵀ·B` (B centred)
+    /// and B's column means.
+    fn prepare(&self, cols: usize, value: impl Fn(usize, usize) -> f64 + Sync) -> Prepared {
+        let frames = self.rows.len();
         let mean_b: Vec<f64> = (0..cols)
-            .map(|c| (0..frames).map(|f| value(f, c)).sum::<f64>() / frames as f64)
+            .map(|c| self.rows.iter().map(|&f| value(f, c)).sum::<f64>() / frames as f64)
             .collect();
-        let bc = faer::Mat::<f64>::from_fn(frames, cols, |f, c| value(f, c) - mean_b[c]);
+        let bc = faer::Mat::<f64>::from_fn(frames, cols, |i, c| value(self.rows[i], c) - mean_b[c]);
+        Prepared {
+            utb: self.u.transpose() * &bc,
+            mean_b,
+        }
+    }
+
+    /// The weights (row-major `(1 + p) × cols`, row 0 the constant) solving `A·X = B`
+    /// (prepared by [`Self::prepare`]) with the ridge `relative` times the largest squared
+    /// singular value.
+    fn weights(&self, prepared: &Prepared, relative: f64) -> Vec<f32> {
+        let Prepared { utb, mean_b } = prepared;
+        let cols = utb.ncols();
+        let p = self.mean_a.len();
         let s = &self.s;
         let rank = s.len();
-        let utb = self.u.transpose() * &bc; // rank × cols
-        drop(bc);
         let smax2 = s.iter().map(|x| x * x).fold(0.0f64, f64::max).max(1e-300);
-        let build = |lambda: f64| -> Vec<f32> {
-            // X = V diag(s / (s² + λ)) Uᵀ Bc, then the constant row folded in.
-            let scaled = faer::Mat::<f64>::from_fn(rank, cols, |i, c| {
-                let si = s[i];
-                let g = if si * si > 1e-12 * smax2 {
-                    si / (si * si + lambda)
-                } else {
-                    0.0
-                };
-                g * utb[(i, c)]
-            });
-            let x = &self.v * &scaled; // p × cols
-            let mut w = vec![0.0f32; (1 + p) * cols];
-            for c in 0..cols {
-                let mut bias = mean_b[c];
-                for k in 0..p {
-                    bias -= self.mean_a[k] * x[(k, c)];
-                    w[(1 + k) * cols + c] = x[(k, c)] as f32;
-                }
-                w[c] = bias as f32;
-            }
-            w
-        };
-        let mut ridge_errors = Vec::new();
-        let mut best: Option<(f32, f64, PoseModel)> = None;
-        for rel in RIDGE_GRID {
-            let lambda = rel * smax2;
-            let model = PoseModel {
-                character: shape.character.to_string(),
-                vertices: shape.vertices,
-                joints: shape.joints,
-                lobes: shape.lobes,
-                active: shape.active.to_vec(),
-                weights: build(lambda),
-            };
-            let err = if validate.is_empty() {
-                0.0
+        let lambda = relative * smax2;
+        // X = V diag(s / (s² + λ)) Uᵀ Bc, then the constant row folded in.
+        let scaled = faer::Mat::<f64>::from_fn(rank, cols, |i, c| {
+            let si = s[i];
+            let g = if si * si > 1e-12 * smax2 {
+                si / (si * si + lambda)
             } else {
-                model_error(&model, validate).0
+                0.0
             };
-            ridge_errors.push((lambda, err));
-            if best.as_ref().map_or(true, |(e, _, _)| err < *e) {
-                best = Some((err, lambda, model));
+            g * utb[(i, c)]
+        });
+        let x = &self.v * &scaled; // p × cols
+        let mut w = vec![0.0f32; (1 + p) * cols];
+        for c in 0..cols {
+            let mut bias = mean_b[c];
+            for k in 0..p {
+                bias -= self.mean_a[k] * x[(k, c)];
+                w[(1 + k) * cols + c] = x[(k, c)] as f32;
             }
-            if validate.is_empty() {
-                break;
-            }
+            w[c] = bias as f32;
         }
-        let (validation_error, ridge, model) = best.expect("the ridge grid is not empty");
-        Ok(Solved {
-            model,
-            ridge_errors,
-            ridge,
-            validation_error,
+        w
+    }
+
+    /// The pose model of the packed lobes `fits` with ridge `relative`.
+    fn model(&self, shape: &Shape, fits: &[VertexFits], relative: f64) -> PoseModel {
+        let prepared = self.prepare_lobes(shape, fits);
+        self.lobe_model(shape, &prepared, relative)
+    }
+
+    /// [`Self::prepare`] for packed lobes.
+    fn prepare_lobes(&self, shape: &Shape, fits: &[VertexFits]) -> Prepared {
+        let out_dim = shape.lobes * LOBE_DIM;
+        self.prepare(shape.vertices * out_dim, |f, c| {
+            fits[c / out_dim].packed[f * out_dim + c % out_dim] as f64
         })
+    }
+
+    /// The pose model of prepared lobes with ridge `relative`.
+    fn lobe_model(&self, shape: &Shape, prepared: &Prepared, relative: f64) -> PoseModel {
+        PoseModel {
+            character: shape.character.to_string(),
+            vertices: shape.vertices,
+            joints: shape.joints,
+            lobes: shape.lobes,
+            active: shape.active.to_vec(),
+            weights: self.weights(prepared, relative),
+            limits: self.limits(),
+        }
+    }
+
+    /// The box of this solver's poses in their principal axes (those with weight).
+    fn limits(&self) -> PoseLimits {
+        let p = self.mean_a.len();
+        let smax2 = self
+            .s
+            .iter()
+            .map(|x| x * x)
+            .fold(0.0f64, f64::max)
+            .max(1e-300);
+        let mut limits = PoseLimits {
+            mean: self.mean_a.iter().map(|&m| m as f32).collect(),
+            ..PoseLimits::default()
+        };
+        if p == 0 {
+            return limits;
+        }
+        for (i, &si) in self.s.iter().enumerate() {
+            if si * si <= 1e-12 * smax2 {
+                continue;
+            }
+            limits.axes.extend((0..p).map(|k| self.v[(k, i)] as f32));
+            // Coordinates of the training poses on axis i: U[f, i] · s_i.
+            let (lo, hi) = (0..self.u.nrows())
+                .map(|f| self.u[(f, i)] * si)
+                .fold((f64::MAX, f64::MIN), |(lo, hi), c| (lo.min(c), hi.max(c)));
+            limits.range.push([lo as f32, hi as f32]);
+        }
+        limits
     }
 }
 
@@ -474,4 +620,63 @@ fn active_joints(train: &[Sample]) -> Vec<u32> {
         })
         .map(|j| j as u32)
         .collect()
+}
+
+/// The paper's Fig. 3 (§3.2) measured: the error of `lobes` zonal lobes fitted to plain
+/// SH visibility, of lobes fitted to cosine-weighted visibility (the diffuse transfer
+/// vector: the clamped-cosine operator applied to visibility), and of the plain fit
+/// convolved with the clamped cosine afterwards, the last two against the traced
+/// cosine-weighted visibility. Mean and standard deviation over vertices×frames of the RMS
+/// over the sphere.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShFitErrors {
+    /// Lobes fitted to plain visibility vs the visibility.
+    pub plain: (f32, f32),
+    /// Lobes fitted to cosine-weighted visibility vs that.
+    pub cosine: (f32, f32),
+    /// The plain fit convolved with the clamped cosine vs cosine-weighted visibility.
+    pub plain_convolved: (f32, f32),
+}
+
+/// [`ShFitErrors`] of `lobes` lobes per vertex over `frames` (each vertex and frame fitted
+/// on its own, greedily started).
+pub fn cosine_fit_errors(frames: &[Sample], lobes: usize) -> ShFitErrors {
+    let op = crate::phong::PhongOperator::diffuse();
+    let errors: Vec<[f32; 3]> = frames
+        .iter()
+        .flat_map(|s| &s.visibility)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|v| {
+            let cosine = op.apply(v);
+            let (plain_fit, _) = fit_lobes(v, lobes, None);
+            let plain_sh = crate::zonal::lobes_to_sh(&plain_fit);
+            let (cosine_fit, _) = fit_lobes(&cosine, lobes, None);
+            [
+                rms_difference(&plain_sh, v),
+                rms_difference(&crate::zonal::lobes_to_sh(&cosine_fit), &cosine),
+                rms_difference(&op.apply(&plain_sh), &cosine),
+            ]
+        })
+        .collect();
+    let column = |k: usize| mean_std(errors.iter().map(|e| e[k]));
+    ShFitErrors {
+        plain: column(0),
+        cosine: column(1),
+        plain_convolved: column(2),
+    }
+}
+
+/// `[1, rotation vectors of the active joints…]`.
+fn features(active: &[u32], joint_rotations: &[Vec3]) -> Vec<f32> {
+    let mut a = Vec::with_capacity(1 + 3 * active.len());
+    a.push(1.0);
+    for &j in active {
+        let r = joint_rotations
+            .get(j as usize)
+            .copied()
+            .unwrap_or(Vec3::ZERO);
+        a.extend_from_slice(&r.to_array());
+    }
+    a
 }

@@ -2,18 +2,20 @@
 //!
 //! Layout, little-endian: magic `PSAOPRT\0`, format version (u32), character name (u32
 //! length + UTF-8), vertices, joints, lobes, active-joint count (u32 each), the active joint
-//! indices (u32 each), the weights (f32 each, `(1 + 3·active) × vertices·lobes·7`), and an
-//! FNV-1a 64 checksum of everything before it. Every count is checked against the bytes
+//! indices (u32 each), the pose limits (their axis count `r` (u32; 0: none), then only when
+//! `r > 0` the mean (`3·active` f32), the axes (`r × 3·active` f32) and per axis its least
+//! and greatest coordinate (f32 each)), the weights (f32 each,
+//! `(1 + 3·active) × vertices·lobes·7`), and an FNV-1a 64 checksum of everything before it. Every count is checked against the bytes
 //! that remain before anything is allocated, so truncated, foreign or corrupt files get an
 //! error, never a panic or a huge allocation.
 
-use crate::model::{PoseModel, LOBE_DIM};
+use crate::model::{PoseLimits, PoseModel, LOBE_DIM};
 use crate::PrtError;
 
 /// First bytes of every model file.
 pub const MAGIC: &[u8; 8] = b"PSAOPRT\0";
 /// The format version written and accepted.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Longest character name accepted.
 const MAX_NAME: usize = 4096;
 
@@ -41,6 +43,18 @@ pub fn to_bytes(model: &PoseModel) -> Vec<u8> {
     }
     for &j in &model.active {
         u32s(&mut out, j);
+    }
+    let limits = &model.limits;
+    u32s(&mut out, limits.range.len() as u32);
+    if !limits.range.is_empty() {
+        for v in limits
+            .mean
+            .iter()
+            .chain(&limits.axes)
+            .chain(limits.range.iter().flatten())
+        {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
     }
     for w in &model.weights {
         out.extend_from_slice(&w.to_le_bytes());
@@ -71,6 +85,17 @@ impl<'a> Reader<'a> {
     fn u32(&mut self, what: &str) -> Result<u32, PrtError> {
         let b = self.take(4, what)?;
         Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+    /// `n` f32 values (the bytes checked before anything is allocated).
+    fn f32s(&mut self, n: usize, what: &str) -> Result<Vec<f32>, PrtError> {
+        let bytes = n
+            .checked_mul(4)
+            .ok_or_else(|| PrtError::Model(format!("{what}: count overflows")))?;
+        Ok(self
+            .take(bytes, what)?
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect())
     }
 }
 
@@ -119,18 +144,34 @@ pub fn from_bytes(bytes: &[u8]) -> Result<PoseModel, PrtError> {
     if let Some(&j) = active.iter().find(|&&j| j as usize >= joints) {
         return Err(PrtError::Model(format!("active joint {j} of {joints}")));
     }
+    let axes = r.u32("pose axis count")? as usize;
+    let p = 3 * active_len;
+    if axes > p {
+        return Err(PrtError::Model(format!(
+            "{axes} pose axes for {p} pose numbers"
+        )));
+    }
+    let limits = if axes == 0 {
+        PoseLimits::default()
+    } else {
+        let mean = r.f32s(p, "pose mean")?;
+        let axis_values = r.f32s(axes * p, "pose axes")?;
+        let range = r
+            .f32s(2 * axes, "pose ranges")?
+            .chunks_exact(2)
+            .map(|c| [c[0], c[1]])
+            .collect();
+        PoseLimits {
+            mean,
+            axes: axis_values,
+            range,
+        }
+    };
     let count = (1 + 3 * active_len)
         .checked_mul(vertices)
         .and_then(|n| n.checked_mul(lobes * LOBE_DIM))
         .ok_or_else(|| PrtError::Model("weight count overflows".into()))?;
-    let weight_bytes = count
-        .checked_mul(4)
-        .ok_or_else(|| PrtError::Model("weight count overflows".into()))?;
-    let body = r.take(weight_bytes, "weights")?;
-    let weights: Vec<f32> = body
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
+    let weights = r.f32s(count, "weights")?;
     let end = r.at;
     let sum: [u8; 8] = r.take(8, "checksum")?.try_into().expect("8 bytes");
     if r.at != bytes.len() {
@@ -145,8 +186,14 @@ pub fn from_bytes(bytes: &[u8]) -> Result<PoseModel, PrtError> {
             "checksum mismatch: the file is corrupt".into(),
         ));
     }
-    if weights.iter().any(|w| !w.is_finite()) {
-        return Err(PrtError::Model("non-finite weight".into()));
+    if weights
+        .iter()
+        .chain(&limits.mean)
+        .chain(&limits.axes)
+        .chain(limits.range.iter().flatten())
+        .any(|w| !w.is_finite())
+    {
+        return Err(PrtError::Model("non-finite weight or pose limit".into()));
     }
     Ok(PoseModel {
         character,
@@ -155,6 +202,7 @@ pub fn from_bytes(bytes: &[u8]) -> Result<PoseModel, PrtError> {
         lobes,
         active,
         weights,
+        limits,
     })
 }
 
@@ -170,6 +218,11 @@ mod tests {
             lobes: 1,
             active: vec![0, 2],
             weights: (0..7 * 7 * 2).map(|i| i as f32 * 0.5).collect(),
+            limits: PoseLimits {
+                mean: vec![0.1; 6],
+                axes: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                range: vec![[-0.5, 0.25]],
+            },
         }
     }
 

@@ -79,7 +79,7 @@ pub fn reference_shading<R: Radiance + ?Sized>(
                 rays.clear();
                 dirs.clear();
                 for i in 0..samples {
-                    let (u1, u2) = sample_2d(seed, v as u64, i);
+                    let (u1, u2) = sample_2d(seed, pose.keys[v], i);
                     let d = match alpha {
                         Some(a) => phong_sample(axis, a, u1, u2),
                         None => cosine_hemisphere(axis, u1, u2),
@@ -108,7 +108,7 @@ pub fn reference_shading<R: Radiance + ?Sized>(
                     Mode::Translucent { transmission } => {
                         let mut back = [0.0f32; 3];
                         for i in 0..samples {
-                            let (u1, u2) = sample_2d(seed ^ 0x6261_636b, v as u64, i);
+                            let (u1, u2) = sample_2d(seed ^ 0x6261_636b, pose.keys[v], i);
                             let l = env.radiance_from(to_env * cosine_hemisphere(-n, u1, u2));
                             for c in 0..3 {
                                 back[c] += l[c];
@@ -144,19 +144,12 @@ mod tests {
         ];
         let normals = vec![Vec3::Z; 5];
         let mesh = Mesh {
-            positions: positions.clone(),
-            normals: normals.clone(),
+            positions,
+            normals,
             indices: vec![[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1]],
             ..Mesh::default()
         };
-        let pose = CharacterPose {
-            time: 0.0,
-            positions,
-            normals,
-            frames: vec![Mat3::IDENTITY; 5],
-            transform: Affine3A::IDENTITY,
-            joint_rotations: vec![],
-        };
+        let pose = CharacterPose::of_mesh(&mesh, vec![Mat3::IDENTITY; 5], Affine3A::IDENTITY);
         (mesh, pose)
     }
 

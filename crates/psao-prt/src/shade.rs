@@ -6,6 +6,7 @@ use glam::{Affine3A, Mat3, Vec3};
 use psao_trace::ao::orthonormal_basis;
 use rayon::prelude::*;
 
+use crate::filter::{Filter, Prepared};
 use crate::model::PoseModel;
 use crate::phong::PhongOperator;
 use crate::rotation::ShRotation;
@@ -140,6 +141,8 @@ impl HorizonTable {
 /// Prepared operators for one mode.
 pub struct Shader {
     mode: Mode,
+    /// What is done to visibility before shading (see [`crate::filter`]).
+    filter: Prepared,
     op: PhongOperator,
     /// Phong's horizon (None for the modes whose lobes are about the normal).
     horizon: Option<HorizonTable>,
@@ -148,8 +151,13 @@ pub struct Shader {
 }
 
 impl Shader {
-    /// Operators for `mode`.
+    /// Operators for `mode`, visibility unfiltered.
     pub fn new(mode: Mode) -> Result<Self, PrtError> {
+        Self::with_filter(mode, Filter::default())
+    }
+
+    /// Operators for `mode`, visibility filtered by `filter` before shading.
+    pub fn with_filter(mode: Mode, filter: Filter) -> Result<Self, PrtError> {
         let mode = mode.validate()?;
         let op = match mode {
             Mode::Phong { alpha } => PhongOperator::new(alpha),
@@ -170,6 +178,7 @@ impl Shader {
         };
         Ok(Self {
             mode,
+            filter: Prepared::new(filter),
             op,
             horizon,
             back,
@@ -179,6 +188,11 @@ impl Shader {
     /// The mode.
     pub fn mode(&self) -> Mode {
         self.mode
+    }
+
+    /// The visibility filter.
+    pub fn filter(&self) -> Filter {
+        self.filter.filter()
     }
 
     /// Shades every vertex under `lights` (SH radiance in world space, one vector per
@@ -238,7 +252,7 @@ impl Shader {
                         None => (None, 1.0),
                     };
                     // Visibility in the BRDF frame.
-                    let vis: ShVec = match (visibility, brdf) {
+                    let mut vis: ShVec = match (visibility, brdf) {
                         (Visibility::Unshadowed, _) => unit,
                         (Visibility::Projected(sh), None) => sh[v],
                         (Visibility::Projected(sh), Some(g)) => {
@@ -254,6 +268,9 @@ impl Shader {
                             out
                         }
                     };
+                    if !matches!(visibility, Visibility::Unshadowed) {
+                        self.filter.apply(&mut vis);
+                    }
                     let transfer = self.op.apply(&vis);
                     let frame = brdf.map_or(local_to_world, |g| local_to_world * g);
                     let to_frame = ShRotation::new(frame.transpose());
@@ -336,6 +353,7 @@ mod tests {
             lobes: 1,
             active: vec![],
             weights: vec![],
+            limits: Default::default(),
         };
         let raw = [lobe.axis.x, lobe.axis.y, lobe.axis.z, 1.5, 1.2, 0.6, 0.2];
         let sh = [lobe.to_sh()];

@@ -24,24 +24,31 @@ const RAY_LENGTH: f32 = 1.0e30;
 /// Vertices per parallel task.
 const CHUNK: usize = 64;
 
-/// Ray queries against the character's own deforming mesh.
+/// Ray queries against the character's own deforming mesh and the rigid meshes of its file.
 pub struct SelfTracer {
     tracer: Tracer,
+    positions: Vec<Vec3>,
 }
 
 impl SelfTracer {
-    /// A tracer holding only `mesh` (its bind pose), in mesh-local space.
+    /// A tracer holding only `mesh` (e.g. [`crate::character::Character::occluder_mesh`]:
+    /// the relit vertices first, then the rigid occluders').
     pub fn new(mesh: &Mesh) -> Result<Self, PrtError> {
         let scene = Scene::of_meshes(vec![mesh.clone()]);
         Ok(Self {
             tracer: Tracer::new(Backend::default(), &scene, GeometryMode::Primary)?,
+            positions: Vec::new(),
         })
     }
 
-    /// Moves the mesh to the pose's skinned positions (refit, or rebuild once refits degraded).
+    /// Moves the mesh to the pose's positions followed by its occluders' (refit, or
+    /// rebuild once refits degraded).
     pub fn set_pose(&mut self, pose: &CharacterPose) -> Result<(), PrtError> {
+        self.positions.clear();
+        self.positions.extend_from_slice(&pose.positions);
+        self.positions.extend_from_slice(&pose.occluders);
         self.tracer
-            .update_deforming_mesh(0, &pose.positions, DEFAULT_MAX_COST_RATIO)?;
+            .update_deforming_mesh(0, &self.positions, DEFAULT_MAX_COST_RATIO)?;
         self.tracer.commit();
         Ok(())
     }
@@ -74,7 +81,7 @@ pub fn lower_hemisphere() -> ShVec {
 /// Per vertex of `pose` (traced by `tracer`, already set to the pose): the SH projection of
 /// binary visibility to infinity in the vertex's local frame, from `rays` stratified
 /// uniform directions over the upper hemisphere (R2 sequence, rotation hashed from `seed`
-/// and the vertex), the lower hemisphere counted as visible (see the module's doc). Runs
+/// and the vertex's key), the lower hemisphere counted as visible (see the module's doc). Runs
 /// on all rayon threads; the result depends only on the inputs and `seed`.
 pub fn visibility_sh(
     tracer: &SelfTracer,
@@ -99,7 +106,7 @@ pub fn visibility_sh(
                 batch.clear();
                 local.clear();
                 for i in 0..rays {
-                    let (u1, u2) = sample_2d(seed, v as u64, i);
+                    let (u1, u2) = sample_2d(seed, pose.keys[v], i);
                     let d = uniform_hemisphere(u1, u2);
                     local.push(d);
                     batch.push(Ray::new(origin, frame * d, RAY_LENGTH));

@@ -55,7 +55,7 @@ fn a_scene_without_a_skin_is_refused() {
 fn visibility_is_deterministic_and_in_range() {
     let Some(fox) = fox("Walk") else { return };
     let pose = fox.pose(0.3);
-    let mut tracer = SelfTracer::new(fox.mesh()).unwrap();
+    let mut tracer = SelfTracer::new(fox.occluder_mesh()).unwrap();
     tracer.set_pose(&pose).unwrap();
     let a = visibility_sh(&tracer, &pose, 64, 7);
     let b = rayon::ThreadPoolBuilder::new()
@@ -83,7 +83,7 @@ fn visibility_is_deterministic_and_in_range() {
 #[test]
 fn two_lobes_fit_better_than_one_and_the_model_predicts_held_out_frames() {
     let Some(fox) = fox("Walk") else { return };
-    let mut tracer = SelfTracer::new(fox.mesh()).unwrap();
+    let mut tracer = SelfTracer::new(fox.occluder_mesh()).unwrap();
     let mut sample = |t: f32| {
         let pose = fox.pose(t);
         tracer.set_pose(&pose).unwrap();

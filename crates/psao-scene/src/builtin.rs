@@ -24,7 +24,8 @@ use crate::model::{Instance, Material, Mesh, Node, Scene, DEFAULT_AO_RADIUS};
 /// pendulum; their base colours are those of the diffuse materials they had, so the base image
 /// and the AO are as without them. One sun light, from the direction of the client's default
 /// shading, with the irradiance `0.5·π` that makes a white Lambertian surface as bright as the
-/// client's direct term.
+/// client's direct term, and three rectangular light panels under the ceiling that light the
+/// closed hall inside.
 pub fn default_scene() -> Scene {
     let mut b = SceneBuilder::default();
     let palette = Palette::new(&mut b);
@@ -39,6 +40,7 @@ pub fn default_scene() -> Scene {
         color: Vec3::ONE,
         power: 0.5 * std::f32::consts::PI,
     });
+    scene.lights.extend(hall::lights());
     scene.playing = (0..scene.animations.len()).collect();
     scene.ao_radius = DEFAULT_AO_RADIUS;
     scene

@@ -41,10 +41,26 @@ use crate::error::{read_file, SceneError};
 use crate::model::Mesh;
 use crate::model::{AlphaMode, Animation, Instance, Material, Scene, DEFAULT_AO_RADIUS};
 
-/// Loads a `.gltf` or `.glb` file (the format is detected from the content).
+/// Loads a `.gltf` or `.glb` file (the format is detected from the content). The files its
+/// buffers and images name must be regular files inside its folder.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    let bad = |e: ::gltf::Error| SceneError::parse(path, "glTF", e.to_string());
     let bytes = read_file(path)?;
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    parse(bytes, path, Some(folder))
+}
+
+/// Loads glTF or GLB bytes held in memory (`label` names them in errors); they may use data
+/// URIs and the GLB chunk but name no files.
+pub fn load_from_bytes(bytes: Vec<u8>, label: &Path) -> Result<Scene, SceneError> {
+    parse(bytes, label, None)
+}
+
+/// Parses glTF or GLB `bytes` whose external files lie in `folder`.
+fn parse(bytes: Vec<u8>, path: &Path, folder: Option<&Path>) -> Result<Scene, SceneError> {
+    let bad = |e: ::gltf::Error| SceneError::parse(path, "glTF", e.to_string());
     if bytes.is_empty() {
         return Err(SceneError::parse(path, "glTF", "file is empty"));
     }
@@ -54,8 +70,8 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let root = document.into_json();
     precheck::precheck(&root, path)?;
     let document = guard(path, || Document::from_json(root))?.map_err(bad)?;
-    let buffers = buffers::load_buffers(&document, blob, path)?;
-    let masks = images::mask_images(&document, &buffers, path)?;
+    let buffers = buffers::load_buffers(&document, blob, path, folder)?;
+    let masks = images::mask_images(&document, &buffers, path, folder)?;
     build(
         &document,
         &BufferData {

@@ -309,8 +309,12 @@ pub struct Scene {
     pub walkers: Vec<Walker>,
     /// AO ray length in scene units (DESIGN §2 default 0.6).
     pub ao_radius: f32,
-    /// Light sources for ray-traced corrections.
+    /// Light sources (their placement at scene time 0; see [`Scene::lights_at`]).
     pub lights: Vec<crate::light::Light>,
+    /// Suns whose direction follows keys over time.
+    pub sun_keys: Vec<crate::light::SunKeys>,
+    /// Light from directions where rays leave the scene.
+    pub environment: crate::environment::Environment,
 }
 
 /// Default AO radius in metres (DESIGN §2).
@@ -352,6 +356,24 @@ impl Scene {
         self.materials.get(m.material).is_none_or(|mat| {
             mat.opaque_at(mat.has_texel_mask().then(|| m.uv_at(tri, bary)).flatten())
         })
+    }
+
+    /// The lights at scene time `time` seconds: keyed suns turned to their direction then.
+    pub fn lights_at(&self, time: f32) -> Vec<crate::light::Light> {
+        let mut lights = self.lights.clone();
+        for keys in &self.sun_keys {
+            if let Some(l) = lights.get_mut(keys.light) {
+                l.shape = crate::light::LightShape::Sun {
+                    direction: keys.direction_at(time),
+                };
+            }
+        }
+        lights
+    }
+
+    /// Whether any light moves over time.
+    pub fn lights_move(&self) -> bool {
+        !self.sun_keys.is_empty()
     }
 
     /// Total triangle count over all instances.

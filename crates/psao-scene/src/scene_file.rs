@@ -3,6 +3,11 @@
 //! ```toml
 //! ao_radius = 0.6                       # optional, default model::DEFAULT_AO_RADIUS
 //! camera_paths = ["../paths/x.toml"]    # optional, relative to the scene file
+//! environment = "../data/sky.hdr"       # optional: Radiance HDR latitude–longitude map, relative
+//! environment_intensity = 1.0           # optional (1), ≥ 0: factor on the map
+//! environment_rotation_deg = 0.0        # optional (0): turn of the map about +Y
+//! sky = [0.6, 0.6, 0.6]                 # optional, without `environment`: constant sky radiance
+//!                                       #   (default environment::DEFAULT_SKY)
 //! [[asset]]
 //! file = "../data/sponza.obj"           # relative to the scene file; "builtin:default" = built-in scene
 //! translation = [0.0, 0.0, 0.0]         # optional
@@ -22,9 +27,10 @@
 //! format = "f16"                        # optional: in-memory bricks for .vdb (f32|f16|unorm8|bc4|bc7)
 //! frame = 0                             # optional: the flip-book frame used (no playback)
 //!
-//! [[light]]                             # optional, any number: lights for ray-traced corrections
+//! [[light]]                             # optional, any number: lights of the diffuse lighting and corrections
 //! kind = "sun"                          # sun | point | rect
 //! direction = [0.35, 1.0, 0.6]          # sun: towards the light
+//! keys = { times = [0, 30], direction = [[1, 1, 0], [-1, 1, 0]] } # sun, instead of direction: turns over time
 //! position = [0.0, 3.0, 0.0]            # point; rect: its centre
 //! size = [1.0, 0.5]                     # rect: edge lengths
 //! normal = [0.0, -1.0, 0.0]             # rect: the side it emits to (default down)
@@ -39,6 +45,8 @@
 //! ```
 //!
 //! Lights of the built-in default scene come along with it (moved by the asset transform).
+//! A sun's `keys` turn its direction over scene time: spherical interpolation between
+//! consecutive keys (which must not be opposite), looping over the last key time.
 //!
 //! `file` may also be `builtin:sphere` (radius 0.5), `builtin:box` (1 m cube) or
 //! `builtin:cylinder` (radius 0.5, 1 m high, standing on y = 0), each centred on the origin
@@ -67,6 +75,7 @@ use crate::model::{Node, Scene, DEFAULT_AO_RADIUS};
 
 mod motion;
 mod shading;
+mod sky;
 mod volume;
 
 use motion::{KeysEntry, WalkEntry};
@@ -90,6 +99,10 @@ struct SceneFile {
     light: Vec<shading::LightEntry>,
     #[serde(default)]
     material: Vec<shading::MaterialEntry>,
+    environment: Option<String>,
+    environment_intensity: Option<f32>,
+    environment_rotation_deg: Option<f32>,
+    sky: Option<[f32; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -205,9 +218,18 @@ pub fn load(path: &Path) -> Result<LoadedScene, SceneError> {
 
     shading::apply_overrides(&mut scene, &file.material).map_err(bad)?;
     for (i, entry) in file.light.iter().enumerate() {
-        let light = shading::light(entry).map_err(|m| bad(format!("light {i}: {m}")))?;
+        let (light, keys) = shading::light(entry, scene.lights.len())
+            .map_err(|m| bad(format!("light {i}: {m}")))?;
         scene.lights.push(light);
+        scene.sun_keys.extend(keys);
     }
+    let sky = sky::SkyEntries {
+        environment: file.environment.as_deref(),
+        intensity: file.environment_intensity,
+        rotation_deg: file.environment_rotation_deg,
+        sky: file.sky,
+    };
+    scene.environment = sky::environment(&sky, dir, bad)?;
 
     if file.volume.len() > 1 {
         return Err(bad(format!(
@@ -384,6 +406,8 @@ mod tests {
             walkers: Vec::new(),
             ao_radius: DEFAULT_AO_RADIUS,
             lights: Vec::new(),
+            sun_keys: Vec::new(),
+            environment: Default::default(),
         }
     }
 

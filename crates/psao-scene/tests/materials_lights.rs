@@ -149,7 +149,7 @@ power = 10.0
 }
 
 #[test]
-fn the_default_scene_brings_its_sun_through_a_scene_file() {
+fn the_default_scene_brings_its_sun_and_panels_through_a_scene_file() {
     let tmp = tempfile::tempdir().unwrap();
     let p = write(
         tmp.path(),
@@ -157,7 +157,8 @@ fn the_default_scene_brings_its_sun_through_a_scene_file() {
         "[[asset]]\nfile = \"builtin:default\"\nrotation_deg = [0.0, 90.0, 0.0]\n",
     );
     let scene = load(&p).unwrap().scene;
-    assert_eq!(scene.lights.len(), 1);
+    // The sun and three ceiling panels.
+    assert_eq!(scene.lights.len(), 4);
     let LightShape::Sun { direction } = scene.lights[0].shape else {
         panic!("not a sun");
     };
@@ -186,5 +187,99 @@ fn bad_lights_and_overrides_are_clear_errors() {
         let p = write(tmp.path(), "s.toml", &text);
         let e = load(&p).unwrap_err().to_string();
         assert!(e.contains(needle), "{extra}: {e}");
+    }
+}
+
+/// Writes a 2:1 latitude–longitude map whose upper half has radiance `top`, the lower 0.
+fn write_sky_hdr(path: &Path, top: f32) {
+    let (w, h) = (8usize, 4usize);
+    let pixels: Vec<image::Rgb<f32>> = (0..w * h)
+        .map(|i| image::Rgb(if i / w < h / 2 { [top; 3] } else { [0.0; 3] }))
+        .collect();
+    let file = fs::File::create(path).unwrap();
+    image::codecs::hdr::HdrEncoder::new(file)
+        .encode(&pixels, w, h)
+        .unwrap();
+}
+
+#[test]
+fn environment_map_sky_and_turning_sun_are_read() {
+    let tmp = tempfile::tempdir().unwrap();
+    write_sky_hdr(&tmp.path().join("sky.hdr"), 2.0);
+    let p = write(
+        tmp.path(),
+        "s.toml",
+        r#"
+environment = "sky.hdr"
+environment_intensity = 1.5
+environment_rotation_deg = 90.0
+
+[[asset]]
+file = "builtin:sphere"
+
+[[light]]
+kind = "sun"
+keys = { times = [0.0, 10.0], direction = [[1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]] }
+power = 3.0
+"#,
+    );
+    let scene = load(&p).unwrap().scene;
+    assert!((scene.environment.radiance(Vec3::Y) - Vec3::splat(3.0)).length() < 0.05);
+    assert_eq!(scene.environment.radiance(Vec3::NEG_Y), Vec3::ZERO);
+    assert!(scene.lights_move());
+    let dir = |t: f32| match scene.lights_at(t)[0].shape {
+        LightShape::Sun { direction } => direction,
+        other => panic!("{other:?}"),
+    };
+    assert!((dir(0.0) - Vec3::new(1.0, 1.0, 0.0).normalize()).length() < 1e-5);
+    assert!((dir(5.0) - Vec3::Y).length() < 1e-5);
+    assert_eq!(scene.lights[0].shape, scene.lights_at(0.0)[0].shape);
+
+    let p = write(
+        tmp.path(),
+        "c.toml",
+        "sky = [0.1, 0.2, 0.3]\n[[asset]]\nfile = \"builtin:box\"\n",
+    );
+    let scene = load(&p).unwrap().scene;
+    assert_eq!(
+        scene.environment.radiance(Vec3::X),
+        Vec3::new(0.1, 0.2, 0.3)
+    );
+    assert!(!scene.lights_move());
+    let p = write(tmp.path(), "d.toml", "[[asset]]\nfile = \"builtin:box\"\n");
+    let scene = load(&p).unwrap().scene;
+    assert_eq!(
+        scene.environment.radiance(Vec3::X),
+        psao_scene::environment::DEFAULT_SKY
+    );
+}
+
+#[test]
+fn bad_environment_and_sun_keys_are_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    write_sky_hdr(&tmp.path().join("sky.hdr"), 1.0);
+    fs::write(tmp.path().join("junk.hdr"), b"not an image").unwrap();
+    let sun = |keys: &str| {
+        format!(
+            "[[asset]]\nfile = \"builtin:box\"\n[[light]]\nkind = \"sun\"\npower = 1.0\n{keys}\n"
+        )
+    };
+    let point = "[[asset]]\nfile = \"builtin:box\"\n[[light]]\nkind = \"point\"\nposition = [0.0, 1.0, 0.0]\npower = 1.0\nkeys = { times = [0.0], direction = [[0.0, 1.0, 0.0]] }\n";
+    for (text, needle) in [
+        ("environment = \"none.hdr\"\n[[asset]]\nfile = \"builtin:box\"\n".to_string(), "cannot read"),
+        ("environment = \"junk.hdr\"\n[[asset]]\nfile = \"builtin:box\"\n".into(), "Radiance HDR"),
+        ("environment = \"sky.hdr\"\nenvironment_intensity = -1.0\n[[asset]]\nfile = \"builtin:box\"\n".into(), "environment_intensity"),
+        ("environment = \"sky.hdr\"\nsky = [1.0, 1.0, 1.0]\n[[asset]]\nfile = \"builtin:box\"\n".into(), "exclude"),
+        ("environment_rotation_deg = 10.0\n[[asset]]\nfile = \"builtin:box\"\n".into(), "need `environment`"),
+        ("sky = [-1.0, 0.0, 0.0]\n[[asset]]\nfile = \"builtin:box\"\n".into(), "sky must"),
+        (sun("keys = { times = [0.0, 1.0], direction = [[0.0, 1.0, 0.0]] }"), "1 directions for 2 times"),
+        (sun("keys = { times = [0.0, 1.0], direction = [[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]] }"), "opposite"),
+        (sun("direction = [0.0, 1.0, 0.0]\nkeys = { times = [0.0], direction = [[0.0, 1.0, 0.0]] }"), "drop `direction`"),
+        (sun("keys = { times = [0.0], directions = [[0.0, 1.0, 0.0]] }"), "unknown field"),
+        (point.into(), "only a sun takes `keys`"),
+    ] {
+        let p = write(tmp.path(), "s.toml", &text);
+        let e = load(&p).unwrap_err().to_string();
+        assert!(e.contains(needle), "{text}: {e}");
     }
 }

@@ -1,12 +1,13 @@
 //! psao-trace: one [`Tracer`] facade over a two-level ray-tracing structure (a BVH per mesh in
 //! mesh-local space, a top level over the instances), with the pure-Rust `obvhs` backend and
-//! Embree 3 behind the cargo feature `embree`; spatial ray sorting; and the [`ao`] module that
-//! defines ambient occlusion for all of psao.
+//! Embree 3 behind the cargo feature `embree`; spatial ray sorting; and the [`ao`] and [`gi`]
+//! modules that define ambient occlusion and diffuse lighting for all of psao.
 
 pub mod ao;
 #[cfg(feature = "embree")]
 mod embree_backend;
 mod geometry;
+pub mod gi;
 mod obvhs_backend;
 mod sort;
 mod tracer;

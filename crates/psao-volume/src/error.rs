@@ -28,6 +28,19 @@ pub enum VolumeError {
     /// The volume does not fit the fixed 4096³ span of one flat-tree top node.
     #[error("volume too large for one top node: extent {0:?} voxels (at most 4096 per axis)")]
     TooLarge([i32; 3]),
+    /// A file holds more nodes, leaves or voxels than the reader accepts (checked before any
+    /// of them is expanded; `count` may be a lower bound, counted up to the first excess).
+    #[error("{label}: too many {what}: {count} (the limit is {limit})")]
+    LimitExceeded {
+        /// The file.
+        label: String,
+        /// What was counted.
+        what: &'static str,
+        /// How many the file holds.
+        count: u64,
+        /// The most accepted.
+        limit: u64,
+    },
     /// The volume has no active voxels.
     #[error("the volume has no voxel data")]
     Empty,

@@ -94,6 +94,33 @@ impl Leaf {
     }
 }
 
+/// An active tile of a fog volume: a cube of `span`³ voxels of one value (an OpenVDB tile of
+/// a 4-level node spans 8, of a 5-level node 128). It is never expanded into leaves: a volume
+/// stores one brick per distinct tile value and points the tile's 8³ cells at it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tile {
+    /// Index-space origin (a multiple of `span`).
+    pub origin: IVec3,
+    /// Voxels per edge: 8 or 128.
+    pub span: i32,
+    /// The value of all its voxels.
+    pub value: f32,
+}
+
+impl Tile {
+    /// Number of 8³ cells it covers.
+    pub fn cells(&self) -> u64 {
+        (self.span as u64 / BRICK as u64).pow(3)
+    }
+
+    /// Origins of its 8³ cells.
+    pub fn cell_origins(&self) -> impl Iterator<Item = IVec3> + '_ {
+        let n = self.span / BRICK as i32;
+        (0..n * n * n)
+            .map(move |i| self.origin + IVec3::new(i % n, (i / n) % n, i / (n * n)) * BRICK as i32)
+    }
+}
+
 /// A sparse grid of one frame, as read from a file.
 #[derive(Clone, Debug)]
 pub struct SparseGrid {
@@ -107,6 +134,9 @@ pub struct SparseGrid {
     pub background: f32,
     /// Leaves sorted by origin (z, y, x).
     pub leaves: Vec<Leaf>,
+    /// Active tiles (all voxels active), sorted by origin (z, y, x); they do not overlap
+    /// the leaves.
+    pub tiles: Vec<Tile>,
 }
 
 impl SparseGrid {
@@ -135,24 +165,30 @@ impl SparseGrid {
             },
             background: 0.0,
             leaves: out,
+            tiles: Vec::new(),
         }
     }
 
-    /// Number of active voxels.
+    /// Number of active voxels (of the leaves and the tiles).
     pub fn active_voxels(&self) -> u64 {
-        self.leaves.iter().map(|l| l.active_count() as u64).sum()
+        let leaves: u64 = self.leaves.iter().map(|l| l.active_count() as u64).sum();
+        leaves
+            + self
+                .tiles
+                .iter()
+                .map(|t| (t.span as u64).pow(3))
+                .sum::<u64>()
     }
 
-    /// Index-space bounds of the leaves: (min corner, max corner exclusive), or `None` if empty.
+    /// Index-space bounds of the leaves and tiles: (min corner, max corner exclusive), or
+    /// `None` if empty.
     pub fn leaf_bounds(&self) -> Option<(IVec3, IVec3)> {
-        let mut it = self.leaves.iter();
-        let first = it.next()?;
-        let init = (first.origin, first.origin + IVec3::splat(BRICK as i32));
-        Some(it.fold(init, |(lo, hi), l| {
-            (
-                lo.min(l.origin),
-                hi.max(l.origin + IVec3::splat(BRICK as i32)),
-            )
+        let boxes = self.leaves.iter().map(|l| (l.origin, BRICK as i32));
+        let mut it = boxes.chain(self.tiles.iter().map(|t| (t.origin, t.span)));
+        let (o, span) = it.next()?;
+        let init = (o, o + IVec3::splat(span));
+        Some(it.fold(init, |(lo, hi), (o, span)| {
+            (lo.min(o), hi.max(o + IVec3::splat(span)))
         }))
     }
 }

@@ -22,7 +22,7 @@ pub mod volume;
 pub use cluster::ClusterParams;
 pub use codec::{BrickFormat, BrickPool};
 pub use error::{Result, VolumeError};
-pub use grid::{GridClass, Leaf, SparseGrid, Transform, BRICK, BRICK_VOXELS};
+pub use grid::{GridClass, Leaf, SparseGrid, Tile, Transform, BRICK, BRICK_VOXELS};
 pub use medium::{PlacedVolume, Placement};
 pub use procedural::Procedural;
 pub use render::{Camera, Image, PixelRays, RenderMode, RenderSettings};

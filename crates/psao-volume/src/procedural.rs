@@ -150,6 +150,7 @@ impl Procedural {
                 GridClass::LevelSet => BAND * voxel as f32,
             },
             leaves,
+            tiles: Vec::new(),
         })
     }
 }

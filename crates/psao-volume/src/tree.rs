@@ -152,13 +152,21 @@ fn prefixes(mask: &[u64]) -> Vec<u16> {
 
 impl FlatTree {
     /// Adds one frame whose leaves use bricks `first_brick..first_brick + leaves.len()` (in
-    /// the order given). Returns the frame index.
-    pub fn push_frame(&mut self, leaves: &[Leaf], first_brick: u32) -> Result<usize> {
-        let (lo, hi) = leaves
-            .iter()
-            .fold(None, |acc: Option<(IVec3, IVec3)>, l| {
-                let e = l.origin + IVec3::splat(BRICK as i32);
-                Some(acc.map_or((l.origin, e), |(a, b)| (a.min(l.origin), b.max(e))))
+    /// the order given), plus fully active cells given as (origin, brick) — the cells of
+    /// constant tiles, which share bricks. Returns the frame index.
+    pub fn push_frame(
+        &mut self,
+        leaves: &[Leaf],
+        first_brick: u32,
+        cells: &[(IVec3, u32)],
+    ) -> Result<usize> {
+        let origins = leaves.iter().map(|l| l.origin);
+        let origins = origins.chain(cells.iter().map(|c| c.0));
+        let (lo, hi) = origins
+            .clone()
+            .fold(None, |acc: Option<(IVec3, IVec3)>, o| {
+                let e = o + IVec3::splat(BRICK as i32);
+                Some(acc.map_or((o, e), |(a, b)| (a.min(o), b.max(e))))
             })
             .ok_or(VolumeError::Empty)?;
         let origin = IVec3::new(
@@ -179,11 +187,11 @@ impl FlatTree {
             let b2 = (c2.x + 16 * (c2.y + 16 * c2.z)) as usize;
             (b1, b2)
         };
-        let mut order: Vec<(usize, usize, usize)> = leaves
-            .iter()
+        // Entry i < leaves.len() is leaf i, else cell i − leaves.len().
+        let mut order: Vec<(usize, usize, usize)> = origins
             .enumerate()
-            .map(|(i, l)| {
-                let (b1, b2) = key(l.origin);
+            .map(|(i, o)| {
+                let (b1, b2) = key(o);
                 (b1, b2, i)
             })
             .collect();
@@ -215,12 +223,16 @@ impl FlatTree {
             }
             let node = self.l2.last_mut().expect("pushed above");
             node.mask[b2 / 64] |= 1 << (b2 % 64);
-            let leaf = &leaves[i];
-            let coded = !mask::is_full(&leaf.mask);
-            if coded {
-                mask::encode(&leaf.mask, &mut self.masks);
-            }
-            let brick = first_brick + i as u32;
+            let (brick, coded) = match leaves.get(i) {
+                Some(leaf) => {
+                    let coded = !mask::is_full(&leaf.mask);
+                    if coded {
+                        mask::encode(&leaf.mask, &mut self.masks);
+                    }
+                    (first_brick + i as u32, coded)
+                }
+                None => (cells[i - leaves.len()].1, false),
+            };
             if brick >= HAS_MASK {
                 return Err(VolumeError::InvalidParameter(
                     "more than 2^31 bricks".into(),

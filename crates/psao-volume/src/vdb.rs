@@ -1,11 +1,23 @@
 //! OpenVDB ingest. The header, grid descriptors, grid metadata, transform and root background
 //! are parsed here first, so that files `vdb-rs` cannot handle (wrong magic, old versions,
 //! unsupported transforms, non-float grids, truncated headers) are rejected with a typed error
-//! before `vdb-rs` reads the tree; a panic inside `vdb-rs` is caught as a last guard.
+//! before `vdb-rs` reads the tree. The tree itself is then walked once without allocating
+//! ([`scan`]): every length is checked against the bytes left, and nodes, leaves and the
+//! voxels of active tiles are counted against the limits below before `vdb-rs` reads it or
+//! anything is expanded. Active tiles stay tiles ([`Tile`]): the volume gives each distinct
+//! tile value one shared brick. A panic inside `vdb-rs` is caught as a last guard.
+//!
+//! The limits are far above the largest real file in the project's data
+//! (`../shared/data/volumes/smoke1.vdb`: 1,049,275 active voxels in 3,117 leaves and no
+//! tiles, i.e. 1/84 of [`MAX_LEAVES`] and 1/1345 of [`MAX_CELLS`]; checked by
+//! `the_largest_real_file_is_far_inside_the_reader_limits` in `tests/real_data.rs`).
+
+mod scan;
 
 use crate::error::{Result, VolumeError};
-use crate::grid::{voxel_index, GridClass, Leaf, SparseGrid, Transform, BRICK, BRICK_VOXELS};
+use crate::grid::{voxel_index, GridClass, Leaf, SparseGrid, Tile, Transform, BRICK, BRICK_VOXELS};
 use glam::{DVec3, IVec3};
+use std::collections::HashSet;
 use std::io::{Cursor, Read, Seek, SeekFrom};
 use std::path::Path;
 
@@ -15,6 +27,19 @@ const MIN_VERSION: u32 = 222;
 const MAX_VERSION: u32 = 224;
 /// Upper bound on any length field in the header (names, metadata blobs).
 const MAX_FIELD: u32 = 1 << 24;
+/// Most bytes of a VDB file read from disk (4 GiB).
+pub const MAX_FILE_BYTES: u64 = 1 << 32;
+/// Most root children (5-level internal nodes, 4096³ voxels each): a volume must fit one
+/// 4096³ flat-tree top node, which at most 2 × 2 × 2 aligned root children can touch.
+pub const MAX_ROOT_NODES: usize = 8;
+/// Most 4-level internal nodes (128³ voxels each; `vdb-rs` keeps some 17 KiB per node).
+pub const MAX_INTERNAL_NODES: usize = 8192;
+/// Most leaves (8³ voxels each; some 6 KiB per leaf while a volume is built, so this bounds
+/// the build at about 1.6 GiB).
+pub const MAX_LEAVES: usize = 1 << 18;
+/// Most 8³ cells, leaves and the cells of active tiles together (1 << 22 cells are
+/// 2.1 × 10⁹ voxels; each costs some 50 bytes of tree and bounds in a volume).
+pub const MAX_CELLS: usize = 1 << 22;
 
 /// What the header says about one grid.
 #[derive(Clone, Debug)]
@@ -35,6 +60,8 @@ pub struct GridInfo {
     pub background: f32,
     /// Active voxel count from the metadata, if present.
     pub active_voxels: Option<i64>,
+    /// Where the tree starts (known when the transform is supported).
+    layout: Option<scan::TreeLayout>,
 }
 
 /// What the header says about a whole file.
@@ -48,11 +75,38 @@ pub struct VdbInfo {
 
 /// Reads a VDB file and returns the float grid named `grid` (or the first float grid).
 pub fn read_vdb_file(path: &Path, grid: Option<&str>) -> Result<SparseGrid> {
-    let bytes = std::fs::read(path).map_err(|source| VolumeError::Io {
+    let bytes = read_regular_file(path)?;
+    read_vdb_bytes(&bytes, &path.display().to_string(), grid)
+}
+
+/// The bytes of a regular file of at most [`MAX_FILE_BYTES`] (a device such as `/dev/zero`
+/// or a FIFO is refused, not read).
+pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
+    let io = |source| VolumeError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
-    read_vdb_bytes(&bytes, &path.display().to_string(), grid)
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    if !meta.is_file() {
+        return Err(VolumeError::InvalidVdb(
+            path.display().to_string(),
+            "not a regular file".into(),
+        ));
+    }
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(VolumeError::LimitExceeded {
+            label: path.display().to_string(),
+            what: "file bytes",
+            count: meta.len(),
+            limit: MAX_FILE_BYTES,
+        });
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(MAX_FILE_BYTES)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    Ok(bytes)
 }
 
 /// Parses only the header of a VDB file held in memory (`label` names it in errors).
@@ -105,9 +159,14 @@ pub fn read_vdb_bytes(bytes: &[u8], label: &str, grid: Option<&str>) -> Result<S
             ))
         }
     };
+    let layout = chosen.layout.ok_or_else(|| {
+        VolumeError::UnsupportedGrid(label.into(), format!("grid `{}` has no tree", chosen.name))
+    })?;
+    scan::scan(bytes, label, layout)?;
     let tree = read_tree(bytes, label, &chosen.name)?;
-    let mut leaves = collect_leaves(&tree, class, chosen.background)?;
+    let (mut leaves, mut tiles) = collect_leaves(&tree, class, chosen.background)?;
     leaves.sort_by_key(|l| (l.origin.z, l.origin.y, l.origin.x));
+    tiles.sort_by_key(|t| (t.origin.z, t.origin.y, t.origin.x));
     if class == GridClass::LevelSet {
         for leaf in &mut leaves {
             fill_inactive_signs(leaf, chosen.background.abs());
@@ -123,6 +182,7 @@ pub fn read_vdb_bytes(bytes: &[u8], label: &str, grid: Option<&str>) -> Result<S
             chosen.background.abs()
         },
         leaves,
+        tiles,
     })
 }
 
@@ -155,61 +215,46 @@ fn ivec<T: Into<[i32; 3]>>(v: T) -> IVec3 {
     IVec3::from_array(v.into())
 }
 
-/// Flattens the `vdb-rs` tree into 8³ leaves; active tiles of fog volumes become dense leaves.
+/// Flattens the `vdb-rs` tree into 8³ leaves and, for fog volumes, active tiles (level sets
+/// keep only their leaves: their tiles are the inside and outside of the narrow band).
 fn collect_leaves(
     tree: &vdb_rs::Grid<f32>,
     class: GridClass,
     background: f32,
-) -> Result<Vec<Leaf>> {
+) -> Result<(Vec<Leaf>, Vec<Tile>)> {
     let mut leaves = Vec::new();
-    let tile = |origin: IVec3, span: i32, value: f32, out: &mut Vec<Leaf>| {
-        let n = span / BRICK as i32;
-        for z in 0..n {
-            for y in 0..n {
-                for x in 0..n {
-                    out.push(Leaf {
-                        origin: origin + IVec3::new(x, y, z) * BRICK as i32,
-                        values: Box::new([value; BRICK_VOXELS]),
-                        mask: [u64::MAX; 8],
-                    });
-                }
-            }
-        }
-    };
+    let mut tiles = Vec::new();
+    let fog = class == GridClass::Fog;
     for n5 in &tree.tree.root_nodes {
         for n4 in n5.nodes.values() {
             for n3 in n4.nodes.values() {
                 leaves.push(convert_leaf(n3)?);
             }
-            if class == GridClass::Fog {
-                for idx in n4.value_mask.iter_ones() {
-                    if !n4.child_mask[idx] {
-                        let origin = ivec(n4.origin) + child_offset(idx, 4, 3);
-                        tile(
-                            origin,
-                            8,
-                            *n4.data.get(idx).unwrap_or(&background),
-                            &mut leaves,
-                        );
-                    }
-                }
+            for idx in n4
+                .value_mask
+                .iter_ones()
+                .filter(|&i| fog && !n4.child_mask[i])
+            {
+                tiles.push(Tile {
+                    origin: ivec(n4.origin) + child_offset(idx, 4, 3),
+                    span: BRICK as i32,
+                    value: *n4.data.get(idx).unwrap_or(&background),
+                });
             }
         }
-        if class == GridClass::Fog {
-            for idx in n5.value_mask.iter_ones() {
-                if !n5.child_mask[idx] {
-                    let origin = ivec(n5.origin) + child_offset(idx, 5, 7);
-                    tile(
-                        origin,
-                        128,
-                        *n5.data.get(idx).unwrap_or(&background),
-                        &mut leaves,
-                    );
-                }
-            }
+        for idx in n5
+            .value_mask
+            .iter_ones()
+            .filter(|&i| fog && !n5.child_mask[i])
+        {
+            tiles.push(Tile {
+                origin: ivec(n5.origin) + child_offset(idx, 5, 7),
+                span: 128,
+                value: *n5.data.get(idx).unwrap_or(&background),
+            });
         }
     }
-    Ok(leaves)
+    Ok((leaves, tiles))
 }
 
 /// Index-space offset of child `idx` of an internal node with `log2dim` children per axis,
@@ -371,10 +416,25 @@ impl Header<'_> {
             return Err(self.err("implausible metadata count"));
         }
         let mut out = Vec::new();
+        let mut names = HashSet::new();
         for _ in 0..count {
             let name = self.string()?;
             let ty = self.string()?;
             let n = self.len()?;
+            // `vdb-rs` reads these types by their size, not by the stored length.
+            let size = match ty.as_str() {
+                "bool" => Some(1),
+                "int32" | "float" => Some(4),
+                "int64" => Some(8),
+                "vec3i" => Some(12),
+                _ => None,
+            };
+            if size.is_some_and(|s| s != n) {
+                return Err(self.err(&format!("metadata `{name}` of type {ty} has {n} bytes")));
+            }
+            if !names.insert(name.clone()) {
+                return Err(self.err(&format!("metadata `{name}` appears twice")));
+            }
             out.push((name, ty, self.bytes(n)?));
         }
         Ok(out)
@@ -405,7 +465,7 @@ impl Header<'_> {
         if grid_count == 0 || grid_count > 1024 {
             return Err(self.err(&format!("implausible grid count {grid_count}")));
         }
-        let mut grids = Vec::new();
+        let mut grids: Vec<GridInfo> = Vec::new();
         for _ in 0..grid_count {
             let name = self.string()?;
             let grid_type = self.string()?;
@@ -416,9 +476,12 @@ impl Header<'_> {
             if !(grid_pos <= block_pos && block_pos <= end_pos) {
                 return Err(self.err("grid offsets out of order"));
             }
+            if grids.iter().any(|g| g.name == name) {
+                return Err(self.err(&format!("two grids named `{name}`")));
+            }
             self.seek(end_pos)?;
             self.seek(grid_pos)?;
-            let _compression = self.u32()?;
+            let compression = self.u32()?;
             let meta = self.metadata()?;
             let text = |key: &str| {
                 meta.iter()
@@ -426,9 +489,9 @@ impl Header<'_> {
                     .map(|(_, _, b)| String::from_utf8_lossy(b).into_owned())
             };
             let class = text("class");
-            let half_float = meta
-                .iter()
-                .any(|(n, _, b)| n == "is_saved_as_half_float" && b.first() == Some(&1));
+            let half_float = meta.iter().any(|(n, t, b)| {
+                n == "is_saved_as_half_float" && t == "bool" && b.first().is_some_and(|&v| v != 0)
+            });
             let active_voxels = meta
                 .iter()
                 .find(|(n, t, b)| n == "file_voxel_count" && t == "int64" && b.len() == 8)
@@ -457,13 +520,20 @@ impl Header<'_> {
                     return Err(self.err("degenerate transform"));
                 }
             }
-            let background = if transform.is_some() && instance_parent.is_empty() {
+            let (background, layout) = if transform.is_some() && instance_parent.is_empty() {
                 if self.u32()? != 1 {
                     return Err(self.err("multi-buffer trees are not supported"));
                 }
-                f32::from_bits(self.u32()?)
+                let background = f32::from_bits(self.u32()?);
+                let layout = scan::TreeLayout {
+                    topology: self.cur.position(),
+                    blocks: block_pos,
+                    compression,
+                    half_float,
+                };
+                (background, Some(layout))
             } else {
-                0.0
+                (0.0, None)
             };
             if !instance_parent.is_empty() {
                 return Err(VolumeError::UnsupportedGrid(
@@ -480,6 +550,7 @@ impl Header<'_> {
                 transform,
                 background,
                 active_voxels,
+                layout,
             });
             self.seek(end_pos)?;
         }

@@ -8,6 +8,7 @@ use crate::grid::{GridClass, SparseGrid, Transform, BRICK, BRICK_VOXELS};
 use crate::tree::{FlatTree, Locate, TreeStats};
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
+use std::collections::HashMap;
 
 /// A multi-frame sparse volume.
 #[derive(Clone, Debug)]
@@ -64,7 +65,7 @@ pub(crate) const NO_LEAF: u32 = u32::MAX;
 /// How a volume was built.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BuildStats {
-    /// Bricks before clustering (= leaves of all frames).
+    /// Bricks before clustering (leaves of all frames plus one per distinct tile value).
     pub bricks_before: usize,
     /// Bricks in the pool.
     pub bricks_after: usize,
@@ -137,9 +138,20 @@ impl Volume {
         }
         let mut tree = FlatTree::default();
         let mut bricks: Vec<[f32; BRICK_VOXELS]> = Vec::new();
+        // One brick per distinct tile value, shared by every cell of every tile of that value.
+        let mut constant: HashMap<u32, u32> = HashMap::new();
         for g in frames {
-            tree.push_frame(&g.leaves, bricks.len() as u32)?;
+            let first = bricks.len() as u32;
             bricks.extend(g.leaves.iter().map(|l| *l.values));
+            let mut cells = Vec::new();
+            for t in &g.tiles {
+                let brick = *constant.entry(t.value.to_bits()).or_insert_with(|| {
+                    bricks.push([t.value; BRICK_VOXELS]);
+                    bricks.len() as u32 - 1
+                });
+                cells.extend(t.cell_origins().map(|o| (o, brick)));
+            }
+            tree.push_frame(&g.leaves, first, &cells)?;
         }
         let (lo, hi) = bricks
             .par_iter()
@@ -359,9 +371,30 @@ impl Volume {
                 (se, mx, n)
             })
             .collect();
-        let (se, mx, n) = per_leaf.iter().fold((0.0, 0.0f64, 0), |a, b| {
-            (a.0 + b.0, a.1.max(b.1), a.2 + b.2)
+        // A tile's cells share one brick: its first cell's error stands for all of them.
+        let per_tile = frames.iter().enumerate().flat_map(|(f, g)| {
+            g.tiles.iter().map(move |t| {
+                let mut out = [self.background; BRICK_VOXELS];
+                if let Locate::Leaf(i, _) = self.tree.locate(f, t.origin) {
+                    self.pool.decode(self.tree.l3[i as usize].brick(), &mut out);
+                }
+                let (mut se, mut mx) = (0.0f64, 0.0f64);
+                for &b in &out {
+                    let e = (t.value - b).abs() as f64 / range;
+                    se += e * e;
+                    mx = mx.max(e);
+                }
+                let cells = t.cells() as f64;
+                (se * cells, mx, BRICK_VOXELS as u64 * t.cells())
+            })
         });
+        let per_tile: Vec<_> = per_tile.collect();
+        let (se, mx, n) = per_leaf
+            .iter()
+            .chain(&per_tile)
+            .fold((0.0, 0.0f64, 0), |a, b| {
+                (a.0 + b.0, a.1.max(b.1), a.2 + b.2)
+            });
         Ok(ErrorStats {
             rmse: if n > 0 { (se / n as f64).sqrt() } else { 0.0 },
             max_error: mx,

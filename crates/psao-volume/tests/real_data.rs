@@ -300,3 +300,15 @@ fn fog_optical_depth_matches_brute_force_and_delta_tracking_is_seeded() {
     assert_ne!(a, c2);
     assert!(a.pixels.iter().any(|&p| p > 0.0));
 }
+
+#[test]
+fn the_largest_real_file_is_far_inside_the_reader_limits() {
+    let Some(path) = data("smoke1.vdb") else {
+        return;
+    };
+    let g = vdb::read_vdb_file(&path, None).unwrap();
+    // The counts the limits' documentation (`vdb.rs`) quotes.
+    assert_eq!((g.leaves.len(), g.tiles.len()), (3117, 0));
+    assert!(g.leaves.len() * 64 < vdb::MAX_LEAVES);
+    assert!(g.leaves.len() * 64 < vdb::MAX_CELLS);
+}

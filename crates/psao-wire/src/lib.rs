@@ -24,5 +24,6 @@ pub use frame::{
 };
 pub use message::{
     capabilities, Ack, Bye, CameraMsg, Delta, ErrorCode, ErrorMsg, Hello, InstanceEntry, Message,
-    SceneTime, Welcome, MAX_CODEC_NAME, MAX_INSTANCES, MAX_TEXT, MAX_TOKEN, PROTOCOL_VERSION,
+    SceneTime, StatusMsg, Welcome, MAX_CODEC_NAME, MAX_INSTANCES, MAX_TEXT, MAX_TOKEN,
+    PROTOCOL_VERSION,
 };

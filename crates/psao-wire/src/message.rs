@@ -27,8 +27,10 @@ pub mod capabilities {
     /// Wants corrective-splatting samples for the regions it sends (a server without
     /// corrections ignores the bit and the regions).
     pub const CORRECTIVE: u32 = 8;
+    /// Understands [`super::Message::Status`] (a server sends it only to such clients).
+    pub const STATUS: u32 = 16;
     /// Every bit defined by this version.
-    pub const ALL: u32 = CODEC_PAPER | CODEC_COMPACT | STATE_HASH | CORRECTIVE;
+    pub const ALL: u32 = CODEC_PAPER | CODEC_COMPACT | STATE_HASH | CORRECTIVE | STATUS;
 }
 
 /// Every message of the protocol; the variant index (a postcard varint) comes first.
@@ -56,6 +58,9 @@ pub enum Message {
     Regions(RegionsMsg),
     /// 10, server → client: correction samples traced for the client's camera.
     Samples(SamplesMsg),
+    /// 11, server → client (only with [`capabilities::STATUS`]): updates stalled, or flowing
+    /// again (a scale-out edge waiting for its trace nodes, docs/SCALE-OUT.md).
+    Status(StatusMsg),
 }
 
 /// Client → server, first message.
@@ -196,6 +201,15 @@ pub struct ErrorMsg {
     pub message: String,
 }
 
+/// How the server is doing, sent when it changes; not an error: the session goes on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StatusMsg {
+    /// Whether updates are stalled.
+    pub stalled: bool,
+    /// Human-readable explanation (empty when updates flow again).
+    pub text: String,
+}
+
 /// Orderly end of a session.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Bye {
@@ -222,7 +236,9 @@ fn check_finite(what: &str, values: &[f32]) -> Result<(), WireError> {
 }
 
 impl CameraMsg {
-    fn validate(&self) -> Result<(), WireError> {
+    /// Finite numbers, `0 < fov_y < π`, `0 < near < far`, `aspect > 0`, position ≠ target:
+    /// the cameras a server steps for (also those that reach it through scale-out views).
+    pub fn validate(&self) -> Result<(), WireError> {
         let mut all = Vec::with_capacity(13);
         for v in [self.position, self.target, self.up] {
             all.extend_from_slice(&v);
@@ -289,6 +305,7 @@ impl Message {
             }
             Message::Error(e) => check_text("error message", &e.message, MAX_TEXT),
             Message::Bye(b) => check_text("bye reason", &b.reason, MAX_TEXT),
+            Message::Status(s) => check_text("status text", &s.text, MAX_TEXT),
             Message::Regions(r) => r.validate(),
             Message::Samples(s) => s.validate(),
             _ => Ok(()),
@@ -309,6 +326,7 @@ impl Message {
             Message::Bye(_) => "bye",
             Message::Regions(_) => "regions",
             Message::Samples(_) => "samples",
+            Message::Status(_) => "status",
         }
     }
 }

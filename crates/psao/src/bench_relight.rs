@@ -8,7 +8,7 @@ use clap::Args;
 use serde::Serialize;
 
 use psao_net::cpu_time::fine_cpu_seconds;
-use psao_prt::shade::{Shader, ShadingGeometry, Visibility};
+use psao_prt::shade::{ShadingGeometry, Visibility};
 
 use crate::relight_cmd::{
     character_and_model, frame_range, gather, split, train_model, ShadingArgs,
@@ -87,7 +87,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         }
     };
     let mode = args.shading.mode()?;
-    let shader = Shader::new(mode)?;
+    let shader = args.shading.shader()?;
     let c = &loaded.character;
     let frames = clip_frames(c);
     let poses: Vec<_> = (0..frames.min(args.runs as u32))

@@ -14,6 +14,7 @@ use anyhow::{bail, Context, Result};
 use psao_net::pipeline::CLIENT_HZ;
 use psao_net::scale::edge::{EdgeConfig, EdgeStepper};
 use psao_net::scale::trace_node::TraceNodeStats;
+use psao_net::scale::NatsAuth;
 use psao_net::serve::Stepper;
 use psao_net::Resolution;
 use psao_scene::CameraPath;
@@ -69,8 +70,13 @@ pub struct ScaleRow {
     pub node_over_serve: f64,
     /// Mean step ms of each node.
     pub step_ms: Vec<f64>,
-    /// Bytes of record batches through NATS per server frame (all partitions).
+    /// Bytes of record batches through NATS per server frame (all partitions), as
+    /// published (compressed, in parts), and what they would have been uncompressed.
     pub nats_bytes_per_frame: f64,
+    pub nats_raw_bytes_per_frame: f64,
+    /// Record batch messages per server frame (all partitions: more than one per batch
+    /// when one would not fit the NATS server's max_payload).
+    pub nats_messages_per_frame: f64,
     /// Bytes one viewer receives per server frame (the update encoded with the codec).
     pub viewer_bytes_per_frame: f64,
     /// Bytes of snapshot chunks and marks the nodes published per server frame, and the
@@ -199,6 +205,10 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             rays_per_s,
             step_ms: stats.iter().map(|s| s.mean_step_ms).collect(),
             nats_bytes_per_frame: nats_bytes as f64 / frames,
+            nats_raw_bytes_per_frame: stats.iter().map(|s| s.batch_raw_bytes).sum::<u64>() as f64
+                / frames,
+            nats_messages_per_frame: stats.iter().map(|s| s.batch_messages).sum::<u64>() as f64
+                / frames,
             viewer_bytes_per_frame: viewer_bytes as f64 / frames,
             snapshot_bytes_per_frame: stats.iter().map(|s| s.snapshot_bytes).sum::<u64>() as f64
                 / frames,
@@ -274,6 +284,7 @@ fn follow(
 ) -> Result<(u64, u64)> {
     let config = EdgeConfig {
         nats: url.to_string(),
+        auth: NatsAuth::default(),
         scene: scene.to_string(),
         edge_id: "bench".into(),
         lockstep: true,
@@ -298,6 +309,7 @@ fn follow(
 fn late_join(url: &str, scene: &str, replica: &mut Server) -> Result<(u64, u64)> {
     let config = EdgeConfig {
         nats: url.to_string(),
+        auth: NatsAuth::default(),
         scene: scene.to_string(),
         edge_id: "late".into(),
         lockstep: false,

@@ -68,7 +68,7 @@ fn section_with(out: &Path, data: Option<PathBuf>) -> Result<String> {
     let t = split.test[0];
     let pose = c.pose(t);
     let camera = framing_camera(&pose, SIZE, SIZE);
-    let mut tracer = SelfTracer::new(c.mesh())?;
+    let mut tracer = SelfTracer::new(c.occluder_mesh())?;
     tracer.set_pose(&pose)?;
     let reference: Vec<f32> = reference_shading(
         &tracer,

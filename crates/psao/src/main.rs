@@ -1,5 +1,6 @@
 //! `psao`: point-based split ambient occlusion — command-line entry point.
 
+mod access_args;
 mod args;
 mod bench_client;
 mod bench_relight;

@@ -24,6 +24,16 @@ pub fn write_rgb_png(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Resu
         .with_context(|| format!("cannot write {}", path.display()))
 }
 
+/// Writes a linear RGB image as a Radiance `.hdr` file.
+pub fn write_rgb_hdr(path: &Path, image: &psao_eval::RgbImage) -> Result<()> {
+    let pixels: Vec<image::Rgb<f32>> = image.data.iter().map(|&p| image::Rgb(p)).collect();
+    let file =
+        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    image::codecs::hdr::HdrEncoder::new(std::io::BufWriter::new(file))
+        .encode(&pixels, image.width as usize, image.height as usize)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Reads a PNG (8 or 16 bit, gray or colour: colour is converted to luma) as an AO image.
 pub fn read_ao_png(path: &Path) -> Result<AoImage> {
     let decoded = image::ImageReader::open(path)

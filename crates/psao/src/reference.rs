@@ -1,22 +1,37 @@
-//! `psao reference`: per-pixel reference AO along a camera path.
+//! `psao reference`: per-pixel reference AO, or the reference of the diffuse lighting
+//! (`--lighting gi`), along a camera path.
 
 use crate::args::{FrameRange, Resolution};
-use crate::png_io::write_ao_png;
+use crate::png_io::{write_ao_png, write_rgb_hdr, write_rgb_png};
 use crate::progress;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
-use clap::Args;
-use psao_eval::{reference_ao_in, AoImage, ReferenceSettings};
+use clap::{Args, ValueEnum};
+use psao_eval::{reference_ao_in, reference_gi, AoImage, GiSettings, ReferenceSettings, RgbImage};
 use psao_raster::{rasterize, rasterize_posed, GBuffer, InstancePose, RasterOptions};
 use psao_scene::path::CameraPath;
 use psao_scene::{Animator, Motion, Scene, ScenePose, PATH_HZ};
 use psao_trace::ao::Medium;
+use psao_trace::gi::DiffuseLighting;
 use psao_trace::{Backend, GeometryMode, Tracer};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// Largest accepted rays per pixel.
 pub const MAX_SPP: u32 = 1 << 16;
+
+/// Largest accepted `--bounces`.
+pub const MAX_BOUNCES: u32 = 64;
+
+/// What `psao reference` renders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Lighting {
+    /// Ambient occlusion (DESIGN §2), `ao_NNNNN.png`.
+    Ao,
+    /// Path-traced diffuse lighting (DESIGN §12): linear radiance `gi_NNNNN.hdr` and an sRGB
+    /// preview `gi_NNNNN.png`.
+    Gi,
+}
 
 /// Arguments of `psao reference`.
 #[derive(Args, Debug)]
@@ -29,7 +44,14 @@ pub struct ReferenceArgs {
     /// A half-open range of frames, `A..B`.
     #[arg(long)]
     pub frames: Option<FrameRange>,
-    /// Rays per pixel.
+    /// What to render: `ao` or `gi` (diffuse lighting: the scene's lights, environment and
+    /// `--bounces` indirect bounces).
+    #[arg(long, value_enum, default_value_t = Lighting::Ao)]
+    pub lighting: Lighting,
+    /// Indirect diffuse bounces of `--lighting gi` (a fixed depth).
+    #[arg(long, default_value_t = 1)]
+    pub bounces: u32,
+    /// Rays per pixel (paths per pixel for `--lighting gi`).
     #[arg(long, default_value_t = 512)]
     pub spp: u32,
     /// Image size, `WxH`.
@@ -41,7 +63,7 @@ pub struct ReferenceArgs {
     /// Ray-tracing backend, `obvhs` or `embree` (default: the fastest compiled in).
     #[arg(long)]
     pub backend: Option<Backend>,
-    /// Output folder for `ao_NNNNN.png`.
+    /// Output folder for `ao_NNNNN.png` (or `gi_NNNNN.hdr` and `gi_NNNNN.png`).
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -50,6 +72,12 @@ pub struct ReferenceArgs {
 pub fn run(args: &ReferenceArgs) -> Result<()> {
     if args.spp == 0 || args.spp > MAX_SPP {
         bail!("--spp must be in 1..={MAX_SPP}, got {}", args.spp);
+    }
+    if args.bounces > MAX_BOUNCES {
+        bail!(
+            "--bounces must be in 0..={MAX_BOUNCES}, got {}",
+            args.bounces
+        );
     }
     let (input, path) = args.input.load()?;
     let frames = select_frames(&path, args.frame, args.frames)?;
@@ -63,10 +91,26 @@ pub fn run(args: &ReferenceArgs) -> Result<()> {
     )?
     .with_medium(input.medium());
     let pixels = args.res.width as u64 * args.res.height as u64;
-    let bar = progress::bar(pixels * frames.len() as u64, "reference AO", "px");
+    let what = match args.lighting {
+        Lighting::Ao => "reference AO",
+        Lighting::Gi => "reference lighting",
+    };
+    let bar = progress::bar(pixels * frames.len() as u64, what, "px");
     for &frame in &frames {
-        let image = renderer.render(&path, frame, args.res, &|n| bar.inc(n))?;
-        write_ao_png(&frame_file(&args.out, frame), &image)?;
+        match args.lighting {
+            Lighting::Ao => {
+                let image = renderer.render(&path, frame, args.res, &|n| bar.inc(n))?;
+                write_ao_png(&frame_file(&args.out, frame), &image)?;
+            }
+            Lighting::Gi => {
+                let image =
+                    renderer.render_gi(&path, frame, args.res, args.bounces, &|n| bar.inc(n))?;
+                let stem = args.out.join(format!("gi_{frame:05}"));
+                write_rgb_hdr(&stem.with_extension("hdr"), &image)?;
+                let srgb = psao_client::composite_srgb8(&image.data);
+                write_rgb_png(&stem.with_extension("png"), image.width, image.height, srgb)?;
+            }
+        }
     }
     bar.finish_and_clear();
     tracing::info!(
@@ -183,6 +227,38 @@ impl<'a> ReferenceRenderer<'a> {
             &gbuffer,
             self.spp,
             self.seed.wrapping_add(frame as u64),
+            progress,
+        ))
+    }
+
+    /// Reference diffuse lighting of `frame` of `path` at `res` with `bounces` indirect
+    /// bounces (the lights at the frame's scene time; pixels without a surface show the
+    /// client's sky grey); `progress` counts pixels. The volume, if any, is not part of it.
+    pub fn render_gi(
+        &mut self,
+        path: &CameraPath,
+        frame: u32,
+        res: Resolution,
+        bounces: u32,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<RgbImage> {
+        let gbuffer = self.gbuffer(path, frame, res)?;
+        let lighting = DiffuseLighting::new(self.scene, frame as f32 / PATH_HZ, bounces);
+        let lighting = match &self.animation {
+            Some((_, pose)) => lighting.posed(pose),
+            None => lighting,
+        };
+        let settings = GiSettings {
+            spp: self.spp,
+            seed: self.seed.wrapping_add(frame as u64),
+            background: glam::Vec3::from_array(psao_client::SKY_GREY),
+        };
+        Ok(reference_gi(
+            &gbuffer,
+            self.scene,
+            &lighting,
+            &self.tracer,
+            &settings,
             progress,
         ))
     }

@@ -7,6 +7,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use psao_prt::character::Character;
+use psao_prt::filter::Filter;
 use psao_prt::model::{train, Sample, TrainReport};
 use psao_prt::shade::{Mode, Shader, ShadingGeometry, Visibility};
 use psao_prt::visibility::{visibility_sh, SelfTracer};
@@ -90,6 +91,11 @@ pub struct ShadingArgs {
     /// Transmitted fraction for `--mode translucent`.
     #[arg(long, default_value_t = 0.3)]
     pub transmission: f32,
+    /// What is done to reconstructed visibility before shading: `none`, or `+`-joined
+    /// `hanning` / `lanczos` (a window on the SH bands) and `clamp` (to [0, 1] over the
+    /// sphere); see docs/RELIGHTING.md.
+    #[arg(long, default_value = "none")]
+    pub filter: Filter,
 }
 
 impl ShadingArgs {
@@ -103,6 +109,11 @@ impl ShadingArgs {
             },
         };
         Ok(mode.validate()?)
+    }
+
+    /// The shader of these options.
+    pub fn shader(&self) -> Result<Shader> {
+        Ok(Shader::with_filter(self.mode()?, self.filter)?)
     }
 }
 
@@ -239,7 +250,7 @@ pub fn gather(
     seed: u64,
     what: &str,
 ) -> Result<Vec<Sample>> {
-    let mut tracer = SelfTracer::new(character.mesh())?;
+    let mut tracer = SelfTracer::new(character.occluder_mesh())?;
     let progress = bar(times.len() as u64, what, "frames");
     let mut out = Vec::with_capacity(times.len());
     for &t in times {
@@ -298,15 +309,11 @@ fn run_train(args: &TrainArgs) -> Result<()> {
         model.lobes
     );
     println!(
-        "lobe fit error {:.4} ± {:.4}; ridge {:.3e}; validation error {:.4}; model {:.2} MB; {:.1} s",
+        "lobe fit error {:.4} ± {:.4}; ridge {:.0e} (relative, by blocked cross-validation); validation error {:.4}; model {:.2} MB; {:.1} s",
         report.lobe_fit_error.0,
         report.lobe_fit_error.1,
         report.ridge,
-        report
-            .ridge_errors
-            .iter()
-            .find(|(l, _)| *l == report.ridge)
-            .map_or(0.0, |(_, e)| *e),
+        report.validation_error,
         model.megabytes(),
         start.elapsed().as_secs_f64()
     );
@@ -318,7 +325,7 @@ fn run_render(args: &RenderArgs) -> Result<()> {
     let loaded = load_character(&args.clip.character, args.clip.clip.as_deref())?;
     let model = read_model(&args.model, &loaded)?;
     let env = load_env(&args.env)?;
-    let shader = Shader::new(args.shading.mode()?)?;
+    let shader = args.shading.shader()?;
     let c = &loaded.character;
     let range = frame_range(c, args.clip.frames)?;
     std::fs::create_dir_all(&args.out)

@@ -1,6 +1,7 @@
 //! `psao relight eval`: fit errors and image quality of shadowed relighting against a Monte
-//! Carlo reference on test frames that training never saw; writes `report.json`,
-//! `report.md` and side-by-side pictures.
+//! Carlo reference on poses that training never saw (by default the clip's last quarter,
+//! or another clip of the character), their visibility traced with rays independent of
+//! training's; writes `report.json`, `report.md` and side-by-side pictures.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -8,8 +9,9 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use psao_eval::{AoImage, Metrics};
+use psao_prt::filter::Filter;
 use psao_prt::lighting::{Radiance, LUMINANCE};
-use psao_prt::model::{mean_std, model_errors, PoseModel};
+use psao_prt::model::{cosine_fit_errors, mean_std, model_errors, PoseModel};
 use psao_prt::reference::{reference_shading, ReferenceSettings};
 use psao_prt::shade::{Shader, ShadingGeometry, Visibility};
 use psao_prt::visibility::SelfTracer;
@@ -19,7 +21,7 @@ use crate::args::{FrameRange, Resolution};
 use crate::png_io::write_rgb_png;
 use crate::relight_cmd::{frame_range, gather, gather_split, split, train_model, ShadingArgs};
 use crate::relight_io::{
-    display, exposure_for, framing_camera, load_character, load_env, VertexImage,
+    clip_frames, display, exposure_for, framing_camera, load_character, load_env, VertexImage, FPS,
 };
 
 /// Arguments of `psao relight eval`.
@@ -31,25 +33,38 @@ pub struct EvalArgs {
     /// Clip name or index (default: the first clip).
     #[arg(long)]
     pub clip: Option<String>,
-    /// Frames `A..B` (30 fps) to train on (default: the whole clip).
+    /// Frames `A..B` (30 fps) to train on (default: the whole clip); frames of the test
+    /// block are left out.
     #[arg(long)]
     pub train: Option<FrameRange>,
     /// Train on every K-th frame.
     #[arg(long, default_value_t = 1)]
     pub every: u32,
-    /// Test frames `A..B` (30 fps) of the clip, held out of training and validation
-    /// (default: times half a frame after training frames, never trained on).
+    /// Test frames `A..B` (30 fps), held out of training and validation (default: the
+    /// last quarter of the clip, a contiguous block of poses training never saw; with
+    /// `--test-clip`, the whole test clip).
     #[arg(long)]
     pub test: Option<FrameRange>,
-    /// Number of test frames evaluated, evenly spread over the test times (default: 4, or
-    /// every frame of `--test`).
+    /// Test on another clip of the same character (name or index): train on `--clip`,
+    /// test on this one.
     #[arg(long)]
-    pub tests: Option<usize>,
+    pub test_clip: Option<String>,
+    /// Number of test frames evaluated, evenly spread over the test block.
+    #[arg(long, default_value_t = 8)]
+    pub tests: usize,
     /// Radiance `.hdr` environment map.
     #[arg(long)]
     pub env: PathBuf,
     #[command(flatten)]
     pub shading: ShadingArgs,
+    /// Compare these visibility filters (each shadowed method is shaded with each, named
+    /// `method:filter`); default: `--filter` alone.
+    #[arg(long, value_delimiter = ',')]
+    pub filters: Vec<Filter>,
+    /// Also shade each model with poses not moved into the training poses' limits
+    /// (methods `lobesN-unlimited`).
+    #[arg(long)]
+    pub also_unlimited: bool,
     /// Lobe counts to train and compare.
     #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
     pub lobes: Vec<usize>,
@@ -125,19 +140,39 @@ struct FrameRow {
     flip: f64,
 }
 
+/// The paper's Fig. 3: lobes fitted to plain vs cosine-weighted SH visibility (see
+/// `psao_prt::model::cosine_fit_errors`), mean and standard deviation.
+#[derive(Serialize)]
+struct ShFit {
+    lobes: usize,
+    plain: (f32, f32),
+    cosine: (f32, f32),
+    plain_convolved: (f32, f32),
+}
+
 #[derive(Serialize)]
 struct Report {
     character: String,
     clip: String,
+    /// The clip the test frames come from.
+    test_clip: String,
+    /// The test frames' block (clip frames at 30 fps, end excluded).
+    test_frames: [u32; 2],
     mode: String,
     vertices: usize,
+    /// Skinned primitives (glTF node × primitive) merged into the character.
+    primitives: usize,
     train_frames: usize,
     validation_frames: usize,
     test_times_s: Vec<f32>,
     rays: u32,
     ref_samples: u32,
     ref_lighting: RefLighting,
+    /// The visibility filters compared (the first is `--filter`'s, or the only one).
+    filters: Vec<String>,
     fit_error: Vec<FitError>,
+    /// Fig. 3: plain vs cosine-weighted visibility.
+    sh_fit: Vec<ShFit>,
     methods: Vec<MethodRow>,
     /// A second reference with independent samples against the first (the noise floor).
     reference_noise: MethodRow,
@@ -176,35 +211,59 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     if args.lobes.is_empty() || args.lobes.iter().any(|l| !(1..=3).contains(l)) {
         bail!("--lobes takes counts among 1, 2 and 3");
     }
-    if args.tests == Some(0) || args.rays == 0 || args.ref_samples == 0 {
+    if args.tests == 0 || args.rays == 0 || args.ref_samples == 0 {
         bail!("--tests, --rays and --ref-samples must be at least 1");
     }
     let loaded = load_character(&args.character, args.clip.as_deref())?;
+    let other = match &args.test_clip {
+        Some(clip) => Some(load_character(&args.character, Some(clip))?),
+        None => None,
+    };
     let env = load_env(&args.env)?;
     let mode = args.shading.mode()?;
-    let shader = Shader::new(mode)?;
+    let filters = if args.filters.is_empty() {
+        vec![args.shading.filter]
+    } else {
+        args.filters.clone()
+    };
+    let shaders: Vec<(String, Shader)> = filters
+        .iter()
+        .map(|&f| {
+            let suffix = if filters.len() > 1 {
+                format!(":{f}")
+            } else {
+                String::new()
+            };
+            Ok((suffix, Shader::with_filter(mode, f)?))
+        })
+        .collect::<Result<_>>()?;
+    let shader = &shaders[0].1;
     let c = &loaded.character;
+    // The character playing the test clip (the same file, so the same joints and vertices).
+    let tc = other.as_ref().map_or(c, |o| &o.character);
+    let block = match (args.test, &other) {
+        (Some(t), _) => frame_range(tc, Some(t)).context("--test")?,
+        (None, Some(_)) => frame_range(tc, None)?,
+        (None, None) => last_quarter(clip_frames(tc)),
+    };
+    if block.start >= block.end {
+        bail!("the test block {}..{} is empty", block.start, block.end);
+    }
     let range = frame_range(c, args.train)?;
-    if let Some(t) = args.test {
-        frame_range(c, Some(t)).context("--test")?;
-    }
-    let split = split(range, args.every, args.test)?;
-    if split.test.is_empty() {
-        bail!("the training range leaves no test frames");
-    }
-    let count = args
-        .tests
-        .unwrap_or(if args.test.is_some() { usize::MAX } else { 4 })
-        .min(split.test.len());
-    let step = split.test.len() as f32 / count as f32;
-    let test_times: Vec<f32> = (0..count)
-        .map(|k| split.test[(k as f32 * step) as usize])
-        .collect();
+    let split = split(range, args.every, other.is_none().then_some(block))?;
+    let test_times = test_times(block, args.tests);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
 
     let (train_set, validate) = gather_split(c, &split, args.rays, args.seed)?;
-    let tests = gather(c, &test_times, args.rays, args.seed, "tracing test frames")?;
+    // Test visibility with rays independent of training's.
+    let tests = gather(
+        tc,
+        &test_times,
+        args.rays,
+        args.seed ^ TEST_SEED,
+        "tracing test frames",
+    )?;
 
     let mut models: Vec<(usize, PoseModel)> = Vec::new();
     let mut fit_error = Vec::new();
@@ -230,22 +289,40 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         models.push((lobes, model));
     }
 
+    // Fig. 3 on at most FIG3_FRAMES training frames spread over the set.
+    let fig3_frames: Vec<_> = (0..FIG3_FRAMES.min(train_set.len()))
+        .map(|k| train_set[k * train_set.len() / FIG3_FRAMES.min(train_set.len())].clone())
+        .collect();
+    let sh_fit: Vec<ShFit> = args
+        .lobes
+        .iter()
+        .map(|&lobes| {
+            let e = cosine_fit_errors(&fig3_frames, lobes);
+            ShFit {
+                lobes,
+                plain: e.plain,
+                cosine: e.cosine,
+                plain_convolved: e.plain_convolved,
+            }
+        })
+        .collect();
+
     let lighting = env.project();
     let radiance: &dyn Radiance = match args.ref_lighting {
         RefLighting::Full => &env,
         RefLighting::Sh => &lighting,
     };
     let (w, h) = (args.res.width, args.res.height);
-    let camera = framing_camera(&c.pose(test_times[0]), w, h);
-    let mut tracer = SelfTracer::new(c.mesh())?;
-    let mut image = VertexImage::new(c);
+    let camera = framing_camera(&tc.pose(test_times[0]), w, h);
+    let mut tracer = SelfTracer::new(tc.occluder_mesh())?;
+    let mut image = VertexImage::new(tc);
     let mut exposure = None;
     let mut rows: Vec<FrameRow> = Vec::new();
     let mut noise_rows: Vec<FrameRow> = Vec::new();
     let mut raw = Vec::new();
     let progress = crate::progress::bar(test_times.len() as u64, "rendering test frames", "frames");
     for (k, (&t, sample)) in test_times.iter().zip(&tests).enumerate() {
-        let pose = c.pose(t);
+        let pose = tc.pose(t);
         tracer.set_pose(&pose)?;
         let reference_with = |seed: u64| -> Vec<f32> {
             reference_shading(
@@ -288,37 +365,44 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             frames: &pose.frames,
             transform: pose.transform,
         };
-        let mut methods: Vec<(String, Vec<f32>)> = vec![
-            (
-                "unshadowed".into(),
-                shader.shade(
-                    Visibility::Unshadowed,
-                    geometry,
-                    &lighting.rgb,
-                    camera.position,
-                )?,
-            ),
-            (
-                "projected".into(),
+        let mut methods: Vec<(String, Vec<f32>)> = vec![(
+            "unshadowed".into(),
+            shader.shade(
+                Visibility::Unshadowed,
+                geometry,
+                &lighting.rgb,
+                camera.position,
+            )?,
+        )];
+        for (suffix, shader) in &shaders {
+            methods.push((
+                format!("projected{suffix}"),
                 shader.shade(
                     Visibility::Projected(&sample.visibility),
                     geometry,
                     &lighting.rgb,
                     camera.position,
                 )?,
-            ),
-        ];
-        for (lobes, model) in &models {
-            model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
-            methods.push((
-                format!("lobes{lobes}"),
-                shader.shade(
-                    Visibility::Model(model, &raw),
-                    geometry,
-                    &lighting.rgb,
-                    camera.position,
-                )?,
             ));
+        }
+        for (lobes, model) in &models {
+            let limited = model.pose_vector(&pose.joint_rotations);
+            let unlimited = model.raw_pose_vector(&pose.joint_rotations);
+            let variants = [(limited, ""), (unlimited, "-unlimited")];
+            for (a, tag) in variants.iter().take(1 + args.also_unlimited as usize) {
+                model.predict_raw(a, &mut raw);
+                for (suffix, shader) in &shaders {
+                    methods.push((
+                        format!("lobes{lobes}{tag}{suffix}"),
+                        shader.shade(
+                            Visibility::Model(model, &raw),
+                            geometry,
+                            &lighting.rgb,
+                            camera.position,
+                        )?,
+                    ));
+                }
+            }
         }
         let mut pictures = vec![("reference".to_string(), ref_pixels.clone())];
         for (name, values) in &methods {
@@ -344,7 +428,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     for (fe, (_, model)) in fit_error.iter_mut().zip(&models) {
         let mut times = Vec::new();
         for &t in &test_times {
-            let pose = c.pose(t);
+            let pose = tc.pose(t);
             for _ in 0..3 {
                 let start = Instant::now();
                 model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
@@ -380,15 +464,20 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let report = Report {
         character: loaded.name.clone(),
         clip: c.clip_name().to_string(),
+        test_clip: tc.clip_name().to_string(),
+        test_frames: [block.start, block.end],
         mode: format!("{mode:?}"),
         vertices: c.vertex_count(),
+        primitives: c.part_count(),
         train_frames: train_set.len(),
         validation_frames: validate.len(),
         test_times_s: test_times.clone(),
         rays: args.rays,
         ref_samples: args.ref_samples,
         ref_lighting: args.ref_lighting,
+        filters: filters.iter().map(ToString::to_string).collect(),
         fit_error,
+        sh_fit,
         methods,
         reference_noise,
         frames: rows,
@@ -400,6 +489,29 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .context("cannot write report.md")?;
     print!("{}", markdown(&report));
     Ok(())
+}
+
+/// Training frames the Fig. 3 fits are measured on.
+const FIG3_FRAMES: usize = 4;
+
+/// Salt of the test frames' visibility seed: their rays are independent of training's.
+const TEST_SEED: u64 = 0x7465_7374;
+
+/// The last quarter of a clip of `frames` frames (at least one frame).
+pub fn last_quarter(frames: u32) -> FrameRange {
+    FrameRange {
+        start: (frames - frames / 4).min(frames.saturating_sub(1)),
+        end: frames,
+    }
+}
+
+/// `count` frames of `block` evenly spread (all of them when it has no more), in seconds.
+fn test_times(block: FrameRange, count: usize) -> Vec<f32> {
+    let n = (block.end - block.start) as usize;
+    let count = count.min(n).max(1);
+    (0..count)
+        .map(|k| (block.start + (k * n / count) as u32) as f32 / FPS)
+        .collect()
 }
 
 /// Per-pixel luminance of interleaved RGB.
@@ -476,8 +588,9 @@ fn to_display_bytes(p: &[f32], exposure: f32) -> Vec<u8> {
 
 fn markdown(r: &Report) -> String {
     let mut s = format!(
-        "# Relighting evaluation: {} (clip `{}`, {} vertices), mode {}\n\n\
-         {} training frames, {} validation frames (ridge choice), test times {:?} s; \
+        "# Relighting evaluation: {} (clip `{}`, {} vertices in {} skinned primitives), mode {}\n\n\
+         {} training frames (ridge by blocked cross-validation over them), {} validation frames; tested on clip `{}` \
+         frames {}..{} (held out of training), times {:?} s; \
          {} visibility rays per vertex; reference {} samples per vertex.\n\n\
          ## Fit error (RMS over the sphere of predicted vs projected visibility, test frames)\n\n\
          | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame |\n\
@@ -485,9 +598,13 @@ fn markdown(r: &Report) -> String {
         r.character,
         r.clip,
         r.vertices,
+        r.primitives,
         r.mode,
         r.train_frames,
         r.validation_frames,
+        r.test_clip,
+        r.test_frames[0],
+        r.test_frames[1],
         r.test_times_s,
         r.rays,
         r.ref_samples
@@ -505,6 +622,24 @@ fn markdown(r: &Report) -> String {
             f.model_mb,
             f.ridge,
             f.ms_per_frame
+        );
+    }
+    s += "\n## Lobes fitted to plain vs cosine-weighted SH visibility (paper Fig. 3)\n\n\
+          RMS over the sphere, mean ± std over vertices of 4 training frames; `convolved`: \
+          the plain fit convolved with the clamped cosine, against the traced \
+          cosine-weighted visibility (the cosine-weighted fit's error is in the same \
+          units).\n\n\
+          | lobes | plain fit | cosine-weighted fit | plain fit, convolved |\n|---|---|---|---|\n";
+    for f in &r.sh_fit {
+        s += &format!(
+            "| {} | {:.4} ± {:.4} | {:.4} ± {:.4} | {:.4} ± {:.4} |\n",
+            f.lobes,
+            f.plain.0,
+            f.plain.1,
+            f.cosine.0,
+            f.cosine.1,
+            f.plain_convolved.0,
+            f.plain_convolved.1
         );
     }
     s += "\n## Image quality against the reference (mean over test frames)\n\n\
@@ -532,4 +667,19 @@ fn markdown(r: &Report) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_test_block_is_the_last_quarter_spread_evenly() {
+        assert_eq!(last_quarter(60), FrameRange { start: 45, end: 60 });
+        assert_eq!(last_quarter(3), FrameRange { start: 2, end: 3 });
+        let t = test_times(FrameRange { start: 45, end: 60 }, 4);
+        let frames: Vec<u32> = t.iter().map(|x| (x * FPS).round() as u32).collect();
+        assert_eq!(frames, [45, 48, 52, 56]);
+        assert_eq!(test_times(FrameRange { start: 2, end: 4 }, 8).len(), 2);
+    }
 }

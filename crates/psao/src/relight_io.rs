@@ -41,24 +41,9 @@ pub fn load_character(path: &Path, clip: Option<&str>) -> Result<LoadedCharacter
 
 /// Reads a Radiance `.hdr` environment map (latitude–longitude).
 pub fn load_env(path: &Path) -> Result<EnvMap> {
-    let reader = image::ImageReader::open(path)
-        .with_context(|| format!("cannot open {}", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    if reader.format() != Some(image::ImageFormat::Hdr) {
-        bail!(
-            "{} is not a Radiance HDR image (expected a file starting with #?RADIANCE or #?RGBE)",
-            path.display()
-        );
-    }
-    let image = reader
-        .decode()
-        .with_context(|| format!("{} is not a readable HDR image", path.display()))?
-        .to_rgb32f();
-    let (w, h) = image.dimensions();
-    let pixels = image.pixels().map(|p| p.0).collect();
-    EnvMap::new(w as usize, h as usize, pixels)
-        .with_context(|| format!("unusable environment map {}", path.display()))
+    let map = psao_scene::environment::read_hdr(path)
+        .with_context(|| format!("unusable environment map {}", path.display()))?;
+    Ok(EnvMap::from(map))
 }
 
 /// Writes `model` to `path`.

@@ -10,10 +10,12 @@ use std::time::Duration;
 use anyhow::Result;
 use psao_net::scale::edge::{EdgeConfig, EdgeStats, EdgeStepper};
 use psao_net::scale::trace_node::{self, TraceNodeConfig};
+use psao_net::scale::NatsAuth;
 use psao_net::serve::{Serve, ServeConfig, ServeStats};
 use psao_server::{Partition, Server};
 use serde::Serialize;
 
+use crate::access_args::ExposureArgs;
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
 
@@ -26,6 +28,8 @@ pub struct SceneArgs {
     /// NATS server URL (with JetStream: `nats-server -js`).
     #[arg(long, default_value = NATS)]
     pub nats: String,
+    #[command(flatten)]
+    pub nats_auth: NatsAuthArgs,
     /// Scene: `default` (built in) or a .gltf/.glb/.obj/.toml file. Every node of a
     /// session must load the same scene with the same settings.
     #[arg(long, default_value = crate::scene_source::BUILTIN_SCENE)]
@@ -38,6 +42,50 @@ pub struct SceneArgs {
     pub hz: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
+}
+
+/// Credentials and TLS for the NATS connection (docs/SECURITY.md); secrets come from files.
+#[derive(clap::Args, Debug, Clone)]
+pub struct NatsAuthArgs {
+    /// NATS `.creds` file (user JWT and NKey seed).
+    #[arg(long, value_name = "FILE")]
+    pub nats_creds: Option<PathBuf>,
+    /// NATS user name (needs --nats-password-file).
+    #[arg(long, requires = "nats_password_file")]
+    pub nats_user: Option<String>,
+    /// File whose first line is the NATS user's password.
+    #[arg(long, value_name = "FILE", requires = "nats_user")]
+    pub nats_password_file: Option<PathBuf>,
+    /// File whose first line is a NATS token.
+    #[arg(long, value_name = "FILE")]
+    pub nats_token_file: Option<PathBuf>,
+    /// File whose first line is a NATS NKey seed.
+    #[arg(long, value_name = "FILE")]
+    pub nats_nkey_seed_file: Option<PathBuf>,
+    /// PEM certificates to trust for the NATS server (TLS).
+    #[arg(long, value_name = "FILE")]
+    pub nats_tls_ca: Option<PathBuf>,
+    /// PEM client certificate for the NATS server (needs --nats-tls-key).
+    #[arg(long, value_name = "FILE", requires = "nats_tls_key")]
+    pub nats_tls_cert: Option<PathBuf>,
+    /// PEM private key of --nats-tls-cert.
+    #[arg(long, value_name = "FILE", requires = "nats_tls_cert")]
+    pub nats_tls_key: Option<PathBuf>,
+}
+
+impl NatsAuthArgs {
+    fn auth(&self) -> NatsAuth {
+        NatsAuth {
+            creds_file: self.nats_creds.clone(),
+            user: self.nats_user.clone(),
+            password_file: self.nats_password_file.clone(),
+            token_file: self.nats_token_file.clone(),
+            nkey_seed_file: self.nats_nkey_seed_file.clone(),
+            tls_ca: self.nats_tls_ca.clone(),
+            tls_cert: self.nats_tls_cert.clone(),
+            tls_key: self.nats_tls_key.clone(),
+        }
+    }
 }
 
 impl SceneArgs {
@@ -82,6 +130,7 @@ pub fn run_trace_node(args: &TraceNodeArgs) -> Result<()> {
     let (scene, server, _) = args.scene.server()?;
     let config = TraceNodeConfig {
         nats: args.scene.nats.clone(),
+        auth: args.scene.nats_auth.auth(),
         scene,
         partition: args.partition,
         hz: args.scene.hz,
@@ -117,9 +166,8 @@ pub struct EdgeArgs {
     /// Address to listen on (TCP and WebSocket on the same port); port 0 picks a free one.
     #[arg(long, default_value = "127.0.0.1:7878")]
     pub listen: SocketAddr,
-    /// Access token clients must present.
-    #[arg(long)]
-    pub token: Option<String>,
+    #[command(flatten)]
+    pub exposure: ExposureArgs,
     /// Step once per round of client camera messages, waiting for every partition's batch
     /// of each frame (deterministic; the trace nodes need --lockstep-edges).
     #[arg(long)]
@@ -162,6 +210,7 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     let mut stepper = EdgeStepper::connect(
         EdgeConfig {
             nats: args.scene.nats.clone(),
+            auth: args.scene.nats_auth.auth(),
             scene: scene.clone(),
             edge_id: args
                 .edge_id
@@ -179,7 +228,9 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
     let counters = stepper.counters();
     let config = ServeConfig {
         listen: args.listen,
-        token: args.token.clone(),
+        token: args.exposure.token.token()?,
+        allow_origins: args.exposure.allow_origins.clone(),
+        max_per_source: args.exposure.max_per_source,
         scene_name: scene,
         codec: args.scene.tuning.codec.clone(),
         hz: args.scene.hz,
@@ -189,9 +240,11 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
         once: args.once,
         stop_on_ctrl_c: true,
         scene_glb,
-        tls: None,
+        tls: args.exposure.tls()?,
     };
-    let serve = Serve::bind(server, config)?.with_stepper(Box::new(stepper));
+    let serve = Serve::bind(server, config)?;
+    stepper.report_to(serve.health());
+    let serve = serve.with_stepper(Box::new(stepper));
     println!("listening on {}", serve.local_addr());
     let serve = serve.run();
     if let Some(json) = &args.json {

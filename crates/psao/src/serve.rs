@@ -8,6 +8,7 @@ use psao_net::serve::{Serve, ServeConfig};
 use psao_net::start_cache::start_server;
 use psao_net::Resolution;
 
+use crate::access_args::ExposureArgs;
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
 
@@ -20,9 +21,8 @@ pub struct ServeArgs {
     /// Address to listen on (TCP and WebSocket on the same port); port 0 picks a free one.
     #[arg(long, default_value = "127.0.0.1:7878")]
     pub listen: SocketAddr,
-    /// Access token clients must present.
-    #[arg(long)]
-    pub token: Option<String>,
+    #[command(flatten)]
+    pub exposure: ExposureArgs,
     /// Points per unit area (after sample elimination).
     #[arg(long, default_value_t = 1024.0)]
     pub points: f32,
@@ -43,12 +43,6 @@ pub struct ServeArgs {
     /// Exit once every client has left (after at least one joined).
     #[arg(long)]
     pub once: bool,
-    /// Serve over TLS with this PEM certificate chain (https, wss; needs --tls-key).
-    #[arg(long, requires = "tls_key")]
-    pub tls_cert: Option<PathBuf>,
-    /// The PEM private key of --tls-cert.
-    #[arg(long, requires = "tls_cert")]
-    pub tls_key: Option<PathBuf>,
     /// Write server statistics as JSON to this file on exit.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -58,10 +52,8 @@ pub struct ServeArgs {
 
 /// Runs `psao serve`.
 pub fn run(args: &ServeArgs) -> Result<()> {
-    let tls = match (&args.tls_cert, &args.tls_key) {
-        (Some(cert), Some(key)) => Some(psao_net::tls::acceptor(cert, key)?),
-        _ => None,
-    };
+    let tls = args.exposure.tls()?;
+    let token = args.exposure.token.token()?;
     let input = SceneInput::load(&args.scene)?;
     let server = scene_server(&input, &args.tuning, args.points, args.hz)?;
     tracing::info!(
@@ -72,7 +64,9 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     );
     let config = ServeConfig {
         listen: args.listen,
-        token: args.token.clone(),
+        token,
+        allow_origins: args.exposure.allow_origins.clone(),
+        max_per_source: args.exposure.max_per_source,
         scene_name: input.name.clone(),
         codec: args.tuning.codec.clone(),
         hz: args.hz,

@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use psao_net::view::{view, ViewConfig};
 use psao_net::Resolution;
 
+use crate::access_args::TokenArgs;
 use crate::run::{write_frame_images, write_json};
 use crate::scene_source::SceneArgs;
 
@@ -21,9 +22,8 @@ pub struct ViewArgs {
     /// PEM file of the certificates to trust for `wss://` (default: the Mozilla roots).
     #[arg(long)]
     pub tls_ca: Option<PathBuf>,
-    /// Access token.
-    #[arg(long)]
-    pub token: Option<String>,
+    #[command(flatten)]
+    pub token: TokenArgs,
     #[command(flatten)]
     pub input: SceneArgs,
     /// Client frames to run (default: the whole camera path).
@@ -153,7 +153,7 @@ fn view_config(args: &ViewArgs) -> Result<ViewConfig> {
     Ok(ViewConfig {
         connect: args.connect.clone(),
         tls_ca: args.tls_ca.clone(),
-        token: args.token.clone(),
+        token: args.token.token()?,
         frames: args.frames,
         res: args.res,
         render: args.out.is_some(),

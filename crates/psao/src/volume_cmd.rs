@@ -353,7 +353,7 @@ fn info(file: &Path) -> Result<()> {
         println!("  world bounds {lo} .. {hi}");
         return Ok(());
     }
-    let bytes = std::fs::read(file).with_context(|| format!("cannot read {}", file.display()))?;
+    let bytes = vdb::read_regular_file(file)?;
     let label = file.display().to_string();
     let header =
         vdb::inspect_vdb(&bytes, &label).with_context(|| format!("cannot load {label}"))?;
@@ -373,10 +373,11 @@ fn info(file: &Path) -> Result<()> {
         .with_context(|| format!("cannot load {label}"))?;
     let (lo, hi) = grid.leaf_bounds().context("no leaves")?;
     println!(
-        "  read `{}`: {} grid, {} leaves, {} active voxels, index bounds {lo} .. {hi}, voxel size {}, translation {}",
+        "  read `{}`: {} grid, {} leaves, {} tiles, {} active voxels, index bounds {lo} .. {hi}, voxel size {}, translation {}",
         grid.name,
         grid.class.name(),
         grid.leaves.len(),
+        grid.tiles.len(),
         grid.active_voxels(),
         grid.transform.scale,
         grid.transform.translation

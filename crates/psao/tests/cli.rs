@@ -109,6 +109,43 @@ fn bad_input_fails_with_a_clear_error() {
 }
 
 #[test]
+fn run_refuses_a_gltf_whose_buffer_leaves_its_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, outside) = (dir.path().join("scene"), dir.path().join("outside"));
+    std::fs::create_dir(&scene).unwrap();
+    std::fs::create_dir(&outside).unwrap();
+    std::fs::write(outside.join("secret.bin"), [0u8; 36]).unwrap();
+    let bad = scene.join("bad.gltf");
+    std::fs::write(
+        &bad,
+        r#"{"asset":{"version":"2.0"},
+        "buffers":[{"uri":"../outside/secret.bin","byteLength":36}],
+        "bufferViews":[{"buffer":0,"byteLength":36}],
+        "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[0,0,0]}],
+        "meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],
+        "nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let o = psao(&[
+        "run",
+        "--scene",
+        bad.to_str().unwrap(),
+        "--frames",
+        "0..1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("bad.gltf") && err.contains("outside the glTF's folder"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
 fn run_is_deterministic_and_counts_bytes() {
     let dir = tempfile::tempdir().unwrap();
     let mut hashes = Vec::new();

@@ -91,14 +91,25 @@ fn http_endpoints_answer_and_bad_requests_get_4xx() {
     assert_eq!(status, 200);
     assert!(!js.is_empty());
 
+    // Without the token /health says only that the server is up, and /scene.glb is refused.
     let (status, health) = request(addr, "GET", "/health", "");
+    assert_eq!(status, 200);
+    let h: serde_json::Value = serde_json::from_slice(&health).unwrap();
+    assert_eq!(h, serde_json::json!({ "status": "ok" }));
+    assert_eq!(request(addr, "GET", "/scene.glb", "").0, 401);
+    assert_eq!(
+        request(addr, "GET", "/scene.glb", "Authorization: Bearer nope\r\n").0,
+        401
+    );
+
+    let (status, health) = request(addr, "GET", "/health", AUTH);
     assert_eq!(status, 200);
     let h: serde_json::Value = serde_json::from_slice(&health).unwrap();
     assert_eq!(h["status"], "ok");
     assert_eq!(h["protocol"], psao_wire::PROTOCOL_VERSION);
     assert_eq!(h["scene"], "default");
 
-    let (status, glb) = request(addr, "GET", "/scene.glb", "");
+    let (status, glb) = request(addr, "GET", "/scene.glb", AUTH);
     assert_eq!(status, 200);
     assert_eq!(&glb[..4], b"glTF");
     let length = u32::from_le_bytes(glb[8..12].try_into().unwrap()) as usize;
@@ -143,10 +154,60 @@ fn http_endpoints_answer_and_bad_requests_get_4xx() {
     let o = view(Some("wrong"));
     assert!(!o.status.success());
     assert!(stderr(&o).contains("token"), "{}", stderr(&o));
-    let (status, health) = request(addr, "GET", "/health", "");
+    let (status, health) = request(addr, "GET", "/health", AUTH);
     assert_eq!(status, 200);
     let h: serde_json::Value = serde_json::from_slice(&health).unwrap();
     assert!(h["server_frame"].as_u64().unwrap() > 0, "{h}");
+}
+
+/// The `Authorization` header with the tests' token.
+const AUTH: &str = "Authorization: Bearer sesame\r\n";
+
+/// The head of the answer to `request` (as is), lowercase.
+fn head_of(addr: &str, request: &str) -> String {
+    let all = raw(addr, request.as_bytes());
+    let end = all
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .unwrap_or(all.len());
+    String::from_utf8_lossy(&all[..end]).to_lowercase()
+}
+
+#[test]
+fn hosts_and_origins_other_than_the_servers_own_and_loopback_are_refused() {
+    let server = Serve::start(&["--allow-origin", "https://viewer.example.org"]);
+    let addr = server.addr.as_str();
+    let upgrade = "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n\
+        Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
+    let get = |path: &str, host: &str, extra: &str| {
+        head_of(
+            addr,
+            &format!("GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n{extra}\r\n"),
+        )
+    };
+    // DNS rebinding: a name the operator did not allow, on any route.
+    for path in ["/", "/health", "/scene.glb", "/ws"] {
+        let head = get(path, "rebind.attacker.example:7878", upgrade);
+        assert!(head.starts_with("http/1.1 403"), "{path}: {head}");
+    }
+    assert!(get("/health", "viewer.example.org", "").starts_with("http/1.1 200"));
+    // WebSocket upgrades: pages of another origin are refused, the own, loopback and allowed
+    // origins (and clients that send no Origin) are taken.
+    let with_origin = |origin: &str| get("/ws", addr, &format!("{upgrade}Origin: {origin}\r\n"));
+    assert!(with_origin("http://evil.example.com").starts_with("http/1.1 403"));
+    assert!(with_origin("null").starts_with("http/1.1 403"));
+    for ok in [
+        format!("http://{addr}"),
+        "http://localhost:3000".into(),
+        "https://viewer.example.org".into(),
+    ] {
+        assert!(with_origin(&ok).starts_with("http/1.1 101"), "{ok}");
+    }
+    assert!(get("/ws", addr, upgrade).starts_with("http/1.1 101"));
+    // /health is readable cross-origin by allowed origins only.
+    let cors = |origin: &str| get("/health", addr, &format!("Origin: {origin}\r\n"));
+    assert!(cors("http://127.0.0.1:9").contains("access-control-allow-origin: http://127.0.0.1:9"));
+    assert!(!cors("http://evil.example.com").contains("access-control-allow-origin"));
 }
 
 #[test]
@@ -215,4 +276,117 @@ fn tls_refuses_files_that_are_no_certificate_or_key() {
     let o = common::psao(&["serve", "--tls-cert", junk.to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--tls-key"), "{}", stderr(&o));
+}
+
+/// Resident memory of process `pid`, bytes.
+fn rss(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let kb: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    kb << 10
+}
+
+/// Open file descriptors of process `pid`.
+fn open_fds(pid: u32) -> usize {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .unwrap()
+        .count()
+}
+
+/// A connection from `from` (another loopback address) to `addr` with a 2 KiB receive buffer
+/// that sends `request` and then never reads; `None` when the connection failed.
+fn slow_reader(from: &str, addr: &str, request: &[u8]) -> Option<TcpStream> {
+    use socket2::{Domain, Socket, Type};
+    let socket = Socket::new(Domain::IPV4, Type::STREAM, None).ok()?;
+    socket.set_recv_buffer_size(2048).ok()?;
+    let local: std::net::SocketAddr = format!("{from}:0").parse().unwrap();
+    socket.bind(&local.into()).ok()?;
+    let remote: std::net::SocketAddr = addr.parse().unwrap();
+    socket
+        .connect_timeout(&remote.into(), Duration::from_secs(5))
+        .ok()?;
+    let mut s: TcpStream = socket.into();
+    s.set_write_timeout(Some(Duration::from_secs(1))).ok()?;
+    // The server may already have closed it (over its per-source cap): ignore write errors.
+    let _ = s.write_all(request);
+    Some(s)
+}
+
+/// `psao view` of 30 frames over `connect` (giving up after 5 s without a connection): its
+/// JSON summary, or the error output.
+fn view_within_5s(connect: &str) -> Result<serde_json::Value, String> {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("view.json");
+    let o = Command::new(BIN)
+        .args(["--log", "warn", "view", "--connect", connect])
+        .args(["--frames", "30", "--res", "32x18", "--retry-secs", "5"])
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    if !o.status.success() {
+        return Err(stderr(&o));
+    }
+    Ok(common::json(&json))
+}
+
+#[test]
+fn slow_readers_from_one_address_lock_nobody_out_and_memory_stays_bounded() {
+    let server = Serve::start(&[]);
+    let addr = server.addr.clone();
+    let pid = server.child.id();
+    // Idle: after the first full request of each kind.
+    assert_eq!(request(&addr, "GET", "/scene.glb", "").0, 200);
+    assert_eq!(request(&addr, "GET", "/viewer.js", "").0, 200);
+    let idle = rss(pid);
+    // 1100 connections from 127.0.0.2 asking for the scene (and the script, pipelined) and
+    // never reading the answers.
+    let req = format!("GET /scene.glb HTTP/1.1\r\nHost: {addr}\r\n\r\n")
+        + &format!("GET /viewer.js HTTP/1.1\r\nHost: {addr}\r\n\r\n").repeat(4);
+    let attackers: Vec<TcpStream> = (0..1100)
+        .filter_map(|_| slow_reader("127.0.0.2", &addr, req.as_bytes()))
+        .collect();
+    assert!(!attackers.is_empty(), "no attacking connection was made");
+    // A viewer from 127.0.0.1 connects and receives frames within 5 s.
+    let summary = view_within_5s(&addr).unwrap_or_else(|e| panic!("viewer locked out: {e}"));
+    assert!(summary["updates"].as_u64().unwrap() > 0, "{summary}");
+    let grown = rss(pid).saturating_sub(idle);
+    assert!(
+        grown < 200 << 20,
+        "server RSS grew by {} MB with slow readers",
+        grown >> 20
+    );
+    // WebSocket sessions hold their connection's slot: 100 upgrades from one address leave
+    // at most the per-source cap (64) open on the server.
+    drop(attackers);
+    let before = open_fds(pid);
+    let upgrade = format!(
+        "GET /ws HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n"
+    );
+    let upgraded: Vec<TcpStream> = (0..100)
+        .filter_map(|_| slow_reader("127.0.0.3", &addr, upgrade.as_bytes()))
+        .collect();
+    assert_eq!(upgraded.len(), 100);
+    // Each connection the server kept answers 101; the others are closed unanswered.
+    let mut switched = 0;
+    for mut s in upgraded.iter() {
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        let mut head = [0u8; 12];
+        if s.read_exact(&mut head).is_ok() && head.starts_with(b"HTTP/1.1 101") {
+            switched += 1;
+        }
+    }
+    assert_eq!(switched, 64, "upgrades answered from one address");
+    let open = open_fds(pid);
+    assert!(
+        open <= before + 64 + 4,
+        "{open} fds open on the server with {switched} upgraded sessions (before: {before})"
+    );
+    let summary = view_within_5s(&format!("ws://{addr}")).unwrap_or_else(|e| panic!("{e}"));
+    assert!(summary["updates"].as_u64().unwrap() > 0, "{summary}");
 }

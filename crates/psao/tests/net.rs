@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::{json, stderr, BIN};
+use common::{free_port, json, stderr, BIN};
 use psao_wire::{
     capabilities, decode_frame, encode_frame, frame_payload, CameraMsg, Delta, ErrorCode, Hello,
     InstanceEntry, Message, Welcome, HEADER_LEN, MAGIC, PROTOCOL_VERSION,
@@ -165,14 +165,6 @@ fn view_cmd(fx: &Fixture, addr: &str, frames: u32, extra: &[&str]) -> Command {
     ])
     .args(extra);
     c
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 /// A view's JSON must show a final state equal to the server's at its last update.

@@ -4,14 +4,14 @@
 //! Every test skips with a note when `nats-server` is not installed.
 
 use std::io::{BufRead, BufReader};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
 
-use common::{json, stderr, BIN};
+use common::{free_port, json, stderr, Proc, BIN};
 
 /// Server settings of every process: few points, small budget.
 const SERVER: &[&str] = &["--points", "96", "--ray-budget", "20000", "--hz", "30"];
@@ -42,24 +42,6 @@ fn fixture(dir: &Path) -> (String, String) {
     std::fs::write(dir.join("path.toml"), path).unwrap();
     let s = |n: &str| dir.join(n).to_string_lossy().into_owned();
     (s("room.obj"), s("path.toml"))
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// A child process killed on drop.
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
 }
 
 impl Proc {
@@ -117,9 +99,14 @@ fn nats_on(dir: &Path, port: u16) -> Proc {
 
 /// `psao <role> --scene SCENE <SERVER> <extra>`, its stdout's first line awaited.
 fn start(role: &str, scene: &str, extra: &[&str]) -> (Proc, String) {
+    start_with(role, scene, SERVER, extra)
+}
+
+/// `psao <role> --scene SCENE <server> <extra>`, its stdout's first line awaited.
+fn start_with(role: &str, scene: &str, server: &[&str], extra: &[&str]) -> (Proc, String) {
     let mut child = Command::new(BIN)
         .args(["--log", "warn", role, "--scene", scene])
-        .args(SERVER)
+        .args(server)
         .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
@@ -780,4 +767,196 @@ fn an_animated_scene_replicates_like_one_serve() {
     for n in nodes {
         n.interrupt(20);
     }
+}
+
+/// What a lockstep viewer of a session at the default ray budget got ([`at_defaults`]).
+struct Session {
+    /// The viewer's final state hash (checked against its server's all along), and the
+    /// bytes it received.
+    hash: String,
+    bytes: u64,
+}
+
+/// One lockstep viewer following `frames` frames of `scene`'s path `path` from `psao serve`
+/// alone with the default ray budget and `server` settings; then from `nodes` trace nodes
+/// and one lockstep edge. Returns both sessions, after checking that the edge ended with
+/// the state of `psao serve`, and the trace nodes' reports.
+fn at_defaults(
+    scene: &str,
+    path: &str,
+    server: &[&str],
+    nodes: u32,
+    frames: u32,
+) -> Option<(Session, Session, Vec<serde_json::Value>)> {
+    let dir = tempfile::tempdir().unwrap();
+    let (_nats, url) = nats(dir.path())?;
+    let out = |n: &str| dir.path().join(n);
+    let session = |file: &str| {
+        let v = json(&out(file));
+        Session {
+            hash: view_hashes(&[out(file)]).remove(0),
+            bytes: v["bytes"].as_u64().unwrap(),
+        }
+    };
+    let lockstep = ["--listen", "127.0.0.1:0", "--lockstep", "--once"];
+    let (mut serve, line) = start_with("serve", scene, server, &lockstep);
+    finished(view(&addr(&line), scene, path, frames, &out("s.json")));
+    serve.wait(60);
+    let alone = session("s.json");
+
+    let count = nodes.to_string();
+    let mut tracers: Vec<Proc> = (0..nodes)
+        .map(|k| {
+            let partition = format!("{k}/{count}");
+            let report = out(&format!("t{k}.json"));
+            let args = [
+                "--nats",
+                &url,
+                "--partition",
+                &partition,
+                "--lockstep-edges",
+                "1",
+                "--json",
+                report.to_str().unwrap(),
+            ];
+            let (p, line) = start_with("trace-node", scene, server, &args);
+            assert!(line.starts_with("trace node"), "{line}");
+            p
+        })
+        .collect();
+    let report = out("e.json");
+    let mut args = vec!["--nats", &url, "--json", report.to_str().unwrap()];
+    args.extend(lockstep);
+    let (mut edge, line) = start_with("edge", scene, server, &args);
+    finished(view(&addr(&line), scene, path, frames, &out("v.json")));
+    edge.wait(60);
+    let split = session("v.json");
+    let e = json(&report);
+    assert_eq!(e["state_hash"].as_str(), Some(alone.hash.as_str()), "{e}");
+    assert_eq!(e["edge"]["malformed"], 0, "{e}");
+    assert_eq!(e["edge"]["sequence_gaps"], 0, "{e}");
+    let reports = tracers
+        .drain(..)
+        .enumerate()
+        .map(|(k, p)| {
+            p.interrupt(30);
+            json(&out(&format!("t{k}.json")))
+        })
+        .collect();
+    Some((alone, split, reports))
+}
+
+/// Client frames of the tests at the default ray budget.
+const DEFAULT_FRAMES: u32 = 12;
+
+/// Checks the sessions of [`at_defaults`]: the same final state, the viewer's bytes within
+/// 5 % of `psao serve`'s, batches compressed, and (`over`) some batch larger than NATS's
+/// default 1 MiB payload limit before compression, so that the test needs the parts.
+fn check_defaults(alone: &Session, split: &Session, nodes: &[serde_json::Value], over: bool) {
+    assert_eq!(split.hash, alone.hash, "same state as psao serve alone");
+    let ratio = split.bytes as f64 / alone.bytes as f64;
+    assert!(
+        (0.95..=1.05).contains(&ratio),
+        "viewer bytes {} against {} from psao serve",
+        split.bytes,
+        alone.bytes
+    );
+    for t in nodes {
+        let (sent, raw) = (&t["batch_bytes"], &t["batch_raw_bytes"]);
+        assert!(sent.as_u64() < raw.as_u64(), "compressed: {t}");
+    }
+    let largest = nodes
+        .iter()
+        .filter_map(|t| t["largest_batch_raw_bytes"].as_u64())
+        .max();
+    if over {
+        assert!(largest > Some(1 << 20), "{largest:?}");
+    }
+}
+
+#[test]
+fn one_and_two_trace_nodes_at_the_default_ray_budget_equal_one_serve() {
+    if Command::new("nats-server")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("note: nats-server is not installed: scale-out test skipped");
+        return;
+    }
+    let path = "../../paths/default_a.toml";
+    for nodes in [1, 2] {
+        let Some((alone, split, reports)) =
+            at_defaults("default", path, &[], nodes, DEFAULT_FRAMES)
+        else {
+            return;
+        };
+        check_defaults(&alone, &split, &reports, nodes == 1);
+    }
+}
+
+#[test]
+fn one_and_two_trace_nodes_on_sponza_at_the_default_ray_budget_equal_one_serve() {
+    let obj = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/scenes/dabrovic_sponza.obj"
+    );
+    if !Path::new(obj).exists() {
+        eprintln!("note: ../shared/data is not there: the Sponza scale-out test is skipped");
+        return;
+    }
+    let (scene, path) = ("../../scenes/sponza.toml", "../../paths/sponza_a.toml");
+    for nodes in [1, 2] {
+        let Some((alone, split, reports)) =
+            at_defaults(scene, path, &["--points", "1024"], nodes, 4)
+        else {
+            return;
+        };
+        check_defaults(&alone, &split, &reports, nodes == 1);
+    }
+}
+
+/// `GET /health` of the server at `addr`, parsed.
+fn health(addr: &str) -> serde_json::Value {
+    use std::io::{Read, Write};
+    let mut s = TcpStream::connect(addr).unwrap();
+    let request = format!("GET /health HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n");
+    s.write_all(request.as_bytes()).unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).unwrap();
+    let body = text.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{e}: {text}"))
+}
+
+#[test]
+fn an_edge_missing_a_partition_says_so_in_health_and_to_its_viewer() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((_nats, url)) = nats(dir.path()) else {
+        return;
+    };
+    let (scene, path) = fixture(dir.path());
+    let out = |n: &str| dir.path().join(n);
+    // Partition 1 of 2 never gets a node: the edge cannot complete a frame.
+    let (mut edge, at) = clocked_edge(&url, &scene, dir.path(), 0);
+    let t0 = clocked_trace_node(&url, &scene, dir.path(), 0);
+    let v = view(&at, &scene, &path, 900, &out("v0.json"));
+    let end = Instant::now() + Duration::from_secs(60);
+    let stalled = loop {
+        let h = health(&at);
+        if !h["stalled"].is_null() {
+            break h["stalled"].clone();
+        }
+        assert!(Instant::now() < end, "no stall reported: {h}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert_eq!(stalled["partitions"], serde_json::json!([1]), "{stalled}");
+    assert!(stalled["seconds"].as_f64().unwrap() >= 3.0, "{stalled}");
+    assert!(stalled["since_unix_ms"].as_u64().unwrap() > 0, "{stalled}");
+    finished(v);
+    edge.wait(20);
+    t0.interrupt(20);
+    let v0 = json(&out("v0.json"));
+    let told = v0["stalled"].as_str().unwrap_or_else(|| panic!("{v0}"));
+    assert!(told.contains("partitions [1]"), "{told}");
+    assert_eq!(v0["status_messages"], 1, "{v0}");
 }

@@ -8,7 +8,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use async_nats::jetstream::consumer::pull;
 use futures_util::StreamExt;
@@ -18,16 +18,20 @@ use tokio::sync::{mpsc, Notify};
 
 use super::join::{join, last_sequence, records_from, Joiner};
 use super::lost::Received;
+use super::parts::{Reassembled, Reassembler};
 use super::wire::{Batch, ViewSet};
-use super::{connect, records_stream, Names};
+use super::{connect, records_stream, Names, NatsAuth, ServerErrors, LEASE_TTL};
+use crate::http::Health;
 use crate::serve::Stepper;
 use crate::NetError;
 
 /// Batches buffered between the stream and the simulation.
 const INBOX: usize = 1024;
-/// Frames an edge keeps incomplete before it refuses more (a partition that never
-/// publishes again would otherwise grow this without bound).
-pub const MAX_PENDING_FRAMES: usize = 1 << 16;
+/// The window of frames an edge takes batches for: `applied + 1 ..= applied +
+/// MAX_PENDING_FRAMES` (9 minutes at 30 Hz; a partition that never publishes again, or a
+/// publisher of far-future frames, cannot grow the pending frames past it, and the next
+/// frames always fit).
+pub const MAX_PENDING_FRAMES: usize = 1 << 14;
 /// How long a lockstep edge waits for a frame's batches before publishing its views again.
 const VIEWS_AGAIN: Duration = Duration::from_secs(1);
 
@@ -36,6 +40,8 @@ const VIEWS_AGAIN: Duration = Duration::from_secs(1);
 pub struct EdgeConfig {
     /// NATS server URL.
     pub nats: String,
+    /// Credentials and TLS for it.
+    pub auth: NatsAuth,
     /// Scene name (names the subjects and stream; see [`Names`]).
     pub scene: String,
     /// This edge's name on its views subject.
@@ -63,7 +69,8 @@ pub struct EdgeCounters {
 /// [`EdgeCounters`] at one moment (`psao edge --json` writes it beside the serve figures).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct EdgeStats {
-    /// Record batches received from the stream, and their bytes.
+    /// Record batch messages (parts, [`super::parts`]) received from the stream, and their
+    /// bytes.
     pub batches: u64,
     pub batch_bytes: u64,
     /// Batches or messages that did not parse or named points that do not exist: dropped.
@@ -147,6 +154,17 @@ impl Assembler {
         if batch.frame <= applied {
             return Added::Duplicate;
         }
+        if batch.frame > applied + MAX_PENDING_FRAMES as u64 {
+            return Added::Refused;
+        }
+        // Frames the edge moved past without taking (a join) free their place.
+        while self
+            .frames
+            .first_key_value()
+            .is_some_and(|(&f, _)| f <= applied)
+        {
+            self.frames.pop_first();
+        }
         if !self.frames.contains_key(&batch.frame) && self.frames.len() >= MAX_PENDING_FRAMES {
             return Added::Refused;
         }
@@ -161,6 +179,18 @@ impl Assembler {
         parts.records.extend(batch.records);
         self.first.entry(batch.partition).or_insert(batch.frame);
         Added::Kept
+    }
+
+    /// The partitions whose batch of `frame` is awaited (none known: no batch arrived yet).
+    pub fn missing(&self, frame: u64) -> Vec<u32> {
+        let Some(n) = self.partitions else {
+            return Vec::new();
+        };
+        let parts = self.frames.get(&frame);
+        (0..n)
+            .filter(|k| !parts.is_some_and(|p| p.partitions.contains(k)))
+            .filter(|k| self.first.get(k).is_none_or(|&g| frame >= g))
+            .collect()
     }
 
     /// Whether every partition's batch of `frame` is in (or the partition started later).
@@ -201,6 +231,32 @@ pub struct EdgeStepper {
     first: u64,
     assembler: Assembler,
     counters: Arc<EdgeCounters>,
+    /// The frame waited for, since when (monotonic and wall clock), and whether the stall
+    /// was reported.
+    waiting: Option<Waiting>,
+    /// Where stalls are reported (`/health`).
+    health: Option<Arc<Health>>,
+}
+
+/// The frame an edge waits for.
+struct Waiting {
+    frame: u64,
+    since: Instant,
+    since_unix_ms: u64,
+    /// What the viewers are told once the stall is reported.
+    reported: Option<String>,
+}
+
+/// A stall as `/health` reports it (key `stalled`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Stall {
+    /// The frame waited for.
+    pub frame: u64,
+    /// The partitions whose batches of it are missing (empty: no batch arrived yet).
+    pub partitions: Vec<u32>,
+    /// Since when (Unix ms), and for how long, seconds.
+    pub since_unix_ms: u64,
+    pub seconds: f64,
 }
 
 impl EdgeStepper {
@@ -217,10 +273,16 @@ impl EdgeStepper {
         let counters = Arc::new(EdgeCounters::default());
         let (client, batches, backlog, joined) = rt.block_on(async {
             let connected = Arc::new(Notify::new());
-            let client = connect(&config.nats, connected.clone()).await?;
+            let client = connect(
+                &config.nats,
+                &config.auth,
+                connected.clone(),
+                ServerErrors::default(),
+            )
+            .await?;
             let js = async_nats::jetstream::new(client.clone());
             let mut stream = records_stream(&js, &names).await?;
-            let joined = join(&js, &names, server, Joiner::Replica).await?;
+            let mut joined = join(&js, &names, server, Joiner::Replica).await?;
             let backlog = last_sequence(&mut stream, "the records stream").await?;
             let messages = records_from(&stream, &names, joined.next)
                 .await
@@ -237,7 +299,8 @@ impl EdgeStepper {
             if let Some((seq, nanos)) = joined.last_read {
                 received.note(seq, nanos);
             }
-            tokio::spawn(reader.run(messages, received, joined.next));
+            let parts = std::mem::take(&mut joined.parts);
+            tokio::spawn(reader.run(messages, received, joined.next, parts));
             Ok::<_, NetError>((client, rx, backlog, joined))
         })?;
         let c = joined.counts;
@@ -273,6 +336,8 @@ impl EdgeStepper {
             first: joined.next,
             assembler,
             counters,
+            waiting: None,
+            health: None,
         };
         for batch in joined.later {
             edge.add(batch, server);
@@ -283,6 +348,77 @@ impl EdgeStepper {
     /// The edge's counters.
     pub fn counters(&self) -> Arc<EdgeCounters> {
         self.counters.clone()
+    }
+
+    /// Report stalls in `health` (`/health`'s `stalled`).
+    pub fn report_to(&mut self, health: Arc<Health>) {
+        self.health = Some(health);
+    }
+
+    /// Note whether frame `next` is `ready`: a frame waited for longer than a lease
+    /// ([`LEASE_TTL`]: its trace node would have been replaced by then) is a stall, logged
+    /// once and reported in `/health` until the frame completes.
+    fn watch(&mut self, next: u64, ready: bool) {
+        if ready {
+            if let Some(w) = self.waiting.take().filter(|w| w.reported.is_some()) {
+                tracing::info!(
+                    "frame {}: every partition's batch arrived after {:.1} s",
+                    w.frame,
+                    w.since.elapsed().as_secs_f64()
+                );
+                self.set_stall(None);
+            }
+            return;
+        }
+        if self.waiting.as_ref().is_none_or(|w| w.frame != next) {
+            if self.waiting.as_ref().is_some_and(|w| w.reported.is_some()) {
+                self.set_stall(None);
+            }
+            let since_unix_ms = SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .map_or(0, |d| d.as_millis() as u64);
+            self.waiting = Some(Waiting {
+                frame: next,
+                since: Instant::now(),
+                since_unix_ms,
+                reported: None,
+            });
+        }
+        let w = self.waiting.as_mut().expect("set above");
+        let seconds = w.since.elapsed().as_secs_f64();
+        if seconds < LEASE_TTL.as_secs_f64() {
+            return;
+        }
+        let stall = Stall {
+            frame: w.frame,
+            partitions: self.assembler.missing(w.frame),
+            since_unix_ms: w.since_unix_ms,
+            seconds,
+        };
+        if w.reported.is_none() {
+            let text = if stall.partitions.is_empty() {
+                format!(
+                    "frame {}: no record batch arrived from the trace nodes",
+                    stall.frame
+                )
+            } else {
+                format!(
+                    "frame {}: the record batches of partitions {:?} are missing (their trace \
+                     nodes may be down)",
+                    stall.frame, stall.partitions
+                )
+            };
+            tracing::warn!("{text} for {seconds:.1} s");
+            w.reported = Some(text);
+        }
+        self.set_stall(Some(stall));
+    }
+
+    fn set_stall(&self, stall: Option<Stall>) {
+        let Some(health) = &self.health else { return };
+        if let Ok(mut stalled) = health.stalled.lock() {
+            *stalled = stall.and_then(|s| serde_json::to_value(s).ok());
+        }
     }
 
     /// Apply every complete frame that was in the stream when the edge connected (a joining
@@ -366,8 +502,15 @@ struct StreamReader {
 }
 
 impl StreamReader {
-    /// Forward from `messages`; `received` holds the last message the join read.
-    async fn run(self, mut messages: pull::Ordered, mut received: Received, first: u64) {
+    /// Forward from `messages`, whole batches once all their parts arrived (`parts` holds
+    /// those the join read); `received` holds the last message the join read.
+    async fn run(
+        self,
+        mut messages: pull::Ordered,
+        mut received: Received,
+        first: u64,
+        mut parts: Reassembler,
+    ) {
         let mut last: Option<u64> = first.checked_sub(1).filter(|&l| l > 0);
         loop {
             let message = tokio::select! {
@@ -408,13 +551,18 @@ impl StreamReader {
             self.counters
                 .bytes
                 .fetch_add(message.payload.len() as u64, Ordering::Relaxed);
-            match Batch::decode(&message.payload) {
-                Ok(batch) => {
+            let subject = self.names.records_partition(&message.subject);
+            match parts.add_payload(subject, &message.payload) {
+                Reassembled::Complete(batch) => {
                     if self.tx.send((seq, batch)).await.is_err() {
                         return;
                     }
                 }
-                Err(e) => {
+                Reassembled::Incomplete => {}
+                Reassembled::Duplicate => {
+                    self.counters.duplicates.fetch_add(1, Ordering::Relaxed);
+                }
+                Reassembled::Malformed(e) => {
                     tracing::debug!("{e}");
                     self.counters.malformed.fetch_add(1, Ordering::Relaxed);
                 }
@@ -479,6 +627,11 @@ impl EdgeStepper {
 }
 
 impl Stepper for EdgeStepper {
+    /// The stall reported, if any (a frame overdue longer than a lease).
+    fn stalled(&self) -> Option<String> {
+        self.waiting.as_ref()?.reported.clone()
+    }
+
     /// Publish the viewers' views for the next frame; lockstep: wait until every
     /// partition's batch of it arrived and apply it; clocked: apply the complete frames
     /// that arrived.
@@ -500,11 +653,15 @@ impl Stepper for EdgeStepper {
             while let Ok((_, batch)) = self.batches.try_recv() {
                 self.add(batch, server);
             }
-            return self.apply_ready(server);
+            let step = self.apply_ready(server);
+            self.watch(next, server.frame() >= next);
+            return step;
         }
         let deadline = Instant::now() + self.config.frame_timeout;
         loop {
-            if self.assembler.ready(next) {
+            let ready = self.assembler.ready(next);
+            self.watch(next, ready);
+            if ready {
                 return self.apply_ready(server);
             }
             let left = deadline.saturating_duration_since(Instant::now());
@@ -593,6 +750,20 @@ mod tests {
         assert_eq!(a.add(batch(0, 5, 0), 4), Added::Kept);
         assert_eq!(a.add(batch(1, 6, 0), 4), Added::Kept);
         assert!(!a.ready(5));
+    }
+
+    #[test]
+    fn far_future_batches_are_refused_and_the_next_frames_still_fit() {
+        let mut a = Assembler::default();
+        let window = MAX_PENDING_FRAMES as u64;
+        for f in (window + 1..window + 70_000).step_by(7) {
+            assert_eq!(a.add(batch(0, f, 0), 0), Added::Refused);
+        }
+        assert_eq!(a.add(batch(0, 1, 0), 0), Added::Kept);
+        assert_eq!(a.add(batch(1, 1, 1), 0), Added::Kept);
+        assert!(a.take(1).is_some());
+        // The window moves with the frames applied.
+        assert_eq!(a.add(batch(0, window + 1, 0), 1), Added::Kept);
     }
 
     #[test]

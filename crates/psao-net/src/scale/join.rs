@@ -18,7 +18,8 @@ use futures_util::StreamExt;
 use psao_server::{Owners, PointRecord, PointState, Server};
 
 use super::lost::stored;
-use super::wire::{Batch, Snapshot, SnapshotMark, CHUNK_POINTS};
+use super::parts::{Reassembled, Reassembler};
+use super::wire::{Batch, BatchPart, Snapshot, SnapshotMark, CHUNK_POINTS};
 use super::{records_stream, snapshot_stream, Names};
 use crate::NetError;
 
@@ -335,6 +336,8 @@ pub struct Joined {
     /// The last records message read: its sequence number and the time the stream stored
     /// it (Unix ns), to notice a NATS server that lost it ([`super::lost`]).
     pub last_read: Option<(u64, i128)>,
+    /// The parts of the batches not whole yet (their other parts come after `next`).
+    pub parts: Reassembler,
     /// What was read.
     pub counts: JoinCounts,
 }
@@ -369,6 +372,7 @@ pub async fn join(
             later,
             next: 1,
             last_read: None,
+            parts: Reassembler::default(),
             counts,
         });
     }
@@ -387,6 +391,7 @@ pub async fn join(
             later,
             next: first,
             last_read: None,
+            parts: Reassembler::default(),
             counts,
         });
     }
@@ -394,6 +399,7 @@ pub async fn join(
         .await
         .map_err(|e| failed(&e))?;
     let mut prev = first - 1;
+    let mut parts = Reassembler::default();
     loop {
         let message = match tokio::time::timeout(JOIN_WAIT, messages.next()).await {
             Err(_) => return Err(failed(&"nothing arrived for 10 s")),
@@ -418,14 +424,16 @@ pub async fn join(
         prev = seq;
         counts.batches += 1;
         counts.batch_bytes += message.payload.len() as u64;
-        match Batch::decode(&message.payload) {
-            Ok(batch) => match fold.add(batch, upto, server) {
+        match parts.add_payload(names.records_partition(&message.subject), &message.payload) {
+            Reassembled::Complete(batch) => match fold.add(batch, upto, server) {
                 Folded::Kept => {}
                 Folded::Later(b) => later.push(b),
                 Folded::Duplicate => counts.duplicates += 1,
                 Folded::Malformed => counts.malformed += 1,
             },
-            Err(e) => {
+            Reassembled::Incomplete => {}
+            Reassembled::Duplicate => counts.duplicates += 1,
+            Reassembled::Malformed(e) => {
                 tracing::debug!("{e}");
                 counts.malformed += 1;
             }
@@ -436,14 +444,15 @@ pub async fn join(
                 later,
                 next: seq + 1,
                 last_read: stored.map(|t| (seq, t)),
+                parts,
                 counts,
             });
         }
     }
 }
 
-/// Whether the records stream still holds, under each of `sequences`, the batch of the
-/// (partition, frame) naming it. A NATS server that lost acknowledged messages reuses
+/// Whether the records stream still holds, under each of `sequences`, (the last part of)
+/// the batch of the (partition, frame) naming it. A NATS server that lost acknowledged messages reuses
 /// their sequence numbers, and the snapshots may name some of them.
 async fn batches_held(
     stream: &async_nats::jetstream::stream::Stream,
@@ -452,7 +461,7 @@ async fn batches_held(
     for (&(k, frame), &seq) in sequences {
         let held = stored(stream, seq)
             .await?
-            .and_then(|m| Batch::decode(&m.payload).ok())
+            .and_then(|m| BatchPart::decode(&m.payload).ok())
             .is_some_and(|b| b.partition == k && b.frame == frame);
         if !held {
             return Ok(false);

@@ -3,18 +3,21 @@
 //! ([`edge`]) rebuild the whole published state from them and serve viewers with the serve
 //! code of `psao serve` ([`crate::serve`]).
 
+pub mod auth;
 pub mod edge;
 pub mod join;
 mod lost;
 mod names;
+pub mod parts;
 pub mod trace_node;
 pub mod wire;
 
+pub use auth::NatsAuth;
 pub use names::{scene_id, Names};
 
 use std::sync::atomic::{AtomicBool, Ordering::SeqCst};
-use std::sync::Arc;
-use std::time::Duration;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use tokio::sync::Notify;
 
@@ -35,12 +38,48 @@ const RECONNECT_DELAY_STEP: Duration = Duration::from_millis(25);
 /// Longest delay between attempts to reconnect (well under [`LEASE_TTL`]).
 const RECONNECT_DELAY_MAX: Duration = Duration::from_millis(250);
 
-/// Connects to the NATS server at `url`. Clients reconnect by themselves after a restart;
+/// The latest error the NATS server sent on a connection (`-ERR`) and when it arrived. A
+/// publish the server refuses (too large, not permitted) is answered only by such an error
+/// (and, when too large, a closed connection), never by an acknowledgement.
+#[derive(Clone, Default)]
+pub(crate) struct ServerErrors(Arc<Mutex<Option<(Instant, String)>>>);
+
+impl ServerErrors {
+    fn note(&self, error: String) {
+        if let Ok(mut latest) = self.0.lock() {
+            *latest = Some((Instant::now(), error));
+        }
+    }
+
+    /// The latest error that arrived since `since` when it says a publish was refused.
+    pub(crate) fn refusal_since(&self, since: Instant) -> Option<String> {
+        let latest = self.0.lock().ok()?.clone();
+        latest
+            .filter(|(at, e)| *at >= since && is_refusal(e))
+            .map(|(_, e)| e)
+    }
+}
+
+/// Whether a NATS server error says it refused a publish (nats-server's wording: "Maximum
+/// Payload Violation", "Permissions Violation for Publish to ...").
+fn is_refusal(error: &str) -> bool {
+    let error = error.to_lowercase();
+    error.contains("maximum payload") || error.contains("permissions violation")
+}
+
+/// Connects to the NATS server at `url` with `auth`. Clients reconnect by themselves after a restart;
 /// `connected` is notified at every reconnection (not the first connection), for what the
-/// NATS server may have forgotten meanwhile (consumers).
-async fn connect(url: &str, connected: Arc<Notify>) -> Result<async_nats::Client, NetError> {
+/// NATS server may have forgotten meanwhile (consumers); `errors` keeps the server's latest
+/// error.
+async fn connect(
+    url: &str,
+    auth: &NatsAuth,
+    connected: Arc<Notify>,
+    errors: ServerErrors,
+) -> Result<async_nats::Client, NetError> {
     let first = Arc::new(AtomicBool::new(true));
-    async_nats::ConnectOptions::new()
+    auth.options()
+        .await?
         .connection_timeout(Duration::from_secs(5))
         // Reconnect within RECONNECT_DELAY_MAX of the server's return (the client's default
         // backoff grows to 4 s): a node that lags behind the others' reconnection by more than
@@ -49,9 +88,12 @@ async fn connect(url: &str, connected: Arc<Notify>) -> Result<async_nats::Client
             (RECONNECT_DELAY_STEP * attempts.min(10) as u32).min(RECONNECT_DELAY_MAX)
         })
         .event_callback(move |event| {
-            let (connected, first) = (connected.clone(), first.clone());
+            let (connected, first, errors) = (connected.clone(), first.clone(), errors.clone());
             async move {
                 tracing::info!("NATS: {event}");
+                if let async_nats::Event::ServerError(e) = &event {
+                    errors.note(e.to_string());
+                }
                 if matches!(event, async_nats::Event::Connected) && !first.swap(false, SeqCst) {
                     connected.notify_one();
                 }
@@ -60,6 +102,20 @@ async fn connect(url: &str, connected: Arc<Notify>) -> Result<async_nats::Client
         .connect(url)
         .await
         .map_err(|e| NetError::Nats(format!("cannot connect to {url}: {e}")))
+}
+
+/// The NATS server's `max_payload` on `client`'s connection, checked to leave room for
+/// every message a node publishes.
+fn max_payload(client: &async_nats::Client) -> Result<usize, NetError> {
+    let max = client.server_info().max_payload;
+    let snapshot = wire::Snapshot::encoded_len(wire::CHUNK_POINTS) + parts::NATS_HEADROOM;
+    let need = parts::MIN_MAX_PAYLOAD.max(snapshot);
+    if max < need {
+        return Err(NetError::Nats(format!(
+            "the NATS server's max_payload of {max} bytes is too small: a snapshot chunk needs {need}"
+        )));
+    }
+    Ok(max)
 }
 
 /// The records stream of `names`, created when missing.
@@ -94,4 +150,33 @@ async fn snapshot_stream(
     })
     .await
     .map_err(|e| NetError::Nats(format!("cannot open stream {name}: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refusals_are_told_from_other_server_errors() {
+        let errors = ServerErrors::default();
+        let before = Instant::now();
+        assert_eq!(errors.refusal_since(before), None);
+        errors.note("Stale Connection".into());
+        assert_eq!(errors.refusal_since(before), None, "not a refusal");
+        errors.note("Maximum Payload Violation".into());
+        assert_eq!(
+            errors.refusal_since(before).as_deref(),
+            Some("Maximum Payload Violation")
+        );
+        errors.note("Permissions Violation for Publish to \"psao.s.rec.0\"".into());
+        assert!(errors
+            .refusal_since(before)
+            .unwrap()
+            .contains("psao.s.rec.0"));
+        assert_eq!(
+            errors.refusal_since(Instant::now() + Duration::from_secs(1)),
+            None,
+            "older than the publish"
+        );
+    }
 }

@@ -37,6 +37,14 @@ impl Names {
         format!("psao.{}.rec.{k}", self.id)
     }
 
+    /// The partition whose record batches `subject` carries (`None`: no records subject of
+    /// this scene).
+    pub fn records_partition(&self, subject: &str) -> Option<u32> {
+        subject
+            .strip_prefix(&format!("psao.{}.rec.", self.id))
+            .and_then(|k| k.parse().ok())
+    }
+
     /// Every partition's record batches.
     pub fn records_wildcard(&self) -> String {
         format!("psao.{}.rec.*", self.id)

@@ -5,7 +5,7 @@
 //! key-value bucket; a node adopts partitions whose lease expired (docs/SCALE-OUT.md). A
 //! node starts from the published state ([`super::join`]), not from zero.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -18,8 +18,12 @@ use tokio::sync::{mpsc, Notify};
 
 use super::join::{join, Joiner};
 use super::lost::{lost, Sent};
-use super::wire::{Batch, Snapshot, SnapshotMark, ViewSet, CHUNK_POINTS};
-use super::{connect, records_stream, snapshot_stream, Names, LEASE_CHECK, LEASE_TTL};
+use super::parts::{split, Reassembled, Reassembler, NATS_HEADROOM};
+use super::wire::{Batch, PayloadError, Snapshot, SnapshotMark, ViewSet, CHUNK_POINTS};
+use super::{
+    connect, max_payload, records_stream, snapshot_stream, Names, NatsAuth, ServerErrors,
+    LEASE_CHECK, LEASE_TTL,
+};
 use crate::cpu_time::cpu_seconds;
 use crate::NetError;
 
@@ -40,11 +44,20 @@ const ACK_WAIT: Duration = Duration::from_secs(1);
 /// ([`super::lost`]): a hard kill loses the messages of the last moments, far fewer.
 const SENT_WINDOW: usize = 512;
 
+/// Most edges whose views a trace node keeps (per frame in lockstep, latest when clocked);
+/// views of further edge names are dropped, so forged names cannot grow the tables.
+pub const MAX_EDGES: usize = 256;
+/// Frames ahead of the node's own whose lockstep views are kept (edges send the views of
+/// frame f + 1 only once they have f).
+const MAX_VIEW_FRAMES_AHEAD: u64 = 64;
+
 /// How a trace node runs.
 #[derive(Clone, Debug)]
 pub struct TraceNodeConfig {
     /// NATS server URL.
     pub nats: String,
+    /// Credentials and TLS for it.
+    pub auth: NatsAuth,
     /// Scene name (names the subjects, stream and bucket; see [`Names`]).
     pub scene: String,
     /// The partition this node starts with.
@@ -90,9 +103,16 @@ pub struct TraceNodeStats {
     pub rays_per_s: f64,
     /// CPU time of the process per server frame, ms.
     pub cpu_ms: f64,
-    /// Records published, and the bytes of their batches.
+    /// Records published, the bytes of their batches as published (compressed, in parts),
+    /// and the bytes the batches would have cost uncompressed.
     pub records: u64,
     pub batch_bytes: u64,
+    pub batch_raw_bytes: u64,
+    /// Bytes of the largest batch uncompressed.
+    pub largest_batch_raw_bytes: u64,
+    /// Messages the batches took (more than one per batch when one would not fit the NATS
+    /// server's `max_payload`).
+    pub batch_messages: u64,
     /// Bytes of the snapshot chunks and marks published, and the chunks published (only
     /// those whose points changed since their previous message).
     pub snapshot_bytes: u64,
@@ -262,7 +282,10 @@ struct Node {
     server: Server,
     config: TraceNodeConfig,
     rt: tokio::runtime::Runtime,
+    client: async_nats::Client,
     js: async_nats::jetstream::Context,
+    /// The NATS server's latest error (a refused publish).
+    errors: ServerErrors,
     names: Names,
     leases: Leases,
     views: mpsc::Receiver<(String, ViewSet)>,
@@ -315,7 +338,14 @@ pub fn run(
     });
     let names = Names::new(&config.scene);
     let connected = Arc::new(Notify::new());
-    let client = rt.block_on(connect(&config.nats, connected.clone()))?;
+    let errors = ServerErrors::default();
+    let client = rt.block_on(connect(
+        &config.nats,
+        &config.auth,
+        connected.clone(),
+        errors.clone(),
+    ))?;
+    max_payload(&client)?;
     let mut js = async_nats::jetstream::new(client.clone());
     js.set_timeout(ACK_WAIT);
     rt.block_on(records_stream(&js, &names))?;
@@ -328,14 +358,22 @@ pub fn run(
         counters.clone(),
         |subject, payload| {
             let edge = subject.rsplit('.').next().unwrap_or("").to_string();
-            ViewSet::decode(payload).ok().map(|v| (edge, v))
+            ViewSet::decode(payload).map(|v| Some((edge, v)))
         },
     ))?;
+    let mut parts = Reassembler::default();
+    let subject_names = names.clone();
     let batches = rt.block_on(subscribe(
         &client,
         names.records_wildcard(),
         counters.clone(),
-        |_, payload| Batch::decode(payload).ok().map(|b| (Instant::now(), b)),
+        move |subject, payload| match parts
+            .add_payload(subject_names.records_partition(subject), payload)
+        {
+            Reassembled::Complete(b) => Ok(Some((Instant::now(), b))),
+            Reassembled::Incomplete | Reassembled::Duplicate => Ok(None),
+            Reassembled::Malformed(e) => Err(e),
+        },
     ))?;
     let partition = config.partition;
     let mut leases = Leases {
@@ -393,7 +431,9 @@ pub fn run(
         server,
         config,
         rt,
+        client,
         js,
+        errors,
         names,
         leases,
         views,
@@ -440,12 +480,13 @@ fn start_frame(last: u64, own: Option<u64>, lockstep: bool) -> u64 {
     }
 }
 
-/// Subscribes to `subject`, forwarding what `parse` accepts (counting what it refuses).
+/// Subscribes to `subject`, forwarding what `parse` makes of the messages (nothing yet: a
+/// part of a batch; counting what it refuses).
 async fn subscribe<T: Send + 'static>(
     client: &async_nats::Client,
     subject: String,
     counters: Arc<Counters>,
-    parse: impl Fn(&str, &[u8]) -> Option<T> + Send + 'static,
+    mut parse: impl FnMut(&str, &[u8]) -> Result<Option<T>, PayloadError> + Send + 'static,
 ) -> Result<mpsc::Receiver<T>, NetError> {
     let mut sub = client
         .subscribe(subject.clone())
@@ -455,7 +496,8 @@ async fn subscribe<T: Send + 'static>(
     tokio::spawn(async move {
         while let Some(m) = sub.next().await {
             match parse(m.subject.as_str(), &m.payload) {
-                Some(item) => {
+                Ok(None) => {}
+                Ok(Some(item)) => {
                     if tx.try_send(item).is_err() {
                         if tx.is_closed() {
                             return;
@@ -463,8 +505,8 @@ async fn subscribe<T: Send + 'static>(
                         counters.dropped.fetch_add(1, Ordering::Relaxed);
                     }
                 }
-                None => {
-                    tracing::debug!("malformed message on {}", m.subject);
+                Err(e) => {
+                    tracing::debug!("malformed message on {}: {e}", m.subject);
                     counters.malformed.fetch_add(1, Ordering::Relaxed);
                 }
             }
@@ -554,18 +596,24 @@ impl Node {
             }
             while let Ok((edge, set)) = self.views.try_recv() {
                 match clock {
-                    None if set.frame >= frame => {
-                        self.pending_views
-                            .entry(set.frame)
-                            .or_default()
-                            .insert(edge, set.views);
+                    // Lockstep edges are at most a frame ahead: views further ahead, or from
+                    // more edges than a session has, are not kept (bounded tables).
+                    None if set.frame >= frame && set.frame <= frame + MAX_VIEW_FRAMES_AHEAD => {
+                        let edges = self.pending_views.entry(set.frame).or_default();
+                        if edges.len() >= MAX_EDGES && !edges.contains_key(&edge) {
+                            continue;
+                        }
+                        edges.insert(edge, set.views);
                         if set.frame == frame {
                             self.pending_seconds.insert(frame, set.seconds);
                         }
                     }
                     None => {}
                     Some(_) => {
-                        self.latest_views.insert(edge, (set.frame, set.views));
+                        let full = self.latest_views.len() >= MAX_EDGES;
+                        if !full || self.latest_views.contains_key(&edge) {
+                            self.latest_views.insert(edge, (set.frame, set.views));
+                        }
                     }
                 }
             }
@@ -731,21 +779,36 @@ impl Node {
         Ok(())
     }
 
-    /// Publish `batches` into the records stream ([`Node::store_retrying`]); returns their
-    /// stream sequence numbers.
+    /// Publish `batches` into the records stream ([`Node::store_retrying`]), each
+    /// compressed and in as many parts as the NATS server's `max_payload` needs
+    /// ([`split`]); returns the stream sequence number of each one's last part.
     fn send(&mut self, batches: &[Batch]) -> Result<Vec<u64>, NetError> {
-        let messages: Vec<(String, String, bytes::Bytes)> = batches
-            .iter()
-            .map(|b| {
-                let id = format!("{}.{}.{}", self.config.node_id, b.partition, b.frame);
-                (self.names.records(b.partition), id, b.encode().into())
-            })
-            .collect();
+        let max_payload = max_payload(&self.client)?;
+        let mut messages: Vec<(String, String, bytes::Bytes)> = Vec::new();
+        let mut ends = Vec::with_capacity(batches.len());
+        for b in batches {
+            let split = split(b, max_payload).map_err(|e| {
+                NetError::Nats(format!(
+                    "cannot publish partition {}'s batch of frame {}: {e}",
+                    b.partition, b.frame
+                ))
+            })?;
+            self.stats.batch_raw_bytes += split.raw_bytes as u64;
+            self.stats.largest_batch_raw_bytes =
+                (self.stats.largest_batch_raw_bytes).max(split.raw_bytes as u64);
+            for (k, payload) in split.parts.into_iter().enumerate() {
+                let id = format!("{}.{}.{}.{k}", self.config.node_id, b.partition, b.frame);
+                messages.push((self.names.records(b.partition), id, payload.into()));
+            }
+            ends.push(messages.len() - 1);
+        }
         let sequences = self.store_retrying(&messages)?;
         self.stats.batch_bytes += messages.iter().map(|m| m.2.len() as u64).sum::<u64>();
+        self.stats.batch_messages += messages.len() as u64;
         self.stats.records += batches.iter().map(|b| b.records.len() as u64).sum::<u64>();
+        let ends = ends.into_iter().map(|i| sequences[i]).collect();
         self.remember(messages, &sequences);
-        Ok(sequences)
+        Ok(ends)
     }
 
     /// Keep the last [`SENT_WINDOW`] batch messages stored, with their sequence numbers.
@@ -811,16 +874,37 @@ impl Node {
 
     /// Publish `messages` (subject, message id, payload) and wait for the streams to store
     /// them, retrying for up to [`OUTAGE`] while the NATS server is away; the message ids
-    /// make a stream store a retried message once. Returns their stream sequence numbers.
+    /// make a stream store a retried message once. A publish the server refuses (too
+    /// large, not permitted) is an error at once. Returns their stream sequence numbers.
     fn store_retrying(
         &mut self,
         messages: &[(String, String, bytes::Bytes)],
     ) -> Result<Vec<u64>, NetError> {
+        let max = max_payload(&self.client)?;
+        if let Some(m) = messages.iter().find(|m| m.2.len() + NATS_HEADROOM > max) {
+            return Err(NetError::Nats(format!(
+                "a message of {} bytes to {} does not fit the NATS server's max_payload of {max} bytes",
+                m.2.len(),
+                m.0
+            )));
+        }
         let deadline = Instant::now() + OUTAGE;
         loop {
+            let attempt = Instant::now();
             match self.rt.block_on(store(&self.js, messages)) {
                 Ok(sequences) => return Ok(sequences),
-                Err(e) if Instant::now() < deadline => {
+                Err(e) => {
+                    if let Some(reason) = self.errors.refusal_since(attempt) {
+                        let subjects: BTreeSet<&str> =
+                            messages.iter().map(|m| m.0.as_str()).collect();
+                        return Err(NetError::Nats(format!(
+                            "the NATS server refused a message to {}: {reason} ({e})",
+                            subjects.into_iter().collect::<Vec<_>>().join(", ")
+                        )));
+                    }
+                    if Instant::now() >= deadline {
+                        return Err(e);
+                    }
                     tracing::warn!("{e}: retrying");
                     // The other nodes may miss refreshing their leases meanwhile.
                     self.adopt_after = Instant::now() + LEASE_TTL;
@@ -829,7 +913,6 @@ impl Node {
                     self.rt.block_on(self.leases.refresh())?;
                     std::thread::sleep(RETRY);
                 }
-                Err(e) => return Err(e),
             }
         }
     }

@@ -1,5 +1,6 @@
 //! The payloads trace nodes and edges exchange through NATS (docs/SCALE-OUT.md): record
-//! batches, snapshot chunks and marks, and view sets, little-endian binary with a magic and a version. Decoding checks
+//! batches (sent compressed, in parts: [`BatchPart`], [`super::parts`]), snapshot chunks and
+//! marks, and view sets, little-endian binary with a magic and a version. Decoding checks
 //! every length against the message before allocating, so a malformed message is an error,
 //! never a panic or a huge allocation.
 
@@ -9,6 +10,8 @@ use psao_server::{PointRecord, PointState, View};
 
 /// Magic of a record batch.
 const BATCH_MAGIC: &[u8; 4] = b"PSRB";
+/// Magic of a part of a compressed record batch.
+const PART_MAGIC: &[u8; 4] = b"PSRP";
 /// Magic of a view set.
 const VIEWS_MAGIC: &[u8; 4] = b"PSVW";
 /// Magic of a snapshot chunk.
@@ -22,6 +25,10 @@ const SNAPSHOT_VERSION: u8 = 2;
 /// Bytes of a batch before its records, and of one record.
 const BATCH_HEADER: usize = 4 + 1 + 4 + 4 + 8 + 8 + 4;
 const RECORD_BYTES: usize = 12;
+/// Bytes of a batch part before its slice of the compressed batch.
+pub const PART_HEADER: usize = 4 + 1 + 4 + 4 + 8 + 4 + 4;
+/// Most parts of one batch.
+pub const MAX_PARTS: u32 = 1024;
 /// Bytes of a snapshot chunk before its points, and of one point (record and samples).
 const SNAPSHOT_HEADER: usize = 4 + 1 + 4 * 4 + 8 + 8 + 8 + 4;
 const POINT_BYTES: usize = RECORD_BYTES + 2;
@@ -52,6 +59,22 @@ pub struct Batch {
     pub seconds: f64,
     /// The points published, in (instance, index) order.
     pub records: Vec<PointRecord>,
+}
+
+/// One part of a record batch as published: the batch's payload ([`Batch::encode`]),
+/// compressed, cut into `parts` slices; this is slice `part` ([`super::parts`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct BatchPart {
+    /// The batch's partition, and the number of partitions.
+    pub partition: u32,
+    pub partitions: u32,
+    /// The batch's server frame.
+    pub frame: u64,
+    /// This part, and the batch's number of parts (at most [`MAX_PARTS`]).
+    pub part: u32,
+    pub parts: u32,
+    /// The part's slice of the compressed batch.
+    pub data: Vec<u8>,
 }
 
 /// One chunk of the published records of a partition's points at one server frame, with
@@ -114,7 +137,7 @@ pub struct PayloadError {
     reason: String,
 }
 
-fn fail(what: &'static str, reason: impl Into<String>) -> PayloadError {
+pub(super) fn fail(what: &'static str, reason: impl Into<String>) -> PayloadError {
     PayloadError {
         what,
         reason: reason.into(),
@@ -336,6 +359,11 @@ impl SnapshotMark {
 }
 
 impl Batch {
+    /// Bytes of the payload of a batch of `records` records.
+    pub fn encoded_len(records: usize) -> usize {
+        BATCH_HEADER + records * RECORD_BYTES
+    }
+
     /// The payload.
     pub fn encode(&self) -> Vec<u8> {
         let mut out = Vec::with_capacity(BATCH_HEADER + self.records.len() * RECORD_BYTES);
@@ -372,6 +400,49 @@ impl Batch {
     }
 }
 
+impl BatchPart {
+    /// The payload.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(PART_HEADER + self.data.len());
+        out.extend_from_slice(PART_MAGIC);
+        out.push(VERSION);
+        out.extend_from_slice(&self.partition.to_le_bytes());
+        out.extend_from_slice(&self.partitions.to_le_bytes());
+        out.extend_from_slice(&self.frame.to_le_bytes());
+        out.extend_from_slice(&self.part.to_le_bytes());
+        out.extend_from_slice(&self.parts.to_le_bytes());
+        out.extend_from_slice(&self.data);
+        out
+    }
+
+    /// Decode a payload; refuses a partition outside its count, no parts or more than
+    /// [`MAX_PARTS`], and a part outside its count.
+    pub fn decode(bytes: &[u8]) -> Result<BatchPart, PayloadError> {
+        let mut r = Reader {
+            bytes,
+            what: "record batch part",
+        };
+        r.header(PART_MAGIC)?;
+        let (partition, partitions) = r.partition()?;
+        let frame = r.u64()?;
+        let (part, parts) = (r.u32()?, r.u32()?);
+        if parts == 0 || parts > MAX_PARTS || part >= parts {
+            return Err(fail(
+                r.what,
+                format!("part {part} of {parts} (at most {MAX_PARTS} parts)"),
+            ));
+        }
+        Ok(BatchPart {
+            partition,
+            partitions,
+            frame,
+            part,
+            parts,
+            data: r.bytes.to_vec(),
+        })
+    }
+}
+
 impl ViewSet {
     /// The payload.
     pub fn encode(&self) -> Vec<u8> {
@@ -394,7 +465,8 @@ impl ViewSet {
         out
     }
 
-    /// Decode a payload; refuses more than [`MAX_VIEWS`] views and non-finite numbers.
+    /// Decode a payload; refuses more than [`MAX_VIEWS`] views and cameras a client could not
+    /// send ([`psao_wire::CameraMsg::validate`]).
     pub fn decode(bytes: &[u8]) -> Result<ViewSet, PayloadError> {
         let mut r = Reader {
             bytes,
@@ -407,11 +479,18 @@ impl ViewSet {
         for _ in 0..n {
             let (position, target, up) = (r.vec3()?, r.vec3()?, r.vec3()?);
             let (fov_y, near, far, aspect) = (r.f32()?, r.f32()?, r.f32()?, r.f32()?);
-            let finite = [position, target, up].iter().all(|v| v.is_finite())
-                && [fov_y, near, far, aspect].iter().all(|f| f.is_finite());
-            if !finite {
-                return Err(fail(r.what, "non-finite view"));
-            }
+            // The rules a client's camera message obeys (a view steps the trace nodes).
+            let camera = psao_wire::CameraMsg {
+                frame: 0,
+                position: position.into(),
+                target: target.into(),
+                up: up.into(),
+                fov_y,
+                near,
+                far,
+                aspect,
+            };
+            camera.validate().map_err(|e| fail(r.what, e.to_string()))?;
             views.push(View {
                 camera: Camera {
                     position,
@@ -494,6 +573,22 @@ mod tests {
             frame: 9,
             seconds: 0.3,
             views: vec![v(1.0), v(-2.5)],
+        }
+    }
+
+    #[test]
+    fn views_a_client_could_not_send_are_refused() {
+        for bad in [
+            |c: &mut Camera| c.fov_y = 4.0,
+            |c: &mut Camera| c.near = -1.0,
+            |c: &mut Camera| c.far = c.near,
+            |c: &mut Camera| c.target = c.position,
+            |c: &mut Camera| c.position.x = f32::NAN,
+        ] {
+            let mut v = views();
+            bad(&mut v.views[1].camera);
+            let err = ViewSet::decode(&v.encode()).unwrap_err();
+            assert!(err.to_string().contains("camera"), "{err}");
         }
     }
 
@@ -581,7 +676,40 @@ mod tests {
         assert!(ViewSet::decode(&nan)
             .unwrap_err()
             .to_string()
-            .contains("non-finite"));
+            .contains("camera is not finite"));
+    }
+
+    #[test]
+    fn batch_parts_round_trip_and_refuse_forged_counts() {
+        let p = BatchPart {
+            partition: 1,
+            partitions: 2,
+            frame: 7,
+            part: 2,
+            parts: 3,
+            data: vec![1, 2, 3, 4],
+        };
+        let bytes = p.encode();
+        assert_eq!(bytes.len(), PART_HEADER + 4);
+        assert_eq!(BatchPart::decode(&bytes), Ok(p.clone()));
+        for n in 0..PART_HEADER {
+            assert!(BatchPart::decode(&bytes[..n]).is_err());
+        }
+        for (part, parts) in [(3, 3), (0, 0), (0, MAX_PARTS + 1)] {
+            let forged = BatchPart {
+                part,
+                parts,
+                ..p.clone()
+            };
+            let e = BatchPart::decode(&forged.encode()).unwrap_err();
+            assert!(e.to_string().contains(&format!("part {part} of {parts}")));
+        }
+        let last = BatchPart {
+            part: MAX_PARTS - 1,
+            parts: MAX_PARTS,
+            ..p
+        };
+        assert_eq!(BatchPart::decode(&last.encode()), Ok(last));
     }
 
     #[test]

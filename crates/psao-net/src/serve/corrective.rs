@@ -13,6 +13,11 @@
 //!   are ready within a wall-clock share of the frame ([`DRAIN_SHARE`]), sent as `Samples`
 //!   messages: the simulation thread never traces corrections, so they cannot delay the AO
 //!   step, and more clients share the same cores instead of adding threads.
+//!
+//! Either way every position examined costs one sample of the client's budget, whether or
+//! not it shows the region's object, and regions of objects the scene does not have are
+//! dropped on arrival ([`crate::corrective::object_regions`], counted in [`ClientStats`]):
+//! what a client's regions make the server trace is bounded by its budget.
 
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
@@ -24,10 +29,10 @@ use psao_wire::{
     capabilities, encode_frame, CameraMsg, Message, RegionsMsg, SampleMsg, SamplesMsg,
 };
 
-use super::{Serve, Session, Simulation};
+use super::{ClientStats, Serve, Session, Simulation};
 use crate::corrective::{
-    budget_of_tick, new_planner, object_regions, sample_msg, ClientCamera, CorrectionEngine,
-    RemoteCorrections,
+    budget_of_tick, new_planner, object_regions, sample_msg, ClientCamera, CorrectionCounters,
+    CorrectionEngine, RemoteCorrections,
 };
 use crate::pipeline::client_time;
 
@@ -93,12 +98,37 @@ impl SessionCorrections {
         }
     }
 
-    /// The client's new analysis.
-    fn regions(&mut self, msg: &RegionsMsg) {
+    /// The client's new analysis of the scene `engine` traces.
+    fn regions(&mut self, msg: &RegionsMsg, engine: &CorrectionEngine) {
         match self {
-            Self::Lockstep(r) => r.regions(msg),
-            Self::Threaded(t) => t.regions(msg),
+            Self::Lockstep(r) => r.regions(msg, engine),
+            Self::Threaded(t) => t.regions(msg, engine),
         }
+    }
+
+    /// What the client's corrections cost so far.
+    pub(super) fn counters(&self) -> CorrectionCounters {
+        match self {
+            Self::Lockstep(r) => r.counters,
+            Self::Threaded(t) => {
+                let stats = t.lane.stats();
+                CorrectionCounters {
+                    budget: stats.granted,
+                    examined: stats.examined,
+                    regions_dropped: t.regions_dropped,
+                }
+            }
+        }
+    }
+}
+
+/// `stats` with the costs of `corrections`.
+pub(super) fn record(corrections: Option<&SessionCorrections>, stats: &mut ClientStats) {
+    if let Some(c) = corrections {
+        let counters = c.counters();
+        stats.correction_budget = counters.budget;
+        stats.correction_examined = counters.examined;
+        stats.regions_dropped = counters.regions_dropped;
     }
 }
 
@@ -120,10 +150,10 @@ pub(super) fn session_state(
 }
 
 /// A client's regions (ignored when the session has no corrections).
-pub(super) fn regions(session: &mut Session, msg: &RegionsMsg) {
-    match &mut session.corrective {
-        Some(c) => c.regions(msg),
-        None => tracing::debug!("client {} sent regions without corrections", session.id.0),
+pub(super) fn regions(session: &mut Session, msg: &RegionsMsg, corrections: Option<&Corrections>) {
+    match (&mut session.corrective, corrections) {
+        (Some(state), Some(c)) => state.regions(msg, &c.engine),
+        _ => tracing::debug!("client {} sent regions without corrections", session.id.0),
     }
 }
 
@@ -138,8 +168,11 @@ pub(super) struct TraceView {
 }
 
 /// The engine as the workers use it: positions whose primary ray shows the job's object are
-/// traced in the scene at the view's time; a sample carries the camera age it was traced at.
-/// A scene that cannot be posed gives no samples (logged).
+/// traced in the scene at the view's time ([`CorrectionTracer::camera_sample`] gives nothing
+/// for the others); a sample carries the camera age it was traced at. A scene that cannot be
+/// posed gives no samples (logged).
+///
+/// [`CorrectionTracer::camera_sample`]: psao_corrective::trace::CorrectionTracer::camera_sample
 pub(super) struct EngineJobs(Arc<CorrectionEngine>);
 
 impl JobTracer for EngineJobs {
@@ -155,9 +188,6 @@ impl JobTracer for EngineJobs {
         let traced = self.0.with_tracer(v.time, |tracer| {
             positions
                 .iter()
-                .filter(|&&(x, y)| {
-                    tracer.object_at(&v.camera, v.width, v.height, x, y) == job.object
-                })
                 .filter_map(|&(x, y)| {
                     tracer.camera_sample(
                         &v.camera, v.width, v.height, x, y, job.object, job.level, v.age,
@@ -174,14 +204,15 @@ impl JobTracer for EngineJobs {
 }
 
 /// A client's threaded correction state: its lane of the shared workers (region queue and
-/// sample queue), its camera and camera age, the image size of its analyses and its budget
-/// clock.
+/// sample queue), its camera and camera age, the image size of its analyses, its budget
+/// clock and the regions dropped so far.
 pub(super) struct ThreadedCorrections {
     lane: Lane<EngineJobs>,
     samples_per_second: u32,
     camera: ClientCamera,
     size: Option<(u32, u32)>,
     ticks: u64,
+    regions_dropped: u64,
 }
 
 impl ThreadedCorrections {
@@ -195,6 +226,7 @@ impl ThreadedCorrections {
             camera: ClientCamera::default(),
             size: None,
             ticks: 0,
+            regions_dropped: 0,
         }
     }
 
@@ -203,7 +235,7 @@ impl ThreadedCorrections {
         self.set_view();
     }
 
-    fn regions(&mut self, msg: &RegionsMsg) {
+    fn regions(&mut self, msg: &RegionsMsg, engine: &CorrectionEngine) {
         let size = (msg.width, msg.height);
         if self.size != Some(size) {
             self.lane
@@ -211,7 +243,9 @@ impl ThreadedCorrections {
             self.size = Some(size);
             self.set_view();
         }
-        self.lane.analyze(&object_regions(msg), self.camera.age);
+        let (regions, dropped) = object_regions(msg, engine);
+        self.regions_dropped += dropped;
+        self.lane.analyze(&regions, self.camera.age);
     }
 
     /// The workers' view, once both a camera and an image size are known.

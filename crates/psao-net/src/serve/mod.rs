@@ -16,20 +16,23 @@ use std::time::{Duration, Instant};
 use psao_delta::Codec;
 use psao_server::{ClientId, Server, StepStats, View};
 use psao_wire::{
-    capabilities, encode_frame, Bye, Delta, ErrorCode, ErrorMsg, Message, SceneTime, Welcome,
-    MAX_CLIENT_FRAME, PROTOCOL_VERSION,
+    capabilities, encode_frame, Bye, Delta, ErrorCode, ErrorMsg, Message, SceneTime, StatusMsg,
+    Welcome, MAX_CLIENT_FRAME, PROTOCOL_VERSION,
 };
 use rayon::prelude::*;
 use serde::Serialize;
 use tokio::net::TcpListener;
-use tokio::sync::{mpsc, oneshot, Semaphore};
+use tokio::sync::{mpsc, oneshot};
 
 mod corrective;
 
 pub use corrective::{Corrections, DEFAULT_WORKERS as DEFAULT_CORRECTION_WORKERS};
 
+use crate::access::Access;
+use crate::admission::{Admission, MAX_CONNECTIONS};
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
+use crate::deadline::{Deadlined, SERVER_DEADLINES};
 use crate::http::{serve_http, Health, HttpContext};
 use crate::io::BoxIo;
 use crate::pipeline::CLIENT_HZ;
@@ -42,6 +45,9 @@ const QUEUE_FRAMES: usize = 4;
 const ACK_WINDOW: usize = 3;
 /// Time a new connection has to send its hello.
 const HELLO_TIMEOUT: Duration = Duration::from_secs(5);
+/// Longest a joined client may send nothing: viewers send a camera or, when they have none
+/// to send, a keep-alive at least every [`crate::view::KEEP_ALIVE`].
+pub const CLIENT_IDLE_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// How a [`Serve`] listens and runs (the [`Server`] itself is built by the caller).
 #[derive(Clone)]
@@ -50,6 +56,10 @@ pub struct ServeConfig {
     pub listen: SocketAddr,
     /// Access token clients must present.
     pub token: Option<String>,
+    /// Web origins (`http(s)://host[:port]`) allowed besides the server's own and loopback.
+    pub allow_origins: Vec<String>,
+    /// Most connections open at once from one source (see [`crate::admission`]).
+    pub max_per_source: usize,
     /// Name of the scene, told to clients in the welcome.
     pub scene_name: String,
     /// Update codec name.
@@ -91,6 +101,13 @@ pub struct ClientStats {
     pub frames: u64,
     /// Correction samples sent.
     pub samples: u64,
+    /// Correction positions the client's sample budget paid for (one sample each).
+    pub correction_budget: u64,
+    /// Correction positions examined (a primary ray each, whether or not it gave a sample):
+    /// at most `correction_budget`.
+    pub correction_examined: u64,
+    /// Regions dropped on arrival because the scene has no such object.
+    pub regions_dropped: u64,
 }
 
 /// What `psao serve --json` writes.
@@ -125,6 +142,11 @@ pub struct ServeStats {
     pub mean_hash_ms: f64,
     /// Server frames that started late because the previous one overran the period.
     pub late_frames: u64,
+    /// Wall-clock seconds from the first server frame to the end of the loop.
+    pub seconds: f64,
+    /// Server frames per wall-clock second over `seconds` (the `--hz` rate unless frames
+    /// overran their period).
+    pub fps: f64,
     /// Hash of the server's final buckets + cells.
     pub state_hash: String,
     /// Every client session, in order of joining.
@@ -142,6 +164,12 @@ pub trait Stepper: Send {
         views: &[View],
         seconds: f32,
     ) -> Result<StepStats, NetError>;
+
+    /// Why updates are stalled, when they are (an edge waiting for its trace nodes); sent
+    /// to the clients that understand status messages whenever it changes.
+    fn stalled(&self) -> Option<String> {
+        None
+    }
 }
 
 /// Tracing in this process: [`Server::step_at`].
@@ -180,6 +208,8 @@ struct Session {
     codec: Box<dyn Codec>,
     out: mpsc::Sender<Vec<u8>>,
     want_hash: bool,
+    /// Whether the client understands status messages.
+    want_status: bool,
     view: Option<View>,
     /// Lockstep: the camera frame awaiting an answer.
     pending: Option<u32>,
@@ -199,6 +229,8 @@ pub struct Serve {
     stop: Arc<AtomicBool>,
     stepper: Box<dyn Stepper>,
     corrections: Option<Corrections>,
+    access: Arc<Access>,
+    health: Arc<Health>,
 }
 
 impl Serve {
@@ -211,6 +243,7 @@ impl Serve {
             )));
         }
         psao_delta::codec_by_name(&config.codec).map_err(NetError::codec("the server's codec"))?;
+        let access = Arc::new(Access::new(config.token.clone(), &config.allow_origins)?);
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()
@@ -231,6 +264,8 @@ impl Serve {
             stop: Arc::new(AtomicBool::new(false)),
             stepper: Box::new(LocalStep),
             corrections: None,
+            access,
+            health: Arc::new(Health::default()),
         })
     }
 
@@ -238,6 +273,11 @@ impl Serve {
     pub fn with_stepper(mut self, stepper: Box<dyn Stepper>) -> Self {
         self.stepper = stepper;
         self
+    }
+
+    /// What `/health` reports (a [`Stepper`] may add to it).
+    pub fn health(&self) -> Arc<Health> {
+        self.health.clone()
     }
 
     /// The address actually listened on (resolves port 0).
@@ -262,6 +302,8 @@ impl Serve {
             stop,
             stepper,
             corrections,
+            access,
+            health,
         } = self;
         let scheme = if config.tls.is_some() {
             "TLS: https, wss and raw frames"
@@ -270,9 +312,9 @@ impl Serve {
         };
         tracing::info!("listening on {local} ({scheme})");
         let (events_tx, events_rx) = mpsc::channel::<Event>(1024);
-        let health = Arc::new(Health::default());
         let http = HttpShared {
-            token: config.token.clone(),
+            access,
+            admission: Admission::new(MAX_CONNECTIONS, config.max_per_source),
             tls: config.tls.clone(),
             scene_glb: bytes::Bytes::from(config.scene_glb),
             scene_name: config.scene_name.clone(),
@@ -309,12 +351,14 @@ impl Serve {
             frame_ms: Vec::new(),
             rays: 0,
             cpu_start: None,
+            wall_start: None,
             update_ms: 0.0,
             encode_ms: 0.0,
             unsent: None,
             hash_ms: 0.0,
             health,
             corrections,
+            status: None,
         };
         let stats = sim.run();
         rt.shutdown_timeout(Duration::from_millis(500));
@@ -322,21 +366,19 @@ impl Serve {
     }
 }
 
-/// Connections (raw, HTTP and WebSocket) open at once; later ones are closed at once.
-const MAX_CONNECTIONS: usize = 1024;
-
 async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: HttpShared) {
-    let permits = Arc::new(Semaphore::new(MAX_CONNECTIONS));
     let ctx = Arc::new(HttpContext {
         scene_glb: http.scene_glb,
         scene_name: http.scene_name,
         health: http.health,
+        access: http.access.clone(),
         on_websocket: {
-            let (events, token) = (events.clone(), http.token.clone());
-            Box::new(move |reader, writer| {
-                let (events, token) = (events.clone(), token.clone());
+            let (events, access) = (events.clone(), http.access.clone());
+            Box::new(move |reader, writer, permit| {
+                let (events, access) = (events.clone(), access.clone());
                 tokio::spawn(async move {
-                    if let Err(e) = session(reader, writer, "websocket", events, token).await {
+                    let _permit = permit;
+                    if let Err(e) = session(reader, writer, "websocket", events, &access).await {
                         tracing::info!("WebSocket session ended: {e}");
                     }
                 });
@@ -346,15 +388,18 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: H
     loop {
         match listener.accept().await {
             Ok((stream, peer)) => {
-                let Ok(permit) = permits.clone().try_acquire_owned() else {
-                    tracing::warn!("{MAX_CONNECTIONS} connections open: closing {peer}'s");
-                    continue;
+                let permit = match http.admission.admit(peer.ip()) {
+                    Ok(p) => p,
+                    Err(e) => {
+                        tracing::debug!("closing {peer}'s connection: {e}");
+                        continue;
+                    }
                 };
                 let _ = stream.set_nodelay(true);
-                let (events, token, ctx) = (events.clone(), http.token.clone(), ctx.clone());
+                let stream = Deadlined::new(stream, SERVER_DEADLINES);
+                let (events, access, ctx) = (events.clone(), http.access.clone(), ctx.clone());
                 let tls = http.tls.clone();
                 tokio::spawn(async move {
-                    let _permit = permit;
                     let io: BoxIo = match tls {
                         None => Box::new(stream),
                         Some(tls) => {
@@ -373,12 +418,13 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: H
                     };
                     match accept(io, HELLO_TIMEOUT).await {
                         Ok(Accepted::Frames(reader, writer)) => {
-                            if let Err(e) = session(reader, writer, "tcp", events, token).await {
+                            let _permit = permit;
+                            if let Err(e) = session(reader, writer, "tcp", events, &access).await {
                                 tracing::info!("session with {peer} ended: {e}");
                             }
                         }
                         Ok(Accepted::Http(io)) => {
-                            if let Err(e) = serve_http(io, ctx).await {
+                            if let Err(e) = serve_http(io, ctx, permit).await {
                                 tracing::debug!("HTTP connection from {peer}: {e}");
                             }
                         }
@@ -396,7 +442,8 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: H
 
 /// What the HTTP side needs from the configuration.
 struct HttpShared {
-    token: Option<String>,
+    access: Arc<Access>,
+    admission: Arc<Admission>,
     tls: Option<tokio_rustls::TlsAcceptor>,
     scene_glb: bytes::Bytes,
     scene_name: String,
@@ -426,7 +473,7 @@ async fn session(
     mut writer: FrameWriter,
     kind: &'static str,
     events: mpsc::Sender<Event>,
-    token: Option<String>,
+    access: &Access,
 ) -> Result<(), NetError> {
     let first = tokio::time::timeout(HELLO_TIMEOUT, reader.next(MAX_CLIENT_FRAME)).await;
     let hello = match first {
@@ -454,17 +501,14 @@ async fn session(
         );
         return Err(refuse(&mut reader, &mut writer, ErrorCode::Version, text).await);
     }
-    if let Some(expected) = &token {
-        let given = hello.token.as_deref().unwrap_or("");
-        if !constant_time_eq(given.as_bytes(), expected.as_bytes()) {
-            return Err(refuse(
-                &mut reader,
-                &mut writer,
-                ErrorCode::Token,
-                "missing or wrong token".into(),
-            )
-            .await);
-        }
+    if !access.token_ok(hello.token.as_deref()) {
+        return Err(refuse(
+            &mut reader,
+            &mut writer,
+            ErrorCode::Token,
+            "missing or wrong token".into(),
+        )
+        .await);
     }
     let (out_tx, mut out_rx) = mpsc::channel::<Vec<u8>>(QUEUE_FRAMES);
     let (reply_tx, reply_rx) = oneshot::channel();
@@ -536,7 +580,14 @@ async fn read_loop(
     events: &mpsc::Sender<Event>,
 ) -> Result<(), ReadError> {
     loop {
-        let Some((message, _)) = reader.next(MAX_CLIENT_FRAME).await? else {
+        let next = tokio::time::timeout(CLIENT_IDLE_TIMEOUT, reader.next(MAX_CLIENT_FRAME));
+        let Some((message, _)) = next.await.map_err(|_| {
+            ReadError::Io(format!(
+                "no message for {} s (clients send a keep-alive)",
+                CLIENT_IDLE_TIMEOUT.as_secs()
+            ))
+        })??
+        else {
             return Ok(());
         };
         let event = match message {
@@ -555,10 +606,6 @@ async fn read_loop(
             return Ok(());
         }
     }
-}
-
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
 /// The simulation thread's state.
@@ -586,6 +633,8 @@ struct Simulation {
     rays: u64,
     /// Process CPU seconds when the first frame started.
     cpu_start: Option<f64>,
+    /// When the first frame started.
+    wall_start: Option<Instant>,
     /// Summed over frames: update collection, encoding, hashing (ms).
     update_ms: f64,
     encode_ms: f64,
@@ -596,6 +645,8 @@ struct Simulation {
     health: Arc<Health>,
     /// Corrective splatting, when served.
     corrections: Option<Corrections>,
+    /// The stall last told to the clients ([`Stepper::stalled`]).
+    status: Option<String>,
 }
 
 impl Simulation {
@@ -620,6 +671,7 @@ impl Simulation {
                 }
                 next = Instant::now();
                 self.cpu_start = cpu_seconds();
+                self.wall_start = Some(Instant::now());
             }
             if self.lockstep {
                 // Every client must have sent the camera of its next frame.
@@ -697,16 +749,17 @@ impl Simulation {
             }
             Event::Regions(id, regions) => {
                 if let Some(s) = self.sessions.get_mut(&id) {
-                    corrective::regions(s, &regions);
+                    corrective::regions(s, &regions, self.corrections.as_ref());
                 }
             }
             Event::Leave(id) => {
-                if let Some(s) = self.sessions.remove(&id) {
+                if let Some(mut s) = self.sessions.remove(&id) {
                     self.health
                         .clients
                         .store(self.sessions.len(), Ordering::Relaxed);
                     self.server.remove_client(s.id);
                     tracing::info!("client {id} left");
+                    corrective::record(s.corrective.as_ref(), &mut s.stats);
                     self.stats.clients.push(s.stats);
                 }
             }
@@ -763,6 +816,7 @@ impl Simulation {
                 codec,
                 out: join.out,
                 want_hash: join.capabilities & capabilities::STATE_HASH != 0,
+                want_status: join.capabilities & capabilities::STATUS != 0,
                 view: None,
                 pending: None,
                 unacked: VecDeque::new(),
@@ -780,6 +834,37 @@ impl Simulation {
         self.health
             .clients
             .store(self.sessions.len(), Ordering::Relaxed);
+        if self.status.is_some() {
+            self.send_status(id.0);
+        }
+    }
+
+    /// Tell the clients when the stepper's stall ([`Stepper::stalled`]) began or ended.
+    fn tell_status(&mut self) {
+        let now = self.stepper.stalled();
+        if now == self.status {
+            return;
+        }
+        self.status = now;
+        let ids: Vec<u32> = self.sessions.keys().copied().collect();
+        for id in ids {
+            self.send_status(id);
+        }
+    }
+
+    /// Send the current status to client `id` if it understands status messages.
+    fn send_status(&mut self, id: u32) {
+        let Some(s) = self.sessions.get_mut(&id).filter(|s| s.want_status) else {
+            return;
+        };
+        let msg = Message::Status(StatusMsg {
+            stalled: self.status.is_some(),
+            text: self.status.clone().unwrap_or_default(),
+        });
+        if let Ok(bytes) = encode_frame(&msg) {
+            s.stats.bytes += bytes.len() as u64;
+            let _ = self.rt.block_on(s.out.send(bytes));
+        }
     }
 
     /// Step once for the union of the clients' views and collect the update of each client
@@ -804,6 +889,7 @@ impl Simulation {
         if let Some(sent) = sent {
             self.sent(sent);
         }
+        self.tell_status();
         let step = match step {
             Ok(step) => step,
             Err(e) => {
@@ -893,6 +979,7 @@ impl Simulation {
 
     /// Say bye to everyone and collect the statistics.
     fn shutdown(mut self) -> ServeStats {
+        let seconds = self.wall_start.map_or(0.0, |t| t.elapsed().as_secs_f64());
         if let Some(u) = self.unsent.take() {
             self.send_now(u, false);
         }
@@ -911,6 +998,10 @@ impl Simulation {
         std::thread::sleep(Duration::from_millis(100));
         let mut stats = std::mem::take(&mut self.stats);
         stats.frames = self.server.frame();
+        stats.seconds = seconds;
+        if seconds > 0.0 {
+            stats.fps = stats.frames as f64 / seconds;
+        }
         stats.mean_ms = mean(&self.frame_ms);
         stats.p95_ms = percentile(&self.frame_ms, 0.95);
         stats.median_ms = percentile(&self.frame_ms, 0.5);
@@ -1080,4 +1171,58 @@ pub fn percentile(v: &[f64], q: f64) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);
     s[((s.len() - 1) as f64 * q).round() as usize]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::{accept, Accepted};
+
+    /// A joined client that sends nothing is dropped once [`CLIENT_IDLE_TIMEOUT`] passed;
+    /// one that sends keep-alives (acks) is not.
+    #[tokio::test(start_paused = true)]
+    async fn silent_clients_are_dropped_and_keep_alives_keep_them() {
+        for keeps_alive in [false, true] {
+            let (server_end, mut client_end) = tokio::io::duplex(4096);
+            let (events, mut received) = mpsc::channel(64);
+            let client = tokio::spawn(async move {
+                use tokio::io::AsyncWriteExt;
+                // The first bytes of a raw frame session, then keep-alives (or silence).
+                let ack = encode_frame(&Message::Ack(psao_wire::Ack { frame: 0 })).unwrap();
+                client_end.write_all(&ack).await.unwrap();
+                let mut t = tokio::time::Duration::ZERO;
+                while t < CLIENT_IDLE_TIMEOUT * 2 {
+                    tokio::time::sleep(crate::view::KEEP_ALIVE).await;
+                    t += crate::view::KEEP_ALIVE;
+                    if keeps_alive && client_end.write_all(&ack).await.is_err() {
+                        return;
+                    }
+                }
+                // Closing ends a live session cleanly.
+                drop(client_end);
+            });
+            let Ok(Accepted::Frames(mut reader, _writer)) =
+                accept(Box::new(server_end), HELLO_TIMEOUT).await
+            else {
+                panic!("not taken for a frame session");
+            };
+            let t0 = tokio::time::Instant::now();
+            let ended = read_loop(&mut reader, 1, &events).await;
+            let lived = t0.elapsed();
+            if keeps_alive {
+                assert!(ended.is_ok(), "{ended:?}");
+                assert!(lived >= CLIENT_IDLE_TIMEOUT * 2, "{lived:?}");
+            } else {
+                let err = ended.unwrap_err().to_string();
+                assert!(err.contains("no message for"), "{err}");
+                assert!(lived >= CLIENT_IDLE_TIMEOUT && lived < CLIENT_IDLE_TIMEOUT * 2);
+            }
+            client.await.unwrap();
+            let mut acks = 0;
+            while let Ok(Event::Ack(1, 0)) = received.try_recv() {
+                acks += 1;
+            }
+            assert!(acks >= 1);
+        }
+    }
 }

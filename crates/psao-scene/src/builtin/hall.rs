@@ -5,6 +5,7 @@ use glam::{Affine3A, Quat, Vec2, Vec3};
 
 use super::shapes::{append, arc_profile, arcade, cuboid, cylinder, lathe, stairs};
 use super::{at, at_yaw, Palette, SceneBuilder};
+use crate::light::{Light, LightShape};
 use crate::model::Mesh;
 
 /// Inner half extents of the hall along x and z.
@@ -31,6 +32,31 @@ pub(super) const DAIS_HALF_Z: f32 = 2.5;
 pub(super) const DAIS_TOP: f32 = 0.6;
 const STEP_RUN: f32 = 0.32;
 const STEPS: u32 = 4;
+
+/// x of the centres of the ceiling's light panels (in the bays between beams).
+const PANEL_X: [f32; 3] = [-6.0, 0.0, 6.0];
+/// Edge lengths of a light panel along x and z.
+const PANEL_SIZE: [f32; 2] = [1.5, 5.0];
+/// Radiance of a light panel.
+const PANEL_RADIANCE: f32 = 6.0;
+
+/// The hall's lights: warm-white panels just under the ceiling over the nave, emitting down
+/// (the hall is closed, so the sun and the sky light only its outside).
+pub(super) fn lights() -> Vec<Light> {
+    PANEL_X
+        .iter()
+        .map(|&x| Light {
+            shape: LightShape::Rect {
+                centre: Vec3::new(x, CEILING - 0.01, 0.0),
+                // half_u × half_v points down: the side the panel emits to.
+                half_u: Vec3::new(0.5 * PANEL_SIZE[0], 0.0, 0.0),
+                half_v: Vec3::new(0.0, 0.0, 0.5 * PANEL_SIZE[1]),
+            },
+            color: Vec3::new(1.0, 0.93, 0.82),
+            power: PANEL_RADIANCE,
+        })
+        .collect()
+}
 
 /// Builds all static architecture.
 pub(super) fn build(b: &mut SceneBuilder, p: &Palette) {

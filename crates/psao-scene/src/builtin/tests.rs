@@ -275,3 +275,26 @@ fn repository_camera_paths_and_default_scene_file_load() {
         default_scene().instanced_triangle_count()
     );
 }
+
+#[test]
+fn hall_lights_are_valid_and_panels_emit_down_inside() {
+    let scene = default_scene();
+    assert!(scene.lights.iter().all(|l| l.check().is_ok()));
+    let panels: Vec<_> = scene
+        .lights
+        .iter()
+        .filter_map(|l| match l.shape {
+            crate::LightShape::Rect {
+                centre,
+                half_u,
+                half_v,
+            } => Some((centre, half_u.cross(half_v).normalize())),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(panels.len(), 3);
+    for (centre, normal) in panels {
+        assert!((normal - Vec3::NEG_Y).length() < 1e-6);
+        assert!(centre.x.abs() < 10.0 && centre.z.abs() < 6.0 && centre.y < 6.0);
+    }
+}

@@ -1,5 +1,11 @@
 //! Loading glTF buffers (GLB chunk, external files, base64 data URIs) and reading URIs.
+//!
+//! A glTF file may come from anyone, so the files its URIs name are confined: a URI must
+//! resolve (symbolic links followed) to a regular file inside the glTF's own folder, and no
+//! more bytes are read than the buffer declares (or than an image may have).
 
+use std::fs::File;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use ::gltf::buffer::Source;
@@ -7,12 +13,14 @@ use ::gltf::Document;
 
 use crate::error::SceneError;
 
-/// Loads every buffer of `doc`; `path` is the glTF file (external URIs are relative to it).
-/// Each buffer is checked to be at least as long as the file declares.
+/// Loads every buffer of `doc`; `path` is the glTF file, `folder` the folder its external
+/// URIs are relative to (`None`: a glTF read from memory may not name files). Each buffer
+/// must hold at least the bytes the file declares; of a file only those are read.
 pub(super) fn load_buffers(
     doc: &Document,
     mut blob: Option<Vec<u8>>,
     path: &Path,
+    folder: Option<&Path>,
 ) -> Result<Vec<Vec<u8>>, SceneError> {
     let missing = |message: String| SceneError::MissingBuffer {
         path: path.to_path_buf(),
@@ -26,14 +34,22 @@ pub(super) fn load_buffers(
             Source::Uri(uri) if uri.starts_with("data:") => format!("buffer {i} (data URI)"),
             Source::Uri(uri) => format!("buffer {i} ({uri})"),
         };
+        let declared = buffer.length() as u64;
         let data = match buffer.source() {
             Source::Bin => blob
                 .take()
                 .ok_or_else(|| missing(format!("buffer {i} refers to a missing GLB BIN chunk")))?,
-            Source::Uri(uri) => read_uri(uri, path, u64::MAX).map_err(|e| match e {
-                UriError::Io(file, e) => SceneError::io(&file, e),
-                UriError::Bad(msg) => SceneError::parse(path, "glTF", format!("buffer {i}: {msg}")),
-            })?,
+            Source::Uri(uri) => {
+                read_uri(uri, folder, Limit::Prefix(declared)).map_err(|e| match e {
+                    UriError::Io(file, e) => SceneError::io(&file, e),
+                    UriError::Short(len) => missing(format!(
+                        "{label} is a file of {len} bytes but the glTF declares {declared}"
+                    )),
+                    UriError::Bad(msg) => {
+                        SceneError::parse(path, "glTF", format!("buffer {i}: {msg}"))
+                    }
+                })?
+            }
         };
         if data.len() < buffer.length() {
             return Err(missing(format!(
@@ -51,27 +67,41 @@ pub(super) fn load_buffers(
 pub(super) enum UriError {
     /// The file it names could not be read.
     Io(PathBuf, std::io::Error),
-    /// The URI is malformed, unsupported or names too much data.
+    /// The file it names has fewer bytes (given) than its buffer declares.
+    Short(u64),
+    /// The URI is malformed, unsupported, names a file outside the glTF's folder or not a
+    /// regular file, or names too much data.
     Bad(String),
 }
 
-/// Reads a URI: `data:…;base64,…`, `file:` or a percent-encoded path relative to the glTF
-/// file; at most `max_bytes` (a longer file is not read).
-pub(super) fn read_uri(uri: &str, gltf_path: &Path, max_bytes: u64) -> Result<Vec<u8>, UriError> {
-    let too_long =
-        |len: u64| UriError::Bad(format!("{len} bytes, more than the limit of {max_bytes}"));
+/// How much of a URI's data is read.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Limit {
+    /// At most this many bytes: more is an error.
+    AtMost(u64),
+    /// The first this many bytes of a file (of a data URI, all of it); fewer is an error.
+    Prefix(u64),
+}
+
+/// Reads a URI: `data:…;base64,…`, or a `file:` URI or percent-encoded relative path that
+/// resolves to a regular file inside `folder` (the glTF's folder; `None`: no files).
+pub(super) fn read_uri(
+    uri: &str,
+    folder: Option<&Path>,
+    limit: Limit,
+) -> Result<Vec<u8>, UriError> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest
             .split_once(";base64,")
             .ok_or_else(|| UriError::Bad("data URI is not base64".into()))?;
         let data =
             decode_base64(payload).ok_or_else(|| UriError::Bad("invalid base64 data".into()))?;
-        return match data.len() as u64 {
-            len if len > max_bytes => Err(too_long(len)),
+        return match (limit, data.len() as u64) {
+            (Limit::AtMost(max), len) if len > max => Err(too_long(len, max)),
             _ => Ok(data),
         };
     }
-    let relative = if let Some(rest) = uri.strip_prefix("file://") {
+    let named = if let Some(rest) = uri.strip_prefix("file://") {
         rest
     } else if let Some(rest) = uri.strip_prefix("file:") {
         rest
@@ -80,19 +110,65 @@ pub(super) fn read_uri(uri: &str, gltf_path: &Path, max_bytes: u64) -> Result<Ve
     } else {
         uri
     };
-    let decoded = percent_decode(relative)
+    let decoded = percent_decode(named)
         .ok_or_else(|| UriError::Bad(format!("invalid percent-encoding in '{uri}'")))?;
-    let file: PathBuf = gltf_path
-        .parent()
-        .unwrap_or_else(|| Path::new(""))
-        .join(decoded);
-    let len = std::fs::metadata(&file)
-        .map_err(|e| UriError::Io(file.clone(), e))?
-        .len();
-    if len > max_bytes {
-        return Err(too_long(len));
+    let folder = folder.ok_or_else(|| {
+        UriError::Bad(format!(
+            "'{uri}' names a file, but this glTF was not read from a folder"
+        ))
+    })?;
+    let file = confined(uri, folder, Path::new(&decoded))?;
+    let not_regular = || {
+        UriError::Bad(format!(
+            "'{uri}' ({}) is not a regular file",
+            file.display()
+        ))
+    };
+    // Checked before opening (opening a FIFO would block) and again on the opened file.
+    let meta = std::fs::metadata(&file).map_err(|e| UriError::Io(file.clone(), e))?;
+    if !meta.is_file() {
+        return Err(not_regular());
     }
-    std::fs::read(&file).map_err(|e| UriError::Io(file, e))
+    let f = File::open(&file).map_err(|e| UriError::Io(file.clone(), e))?;
+    let meta = f.metadata().map_err(|e| UriError::Io(file.clone(), e))?;
+    if !meta.is_file() {
+        return Err(not_regular());
+    }
+    let take = match limit {
+        Limit::AtMost(max) if meta.len() > max => return Err(too_long(meta.len(), max)),
+        Limit::AtMost(max) => max,
+        Limit::Prefix(len) if meta.len() < len => return Err(UriError::Short(meta.len())),
+        Limit::Prefix(len) => len,
+    };
+    let mut data = Vec::with_capacity(take.min(meta.len()) as usize);
+    f.take(take)
+        .read_to_end(&mut data)
+        .map_err(|e| UriError::Io(file, e))?;
+    Ok(data)
+}
+
+fn too_long(len: u64, max: u64) -> UriError {
+    UriError::Bad(format!("{len} bytes, more than the limit of {max}"))
+}
+
+/// `named` (relative to `folder`, or absolute) resolved with every symbolic link followed,
+/// if it lies inside `folder`.
+fn confined(uri: &str, folder: &Path, named: &Path) -> Result<PathBuf, UriError> {
+    let root = folder
+        .canonicalize()
+        .map_err(|e| UriError::Io(folder.to_path_buf(), e))?;
+    let joined = root.join(named);
+    let real = joined
+        .canonicalize()
+        .map_err(|e| UriError::Io(joined.clone(), e))?;
+    if !real.starts_with(&root) {
+        return Err(UriError::Bad(format!(
+            "'{uri}' resolves to {}, outside the glTF's folder {}",
+            real.display(),
+            root.display()
+        )));
+    }
+    Ok(real)
 }
 
 /// Decodes `%XX` escapes; `None` for malformed escapes or non-UTF-8 results.

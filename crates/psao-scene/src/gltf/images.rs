@@ -12,7 +12,7 @@ use ::gltf::Document;
 use image::{DynamicImage, ImageFormat, ImageReader, Limits};
 use rayon::prelude::*;
 
-use super::buffers::{read_uri, UriError};
+use super::buffers::{read_uri, Limit, UriError};
 use crate::alpha::AlphaImage;
 use crate::error::SceneError;
 
@@ -31,11 +31,13 @@ const JPEG_SIGNATURE: &[u8] = b"\xff\xd8\xff";
 /// Decoded masks by glTF image index; `None` for an image without alpha (opaque everywhere).
 pub(super) type MaskImages = HashMap<usize, Option<Arc<AlphaImage>>>;
 
-/// Decodes (in parallel) every image that an alpha-masked material uses as its base colour.
+/// Decodes (in parallel) every image that an alpha-masked material uses as its base colour;
+/// image files are read from `folder` (see [`read_uri`]).
 pub(super) fn mask_images(
     doc: &Document,
     buffers: &[Vec<u8>],
     path: &Path,
+    folder: Option<&Path>,
 ) -> Result<MaskImages, SceneError> {
     let mut users: Vec<(usize, String)> = Vec::new();
     for m in doc.materials() {
@@ -58,7 +60,7 @@ pub(super) fn mask_images(
         .par_iter()
         .map(|(image, material)| {
             let label = label(doc, *image, material);
-            let bytes = encoded(doc, *image, buffers, path, &label)?;
+            let bytes = encoded(doc, *image, buffers, (path, folder), &label)?;
             Ok((*image, decode(&bytes, path, &label)?.map(Arc::new)))
         })
         .collect()
@@ -81,14 +83,17 @@ fn encoded(
     doc: &Document,
     image: usize,
     buffers: &[Vec<u8>],
-    path: &Path,
+    (path, folder): (&Path, Option<&Path>),
     label: &str,
 ) -> Result<Vec<u8>, SceneError> {
     let json = &doc.as_json().images[image];
     if let Some(uri) = &json.uri {
-        return read_uri(uri, path, MAX_IMAGE_BYTES).map_err(|e| match e {
+        return read_uri(uri, folder, Limit::AtMost(MAX_IMAGE_BYTES)).map_err(|e| match e {
             UriError::Io(file, e) => {
                 SceneError::image(path, label, format!("cannot read {}: {e}", file.display()))
+            }
+            UriError::Short(len) => {
+                SceneError::image(path, label, format!("the file has only {len} bytes"))
             }
             UriError::Bad(msg) => SceneError::image(path, label, msg),
         });

@@ -3,7 +3,7 @@
 use glam::Vec3;
 use serde::Deserialize;
 
-use crate::light::{Light, LightShape};
+use crate::light::{Light, LightShape, SunKeys};
 use crate::model::{Material, Scene};
 
 /// A `[[light]]` entry.
@@ -18,6 +18,15 @@ pub(super) struct LightEntry {
     #[serde(default = "white")]
     color: [f32; 3],
     power: f32,
+    keys: Option<SunKeysEntry>,
+}
+
+/// A sun's `keys = { times = [...], direction = [[x, y, z], ...] }`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SunKeysEntry {
+    times: Vec<f32>,
+    direction: Vec<[f32; 3]>,
 }
 
 fn white() -> [f32; 3] {
@@ -37,15 +46,38 @@ pub(super) struct MaterialEntry {
     ior: Option<f32>,
 }
 
-/// The light an entry describes, checked.
-pub(super) fn light(e: &LightEntry) -> Result<Light, String> {
+/// The light an entry describes, checked, and its keys when it is a sun with `keys` (their
+/// `light` index is `index`; the light's own direction is theirs at time 0).
+pub(super) fn light(e: &LightEntry, index: usize) -> Result<(Light, Option<SunKeys>), String> {
+    let keys = match &e.keys {
+        None => None,
+        Some(_) if e.kind != "sun" => {
+            return Err(format!("only a sun takes `keys`, not a {} light", e.kind))
+        }
+        Some(_) if e.direction.is_some() => {
+            return Err("a sun with `keys` takes its direction from them: drop `direction`".into())
+        }
+        Some(k) => {
+            let directions = k.direction.iter().map(|&d| Vec3::from_array(d)).collect();
+            Some(SunKeys::new(index, k.times.clone(), directions)?)
+        }
+    };
+    let light = one_light(e, keys.as_ref().map(|k| k.direction_at(0.0)))?;
+    Ok((light, keys))
+}
+
+/// The light an entry describes, checked; `direction` stands in for a sun's missing one.
+fn one_light(e: &LightEntry, direction: Option<Vec3>) -> Result<Light, String> {
     let need = |v: Option<[f32; 3]>, what: &str| {
         v.map(Vec3::from_array)
             .ok_or_else(|| format!("a {} light needs `{what}`", e.kind))
     };
     let shape = match e.kind.as_str() {
         "sun" => LightShape::Sun {
-            direction: need(e.direction, "direction")?.normalize_or_zero(),
+            direction: match direction {
+                Some(d) => d,
+                None => need(e.direction, "direction")?.normalize_or_zero(),
+            },
         },
         "point" => LightShape::Point {
             position: need(e.position, "position")?,
