@@ -117,7 +117,7 @@ pub struct ScaleReport {
 }
 
 /// A child process killed on drop.
-struct Proc(Child);
+pub(crate) struct Proc(Child);
 
 impl Drop for Proc {
     fn drop(&mut self) {
@@ -127,10 +127,10 @@ impl Drop for Proc {
 }
 
 /// A scratch folder for one nats-server's store, removed on drop.
-struct Scratch(PathBuf);
+pub(crate) struct Scratch(PathBuf);
 
 impl Scratch {
-    fn new(name: &str) -> Result<Self> {
+    pub(crate) fn new(name: &str) -> Result<Self> {
         let dir =
             std::env::temp_dir().join(format!("psao-bench-scale-{}-{name}", std::process::id()));
         std::fs::create_dir_all(&dir)
@@ -138,7 +138,7 @@ impl Scratch {
         Ok(Self(dir))
     }
 
-    fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         &self.0
     }
 }
@@ -185,7 +185,7 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             .collect::<Result<_>>()?;
         let mut replica = make()?;
         let (viewer_bytes, nats_bytes) =
-            follow(args, &url, &input.name, &path, &mut replica, None)?;
+            follow(args, &url, &input.name, &path, n, &mut replica, None)?;
         let stats: Vec<TraceNodeStats> = (0..n)
             .map(|k| {
                 wait_stats(
@@ -197,7 +197,7 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
         let rays_per_s: Vec<f64> = stats.iter().map(|s| s.rays_per_s).collect();
         let frames = args.frames as f64;
         let mut late = make()?;
-        let (late_join_bytes, late_join_frame) = late_join(&url, &input.name, &mut late)?;
+        let (late_join_bytes, late_join_frame) = late_join(&url, &input.name, n, &mut late)?;
         let row = ScaleRow {
             nodes: n,
             sum_rays_per_s: rays_per_s.iter().sum(),
@@ -264,6 +264,7 @@ fn takeover(
         &url,
         scene,
         path,
+        2,
         &mut replica,
         Some((args.frames / 3, victim)),
     )?;
@@ -271,14 +272,15 @@ fn takeover(
     Ok(stats.adopted.first().map(|a| a.after_s))
 }
 
-/// Follow the path for `args.frames` server frames as an edge in lockstep; returns the
-/// bytes one viewer would receive and the bytes of batches received. `kill`: at that frame,
-/// kill that node.
+/// Follow the path for `args.frames` server frames as an edge in lockstep of a session of
+/// `partitions` partitions; returns the bytes one viewer would receive and the bytes of
+/// batches received. `kill`: at that frame, kill that node.
 fn follow(
     args: &BenchScaleArgs,
     url: &str,
     scene: &str,
     path: &CameraPath,
+    partitions: u32,
     replica: &mut Server,
     mut kill: Option<(u64, Proc)>,
 ) -> Result<(u64, u64)> {
@@ -287,6 +289,7 @@ fn follow(
         auth: NatsAuth::default(),
         scene: scene.to_string(),
         edge_id: "bench".into(),
+        partitions,
         lockstep: true,
         frame_timeout: Duration::from_secs(300),
     };
@@ -304,14 +307,15 @@ fn follow(
     Ok((viewer_bytes, edge.counters().snapshot().batch_bytes))
 }
 
-/// A clocked edge joining after the run: the bytes it read to catch up (snapshots and
-/// batches) and the frame it started from.
-fn late_join(url: &str, scene: &str, replica: &mut Server) -> Result<(u64, u64)> {
+/// A clocked edge joining a session of `partitions` partitions after the run: the bytes it
+/// read to catch up (snapshots and batches) and the frame it started from.
+fn late_join(url: &str, scene: &str, partitions: u32, replica: &mut Server) -> Result<(u64, u64)> {
     let config = EdgeConfig {
         nats: url.to_string(),
         auth: NatsAuth::default(),
         scene: scene.to_string(),
         edge_id: "late".into(),
+        partitions,
         lockstep: false,
         frame_timeout: Duration::from_secs(30),
     };
@@ -341,7 +345,7 @@ fn state_hash(server: &Server) -> String {
 }
 
 /// A `nats-server -js` on a free loopback port storing into `dir`.
-fn start_nats(program: &Path, dir: &Path) -> Result<(Proc, String)> {
+pub(crate) fn start_nats(program: &Path, dir: &Path) -> Result<(Proc, String)> {
     let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
     let child = Command::new(program)
         .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])

@@ -3,6 +3,7 @@
 mod access_args;
 mod args;
 mod bench_client;
+mod bench_nats;
 mod bench_relight;
 mod bench_scale;
 mod bench_serve;
@@ -94,6 +95,8 @@ enum BenchCommand {
     Scale(bench_scale::BenchScaleArgs),
     /// Synthesis + shading time per frame of a relighting model.
     Relight(bench_relight::BenchRelightArgs),
+    /// One NATS server's rate storing record-batch-sized messages for 1, 2, 4, … consumers.
+    Nats(bench_nats::BenchNatsArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -127,6 +130,7 @@ fn run(command: Command) -> Result<()> {
         Command::Bench(BenchCommand::Step(a)) => bench_step::run(&a),
         Command::Bench(BenchCommand::Relight(a)) => bench_relight::run(&a),
         Command::Bench(BenchCommand::Scale(a)) => bench_scale::run(&a),
+        Command::Bench(BenchCommand::Nats(a)) => bench_nats::run(&a),
         Command::Serve(a) => serve::run(&a),
         Command::View(a) => view::run(&a),
         Command::TraceNode(a) => scale_cmd::run_trace_node(&a),

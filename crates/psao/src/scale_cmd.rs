@@ -168,6 +168,10 @@ pub struct EdgeArgs {
     pub listen: SocketAddr,
     #[command(flatten)]
     pub exposure: ExposureArgs,
+    /// The session's number of partitions: the N of the trace nodes' `--partition k/N`.
+    /// Batches and snapshots claiming another count are dropped (the bus never sets it).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub partitions: u32,
     /// Step once per round of client camera messages, waiting for every partition's batch
     /// of each frame (deterministic; the trace nodes need --lockstep-edges).
     #[arg(long)]
@@ -216,6 +220,7 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
                 .edge_id
                 .clone()
                 .unwrap_or_else(|| format!("edge-{}", std::process::id())),
+            partitions: args.partitions,
             lockstep: args.lockstep,
             frame_timeout: Duration::from_secs_f64(args.frame_timeout),
         },

@@ -276,7 +276,14 @@ fn lockstep_edges(
 ) -> Vec<(Proc, String)> {
     let args = |e| {
         let id = format!("e{e}");
-        let listen = ["--listen", "127.0.0.1:0", "--lockstep", "--once"];
+        let listen = [
+            "--listen",
+            "127.0.0.1:0",
+            "--lockstep",
+            "--once",
+            "--partitions",
+            "2",
+        ];
         ["--nats", url, "--edge-id", &id]
             .into_iter()
             .chain(listen)
@@ -389,6 +396,8 @@ fn late_edge(dir: &Path, url: &str, scene: &str, path: &str) -> serde_json::Valu
             "--listen",
             "127.0.0.1:0",
             "--once",
+            "--partitions",
+            "2",
             "--json",
             report.to_str().unwrap(),
         ],
@@ -420,6 +429,7 @@ fn clocked_trace_node(url: &str, scene: &str, dir: &Path, k: u32) -> Proc {
 fn clocked_edge(url: &str, scene: &str, dir: &Path, e: u32) -> (Proc, String) {
     let json = dir.join(format!("e{e}.json"));
     let mut args = vec!["--nats", url, "--listen", "127.0.0.1:0", "--once"];
+    args.extend(["--partitions", "2"]);
     args.extend(QUICK);
     args.extend(["--json", json.to_str().unwrap()]);
     let (p, line) = start("edge", scene, &args);
@@ -657,6 +667,8 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
                 "127.0.0.1:0",
                 "--lockstep",
                 "--once",
+                "--partitions",
+                "2",
                 "--edge-id",
                 &id,
                 "--json",
@@ -826,6 +838,7 @@ fn at_defaults(
         .collect();
     let report = out("e.json");
     let mut args = vec!["--nats", &url, "--json", report.to_str().unwrap()];
+    args.extend(["--partitions", &count]);
     args.extend(lockstep);
     let (mut edge, line) = start_with("edge", scene, server, &args);
     finished(view(&addr(&line), scene, path, frames, &out("v.json")));
@@ -959,4 +972,50 @@ fn an_edge_missing_a_partition_says_so_in_health_and_to_its_viewer() {
     let told = v0["stalled"].as_str().unwrap_or_else(|| panic!("{v0}"));
     assert!(told.contains("partitions [1]"), "{told}");
     assert_eq!(v0["status_messages"], 1, "{v0}");
+}
+
+#[test]
+fn bench_nats_stores_and_delivers_every_message_to_every_consumer() {
+    if Command::new("nats-server")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("note: nats-server is not installed: bench nats test skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("nats.json");
+    let o = common::psao(&[
+        "bench",
+        "nats",
+        "--messages",
+        "40",
+        "--message-bytes",
+        "2000",
+        "--subscribers",
+        "1,3",
+        "--json",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let runs = json(&report)["runs"].clone();
+    let counts: Vec<u64> = runs
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["subscribers"].as_u64().unwrap())
+        .collect();
+    assert_eq!(counts, [1, 3]);
+    for r in runs.as_array().unwrap() {
+        assert_eq!(r["messages"], 40, "{r}");
+        let (stored, delivered) = (
+            r["stored_mb_per_s"].as_f64().unwrap(),
+            r["delivered_mb_per_s"].as_f64().unwrap(),
+        );
+        assert!(stored > 0.0 && delivered > 0.0, "{r}");
+    }
+    let bad = common::psao(&["bench", "nats", "--subscribers", "0"]);
+    assert!(!bad.status.success());
+    assert!(stderr(&bad).contains("at least 1"), "{}", stderr(&bad));
 }

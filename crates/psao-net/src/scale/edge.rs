@@ -46,6 +46,9 @@ pub struct EdgeConfig {
     pub scene: String,
     /// This edge's name on its views subject.
     pub edge_id: String,
+    /// The session's number of partitions (the trace nodes' `--partition k/N`): batches and
+    /// snapshots that claim another count are dropped, whatever the bus says.
+    pub partitions: u32,
     /// Lockstep: each server frame waits for every partition's batch of that frame.
     pub lockstep: bool,
     /// Longest wait for a frame's batches in lockstep.
@@ -123,15 +126,14 @@ pub enum Added {
     Kept,
     /// Dropped: its frame was applied already or its partition sent that frame before.
     Duplicate,
-    /// Dropped: its partition count disagrees with the earlier batches', or too many frames
-    /// are incomplete.
+    /// Dropped: its partition count is not the edge's, or too many frames are incomplete.
     Refused,
 }
 
 /// Gathers the batches of each frame until every partition's is there.
-#[derive(Default)]
 pub struct Assembler {
-    partitions: Option<u32>,
+    /// The session's partition count (the edge's own setting: a batch never sets it).
+    partitions: u32,
     frames: BTreeMap<u64, Parts>,
     /// Per partition, the frame of the first batch taken in (0 for the partitions whose
     /// state the edge's join knew). A partition first heard of at frame g had no node
@@ -141,6 +143,15 @@ pub struct Assembler {
 }
 
 impl Assembler {
+    /// An assembler for a session of `partitions` partitions.
+    pub fn new(partitions: u32) -> Self {
+        Self {
+            partitions,
+            frames: BTreeMap::new(),
+            first: BTreeMap::new(),
+        }
+    }
+
     /// Partition `k`'s state is known from the join: every later frame waits for it.
     pub fn known(&mut self, k: u32) {
         self.first.insert(k, 0);
@@ -148,7 +159,7 @@ impl Assembler {
 
     /// Take in `batch`; frames up to `applied` are done.
     pub fn add(&mut self, batch: Batch, applied: u64) -> Added {
-        if *self.partitions.get_or_insert(batch.partitions) != batch.partitions {
+        if batch.partitions != self.partitions || batch.partition >= self.partitions {
             return Added::Refused;
         }
         if batch.frame <= applied {
@@ -181,13 +192,10 @@ impl Assembler {
         Added::Kept
     }
 
-    /// The partitions whose batch of `frame` is awaited (none known: no batch arrived yet).
+    /// The partitions whose batch of `frame` is awaited.
     pub fn missing(&self, frame: u64) -> Vec<u32> {
-        let Some(n) = self.partitions else {
-            return Vec::new();
-        };
         let parts = self.frames.get(&frame);
-        (0..n)
+        (0..self.partitions)
             .filter(|k| !parts.is_some_and(|p| p.partitions.contains(k)))
             .filter(|k| self.first.get(k).is_none_or(|&g| frame >= g))
             .collect()
@@ -195,17 +203,14 @@ impl Assembler {
 
     /// Whether every partition's batch of `frame` is in (or the partition started later).
     pub fn ready(&self, frame: u64) -> bool {
-        match (self.partitions, self.frames.get(&frame)) {
-            (Some(n), Some(parts)) => {
-                let started_later = self
-                    .first
-                    .iter()
-                    .filter(|&(k, &g)| frame < g && !parts.partitions.contains(k))
-                    .count();
-                parts.partitions.len() + started_later >= n as usize
-            }
-            _ => false,
-        }
+        self.frames.get(&frame).is_some_and(|parts| {
+            let started_later = self
+                .first
+                .iter()
+                .filter(|&(k, &g)| frame < g && !parts.partitions.contains(k))
+                .count();
+            parts.partitions.len() + started_later >= self.partitions as usize
+        })
     }
 
     /// The scene time and records of `frame` once every partition's batch of it is in.
@@ -252,7 +257,7 @@ struct Waiting {
 pub struct Stall {
     /// The frame waited for.
     pub frame: u64,
-    /// The partitions whose batches of it are missing (empty: no batch arrived yet).
+    /// The partitions whose batches of it are missing.
     pub partitions: Vec<u32>,
     /// Since when (Unix ms), and for how long, seconds.
     pub since_unix_ms: u64,
@@ -282,7 +287,7 @@ impl EdgeStepper {
             .await?;
             let js = async_nats::jetstream::new(client.clone());
             let mut stream = records_stream(&js, &names).await?;
-            let mut joined = join(&js, &names, server, Joiner::Replica).await?;
+            let mut joined = join(&js, &names, server, Joiner::Replica, config.partitions).await?;
             let backlog = last_sequence(&mut stream, "the records stream").await?;
             let messages = records_from(&stream, &names, joined.next)
                 .await
@@ -311,7 +316,7 @@ impl EdgeStepper {
         add(&counters.malformed, c.malformed);
         add(&counters.duplicates, c.duplicates);
         add(&counters.sequence_gaps, c.sequence_gaps);
-        let mut assembler = Assembler::default();
+        let mut assembler = Assembler::new(config.partitions);
         for &k in joined.fold.latest_frames().keys() {
             assembler.known(k);
         }
@@ -396,9 +401,9 @@ impl EdgeStepper {
             seconds,
         };
         if w.reported.is_none() {
-            let text = if stall.partitions.is_empty() {
+            let text = if stall.partitions.len() == self.config.partitions as usize {
                 format!(
-                    "frame {}: no record batch arrived from the trace nodes",
+                    "frame {}: no record batch of it arrived from any trace node",
                     stall.frame
                 )
             } else {
@@ -705,7 +710,17 @@ mod tests {
 
     #[test]
     fn frames_complete_once_every_partition_sent_them() {
-        let mut a = Assembler::default();
+        let mut a = Assembler::new(2);
+        let forged = Batch {
+            partitions: 1,
+            ..batch(0, 1, 1)
+        };
+        assert_eq!(
+            a.add(forged, 0),
+            Added::Refused,
+            "a first batch sets nothing"
+        );
+        assert_eq!(a.missing(1), [0, 1]);
         assert_eq!(a.add(batch(0, 1, 1), 0), Added::Kept);
         assert!(!a.ready(1));
         assert_eq!(a.take(1), None);
@@ -721,6 +736,15 @@ mod tests {
             ..batch(2, 2, 4)
         };
         assert_eq!(a.add(other, 1), Added::Refused, "another partition count");
+        let beyond = Batch {
+            partition: 2,
+            ..batch(0, 2, 4)
+        };
+        assert_eq!(
+            a.add(beyond, 1),
+            Added::Refused,
+            "a partition past the count"
+        );
         assert!(!a.ready(2));
         assert_eq!(a.add(batch(0, 2, 5), 1), Added::Kept);
         assert!(a.ready(2));
@@ -728,7 +752,7 @@ mod tests {
 
     #[test]
     fn frames_before_a_partitions_first_batch_do_not_wait_for_it() {
-        let mut a = Assembler::default();
+        let mut a = Assembler::new(2);
         for f in 1..=3 {
             assert_eq!(a.add(batch(0, f, f as u32), 0), Added::Kept);
         }
@@ -745,7 +769,7 @@ mod tests {
         assert!(!a.ready(4), "started: later frames wait for it");
 
         // A partition the join knew waits, whatever frame its next batch has.
-        let mut a = Assembler::default();
+        let mut a = Assembler::new(2);
         a.known(1);
         assert_eq!(a.add(batch(0, 5, 0), 4), Added::Kept);
         assert_eq!(a.add(batch(1, 6, 0), 4), Added::Kept);
@@ -754,7 +778,7 @@ mod tests {
 
     #[test]
     fn far_future_batches_are_refused_and_the_next_frames_still_fit() {
-        let mut a = Assembler::default();
+        let mut a = Assembler::new(2);
         let window = MAX_PENDING_FRAMES as u64;
         for f in (window + 1..window + 70_000).step_by(7) {
             assert_eq!(a.add(batch(0, f, 0), 0), Added::Refused);
@@ -768,7 +792,7 @@ mod tests {
 
     #[test]
     fn incomplete_frames_are_bounded() {
-        let mut a = Assembler::default();
+        let mut a = Assembler::new(2);
         for f in 1..=MAX_PENDING_FRAMES as u64 {
             assert_eq!(a.add(batch(0, f, 0), 0), Added::Kept);
         }

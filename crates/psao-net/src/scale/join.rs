@@ -27,7 +27,7 @@ use crate::NetError;
 const JOIN_WAIT: Duration = Duration::from_secs(10);
 
 /// The latest snapshot chunk and mark of each subject.
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct Published {
     marks: BTreeMap<u32, SnapshotMark>,
     chunks: BTreeMap<(u32, u32), Snapshot>,
@@ -75,11 +75,11 @@ pub struct Plan {
     pub points: Vec<PointState>,
 }
 
-/// The plan of a join from `published`; `None` when some partition has no mark or misses a
-/// chunk (no complete snapshot yet: read the records stream from its start). The partition
-/// count is that of the latest mark; messages of another count are ignored.
-pub fn plan(published: Published) -> Option<Plan> {
-    let n = published.marks.values().max_by_key(|m| m.frame)?.partitions;
+/// The plan of a join from `published` for a session of `n` partitions (the joiner's own
+/// setting, never a message's); `None` when some partition has no mark or misses a chunk
+/// (no complete snapshot yet: read the records stream from its start). Messages of another
+/// partition count are ignored.
+pub fn plan(published: Published, n: u32) -> Option<Plan> {
     // (frame, records sequence, scene time) of the validity of each chunk.
     let mut valid = BTreeMap::new();
     let mut sequences = BTreeMap::new();
@@ -136,6 +136,8 @@ pub enum Folded {
 /// them.
 pub struct Fold {
     plan: Option<Plan>,
+    /// The session's partition count: batches of another are malformed.
+    partitions: u32,
     /// The snapshot chunk of every point (when there is a plan).
     chunk_of: Vec<Vec<u32>>,
     owners: Option<Owners>,
@@ -147,8 +149,9 @@ pub struct Fold {
 }
 
 impl Fold {
-    /// A fold starting from `plan`'s chunks (or from nothing); `server` has the scene.
-    pub fn new(plan: Option<Plan>, server: &Server) -> Fold {
+    /// A fold of a session of `partitions` partitions starting from `plan`'s chunks (or
+    /// from nothing); `server` has the scene.
+    pub fn new(plan: Option<Plan>, partitions: u32, server: &Server) -> Fold {
         let mut published = HashMap::new();
         let (mut chunk_of, mut owners) = (Vec::new(), None);
         if let Some(p) = &plan {
@@ -168,6 +171,7 @@ impl Fold {
         }
         Fold {
             plan,
+            partitions,
             chunk_of,
             owners,
             published,
@@ -188,11 +192,7 @@ impl Fold {
 
     /// Take in `batch` if its frame is at most `upto`; `server` checks its records.
     pub fn add(&mut self, batch: Batch, upto: u64, server: &Server) -> Folded {
-        if self
-            .plan
-            .as_ref()
-            .is_some_and(|p| p.partitions != batch.partitions)
-        {
+        if batch.partitions != self.partitions {
             return Folded::Malformed;
         }
         if self.seen.contains(&(batch.partition, batch.frame)) {
@@ -342,17 +342,18 @@ pub struct Joined {
     pub counts: JoinCounts,
 }
 
-/// Join the session of `names`: read the snapshots, then the records stream after them
-/// (see [`Joiner`]); `server` has the scene.
+/// Join the session of `names`, cut into `partitions` partitions: read the snapshots, then
+/// the records stream after them (see [`Joiner`]); `server` has the scene.
 pub async fn join(
     js: &async_nats::jetstream::Context,
     names: &Names,
     server: &Server,
     joiner: Joiner,
+    partitions: u32,
 ) -> Result<Joined, NetError> {
     let mut counts = JoinCounts::default();
-    let published = read_published(js, names, &mut counts).await?;
-    let plan = plan(published);
+    let published = read_published(js, names, partitions, &mut counts).await?;
+    let plan = plan(published, partitions);
     let mut stream = records_stream(js, names).await?;
     let mut first = plan.as_ref().map_or(1, |p| p.first);
     if let Some(p) = &plan {
@@ -364,7 +365,7 @@ pub async fn join(
             first = 1;
         }
     }
-    let mut fold = Fold::new(plan, server);
+    let mut fold = Fold::new(plan, partitions, server);
     let mut later = Vec::new();
     if joiner == Joiner::Replica && fold.snapshot_frame() == 0 {
         return Ok(Joined {
@@ -471,10 +472,12 @@ async fn batches_held(
 }
 
 /// The latest message of every snapshot subject (chunks and marks); messages that do not
-/// parse are counted and dropped.
+/// parse, name another partition count than `n` or another subject than the one they were
+/// published on are counted as malformed and dropped.
 async fn read_published(
     js: &async_nats::jetstream::Context,
     names: &Names,
+    n: u32,
     counts: &mut JoinCounts,
 ) -> Result<Published, NetError> {
     let failed =
@@ -505,12 +508,25 @@ async fn read_published(
             None => break,
         };
         counts.snapshot_bytes += message.payload.len() as u64;
-        let parsed = if message.subject.as_str().ends_with(".mark") {
-            SnapshotMark::decode(&message.payload).map(|m| published.add_mark(m))
+        let subject = message.subject.as_str();
+        let kept = if subject.ends_with(".mark") {
+            SnapshotMark::decode(&message.payload)
+                .map_err(|e| e.to_string())
+                .and_then(|m| {
+                    let ok = m.partitions == n && subject == names.snapshot_mark(m.partition);
+                    ok.then(|| published.add_mark(m))
+                        .ok_or_else(|| format!("{subject}: a mark of another partition or count"))
+                })
         } else {
-            Snapshot::decode(&message.payload).map(|s| published.add_chunk(s))
+            Snapshot::decode(&message.payload)
+                .map_err(|e| e.to_string())
+                .and_then(|c| {
+                    let ok = c.partitions == n && subject == names.snapshot(c.partition, c.chunk);
+                    ok.then(|| published.add_chunk(c))
+                        .ok_or_else(|| format!("{subject}: a chunk of another partition or count"))
+                })
         };
-        if let Err(e) = parsed {
+        if let Err(e) = kept {
             tracing::debug!("{e}");
             counts.malformed += 1;
         }
@@ -545,7 +561,7 @@ pub(super) async fn records_from(
 }
 
 /// The messages of an ordered consumer of `stream` on `subject`, delivered from `from`.
-async fn ordered(
+pub(super) async fn ordered(
     stream: &async_nats::jetstream::stream::Stream,
     from: DeliverPolicy,
     subject: String,
@@ -605,7 +621,7 @@ mod tests {
     #[test]
     fn a_join_starts_from_each_chunks_latest_message() {
         let mut p = Published::default();
-        assert_eq!(plan(Published::default()), None, "nothing published");
+        assert_eq!(plan(Published::default(), 2), None, "nothing published");
         for k in 0..2 {
             p.add_chunk(chunk(k, 0, 4));
             p.add_chunk(chunk(k, 1, 4));
@@ -618,7 +634,12 @@ mod tests {
         p.add_chunk(chunk(0, 1, 8));
         // An older copy arriving late does not replace the newer one.
         p.add_chunk(chunk(0, 1, 4));
-        let got = plan(p).unwrap();
+        assert_eq!(
+            plan(p.clone(), 3),
+            None,
+            "a session of 3 has no marks of its own"
+        );
+        let got = plan(p, 2).unwrap();
         assert_eq!(got.partitions, 2);
         let valid: Vec<u64> = got.valid.values().copied().collect();
         assert_eq!(
@@ -645,7 +666,7 @@ mod tests {
         missing.add_mark(mark(0, 4));
         missing.add_mark(mark(1, 4));
         missing.add_chunk(chunk(1, 0, 4));
-        assert_eq!(plan(missing), None, "chunk 1 of partition 1 missing");
+        assert_eq!(plan(missing, 2), None, "chunk 1 of partition 1 missing");
         let mut other = Published::default();
         for k in 0..2 {
             other.add_chunk(chunk(k, 0, 4));
@@ -656,6 +677,10 @@ mod tests {
             partitions: 3,
             ..mark(2, 12)
         });
-        assert_eq!(plan(other), None, "the latest mark's partition count rules");
+        assert_eq!(
+            plan(other, 2).map(|p| p.frame),
+            Some(4),
+            "a later mark of another partition count is ignored"
+        );
     }
 }

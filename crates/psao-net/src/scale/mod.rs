@@ -5,6 +5,7 @@
 
 pub mod auth;
 pub mod edge;
+pub mod fanout;
 pub mod join;
 mod lost;
 mod names;

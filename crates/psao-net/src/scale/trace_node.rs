@@ -396,7 +396,13 @@ pub fn run(
     // Start from the published state: every partition's records, and the sample counts
     // of the snapshots.
     let mut server = server;
-    let joined = rt.block_on(join(&js, &names, &server, Joiner::TraceNode))?;
+    let joined = rt.block_on(join(
+        &js,
+        &names,
+        &server,
+        Joiner::TraceNode,
+        partition.count,
+    ))?;
     let (last, seconds) = joined.fold.last_frame();
     let latest = joined.fold.latest_frames();
     let own = latest.get(&partition.index).map(|&(f, _)| f);
@@ -647,9 +653,15 @@ impl Node {
     }
 
     /// Take in the other partitions' batches: their records become this node's published
-    /// state (to adopt from), and their frames are noted.
+    /// state (to adopt from), and their frames are noted. Batches of another partition
+    /// count than this node's, or of a partition past it, are dropped.
     fn note_batches(&mut self) {
         while let Ok((arrived, batch)) = self.batches.try_recv() {
+            let count = self.leases.count;
+            if batch.partitions != count || batch.partition >= count {
+                self.counters.malformed.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
             let seen = self
                 .last_seen
                 .entry(batch.partition)
