@@ -73,40 +73,45 @@ pub fn measure(config: &FanoutConfig) -> Result<FanoutResult, NetError> {
 
 async fn run(config: &FanoutConfig) -> Result<FanoutResult, NetError> {
     let failed = |e: &dyn std::fmt::Display| NetError::Nats(format!("fan-out measurement: {e}"));
-    let client = connect(
-        &config.nats,
-        &config.auth,
-        Arc::new(Notify::new()),
-        ServerErrors::default(),
-    )
-    .await?;
-    let max = client.server_info().max_payload;
+    let (js, max) = jetstream(config).await?;
     if config.message_bytes > max {
         return Err(NetError::Nats(format!(
             "messages of {} bytes exceed the server's max_payload of {max}",
             config.message_bytes
         )));
     }
-    let js = async_nats::jetstream::new(client);
     let names = Names::new(FANOUT_SCENE);
     // A stream left by an interrupted run would be counted: start from an empty one.
     let _ = js.delete_stream(names.stream()).await;
-    let stream = records_stream(&js, &names).await?;
+    records_stream(&js, &names).await?;
     let mut readers = Vec::new();
     for _ in 0..config.subscribers {
+        // A connection per consumer, as every edge and trace node is a process of its own.
+        let stream = records_stream(&jetstream(config).await?.0, &names).await?;
         let mut messages = ordered(&stream, DeliverPolicy::All, names.records_wildcard())
             .await
             .map_err(|e| failed(&e))?;
         let want = config.messages;
         readers.push(tokio::spawn(async move {
             let mut got = 0u64;
-            while got < want {
+            loop {
                 match tokio::time::timeout(STALL, messages.next()).await {
-                    Ok(Some(Ok(_))) => got += 1,
+                    Ok(Some(Ok(m))) => {
+                        got += 1;
+                        // The stream is new: the last store has sequence `want`.
+                        if m.info().is_ok_and(|i| i.stream_sequence >= want) {
+                            break;
+                        }
+                    }
                     Ok(Some(Err(e))) => return Err(e.to_string()),
                     Ok(None) => return Err("the consumer ended".to_string()),
                     Err(_) => return Err(format!("no message for {STALL:?} after {got}")),
                 }
+            }
+            if got < want {
+                // The stream keeps RECORD_FRAMES messages per subject: a consumer that fell
+                // further behind lost some, and the rate would not be the server's.
+                return Err(format!("a consumer fell behind and lost {} messages", want - got));
             }
             Ok(Instant::now())
         }));
@@ -149,6 +154,25 @@ async fn run(config: &FanoutConfig) -> Result<FanoutResult, NetError> {
         stored_mb_per_s: bytes / stored / 1e6,
         delivered_mb_per_s: bytes * f64::from(config.subscribers) / seconds / 1e6,
     })
+}
+
+/// A JetStream context on a connection of its own, and the server's `max_payload`.
+async fn jetstream(
+    config: &FanoutConfig,
+) -> Result<(async_nats::jetstream::Context, usize), NetError> {
+    let client = connect(
+        &config.nats,
+        &config.auth,
+        Arc::new(Notify::new()),
+        ServerErrors::default(),
+    )
+    .await?;
+    let max_payload = client.server_info().max_payload;
+    let mut js = async_nats::jetstream::new(client);
+    // The default acknowledgement timeout (5 s) is shorter than a busy server's file writes
+    // can take with many consumers: the measurement waits as long as for any message.
+    js.set_timeout(STALL);
+    Ok((js, max_payload))
 }
 
 /// Waits for one store's acknowledgement.
