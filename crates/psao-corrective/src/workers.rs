@@ -120,6 +120,16 @@ pub struct WorkerPool<T: JobTracer> {
 impl<T: JobTracer> WorkerPool<T> {
     /// `workers` threads (at least 1) tracing with `tracer`, without lanes yet.
     pub fn new(tracer: T, workers: usize) -> Self {
+        Self::with_thread_start(tracer, workers, || {})
+    }
+
+    /// As [`WorkerPool::new`], each worker thread first running `start` (e.g. to lower its
+    /// scheduling priority below the server step's: the caller's business, not this crate's).
+    pub fn with_thread_start(
+        tracer: T,
+        workers: usize,
+        start: impl Fn() + Send + Sync + 'static,
+    ) -> Self {
         let shared = Arc::new(Shared {
             state: Mutex::new(State {
                 lanes: BTreeMap::new(),
@@ -131,12 +141,16 @@ impl<T: JobTracer> WorkerPool<T> {
             done: Condvar::new(),
         });
         let tracer = Arc::new(tracer);
+        let start = Arc::new(start);
         let threads = (0..workers.max(1))
             .filter_map(|i| {
-                let (shared, tracer) = (shared.clone(), tracer.clone());
+                let (shared, tracer, start) = (shared.clone(), tracer.clone(), start.clone());
                 std::thread::Builder::new()
                     .name(format!("psao-corrective-{i}"))
-                    .spawn(move || work(&shared, &*tracer))
+                    .spawn(move || {
+                        start();
+                        work(&shared, &*tracer)
+                    })
                     .ok()
             })
             .collect();

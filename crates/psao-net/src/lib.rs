@@ -18,6 +18,7 @@ pub mod glb;
 pub mod http;
 pub mod io;
 pub mod pipeline;
+pub mod priority;
 mod resolution;
 pub mod scale;
 pub mod secret;

@@ -111,7 +111,10 @@ async fn run(config: &FanoutConfig) -> Result<FanoutResult, NetError> {
             if got < want {
                 // The stream keeps RECORD_FRAMES messages per subject: a consumer that fell
                 // further behind lost some, and the rate would not be the server's.
-                return Err(format!("a consumer fell behind and lost {} messages", want - got));
+                return Err(format!(
+                    "a consumer fell behind and lost {} messages",
+                    want - got
+                ));
             }
             Ok(Instant::now())
         }));

@@ -12,7 +12,9 @@
 //!   Each server frame grants each client's budget for one tick and drains its samples that
 //!   are ready within a wall-clock share of the frame ([`DRAIN_SHARE`]), sent as `Samples`
 //!   messages: the simulation thread never traces corrections, so they cannot delay the AO
-//!   step, and more clients share the same cores instead of adding threads.
+//!   step, and more clients share the same cores instead of adding threads. The workers
+//!   run at a lower scheduling priority than the step ([`CORRECTION_NICE`]), so on busy
+//!   cores the step goes first and corrections take what is left.
 //!
 //! Either way every position examined costs one sample of the client's budget, whether or
 //! not it shows the region's object, and regions of objects the scene does not have are
@@ -35,6 +37,11 @@ use crate::corrective::{
     CorrectionEngine, RemoteCorrections,
 };
 use crate::pipeline::client_time;
+
+/// The nice value of the correction workers' threads: below the server step (0), so they
+/// never take its cores from it, but not the lowest (19) either, so other idle-priority work
+/// on the machine does not starve corrections.
+pub const CORRECTION_NICE: i32 = 10;
 
 /// Default tracing workers of a server, shared by all its clients (both cores of the
 /// reference machine).
@@ -68,8 +75,13 @@ impl Corrections {
 
     /// The shared workers (started on first use; stopped when the last copy is dropped).
     fn pool(&self) -> &WorkerPool<EngineJobs> {
-        self.pool
-            .get_or_init(|| WorkerPool::new(EngineJobs(self.engine.clone()), self.workers))
+        self.pool.get_or_init(|| {
+            // Below the server step: whatever the clients ask, corrections take the cores
+            // only when the step leaves them free (docs/SECURITY.md, "Corrections").
+            WorkerPool::with_thread_start(EngineJobs(self.engine.clone()), self.workers, || {
+                crate::priority::lower_this_thread(CORRECTION_NICE)
+            })
+        })
     }
 }
 
