@@ -126,38 +126,37 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
     let mut total = Vec::with_capacity(args.runs);
     let mut synth = Vec::with_capacity(args.runs);
     let mut cpu = Vec::with_capacity(args.runs);
-    // One warm-up frame, then the timed runs.
-    pool.install(|| -> Result<()> {
-        for run in 0..=args.runs {
-            let pose = &poses[run % poses.len()];
-            let frame = FramePose {
-                joint_local: &pose.joint_local,
-                positions: &pose.positions,
-                normals: &pose.normals,
-                transform: pose.transform,
-            };
-            let cpu_start = fine_cpu_seconds();
-            let start = Instant::now();
-            let v = relighter.shade(&frame, &lights, camera.position)?;
-            let wall = start.elapsed();
-            let cpu_end = fine_cpu_seconds();
-            std::hint::black_box(v);
-            // The synthesis alone (the model's matrix product), timed apart.
-            let model = relighter.model();
-            let a = model.pose_vector(&pose.joint_rotations);
-            let start = Instant::now();
-            model.predict_raw(&a, &mut raw);
-            let synthesis = start.elapsed();
-            if run > 0 {
-                total.push(wall.as_secs_f64() * 1e3);
-                synth.push(synthesis.as_secs_f64() * 1e3);
-                if let (Some(a), Some(b)) = (cpu_start, cpu_end) {
-                    cpu.push((b - a).max(0.0) * 1e3);
-                }
+    // One warm-up frame, then the timed runs. The clocks are read on this thread, outside
+    // the pool: a thread's scheduler statistics are only brought up to date when it stops
+    // running, so the pool's threads are read while they wait between frames.
+    for run in 0..=args.runs {
+        let pose = &poses[run % poses.len()];
+        let frame = FramePose {
+            joint_local: &pose.joint_local,
+            positions: &pose.positions,
+            normals: &pose.normals,
+            transform: pose.transform,
+        };
+        let cpu_start = fine_cpu_seconds();
+        let start = Instant::now();
+        let v = pool.install(|| relighter.shade(&frame, &lights, camera.position))?;
+        let wall = start.elapsed();
+        let cpu_end = fine_cpu_seconds();
+        std::hint::black_box(v);
+        // The synthesis alone (the model's matrix product), timed apart.
+        let model = relighter.model();
+        let a = model.pose_vector(&pose.joint_rotations);
+        let start = Instant::now();
+        pool.install(|| model.predict_raw(&a, &mut raw));
+        let synthesis = start.elapsed();
+        if run > 0 {
+            total.push(wall.as_secs_f64() * 1e3);
+            synth.push(synthesis.as_secs_f64() * 1e3);
+            if let (Some(a), Some(b)) = (cpu_start, cpu_end) {
+                cpu.push((b - a).max(0.0) * 1e3);
             }
         }
-        Ok(())
-    })?;
+    }
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
