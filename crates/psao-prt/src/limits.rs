@@ -46,16 +46,10 @@ impl PoseLimits {
         if self.range.is_empty() || x.len() != p {
             return;
         }
-        let d: Vec<f32> = x.iter().zip(&self.mean).map(|(a, m)| a - m).collect();
-        let mut coords: Vec<f32> = self
-            .axes
-            .chunks_exact(p)
-            .zip(&self.range)
-            .map(|(axis, &[lo, hi])| {
-                let c: f32 = axis.iter().zip(&d).map(|(a, b)| a * b).sum();
-                c.clamp(lo, hi)
-            })
-            .collect();
+        let mut coords = self.coords(x);
+        for (c, &[lo, hi]) in coords.iter_mut().zip(&self.range) {
+            *c = c.clamp(lo, hi);
+        }
         let factor = self.ball_factor(&coords);
         x.copy_from_slice(&self.mean);
         for (axis, c) in self.axes.chunks_exact(p).zip(&mut coords) {
@@ -64,6 +58,23 @@ impl PoseLimits {
                 *o += *c * a;
             }
         }
+    }
+
+    /// How far the pose features `x` are from the training mean, as a multiple of the
+    /// ball's radius (the farthest training pose's distance): at most 1 for a training pose.
+    /// Measured before any limit is applied; `None` without a ball or for another length.
+    pub fn reach(&self, x: &[f32]) -> Option<f32> {
+        (self.radius > 0.0 && self.scale.len() == self.range.len() && x.len() == self.mean.len())
+            .then(|| self.distance(&self.coords(x)) / self.radius)
+    }
+
+    /// The principal coordinates of the pose features `x` (of the right length).
+    fn coords(&self, x: &[f32]) -> Vec<f32> {
+        let d: Vec<f32> = x.iter().zip(&self.mean).map(|(a, m)| a - m).collect();
+        self.axes
+            .chunks_exact(self.mean.len())
+            .map(|axis| axis.iter().zip(&d).map(|(a, b)| a * b).sum())
+            .collect()
     }
 
     /// The factor that brings principal coordinates `coords` onto the ball (1 inside it or
@@ -141,6 +152,11 @@ mod tests {
         assert!((l.distance(&coords) - 2.0).abs() < 1e-5, "{x:?}");
         // Along the line from the mean to the box-limited pose.
         assert!((coords[1] / coords[0] - 0.25).abs() < 1e-6, "{x:?}");
+        // The corner lies √2 radii out, a pose beyond it farther; the mean at none.
+        assert!((l.reach(&[3.0, 0.5, 0.0]).unwrap() - 2f32.sqrt()).abs() < 1e-5);
+        assert!((l.reach(&[5.0, 3.0, 0.0]).unwrap() - 160f32.sqrt() / 2.0).abs() < 1e-4);
+        assert_eq!(l.reach(&[1.0, 0.0, 0.0]), Some(0.0));
+        assert_eq!(l.box_only().reach(&[5.0, 3.0, 0.0]), None);
         // Without the ball the corner stays.
         let mut y = [5.0, 3.0, 0.0];
         l.box_only().apply(&mut y);

@@ -163,6 +163,9 @@ struct FitError {
     model_mb: f64,
     ridge: f64,
     ms_per_frame: f64,
+    /// Per test frame: its pose's distance from the training poses' mean as a multiple of
+    /// the farthest training pose's (the pose limits' ball; `null` without one).
+    pose_reach: Vec<Option<f32>>,
 }
 
 /// Averages of one method.
@@ -330,6 +333,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             model_mb: model.megabytes(),
             ridge: report.ridge,
             ms_per_frame: 0.0,
+            pose_reach: tests
+                .iter()
+                .map(|s| {
+                    let pose = model.raw_pose_vector(&s.joint_rotations);
+                    model.limits.reach(&pose[1..])
+                })
+                .collect(),
         });
         let variants = args.variants.iter().map(|v| {
             (
@@ -725,8 +735,8 @@ fn markdown(r: &Report) -> String {
          frames {}..{} (held out of training), times {:?} s; \
          {} visibility rays per vertex; reference {} samples per vertex.\n\n\
          ## Fit error (RMS over the sphere of predicted vs projected visibility, test frames)\n\n\
-         | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+         | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame | pose reach per test frame |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
         r.character,
         r.clip,
         r.vertices,
@@ -743,7 +753,7 @@ fn markdown(r: &Report) -> String {
     );
     for f in &r.fit_error {
         s += &format!(
-            "| {} | {:.4} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} |\n",
+            "| {} | {:.4} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} | {} |\n",
             f.lobes,
             f.mean,
             f.std,
@@ -753,7 +763,12 @@ fn markdown(r: &Report) -> String {
             f.train_s,
             f.model_mb,
             f.ridge,
-            f.ms_per_frame
+            f.ms_per_frame,
+            f.pose_reach
+                .iter()
+                .map(|r| r.map_or("—".to_string(), |r| format!("{r:.2}")))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     s += "\n## Lobes fitted to plain vs cosine-weighted SH visibility (paper Fig. 3)\n\n\
