@@ -17,6 +17,7 @@ use glam::{Affine3A, Mat3, Quat, Vec3};
 use psao_scene::{Animator, Mesh, Scene};
 use psao_trace::ao::{hash64, orthonormal_basis};
 
+use crate::runtime::Rig;
 use crate::PrtError;
 
 /// One instance of the file as part of the character: the mesh vertices it contributes
@@ -75,6 +76,8 @@ pub struct CharacterPose {
     /// Per skin joint: its local rotation relative to the bind pose, as rotation vector
     /// (axis × angle in radians, angle ≤ π).
     pub joint_rotations: Vec<Vec3>,
+    /// Per skin joint: its local transform (relative to its parent node).
+    pub joint_local: Vec<Affine3A>,
 }
 
 impl CharacterPose {
@@ -90,6 +93,7 @@ impl CharacterPose {
             occluders: Vec::new(),
             transform,
             joint_rotations: Vec::new(),
+            joint_local: Vec::new(),
         }
     }
 }
@@ -223,6 +227,15 @@ impl Character {
         &self.keys
     }
 
+    /// What a client needs besides the model to relight this character frame by frame
+    /// (see [`crate::runtime`]).
+    pub fn rig(&self) -> Rig {
+        Rig {
+            rest: self.rest.clone(),
+            neighbours: self.neighbours.clone(),
+        }
+    }
+
     /// The character at clip time `time` (seconds; the clip loops), in world space.
     pub fn pose(&self, time: f32) -> CharacterPose {
         let pose = self.animator.pose_at(time);
@@ -251,20 +264,21 @@ impl Character {
         let (positions, normals) = place(&self.parts, true);
         let (occluders, _) = place(&self.rigid, false);
         let frames = skin_frames(&positions, &normals, &self.neighbours);
-        let joint_rotations = self
+        let joint_local: Vec<Affine3A> = self
             .joints
             .iter()
-            .zip(&self.rest)
-            .map(|(&j, rest)| {
+            .map(|&j| {
                 let world = pose.nodes[j];
-                let local = match self.parents[j] {
+                match self.parents[j] {
                     Some(p) => pose.nodes[p].inverse() * world,
                     None => world,
-                };
-                let (_, rotation, _) = local.to_scale_rotation_translation();
-                rotation_vector(rest.inverse() * rotation)
+                }
             })
             .collect();
+        let joint_rotations = self
+            .rig()
+            .joint_rotations(&joint_local)
+            .expect("one local transform per joint");
         CharacterPose {
             time,
             positions,
@@ -274,6 +288,7 @@ impl Character {
             occluders,
             transform: Affine3A::IDENTITY,
             joint_rotations,
+            joint_local,
         }
     }
 }

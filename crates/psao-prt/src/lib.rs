@@ -6,21 +6,26 @@
 //! operator ([`phong`]) form the toolkit. On top: per-vertex visibility of a posed character
 //! ([`visibility`]), multi-lobe zonal fits kept in correspondence over frames ([`fit`]), the
 //! linear pose model ([`model`]), environment lighting ([`lighting`]) and run-time shading
-//! ([`shade`]) with its Monte Carlo reference ([`reference`]). Pure code: no file I/O.
+//! ([`shade`]) with its Monte Carlo reference ([`reference`]); [`runtime`] relights a
+//! character frame by frame from its joint transforms, as a client does. Pure code: no
+//! file I/O.
 
 pub mod character;
 mod error;
 pub mod filter;
 pub mod fit;
 pub mod lighting;
+pub mod limits;
 pub mod model;
 pub mod model_file;
 pub mod phong;
 pub mod quadrature;
 pub mod reference;
 pub mod rotation;
+pub mod runtime;
 pub mod sh;
 pub mod shade;
+pub mod shrink;
 mod small;
 pub mod visibility;
 pub mod zonal;

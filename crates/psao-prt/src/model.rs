@@ -12,13 +12,17 @@
 //! block is predicted by a model trained on the others, and the ridge with the lowest SH
 //! visibility error over all blocks is kept. A held-out block is a stretch of poses the
 //! model never saw, as in use; frames between training frames would reward a model that
-//! interpolates well and extrapolates wildly (no ridge).
+//! interpolates well and extrapolates wildly (no ridge). The same blocks then choose, per
+//! vertex, how much of the pose-dependent part to keep ([`crate::shrink`]), and the model
+//! keeps poses within the training poses' limits ([`crate::limits`]).
 
 use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::fit::{fit_lobes, fit_sequence, rms_difference};
+pub use crate::limits::PoseLimits;
 use crate::sh::ShVec;
+use crate::shrink::{shrink_towards_mean, ShrinkErrors};
 use crate::zonal::ZhLobe;
 use crate::PrtError;
 
@@ -59,6 +63,11 @@ pub struct TrainReport {
     pub ridge: f64,
     /// Mean RMS SH error of the model on the validation frames (0 without them).
     pub validation_error: f32,
+    /// Per vertex: the factor of the pose-dependent part chosen by cross-validation (see
+    /// [`crate::shrink`]), folded into the returned model.
+    pub vertex_shrink: Vec<f32>,
+    /// The returned model before the per-vertex shrink (to measure what it does).
+    pub unshrunk: PoseModel,
 }
 
 /// A trained linear pose model for one character.
@@ -78,41 +87,6 @@ pub struct PoseModel {
     pub weights: Vec<f32>,
     /// Where training's poses lie (empty: poses are not limited).
     pub limits: PoseLimits,
-}
-
-/// The training poses' box in their principal axes: a pose is moved into it before
-/// prediction, so the model never extrapolates beyond the coordinates it was trained on
-/// along any principal axis; a pose of the training set is left as it is. Moving a pose
-/// back along an axis is blending the prediction towards that of the training mean along
-/// that axis (the model is linear). Directions in which training poses did not vary carry
-/// no weight in the model and are dropped.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct PoseLimits {
-    /// Mean of the training pose vectors (without the constant), `3·active` numbers.
-    pub mean: Vec<f32>,
-    /// Orthonormal principal axes, row-major `axes × 3·active`.
-    pub axes: Vec<f32>,
-    /// Per axis: the least and greatest coordinate of a training pose.
-    pub range: Vec<[f32; 2]>,
-}
-
-impl PoseLimits {
-    /// Moves the pose features `x` (`3·active` numbers) into the box; no-op when empty.
-    pub fn apply(&self, x: &mut [f32]) {
-        let p = self.mean.len();
-        if self.range.is_empty() || x.len() != p {
-            return;
-        }
-        let d: Vec<f32> = x.iter().zip(&self.mean).map(|(a, m)| a - m).collect();
-        x.copy_from_slice(&self.mean);
-        for (axis, &[lo, hi]) in self.axes.chunks_exact(p).zip(&self.range) {
-            let c: f32 = axis.iter().zip(&d).map(|(a, b)| a * b).sum();
-            let c = c.clamp(lo, hi);
-            for (o, a) in x.iter_mut().zip(axis) {
-                *o += c * a;
-            }
-        }
-    }
 }
 
 impl PoseModel {
@@ -306,20 +280,66 @@ pub fn train(
             lobe_fit_error = mean_std(fits.iter().flat_map(|f| f.errors.iter().copied()));
         }
     }
+    let vertex_shrink = cross_validate_shrink(train, &shape, &fits, best.ridge)?;
+    let model = shrink_towards_mean(&best.model, &vertex_shrink)?;
     let validation_error = if validate.is_empty() {
         0.0
     } else {
-        model_error(&best.model, validate).0
+        model_error(&model, validate).0
     };
     Ok((
-        best.model,
+        model,
         TrainReport {
             lobe_fit_error,
             ridge_errors: best.ridge_errors,
             ridge: best.ridge,
             validation_error,
+            vertex_shrink,
+            unshrunk: best.model,
         },
     ))
+}
+
+/// Per vertex, the factor of [`crate::shrink::SHRINK_GRID`] whose shrunk prediction has the least error
+/// on the blocks of the same blocked cross-validation as the ridge's, with ridge
+/// `relative`.
+fn cross_validate_shrink(
+    train: &[Sample],
+    shape: &Shape,
+    fits: &[VertexFits],
+    relative: f64,
+) -> Result<Vec<f32>, PrtError> {
+    let mut errors = ShrinkErrors::new(shape.vertices, shape.lobes);
+    let (mut raw, mut mean) = (Vec::new(), Vec::new());
+    for (held, rest) in folds(train.len()) {
+        let solver = Solver::new(train, shape.active, &rest)?;
+        let model = solver.model(shape, fits, relative);
+        let at_mean: Vec<f32> = std::iter::once(1.0)
+            .chain(solver.mean_a.iter().map(|&m| m as f32))
+            .collect();
+        model.predict_raw(&at_mean, &mut mean);
+        for s in &train[held] {
+            model.predict_raw(&model.pose_vector(&s.joint_rotations), &mut raw);
+            errors.add(&mean, &raw, &s.visibility);
+        }
+    }
+    Ok(errors.choose())
+}
+
+/// The blocks of the blocked cross-validation over `frames` time-ordered frames: each
+/// held-out block with the frames left to train on ([`FOLDS`] blocks, fewer when there are
+/// under `2·FOLDS` frames; at least 2, each leaving at least 2 to train on).
+fn folds(frames: usize) -> Vec<(std::ops::Range<usize>, Vec<usize>)> {
+    let folds = FOLDS.min(frames / 2).max(2).min(frames);
+    (0..folds)
+        .map(|k| k * frames / folds..(k + 1) * frames / folds)
+        .filter(|held| !held.is_empty())
+        .map(|held| {
+            let rest: Vec<usize> = (0..frames).filter(|f| !held.contains(f)).collect();
+            (held, rest)
+        })
+        .filter(|(_, rest)| rest.len() >= 2)
+        .collect()
 }
 
 /// The model of `fits` over all of `train` with the ridge that cross-validates best.
@@ -352,26 +372,19 @@ fn cross_validate(
     shape: &Shape,
     fits: &[VertexFits],
 ) -> Result<Vec<(f64, f32)>, PrtError> {
-    let frames = train.len();
-    let folds = FOLDS.min(frames / 2).max(2).min(frames);
     let mut sums = vec![0.0f64; RIDGE_GRID.len()];
     let mut count = 0usize;
-    for k in 0..folds {
-        let (a, b) = (k * frames / folds, (k + 1) * frames / folds);
-        let rest: Vec<usize> = (0..frames).filter(|f| !(a..b).contains(f)).collect();
-        if rest.len() < 2 || a == b {
-            continue;
-        }
+    for (held, rest) in folds(train.len()) {
         let solver = Solver::new(train, shape.active, &rest)?;
         let prepared = solver.prepare_lobes(shape, fits);
         for (sum, &rel) in sums.iter_mut().zip(&RIDGE_GRID) {
             let model = solver.lobe_model(shape, &prepared, rel);
-            *sum += model_errors(&model, &train[a..b])
+            *sum += model_errors(&model, &train[held.clone()])
                 .iter()
                 .map(|&e| e as f64)
                 .sum::<f64>();
         }
-        count += (b - a) * shape.vertices;
+        count += held.len() * shape.vertices;
     }
     Ok(RIDGE_GRID
         .iter()
@@ -548,12 +561,14 @@ impl Solver {
             lobes: shape.lobes,
             active: shape.active.to_vec(),
             weights: self.weights(prepared, relative),
-            limits: self.limits(),
+            limits: self.limits(relative),
         }
     }
 
-    /// The box of this solver's poses in their principal axes (those with weight).
-    fn limits(&self) -> PoseLimits {
+    /// The box and ball of this solver's poses in their principal axes (those with
+    /// weight), the ball's units regularised by the ridge `relative` (see
+    /// [`PoseLimits::scale`]).
+    fn limits(&self, relative: f64) -> PoseLimits {
         let p = self.mean_a.len();
         let smax2 = self
             .s
@@ -568,17 +583,28 @@ impl Solver {
         if p == 0 {
             return limits;
         }
+        let frames = self.u.nrows();
+        let lambda = relative * smax2;
+        // Per training pose: its squared scaled distance from the mean.
+        let mut dist2 = vec![0.0f64; frames];
         for (i, &si) in self.s.iter().enumerate() {
             if si * si <= 1e-12 * smax2 {
                 continue;
             }
             limits.axes.extend((0..p).map(|k| self.v[(k, i)] as f32));
-            // Coordinates of the training poses on axis i: U[f, i] · s_i.
-            let (lo, hi) = (0..self.u.nrows())
+            // Coordinates of the training poses on axis i: U[f, i] · s_i; their RMS is
+            // s_i / √frames, the unit regularised to √((s_i² + λ) / frames).
+            let (lo, hi) = (0..frames)
                 .map(|f| self.u[(f, i)] * si)
                 .fold((f64::MAX, f64::MIN), |(lo, hi), c| (lo.min(c), hi.max(c)));
             limits.range.push([lo as f32, hi as f32]);
+            let unit = ((si * si + lambda) / frames as f64).sqrt();
+            limits.scale.push(unit as f32);
+            for (f, d) in dist2.iter_mut().enumerate() {
+                *d += (self.u[(f, i)] * si / unit).powi(2);
+            }
         }
+        limits.radius = dist2.iter().copied().fold(0.0f64, f64::max).sqrt() as f32;
         limits
     }
 }
@@ -679,4 +705,31 @@ fn features(active: &[u32], joint_rotations: &[Vec3]) -> Vec<f32> {
         a.extend_from_slice(&r.to_array());
     }
     a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn folds_are_contiguous_blocks_that_cover_the_frames_once() {
+        for frames in [4, 5, 7, 8, 45, 103] {
+            let folds = folds(frames);
+            assert!(folds.len() >= 2, "{frames}");
+            let mut seen = vec![0; frames];
+            for (held, rest) in &folds {
+                for f in held.clone() {
+                    seen[f] += 1;
+                }
+                assert_eq!(rest.len() + held.len(), frames);
+                assert!(rest.iter().all(|f| !held.contains(f)));
+            }
+            assert!(seen.iter().all(|&n| n == 1), "{frames}: {seen:?}");
+        }
+        assert_eq!(folds(45).len(), FOLDS);
+        // Too few frames to hold any out and train on 2: no blocks (every ridge ties, the
+        // first is kept, and no vertex is shrunk).
+        assert!(folds(2).is_empty());
+        assert_eq!(folds(3).len(), 1);
+    }
 }

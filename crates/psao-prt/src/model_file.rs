@@ -3,8 +3,9 @@
 //! Layout, little-endian: magic `PSAOPRT\0`, format version (u32), character name (u32
 //! length + UTF-8), vertices, joints, lobes, active-joint count (u32 each), the active joint
 //! indices (u32 each), the pose limits (their axis count `r` (u32; 0: none), then only when
-//! `r > 0` the mean (`3·active` f32), the axes (`r × 3·active` f32) and per axis its least
-//! and greatest coordinate (f32 each)), the weights (f32 each,
+//! `r > 0` the mean (`3·active` f32), the axes (`r × 3·active` f32), per axis its least
+//! and greatest coordinate (f32 each), per axis the ball's unit (f32) and the ball's radius
+//! (f32; 0: no ball)), the weights (f32 each,
 //! `(1 + 3·active) × vertices·lobes·7`), and an FNV-1a 64 checksum of everything before it. Every count is checked against the bytes
 //! that remain before anything is allocated, so truncated, foreign or corrupt files get an
 //! error, never a panic or a huge allocation.
@@ -15,7 +16,7 @@ use crate::PrtError;
 /// First bytes of every model file.
 pub const MAGIC: &[u8; 8] = b"PSAOPRT\0";
 /// The format version written and accepted.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// Longest character name accepted.
 const MAX_NAME: usize = 4096;
 
@@ -47,11 +48,24 @@ pub fn to_bytes(model: &PoseModel) -> Vec<u8> {
     let limits = &model.limits;
     u32s(&mut out, limits.range.len() as u32);
     if !limits.range.is_empty() {
+        // Without a ball: zero units and radius 0.
+        let scale = if limits.scale.len() == limits.range.len() {
+            limits.scale.clone()
+        } else {
+            vec![0.0; limits.range.len()]
+        };
+        let radius = if scale.iter().any(|&s| s > 0.0) {
+            limits.radius
+        } else {
+            0.0
+        };
         for v in limits
             .mean
             .iter()
             .chain(&limits.axes)
             .chain(limits.range.iter().flatten())
+            .chain(&scale)
+            .chain([&radius])
         {
             out.extend_from_slice(&v.to_le_bytes());
         }
@@ -161,10 +175,15 @@ pub fn from_bytes(bytes: &[u8]) -> Result<PoseModel, PrtError> {
             .chunks_exact(2)
             .map(|c| [c[0], c[1]])
             .collect();
+        let scale = r.f32s(axes, "ball units")?;
+        let radius = r.f32s(1, "ball radius")?[0];
+        let ball = radius > 0.0;
         PoseLimits {
             mean,
             axes: axis_values,
             range,
+            scale: if ball { scale } else { Vec::new() },
+            radius: if ball { radius } else { 0.0 },
         }
     };
     let count = (1 + 3 * active_len)
@@ -191,6 +210,8 @@ pub fn from_bytes(bytes: &[u8]) -> Result<PoseModel, PrtError> {
         .chain(&limits.mean)
         .chain(&limits.axes)
         .chain(limits.range.iter().flatten())
+        .chain(&limits.scale)
+        .chain([&limits.radius])
         .any(|w| !w.is_finite())
     {
         return Err(PrtError::Model("non-finite weight or pose limit".into()));
@@ -222,6 +243,8 @@ mod tests {
                 mean: vec![0.1; 6],
                 axes: vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
                 range: vec![[-0.5, 0.25]],
+                scale: vec![0.2],
+                radius: 1.5,
             },
         }
     }
@@ -230,6 +253,13 @@ mod tests {
     fn round_trips() {
         let m = model();
         assert_eq!(from_bytes(&to_bytes(&m)).unwrap(), m);
+        // Limits without a ball, and no limits at all.
+        let mut boxed = model();
+        boxed.limits = boxed.limits.box_only();
+        assert_eq!(from_bytes(&to_bytes(&boxed)).unwrap(), boxed);
+        let mut free = model();
+        free.limits = PoseLimits::default();
+        assert_eq!(from_bytes(&to_bytes(&free)).unwrap(), free);
     }
 
     #[test]

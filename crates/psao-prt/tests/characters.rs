@@ -121,3 +121,67 @@ fn two_lobes_fit_better_than_one_and_the_model_predicts_held_out_frames() {
         / (validate.len() * fox.vertex_count()) as f32;
     assert!(err < 0.5 * baseline, "model {err} vs unshadowed {baseline}");
 }
+
+/// A client relighting the Fox from its joint transforms and skinned vertices gets what
+/// shading the model's prediction at the character's own pose and frames gives.
+#[test]
+fn a_client_frame_shades_like_the_characters_own_pose() {
+    use psao_prt::model::{PoseModel, LOBE_DIM};
+    use psao_prt::runtime::{FramePose, Relighter};
+    use psao_prt::shade::{Mode, Shader, ShadingGeometry, Visibility};
+    let Some(fox) = fox("Survey") else { return };
+    let (vertices, joints) = (fox.vertex_count(), fox.joint_count());
+    let out = vertices * 2 * LOBE_DIM;
+    // Weights that make the lobes depend on every joint (values arbitrary but fixed).
+    let weights = (0..(1 + 3 * joints) * out)
+        .map(|i| ((i * 2_654_435_761usize) % 1000) as f32 / 1000.0 - 0.5)
+        .collect();
+    let model = PoseModel {
+        character: "Fox".into(),
+        vertices,
+        joints,
+        lobes: 2,
+        active: (0..joints as u32).collect(),
+        weights,
+        limits: Default::default(),
+    };
+    let mode = Mode::Phong { alpha: 8.0 };
+    let mut relighter =
+        Relighter::new(model.clone(), Shader::new(mode).unwrap(), fox.rig()).unwrap();
+    let mut light = psao_prt::shade::unit_visibility();
+    light[1] = 0.7;
+    light[6] = -0.4;
+    let eye = glam::Vec3::new(0.0, 80.0, 300.0);
+    for t in [0.3, 1.7] {
+        let pose = fox.pose(t);
+        let frame = FramePose {
+            joint_local: &pose.joint_local,
+            positions: &pose.positions,
+            normals: &pose.normals,
+            transform: pose.transform,
+        };
+        let client = relighter.shade(&frame, &[light], eye).unwrap();
+        let mut raw = Vec::new();
+        model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+        let direct = Shader::new(mode)
+            .unwrap()
+            .shade(
+                Visibility::Model(&model, &raw),
+                ShadingGeometry {
+                    positions: &pose.positions,
+                    frames: &pose.frames,
+                    transform: pose.transform,
+                },
+                &[light],
+                eye,
+            )
+            .unwrap();
+        assert_eq!(client.len(), vertices);
+        let worst = client
+            .iter()
+            .zip(&direct)
+            .map(|(a, b)| (a - b).abs() / b.abs().max(1.0))
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-5, "t = {t}: worst relative difference {worst}");
+    }
+}

@@ -8,7 +8,8 @@ use clap::Args;
 use serde::Serialize;
 
 use psao_net::cpu_time::fine_cpu_seconds;
-use psao_prt::shade::{ShadingGeometry, Visibility};
+use psao_prt::model::PoseModel;
+use psao_prt::runtime::{FramePose, Relighter, Rig};
 
 use crate::relight_cmd::{
     character_and_model, frame_range, gather, split, train_model, ShadingArgs,
@@ -35,6 +36,14 @@ pub struct BenchRelightArgs {
     /// Timed runs (one per frame of the clip, cycling).
     #[arg(long, default_value_t = 60)]
     pub runs: usize,
+    /// Relight this many vertices: the character's vertices, model columns and skinned
+    /// geometry repeated (or cut) to that count (the cost depends on the sizes, not on the
+    /// values); default: the character's own.
+    #[arg(long)]
+    pub vertices: Option<usize>,
+    /// Threads of the pool the frames run on (default: one per core).
+    #[arg(long)]
+    pub threads: Option<usize>,
     /// Write the result as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -87,40 +96,62 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         }
     };
     let mode = args.shading.mode()?;
-    let shader = args.shading.shader()?;
     let c = &loaded.character;
     let frames = clip_frames(c);
-    let poses: Vec<_> = (0..frames.min(args.runs as u32))
+    let mut poses: Vec<_> = (0..frames.min(args.runs as u32))
         .map(|i| c.pose(i as f32 / FPS))
         .collect();
     let camera = framing_camera(&poses[0], 640, 480);
+    let (model, rig) = match args.vertices {
+        Some(n) => {
+            if n == 0 {
+                bail!("--vertices must be at least 1");
+            }
+            for pose in &mut poses {
+                pose.positions = repeat(&pose.positions, 1, n);
+                pose.normals = repeat(&pose.normals, 1, n);
+            }
+            repeat_vertices(&model, c.rig(), n)
+        }
+        None => (model, c.rig()),
+    };
+    let vertices = model.vertices;
+    let (lobes, model_mb) = (model.lobes, model.megabytes());
+    let mut relighter = Relighter::new(model, args.shading.shader()?, rig)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .context("cannot start the thread pool")?;
     let mut raw = Vec::new();
     let mut total = Vec::with_capacity(args.runs);
     let mut synth = Vec::with_capacity(args.runs);
     let mut cpu = Vec::with_capacity(args.runs);
-    // One warm-up frame, then the timed runs.
+    // One warm-up frame, then the timed runs. The clocks are read on this thread, outside
+    // the pool: a thread's scheduler statistics are only brought up to date when it stops
+    // running, so the pool's threads are read while they wait between frames.
     for run in 0..=args.runs {
         let pose = &poses[run % poses.len()];
+        let frame = FramePose {
+            joint_local: &pose.joint_local,
+            positions: &pose.positions,
+            normals: &pose.normals,
+            transform: pose.transform,
+        };
         let cpu_start = fine_cpu_seconds();
         let start = Instant::now();
-        model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
-        let mid = Instant::now();
-        let v = shader.shade(
-            Visibility::Model(&model, &raw),
-            ShadingGeometry {
-                positions: &pose.positions,
-                frames: &pose.frames,
-                transform: pose.transform,
-            },
-            &lights,
-            camera.position,
-        )?;
-        std::hint::black_box(v);
+        let v = pool.install(|| relighter.shade(&frame, &lights, camera.position))?;
         let wall = start.elapsed();
         let cpu_end = fine_cpu_seconds();
+        std::hint::black_box(v);
+        // The synthesis alone (the model's matrix product), timed apart.
+        let model = relighter.model();
+        let a = model.pose_vector(&pose.joint_rotations);
+        let start = Instant::now();
+        pool.install(|| model.predict_raw(&a, &mut raw));
+        let synthesis = start.elapsed();
         if run > 0 {
             total.push(wall.as_secs_f64() * 1e3);
-            synth.push((mid - start).as_secs_f64() * 1e3);
+            synth.push(synthesis.as_secs_f64() * 1e3);
             if let (Some(a), Some(b)) = (cpu_start, cpu_end) {
                 cpu.push((b - a).max(0.0) * 1e3);
             }
@@ -132,16 +163,16 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
     };
     let result = BenchResult {
         character: loaded.name.clone(),
-        vertices: model.vertices,
-        lobes: model.lobes,
+        vertices,
+        lobes,
         mode: format!("{mode:?}"),
-        threads: rayon::current_num_threads(),
+        threads: pool.current_num_threads(),
         runs: args.runs,
         ms_per_frame: median(&mut total),
         // Every run has a figure or none has (the statistics exist or they do not).
         cpu_ms_per_frame: (cpu.len() == total.len()).then(|| median(&mut cpu)),
         synthesis_ms: median(&mut synth),
-        model_mb: model.megabytes(),
+        model_mb,
     };
     let cpu_text = result
         .cpu_ms_per_frame
@@ -162,4 +193,79 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
+}
+
+/// `values` (`per` entries per vertex) repeated vertex by vertex to `n` vertices (vertex
+/// `v` takes the values of vertex `v mod len`).
+fn repeat<T: Copy>(values: &[T], per: usize, n: usize) -> Vec<T> {
+    let len = values.len() / per;
+    (0..n)
+        .flat_map(|v| &values[(v % len) * per..(v % len + 1) * per])
+        .copied()
+        .collect()
+}
+
+/// The model and rig of a character of `n` vertices made by repeating these: every row of
+/// weights repeated per vertex, each copy's tangent neighbours within the same copy (or
+/// the original's where the last copy is cut short).
+fn repeat_vertices(model: &PoseModel, rig: Rig, n: usize) -> (PoseModel, Rig) {
+    let per = model.lobes * psao_prt::model::LOBE_DIM;
+    let out = model.output_len();
+    let weights = model
+        .weights
+        .chunks_exact(out)
+        .flat_map(|row| repeat(row, per, n))
+        .collect();
+    let len = model.vertices;
+    let neighbours = (0..n)
+        .map(|v| {
+            let copied = (v - v % len) as u32 + rig.neighbours[v % len];
+            if (copied as usize) < n {
+                copied
+            } else {
+                rig.neighbours[v % len]
+            }
+        })
+        .collect();
+    (
+        PoseModel {
+            vertices: n,
+            weights,
+            ..model.clone()
+        },
+        Rig {
+            rest: rig.rest,
+            neighbours,
+        },
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn repeated_vertices_take_their_originals_columns_and_neighbours() {
+        let model = PoseModel {
+            character: "t".into(),
+            vertices: 2,
+            joints: 0,
+            lobes: 1,
+            active: vec![],
+            weights: (0..14).map(|i| i as f32).collect(),
+            limits: Default::default(),
+        };
+        let rig = Rig {
+            rest: vec![],
+            neighbours: vec![1, 0],
+        };
+        let (m, r) = repeat_vertices(&model, rig, 5);
+        assert_eq!(m.vertices, 5);
+        assert_eq!(m.weights.len(), 35);
+        assert_eq!(m.weights[14..21], model.weights[0..7]);
+        assert_eq!(m.weights[21..28], model.weights[7..14]);
+        // Vertex 4 is the first of a cut copy: its neighbour 5 does not exist.
+        assert_eq!(r.neighbours, [1, 0, 3, 2, 1]);
+        assert_eq!(repeat(&[1, 2, 3, 4], 2, 3), [1, 2, 3, 4, 1, 2]);
+    }
 }

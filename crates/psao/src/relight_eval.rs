@@ -9,17 +9,20 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use psao_eval::{AoImage, Metrics};
+use psao_prt::character::Character;
 use psao_prt::filter::Filter;
-use psao_prt::lighting::{Radiance, LUMINANCE};
-use psao_prt::model::{cosine_fit_errors, mean_std, model_errors, PoseModel};
+use psao_prt::lighting::{EnvMap, Radiance, LUMINANCE};
+use psao_prt::model::{cosine_fit_errors, mean_std, model_errors, PoseLimits, PoseModel, Sample};
 use psao_prt::reference::{reference_shading, ReferenceSettings};
-use psao_prt::shade::{Shader, ShadingGeometry, Visibility};
+use psao_prt::shade::{Mode, Shader, ShadingGeometry, Visibility};
 use psao_prt::visibility::SelfTracer;
 use serde::Serialize;
 
 use crate::args::{FrameRange, Resolution};
 use crate::png_io::write_rgb_png;
-use crate::relight_cmd::{frame_range, gather, gather_split, split, train_model, ShadingArgs};
+use crate::relight_cmd::{
+    frame_range, gather, gather_split, split, train_model, ModeArg, ShadingArgs,
+};
 use crate::relight_io::{
     clip_frames, display, exposure_for, framing_camera, load_character, load_env, VertexImage, FPS,
 };
@@ -57,14 +60,20 @@ pub struct EvalArgs {
     pub env: PathBuf,
     #[command(flatten)]
     pub shading: ShadingArgs,
+    /// Evaluate each of these modes with the same models and test frames (reports in
+    /// `OUT/MODE/`); default: `--mode` alone (report in `OUT`).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub modes: Vec<ModeArg>,
     /// Compare these visibility filters (each shadowed method is shaded with each, named
     /// `method:filter`); default: `--filter` alone.
     #[arg(long, value_delimiter = ',')]
     pub filters: Vec<Filter>,
-    /// Also shade each model with poses not moved into the training poses' limits
-    /// (methods `lobesN-unlimited`).
-    #[arg(long)]
-    pub also_unlimited: bool,
+    /// Also shade each model with parts of its protection against unseen poses switched
+    /// off (methods `lobesN-VARIANT`): `unlimited` (poses not moved into the training
+    /// poses' limits), `box` (the limits' box without their ball), `noshrink` (no
+    /// per-vertex shrink towards the average lobes), `plain` (box only, no shrink).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub variants: Vec<Variant>,
     /// Lobe counts to train and compare.
     #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
     pub lobes: Vec<usize>,
@@ -89,6 +98,45 @@ pub struct EvalArgs {
     pub out: PathBuf,
 }
 
+/// A model with parts of its protection against unseen poses switched off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Variant {
+    /// No pose limits (shrink kept).
+    Unlimited,
+    /// The limits' box without their ball (shrink kept).
+    Box,
+    /// No per-vertex shrink (limits kept).
+    Noshrink,
+    /// The box alone, no ball and no shrink.
+    Plain,
+}
+
+impl Variant {
+    /// The method name's suffix.
+    fn tag(self) -> &'static str {
+        match self {
+            Variant::Unlimited => "-unlimited",
+            Variant::Box => "-box",
+            Variant::Noshrink => "-noshrink",
+            Variant::Plain => "-plain",
+        }
+    }
+
+    /// This variant of the trained `model` (`unshrunk`: the same before its shrink).
+    fn of(self, model: &PoseModel, unshrunk: &PoseModel) -> PoseModel {
+        let (base, limits) = match self {
+            Variant::Unlimited => (model, PoseLimits::default()),
+            Variant::Box => (model, model.limits.box_only()),
+            Variant::Noshrink => (unshrunk, unshrunk.limits.clone()),
+            Variant::Plain => (unshrunk, unshrunk.limits.box_only()),
+        };
+        PoseModel {
+            limits,
+            ..base.clone()
+        }
+    }
+}
+
 /// The lighting of the reference.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -100,7 +148,7 @@ pub enum RefLighting {
 }
 
 /// Fit error of one lobe count.
-#[derive(Serialize)]
+#[derive(Clone, Serialize)]
 struct FitError {
     lobes: usize,
     /// Mean RMS-over-the-sphere error of the model's visibility on the test frames.
@@ -115,6 +163,9 @@ struct FitError {
     model_mb: f64,
     ridge: f64,
     ms_per_frame: f64,
+    /// Per test frame: its pose's distance from the training poses' mean as a multiple of
+    /// the farthest training pose's (the pose limits' ball; `null` without one).
+    pose_reach: Vec<Option<f32>>,
 }
 
 /// Averages of one method.
@@ -142,7 +193,7 @@ struct FrameRow {
 
 /// The paper's Fig. 3: lobes fitted to plain vs cosine-weighted SH visibility (see
 /// `psao_prt::model::cosine_fit_errors`), mean and standard deviation.
-#[derive(Serialize)]
+#[derive(Clone, Serialize)]
 struct ShFit {
     lobes: usize,
     plain: (f32, f32),
@@ -220,24 +271,20 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         None => None,
     };
     let env = load_env(&args.env)?;
-    let mode = args.shading.mode()?;
-    let filters = if args.filters.is_empty() {
-        vec![args.shading.filter]
+    let modes: Vec<(ModeArg, Mode)> = if args.modes.is_empty() {
+        vec![(args.shading.mode, args.shading.mode()?)]
     } else {
-        args.filters.clone()
+        args.modes
+            .iter()
+            .map(|&m| {
+                let shading = ShadingArgs {
+                    mode: m,
+                    ..args.shading.clone()
+                };
+                Ok((m, shading.mode()?))
+            })
+            .collect::<Result<_>>()?
     };
-    let shaders: Vec<(String, Shader)> = filters
-        .iter()
-        .map(|&f| {
-            let suffix = if filters.len() > 1 {
-                format!(":{f}")
-            } else {
-                String::new()
-            };
-            Ok((suffix, Shader::with_filter(mode, f)?))
-        })
-        .collect::<Result<_>>()?;
-    let shader = &shaders[0].1;
     let c = &loaded.character;
     // The character playing the test clip (the same file, so the same joints and vertices).
     let tc = other.as_ref().map_or(c, |o| &o.character);
@@ -265,7 +312,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         "tracing test frames",
     )?;
 
-    let mut models: Vec<(usize, PoseModel)> = Vec::new();
+    // Per lobe count: the model and its variants, each with its method name.
+    let mut models: Vec<(usize, Vec<(String, PoseModel)>)> = Vec::new();
     let mut fit_error = Vec::new();
     for &lobes in &args.lobes {
         let start = Instant::now();
@@ -285,8 +333,25 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             model_mb: model.megabytes(),
             ridge: report.ridge,
             ms_per_frame: 0.0,
+            pose_reach: tests
+                .iter()
+                .map(|s| {
+                    let pose = model.raw_pose_vector(&s.joint_rotations);
+                    model.limits.reach(&pose[1..])
+                })
+                .collect(),
         });
-        models.push((lobes, model));
+        let variants = args.variants.iter().map(|v| {
+            (
+                format!("lobes{lobes}{}", v.tag()),
+                v.of(&model, &report.unshrunk),
+            )
+        });
+        let named: Vec<(String, PoseModel)> = variants.collect();
+        models.push((
+            lobes,
+            [vec![(format!("lobes{lobes}"), model)], named].concat(),
+        ));
     }
 
     // Fig. 3 on at most FIG3_FRAMES training frames spread over the set.
@@ -307,9 +372,91 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         })
         .collect();
 
+    let shared = Shared {
+        args,
+        name: &loaded.name,
+        clip: c.clip_name(),
+        tc,
+        block,
+        train_frames: train_set.len(),
+        validation_frames: validate.len(),
+        test_times: &test_times,
+        tests: &tests,
+        models: &models,
+        fit_error: &fit_error,
+        sh_fit: &sh_fit,
+        env: &env,
+    };
+    for &(arg, mode) in &modes {
+        let out = if args.modes.is_empty() {
+            args.out.clone()
+        } else {
+            args.out.join(
+                arg.to_possible_value()
+                    .expect("no skipped modes")
+                    .get_name(),
+            )
+        };
+        std::fs::create_dir_all(&out)
+            .with_context(|| format!("cannot create {}", out.display()))?;
+        evaluate_mode(&shared, mode, &out)?;
+    }
+    Ok(())
+}
+
+/// What every mode's evaluation shares: the trained models and the test frames.
+struct Shared<'a> {
+    args: &'a EvalArgs,
+    name: &'a str,
+    clip: &'a str,
+    /// The character playing the test clip.
+    tc: &'a Character,
+    block: FrameRange,
+    train_frames: usize,
+    validation_frames: usize,
+    test_times: &'a [f32],
+    /// The test frames' traced visibility.
+    tests: &'a [Sample],
+    /// Per lobe count: the model and its variants, each with its method name.
+    models: &'a [(usize, Vec<(String, PoseModel)>)],
+    fit_error: &'a [FitError],
+    sh_fit: &'a [ShFit],
+    env: &'a EnvMap,
+}
+
+/// Renders the test frames in `mode` with every method against the reference and writes
+/// the report and pictures to `out`.
+fn evaluate_mode(shared: &Shared, mode: Mode, out: &std::path::Path) -> Result<()> {
+    let Shared {
+        args,
+        tc,
+        test_times,
+        tests,
+        models,
+        env,
+        ..
+    } = *shared;
+    let filters = if args.filters.is_empty() {
+        vec![args.shading.filter]
+    } else {
+        args.filters.clone()
+    };
+    let shaders: Vec<(String, Shader)> = filters
+        .iter()
+        .map(|&f| {
+            let suffix = if filters.len() > 1 {
+                format!(":{f}")
+            } else {
+                String::new()
+            };
+            Ok((suffix, Shader::with_filter(mode, f)?))
+        })
+        .collect::<Result<_>>()?;
+    let shader = &shaders[0].1;
+    let mut fit_error = shared.fit_error.to_vec();
     let lighting = env.project();
     let radiance: &dyn Radiance = match args.ref_lighting {
-        RefLighting::Full => &env,
+        RefLighting::Full => env,
         RefLighting::Sh => &lighting,
     };
     let (w, h) = (args.res.width, args.res.height);
@@ -321,7 +468,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let mut noise_rows: Vec<FrameRow> = Vec::new();
     let mut raw = Vec::new();
     let progress = crate::progress::bar(test_times.len() as u64, "rendering test frames", "frames");
-    for (k, (&t, sample)) in test_times.iter().zip(&tests).enumerate() {
+    for (k, (&t, sample)) in test_times.iter().zip(tests).enumerate() {
         let pose = tc.pose(t);
         tracer.set_pose(&pose)?;
         let reference_with = |seed: u64| -> Vec<f32> {
@@ -385,23 +532,18 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                 )?,
             ));
         }
-        for (lobes, model) in &models {
-            let limited = model.pose_vector(&pose.joint_rotations);
-            let unlimited = model.raw_pose_vector(&pose.joint_rotations);
-            let variants = [(limited, ""), (unlimited, "-unlimited")];
-            for (a, tag) in variants.iter().take(1 + args.also_unlimited as usize) {
-                model.predict_raw(a, &mut raw);
-                for (suffix, shader) in &shaders {
-                    methods.push((
-                        format!("lobes{lobes}{tag}{suffix}"),
-                        shader.shade(
-                            Visibility::Model(model, &raw),
-                            geometry,
-                            &lighting.rgb,
-                            camera.position,
-                        )?,
-                    ));
-                }
+        for (name, model) in models.iter().flat_map(|(_, named)| named) {
+            model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+            for (suffix, shader) in &shaders {
+                methods.push((
+                    format!("{name}{suffix}"),
+                    shader.shade(
+                        Visibility::Model(model, &raw),
+                        geometry,
+                        &lighting.rgb,
+                        camera.position,
+                    )?,
+                ));
             }
         }
         let mut pictures = vec![("reference".to_string(), ref_pixels.clone())];
@@ -418,16 +560,17 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             pictures.push((name.clone(), pixels));
         }
         if k == 0 {
-            write_pictures(args, &pictures, w, h, exposure)?;
+            write_pictures(out, &pictures, w, h, exposure)?;
         }
         progress.inc(1);
     }
     progress.finish_and_clear();
 
     // Run time: synthesis + shading per frame, median of the test frames (3 runs each).
-    for (fe, (_, model)) in fit_error.iter_mut().zip(&models) {
+    for (fe, (_, named)) in fit_error.iter_mut().zip(models) {
+        let model = &named[0].1;
         let mut times = Vec::new();
-        for &t in &test_times {
+        for &t in test_times {
             let pose = tc.pose(t);
             for _ in 0..3 {
                 let start = Instant::now();
@@ -462,31 +605,30 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let methods: Vec<MethodRow> = names.iter().map(|n| method_row(n, &rows)).collect();
     let reference_noise = method_row("reference_reseeded", &noise_rows);
     let report = Report {
-        character: loaded.name.clone(),
-        clip: c.clip_name().to_string(),
+        character: shared.name.to_string(),
+        clip: shared.clip.to_string(),
         test_clip: tc.clip_name().to_string(),
-        test_frames: [block.start, block.end],
+        test_frames: [shared.block.start, shared.block.end],
         mode: format!("{mode:?}"),
-        vertices: c.vertex_count(),
-        primitives: c.part_count(),
-        train_frames: train_set.len(),
-        validation_frames: validate.len(),
-        test_times_s: test_times.clone(),
+        vertices: tc.vertex_count(),
+        primitives: tc.part_count(),
+        train_frames: shared.train_frames,
+        validation_frames: shared.validation_frames,
+        test_times_s: test_times.to_vec(),
         rays: args.rays,
         ref_samples: args.ref_samples,
         ref_lighting: args.ref_lighting,
         filters: filters.iter().map(ToString::to_string).collect(),
         fit_error,
-        sh_fit,
+        sh_fit: shared.sh_fit.to_vec(),
         methods,
         reference_noise,
         frames: rows,
         reference_noise_frames: noise_rows,
     };
     let json = serde_json::to_string_pretty(&report)?;
-    std::fs::write(args.out.join("report.json"), json).context("cannot write report.json")?;
-    std::fs::write(args.out.join("report.md"), markdown(&report))
-        .context("cannot write report.md")?;
+    std::fs::write(out.join("report.json"), json).context("cannot write report.json")?;
+    std::fs::write(out.join("report.md"), markdown(&report)).context("cannot write report.md")?;
     print!("{}", markdown(&report));
     Ok(())
 }
@@ -535,7 +677,7 @@ pub fn to_image(rgb: &[f32], w: u32, h: u32, exposure: f32) -> AoImage {
 
 /// Each method's picture of the first test frame, and reference | lobes2 | unshadowed side by side.
 fn write_pictures(
-    args: &EvalArgs,
+    out: &std::path::Path,
     pictures: &[(String, Vec<f32>)],
     w: u32,
     h: u32,
@@ -543,7 +685,7 @@ fn write_pictures(
 ) -> Result<()> {
     for (name, p) in pictures {
         write_rgb_png(
-            &args.out.join(format!("{name}.png")),
+            &out.join(format!("{name}.png")),
             w,
             h,
             to_display_bytes(p, exposure),
@@ -560,7 +702,7 @@ fn write_pictures(
         .map(|(_, p)| p.as_slice())
         .collect();
     let (pw, side) = side_by_side(&panels, w, h, exposure);
-    write_rgb_png(&args.out.join("side_by_side.png"), pw, h, side)
+    write_rgb_png(&out.join("side_by_side.png"), pw, h, side)
 }
 
 /// RGB `w × h` pictures (linear, interleaved) placed left to right and tone-mapped with
@@ -593,8 +735,8 @@ fn markdown(r: &Report) -> String {
          frames {}..{} (held out of training), times {:?} s; \
          {} visibility rays per vertex; reference {} samples per vertex.\n\n\
          ## Fit error (RMS over the sphere of predicted vs projected visibility, test frames)\n\n\
-         | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+         | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame | pose reach per test frame |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
         r.character,
         r.clip,
         r.vertices,
@@ -611,7 +753,7 @@ fn markdown(r: &Report) -> String {
     );
     for f in &r.fit_error {
         s += &format!(
-            "| {} | {:.4} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} |\n",
+            "| {} | {:.4} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} | {} |\n",
             f.lobes,
             f.mean,
             f.std,
@@ -621,7 +763,12 @@ fn markdown(r: &Report) -> String {
             f.train_s,
             f.model_mb,
             f.ridge,
-            f.ms_per_frame
+            f.ms_per_frame,
+            f.pose_reach
+                .iter()
+                .map(|r| r.map_or("—".to_string(), |r| format!("{r:.2}")))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     s += "\n## Lobes fitted to plain vs cosine-weighted SH visibility (paper Fig. 3)\n\n\
