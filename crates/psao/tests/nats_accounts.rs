@@ -61,20 +61,9 @@ fn raw_publish(port: u16, credentials: &str, subject: &str) -> String {
     answer
 }
 
+/// `psao <role> --scene SCENE <SERVER> <extra>`, its stdout's first line awaited.
 fn start(role: &str, scene: &str, extra: &[&str]) -> (Proc, String) {
-    let mut child = Command::new(BIN)
-        .args(["--log", "warn", role, "--scene", scene])
-        .args(SERVER)
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    (Proc(child), line.trim().to_string())
+    common::start_role(role, scene, SERVER, extra)
 }
 
 fn write_scene(dir: &Path) -> String {

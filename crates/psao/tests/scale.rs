@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::{free_port, json, stderr, Proc, BIN};
+use common::{free_port, json, start_role, stderr, Proc, BIN};
 
 /// Server settings of every process: few points, small budget.
 const SERVER: &[&str] = &["--points", "96", "--ray-budget", "20000", "--hz", "30"];
@@ -99,24 +99,7 @@ fn nats_on(dir: &Path, port: u16) -> Proc {
 
 /// `psao <role> --scene SCENE <SERVER> <extra>`, its stdout's first line awaited.
 fn start(role: &str, scene: &str, extra: &[&str]) -> (Proc, String) {
-    start_with(role, scene, SERVER, extra)
-}
-
-/// `psao <role> --scene SCENE <server> <extra>`, its stdout's first line awaited.
-fn start_with(role: &str, scene: &str, server: &[&str], extra: &[&str]) -> (Proc, String) {
-    let mut child = Command::new(BIN)
-        .args(["--log", "warn", role, "--scene", scene])
-        .args(server)
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    (Proc(child), line.trim().to_string())
+    start_role(role, scene, SERVER, extra)
 }
 
 /// The address of a server that printed `listening on ADDR`.
@@ -811,7 +794,7 @@ fn at_defaults(
         }
     };
     let lockstep = ["--listen", "127.0.0.1:0", "--lockstep", "--once"];
-    let (mut serve, line) = start_with("serve", scene, server, &lockstep);
+    let (mut serve, line) = start_role("serve", scene, server, &lockstep);
     finished(view(&addr(&line), scene, path, frames, &out("s.json")));
     serve.wait(60);
     let alone = session("s.json");
@@ -831,7 +814,7 @@ fn at_defaults(
                 "--json",
                 report.to_str().unwrap(),
             ];
-            let (p, line) = start_with("trace-node", scene, server, &args);
+            let (p, line) = start_role("trace-node", scene, server, &args);
             assert!(line.starts_with("trace node"), "{line}");
             p
         })
@@ -840,7 +823,7 @@ fn at_defaults(
     let mut args = vec!["--nats", &url, "--json", report.to_str().unwrap()];
     args.extend(["--partitions", &count]);
     args.extend(lockstep);
-    let (mut edge, line) = start_with("edge", scene, server, &args);
+    let (mut edge, line) = start_role("edge", scene, server, &args);
     finished(view(&addr(&line), scene, path, frames, &out("v.json")));
     edge.wait(60);
     let split = session("v.json");

@@ -2,9 +2,10 @@
 //! different subset, hence the `dead_code` allowance).
 #![allow(dead_code)]
 
+use std::io::{BufRead, BufReader};
 use std::net::TcpListener;
 use std::path::Path;
-use std::process::{Child, Command, Output};
+use std::process::{Child, Command, Output, Stdio};
 
 /// Path of the `psao` binary under test.
 pub const BIN: &str = env!("CARGO_BIN_EXE_psao");
@@ -45,4 +46,22 @@ impl Drop for Proc {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
+}
+
+/// `psao --log warn <role> --scene SCENE <server> <extra>`, running, with the first line of
+/// its standard output (a server's `listening on ADDR`) once printed.
+pub fn start_role(role: &str, scene: &str, server: &[&str], extra: &[&str]) -> (Proc, String) {
+    let mut child = Command::new(BIN)
+        .args(["--log", "warn", role, "--scene", scene])
+        .args(server)
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    (Proc(child), line.trim().to_string())
 }
