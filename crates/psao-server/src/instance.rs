@@ -9,6 +9,7 @@ use psao_points::{
 use crate::alloc::CellAlloc;
 use crate::blocks::CullBlocks;
 use crate::changes::{stamp, ChangeLog};
+use crate::light::LightSums;
 use crate::summary::BlockSummaries;
 use crate::ServerError;
 
@@ -68,6 +69,20 @@ pub(crate) struct Points {
     /// point's current slot (cleared when the point changes cell).
     pub published: Vec<u32>,
     pub published_here: Bits,
+    /// Irradiance accumulators, when the server computes lighting.
+    pub light: Option<LightSums>,
+}
+
+impl Points {
+    /// Point `i`'s progress for selection and convergence: its AO samples, or with lighting
+    /// the smaller of those and its light paths counted in AO samples (see `light.rs`).
+    #[inline]
+    pub fn progress(&self, i: usize) -> u32 {
+        match &self.light {
+            None => self.count[i],
+            Some(l) => self.count[i].min(l.progress(i)),
+        }
+    }
 }
 
 /// One bit per point.
@@ -148,6 +163,7 @@ impl InstanceState {
             count: vec![0; n],
             published: vec![0; n],
             published_here: Bits::new(n),
+            light: None,
         };
         let blocks = CullBlocks::new(&p.position, index, seed);
         let summaries = BlockSummaries::new(&blocks, &p, max_samples);
