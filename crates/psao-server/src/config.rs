@@ -14,15 +14,20 @@ pub struct Thresholds {
     /// Resend when the position moved by more than this many quantisation steps (cell / 32)
     /// along some axis.
     pub position_steps: f32,
+    /// With lighting: resend when the irradiance moved perceptibly from the published one
+    /// (a Weber fraction, [`psao_points::irradiance::irradiance_changed`]).
+    pub irradiance: f32,
 }
 
 impl Default for Thresholds {
-    /// The paper's values: 8/255 AO, cosine 0.6, 3 position steps.
+    /// The paper's values: 8/255 AO, cosine 0.6, 3 position steps; irradiance 8/255 of its
+    /// luminance.
     fn default() -> Self {
         Self {
             ao: 8.0 / 255.0,
             normal_cos: 0.6,
             position_steps: 3.0,
+            irradiance: 8.0 / 255.0,
         }
     }
 }
@@ -137,7 +142,8 @@ impl ServerConfig {
             }
         }
         let t = &self.thresholds;
-        if !(t.ao.is_finite() && t.normal_cos.is_finite() && t.position_steps.is_finite()) {
+        let finite = [t.ao, t.normal_cos, t.position_steps, t.irradiance];
+        if !finite.iter().all(|v| v.is_finite()) {
             return bad("thresholds must be finite");
         }
         Ok(())

@@ -3,7 +3,8 @@
 
 use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use psao_points::{
-    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, DEFAULT_INTERPOLATION_FACTOR,
+    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, CELL_POINTS,
+    DEFAULT_INTERPOLATION_FACTOR,
 };
 
 use crate::alloc::CellAlloc;
@@ -51,6 +52,9 @@ pub(crate) struct InstanceState {
     /// publish: they must be refreshed even if no point is republished into them.
     pub pending_cells: Vec<u32>,
     pub pending_buckets: Vec<usize>,
+    /// With lighting: the published irradiance records of each published cell's points
+    /// (same order as its point records; empty without lighting or past the last lit slot).
+    pub light_cells: Vec<[u32; CELL_POINTS]>,
 }
 
 /// Per-point state of one instance.
@@ -184,6 +188,7 @@ impl InstanceState {
             summaries,
             pending_cells: Vec::new(),
             pending_buckets: Vec::new(),
+            light_cells: Vec::new(),
         };
         state.refresh_cull_bounds();
         Ok(state)
@@ -311,6 +316,31 @@ impl InstanceState {
             *dst = bits;
         }
         cell
+    }
+
+    /// The irradiance records of [`InstanceState::published_cell`]'s points, in its order
+    /// (`None` without lighting).
+    pub fn published_light_cell(&self, slot: u32) -> Option<[u32; CELL_POINTS]> {
+        let light = self.points.light.as_ref()?;
+        let mut out = [0; CELL_POINTS];
+        let records = self
+            .alloc
+            .members(slot)
+            .iter()
+            .filter(|&&m| m != NONE && self.points.published_here.get(m as usize))
+            .map(|&m| light.published[m as usize]);
+        for (dst, bits) in out.iter_mut().zip(records) {
+            *dst = bits;
+        }
+        Some(out)
+    }
+
+    /// The published irradiance records of slot `slot` (zeros where none were published).
+    pub fn light_cell(&self, slot: u32) -> [u32; CELL_POINTS] {
+        self.light_cells
+            .get(slot as usize)
+            .copied()
+            .unwrap_or_default()
     }
 
     /// The published content of bucket `b`: the allocation bucket's entries whose cells hold

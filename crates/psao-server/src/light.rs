@@ -23,6 +23,7 @@
 //! traced with the lights of the last relighting, so the samples of a point agree.
 
 use glam::Vec3;
+use psao_points::irradiance::{irradiance_changed, pack_rgb9e5, unpack_rgb9e5};
 use psao_scene::{Light, LightShape, Scene, ScenePose};
 use psao_trace::gi::DiffuseLighting;
 use psao_trace::Tracer;
@@ -44,6 +45,8 @@ pub(crate) struct LightSums {
     /// Sum of the irradiance samples (linear RGB) and their number, per point.
     pub sum: Vec<Vec3>,
     pub count: Vec<u32>,
+    /// Last published irradiance record (RGB9E5) per point.
+    pub published: Vec<u32>,
     /// AO rays and light paths per selected point and frame: the rate between the counts.
     rays_per_point: u32,
     paths_per_point: u32,
@@ -55,6 +58,7 @@ impl LightSums {
         Self {
             sum: vec![Vec3::ZERO; n],
             count: vec![0; n],
+            published: vec![0; n],
             rays_per_point,
             paths_per_point,
         }
@@ -74,6 +78,23 @@ impl LightSums {
         let paths = (u64::from(max_samples) * u64::from(self.paths_per_point))
             .div_ceil(u64::from(self.rays_per_point));
         u32::try_from(paths).unwrap_or(u32::MAX)
+    }
+
+    /// Point `i`'s mean irradiance, when it has paths.
+    pub fn mean(&self, i: usize) -> Option<Vec3> {
+        (self.count[i] > 0).then(|| self.sum[i] / self.count[i] as f32)
+    }
+
+    /// The record point `i` would be published with now: its mean, or what was published
+    /// while it has no paths (restarted).
+    pub fn record(&self, i: usize) -> u32 {
+        self.mean(i).map_or(self.published[i], pack_rgb9e5)
+    }
+
+    /// Whether point `i`'s irradiance moved perceptibly from its published record.
+    pub fn changed(&self, i: usize, threshold: f32) -> bool {
+        self.mean(i)
+            .is_some_and(|e| irradiance_changed(unpack_rgb9e5(self.published[i]), e, threshold))
     }
 
     /// Keep the fraction `kept` of point `i`'s samples (their mean unchanged).
@@ -96,7 +117,9 @@ impl LightSums {
 
     /// Heap bytes.
     pub fn heap_bytes(&self) -> u64 {
-        psao_points::vec_bytes(&self.sum) + psao_points::vec_bytes(&self.count)
+        psao_points::vec_bytes(&self.sum)
+            + psao_points::vec_bytes(&self.count)
+            + psao_points::vec_bytes(&self.published)
     }
 }
 

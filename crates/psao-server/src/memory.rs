@@ -22,8 +22,10 @@ pub(crate) fn memory_parts(instances: &[InstanceState], skins: u64) -> Vec<Memor
     let lit = instances.iter().any(|i| i.points.light.is_some());
     let light = lit.then(|| {
         part(
-            "irradiance accumulators",
-            sum(&|i| i.points.light.as_ref().map_or(0, |l| l.heap_bytes())),
+            "irradiance accumulators and published records",
+            sum(&|i| {
+                i.points.light.as_ref().map_or(0, |l| l.heap_bytes()) + vec_bytes(&i.light_cells)
+            }),
         )
     });
     let mut parts = vec![

@@ -710,6 +710,8 @@ fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> Instan
     match (snapshot, inst.changes.since(since)) {
         (false, Some(changed)) => {
             let grid = &inst.grid;
+            let cells: Vec<(u32, psao_points::Cell)> =
+                changed.cells.iter().map(|&s| (s, *grid.cell(s))).collect();
             InstanceDelta {
                 instance: index,
                 buckets: changed
@@ -717,7 +719,8 @@ fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> Instan
                     .iter()
                     .map(|&b| (b, grid.bucket(b as usize)))
                     .collect(),
-                cells: changed.cells.iter().map(|&s| (s, *grid.cell(s))).collect(),
+                lights: lights_of(inst, &cells),
+                cells,
             }
         }
         _ => scan_delta(index, inst, snapshot, since),
@@ -739,7 +742,7 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
         })
         .map(|(b, bucket)| (b as u32, bucket))
         .collect();
-    let cells = grid
+    let cells: Vec<(u32, psao_points::Cell)> = grid
         .cells()
         .enumerate()
         .filter(|&(s, cell)| {
@@ -756,8 +759,20 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
     InstanceDelta {
         instance: index,
         buckets,
+        lights: lights_of(inst, &cells),
         cells,
     }
+}
+
+/// The published irradiance records of `cells` (none without lighting).
+fn lights_of(
+    inst: &InstanceState,
+    cells: &[(u32, psao_points::Cell)],
+) -> Vec<[u32; psao_points::CELL_POINTS]> {
+    if inst.points.light.is_none() {
+        return Vec::new();
+    }
+    cells.iter().map(|&(s, _)| inst.light_cell(s)).collect()
 }
 
 #[cfg(test)]

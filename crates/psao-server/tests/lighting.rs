@@ -456,3 +456,101 @@ fn a_turning_sun_relights_what_it_lights_past_the_tolerance() {
         assert!(stats.light_paths > 0);
     }
 }
+
+/// The lights of every cell of `update`, checked to be one array per cell.
+fn lights_of(update: &psao_delta::Update) -> Vec<[u32; 7]> {
+    for d in &update.instances {
+        assert_eq!(d.lights.len(), d.cells.len(), "one light array per cell");
+    }
+    update
+        .instances
+        .iter()
+        .flat_map(|d| d.lights.clone())
+        .collect()
+}
+
+#[test]
+fn updates_carry_irradiance_records_resent_past_the_threshold() {
+    use psao_delta::{Codec, CompactCodec, PaperCodec};
+    use psao_points::irradiance::unpack_rgb9e5;
+    let (sky, power) = (Vec3::splat(0.3), 2.0);
+    let mut scene = scene_of(
+        vec![floor(-1.0, 1.0, -1.0, 1.0)],
+        0.8,
+        sky,
+        vec![sun(Vec3::Y, Vec3::ONE, power)],
+    );
+    // 9° per second, from straight up towards +x.
+    scene
+        .sun_keys
+        .push(SunKeys::new(0, vec![0.0, 10.0], vec![Vec3::Y, Vec3::X]).unwrap());
+    let views = [view(Vec3::new(0.0, 3.0, 2.0), Vec3::ZERO, 60.0)];
+    let mut server = Server::new(&scene, lit(0, 4)).unwrap();
+    let client = server.add_client();
+    let (mut compact, mut compact_rx) = (CompactCodec::new(), CompactCodec::new());
+    let mut send = |server: &mut Server| {
+        let update = server.update_for(client);
+        let decoded = compact_rx.decode(&compact.encode(&update)).unwrap();
+        assert_eq!(lights_of(&decoded), lights_of(&update));
+        let bytes = PaperCodec::new().encode(&update);
+        let decoded = PaperCodec::new().decode(&bytes).unwrap();
+        assert_eq!(lights_of(&decoded), lights_of(&update));
+        update
+    };
+    // Every record of a converged lit cell is the points' irradiance (RGB9E5 keeps 1/256).
+    let check = |update: &psao_delta::Update, expected: Vec3| {
+        let mut n = 0;
+        for d in &update.instances {
+            for ((_, cell), lights) in d.cells.iter().zip(&d.lights) {
+                for (p, e) in cell.points.iter().zip(lights) {
+                    if *p == 0 {
+                        assert_eq!(*e, 0, "no record past the cell's points");
+                    } else {
+                        assert!(close(unpack_rgb9e5(*e), expected, 1.0 / 256.0));
+                        n += 1;
+                    }
+                }
+            }
+        }
+        n
+    };
+    let pi = std::f32::consts::PI;
+    converge(&mut server, &views, 10);
+    let first = send(&mut server);
+    assert!(first.snapshot && check(&first, pi * sky + Vec3::splat(power)) > 100);
+    // A 2° turn relights every floor point, but its irradiance moves by 0.06 %: under the
+    // threshold, nothing is resent (the AO of the open floor is exactly 1 throughout).
+    let t = 2.0 / 9.0;
+    let mut relit = 0;
+    for _ in 0..4 {
+        let stats = server.step_at(&views, t).unwrap();
+        relit += stats.relit_points;
+        assert_eq!(stats.published_points, 0);
+    }
+    assert!(relit > 100);
+    assert!(send(&mut server).is_empty());
+    // A 40° turn moves it by 16 %: every point is resent with the new irradiance.
+    let t = 40.0 / 9.0;
+    let cos = scene.lights_at(t)[0].shape;
+    let LightShape::Sun { direction } = cos else {
+        unreachable!()
+    };
+    for _ in 0..4 {
+        server.step_at(&views, t).unwrap();
+    }
+    let update = send(&mut server);
+    assert!(check(&update, pi * sky + Vec3::splat(power * direction.y)) > 100);
+    // Without lighting no records travel.
+    let mut ao_only = Server::new(
+        &scene,
+        ServerConfig {
+            lighting: None,
+            ..lit(0, 4)
+        },
+    )
+    .unwrap();
+    let id = ao_only.add_client();
+    ao_only.step(&views);
+    let update = ao_only.update_for(id);
+    assert!(update.changed_cells() > 0 && !update.has_lights());
+}
