@@ -187,7 +187,7 @@ impl Server {
         let dynamics = Dynamics::new(scene, &points, config.invalidation)?;
         let lighting = config.lighting.map(|l| Lighting::new(scene, l));
         let motion = dynamics.motion();
-        let instances = points
+        let mut instances = points
             .par_iter()
             .zip(&scene.instances)
             .zip(motion)
@@ -205,7 +205,6 @@ impl Server {
                 )
             })
             .collect::<Result<Vec<InstanceState>, _>>()?;
-        let mut instances = instances;
         if let Some(l) = &config.lighting {
             for inst in &mut instances {
                 let n = inst.points.position.len();

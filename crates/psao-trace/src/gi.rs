@@ -118,8 +118,8 @@ impl<'a> DiffuseLighting<'a> {
         self.sample_counted(tracer, x, n, face, seed, key, index).0
     }
 
-    /// [`Self::sample`] with the number of rays the path traced (closest-hit and shadow
-    /// rays; at most [`Self::max_path_rays`]).
+    /// [`Self::sample`] with the number of rays the path traced: per vertex (at most
+    /// `bounces + 1`) one closest-hit ray and at most one shadow ray per light.
     #[allow(clippy::too_many_arguments)]
     pub fn sample_counted(
         &self,
@@ -163,12 +163,6 @@ impl<'a> DiffuseLighting<'a> {
             (x, n, face) = (s.point, s.normal, s.face);
         }
         (total, rays)
-    }
-
-    /// The most rays one path traces: per vertex (`bounces + 1` of them) one closest-hit ray
-    /// and one shadow ray per light.
-    pub fn max_path_rays(&self) -> u64 {
-        (u64::from(self.bounces) + 1) * (1 + self.lights.len() as u64)
     }
 
     /// The diffuse albedo of material `material` (its base colour; 0.8 grey when missing).
