@@ -41,6 +41,11 @@ pub struct LightingConfig {
     /// Light paths traced for a selected point in one frame, beside its
     /// [`ServerConfig::rays_per_point`] AO rays.
     pub paths_per_point: u32,
+    /// Whether the points also carry the direct light of suns and point lights. Off by
+    /// default: their sharp shadows need more resolution than the points have, so clients
+    /// render that light with shadow maps and the points carry only its bounces (DESIGN §12,
+    /// [`psao_trace::gi::DiffuseLighting::without_sharp_direct`]).
+    pub sharp_direct: bool,
 }
 
 /// Most bounces a server path may take (each costs a closest-hit ray and a shadow ray per
@@ -48,11 +53,13 @@ pub struct LightingConfig {
 pub const MAX_BOUNCES: u32 = 8;
 
 impl Default for LightingConfig {
-    /// One bounce (the bounce of the sun and of small lights), 4 paths per point and frame.
+    /// One bounce (the bounce of the sun and of small lights), 4 paths per point and frame,
+    /// the direct light of suns and point lights left to the clients.
     fn default() -> Self {
         Self {
             bounces: 1,
             paths_per_point: 4,
+            sharp_direct: false,
         }
     }
 }

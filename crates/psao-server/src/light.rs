@@ -3,6 +3,9 @@
 //! [`DiffuseLighting`] (environment, lights with shadow rays, `bounces` indirect bounces),
 //! accumulated into a running linear RGB mean.
 //!
+//! By default the points leave out the direct light of suns and point lights (clients render
+//! it with shadow maps) and keep its bounces ([`LightingConfig::sharp_direct`]).
+//!
 //! # One selection, one budget
 //!
 //! AO and irradiance share the point set, the selection and the ray budget: a point's
@@ -19,7 +22,8 @@
 //! [`crate::Invalidation`], the same kept fraction). A sun whose direction follows keys
 //! relights the points once it turned by more than [`SUN_TOLERANCE_DEG`] from the direction
 //! the points' paths were traced with: without bounces the points facing it before or
-//! after; with bounces every point (its bounce may reach any of them). Paths are always
+//! after (none when the points leave its direct light to the clients); with bounces every
+//! point (its bounce may reach any of them). Paths are always
 //! traced with the lights of the last relighting, so the samples of a point agree.
 
 use glam::Vec3;
@@ -193,7 +197,8 @@ impl Lighting {
                 _ => None,
             })
             .collect();
-        if turned.is_empty() {
+        // Without bounces and without their direct light, suns do not reach the points.
+        if turned.is_empty() || (self.config.bounces == 0 && !self.config.sharp_direct) {
             return None;
         }
         self.lights = now;
@@ -238,9 +243,12 @@ impl Lighting {
         max_samples: u32,
         seed: u64,
     ) -> Vec<LightSample> {
-        let lighting =
+        let mut lighting =
             DiffuseLighting::with_lights(&self.scene, self.lights.clone(), self.config.bounces)
                 .posed(pose);
+        if !self.config.sharp_direct {
+            lighting = lighting.without_sharp_direct();
+        }
         selected
             .par_iter()
             .map(|c| {

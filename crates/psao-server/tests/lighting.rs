@@ -69,9 +69,19 @@ fn lit(bounces: u32, paths_per_point: u32) -> ServerConfig {
         lighting: Some(LightingConfig {
             bounces,
             paths_per_point,
+            sharp_direct: false,
         }),
         ..ServerConfig::default()
     }
+}
+
+/// [`lit`] with the direct light of suns and point lights in the points too.
+fn lit_sharp(bounces: u32, paths_per_point: u32) -> ServerConfig {
+    let mut config = lit(bounces, paths_per_point);
+    if let Some(l) = &mut config.lighting {
+        l.sharp_direct = true;
+    }
+    config
 }
 
 fn view(from: Vec3, to: Vec3, fov: f32) -> View {
@@ -103,15 +113,26 @@ fn open_floor_gets_pi_times_the_sky_plus_the_sun_cosine() {
     let sky = Vec3::new(0.2, 0.5, 1.0);
     let (color, power) = (Vec3::new(1.0, 0.5, 0.25), 3.0);
     let direction = Vec3::new(1.0, 1.0, 0.0);
-    let expected = std::f32::consts::PI * sky + color * power * std::f32::consts::FRAC_1_SQRT_2;
-    for bounces in [0, 2] {
+    let sky_only = std::f32::consts::PI * sky;
+    let with_sun = sky_only + color * power * std::f32::consts::FRAC_1_SQRT_2;
+    // The sun's direct light is in the points only when asked for (clients render it).
+    for (bounces, sharp, expected) in [
+        (0, true, with_sun),
+        (2, true, with_sun),
+        (1, false, sky_only),
+    ] {
         let scene = scene_of(
             vec![floor(-1.0, 1.0, -1.0, 1.0)],
             0.8,
             sky,
             vec![sun(direction, color, power)],
         );
-        let mut server = Server::new(&scene, lit(bounces, 4)).unwrap();
+        let config = if sharp {
+            lit_sharp(bounces, 4)
+        } else {
+            lit(bounces, 4)
+        };
+        let mut server = Server::new(&scene, config).unwrap();
         let views = [view(Vec3::new(0.0, 3.0, 2.0), Vec3::ZERO, 60.0)];
         let steps = converge(&mut server, &views, 20);
         assert!(steps > 1);
@@ -148,7 +169,8 @@ fn the_first_bounce_off_a_sunlit_wall_matches_its_closed_form() {
     // The floor receives the sun, E = P/√2, directly. The wall, facing the sun at 45°
     // too, has radiance ρ·P/(√2·π) and fills the half of the floor's hemisphere on its
     // side: a first bounce of π · ρ·P/(√2·π) · ½. Total P/√2 · (1 + ρ/2) (the wall's finite
-    // width misses < 0.7 % of it at the patch's far corner).
+    // width misses < 0.7 % of it at the patch's far corner); by default the points leave the
+    // sun's direct light to the clients and keep the bounce, P/√2 · ρ/2.
     let (rho, power) = (0.5, 2.0);
     let direct = power * std::f32::consts::FRAC_1_SQRT_2;
     let floor_view = [view(
@@ -156,10 +178,18 @@ fn the_first_bounce_off_a_sunlit_wall_matches_its_closed_form() {
         Vec3::new(0.0, 0.0, 0.16),
         25.0,
     )];
-    for (bounces, expected, tolerance) in
-        [(0, direct, 1e-5), (1, direct * (1.0 + rho / 2.0), 0.025)]
-    {
-        let mut config = lit(bounces, 64);
+    let cases = [
+        (0, true, direct, 1e-5),
+        (1, true, direct * (1.0 + rho / 2.0), 0.025),
+        (1, false, direct * rho / 2.0, 0.025),
+        (0, false, 0.0, 0.0),
+    ];
+    for (bounces, sharp, expected, tolerance) in cases {
+        let mut config = if sharp {
+            lit_sharp(bounces, 64)
+        } else {
+            lit(bounces, 64)
+        };
         config.max_samples = 64;
         let mut server = Server::new(&wall_scene(rho, power), config).unwrap();
         converge(&mut server, &floor_view, 40);
@@ -169,12 +199,12 @@ fn the_first_bounce_off_a_sunlit_wall_matches_its_closed_form() {
         let mean = points.iter().map(|p| p.3).sum::<Vec3>() / points.len() as f32;
         assert!(
             close(mean, Vec3::splat(expected), tolerance),
-            "{bounces} bounces: {mean} vs {expected}"
+            "{bounces} bounces, sharp {sharp}: {mean} vs {expected}"
         );
         if bounces == 0 {
-            // Without bounces every path is exactly the sun's direct light.
+            // Without bounces every path is exactly the sun's direct light (or nothing).
             for p in &points {
-                assert!(close(p.3, Vec3::splat(direct), 1e-5), "{:?}", p);
+                assert!(close(p.3, Vec3::splat(expected), 1e-5), "{:?}", p);
             }
         }
     }
@@ -416,8 +446,13 @@ fn a_turning_sun_relights_what_it_lights_past_the_tolerance() {
     let views = [wide_view()];
     let below = SUN_TOLERANCE_DEG / 9.0 * 0.5;
     let above = SUN_TOLERANCE_DEG / 9.0 * 2.0;
+    // Without bounces and with the sun's direct light left to the clients, the sun does not
+    // reach the points: nothing restarts.
+    let mut server = Server::new(&turning_sun(), lit(0, 4)).unwrap();
+    server.step_at(&views, 0.0).unwrap();
+    assert_eq!(server.step_at(&views, above).unwrap().relit_points, 0);
     for bounces in [0, 1] {
-        let mut config = lit(bounces, 4);
+        let mut config = lit_sharp(bounces, 4);
         config.max_samples = 8;
         let mut server = Server::new(&turning_sun(), config).unwrap();
         for _ in 0..4 {
@@ -485,7 +520,7 @@ fn updates_carry_irradiance_records_resent_past_the_threshold() {
         .sun_keys
         .push(SunKeys::new(0, vec![0.0, 10.0], vec![Vec3::Y, Vec3::X]).unwrap());
     let views = [view(Vec3::new(0.0, 3.0, 2.0), Vec3::ZERO, 60.0)];
-    let mut server = Server::new(&scene, lit(0, 4)).unwrap();
+    let mut server = Server::new(&scene, lit_sharp(0, 4)).unwrap();
     let client = server.add_client();
     let (mut compact, mut compact_rx) = (CompactCodec::new(), CompactCodec::new());
     let mut send = |server: &mut Server| {

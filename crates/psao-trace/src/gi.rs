@@ -46,6 +46,9 @@ pub struct DiffuseLighting<'a> {
     surfaces: Surfaces<'a>,
     lights: Vec<Light>,
     bounces: u32,
+    /// Whether the direct light of suns and point lights at the path's first vertex is left
+    /// out ([`Self::without_sharp_direct`]).
+    skip_sharp_direct: bool,
 }
 
 impl<'a> DiffuseLighting<'a> {
@@ -62,7 +65,17 @@ impl<'a> DiffuseLighting<'a> {
             surfaces: Surfaces::new(scene),
             lights,
             bounces,
+            skip_sharp_direct: false,
         }
+    }
+
+    /// The same lighting without the direct light of suns and point lights at the point
+    /// itself (their bounces stay): what a client that renders those lights with shadow maps
+    /// takes from the points (DESIGN §12, as CloudLight leaves direct light to the client).
+    /// Rectangles and the environment, whose shadows are soft, stay whole.
+    pub fn without_sharp_direct(mut self) -> Self {
+        self.skip_sharp_direct = true;
+        self
     }
 
     /// The same lighting with the scene in `pose`, which the tracer given to the queries must
@@ -137,8 +150,9 @@ impl<'a> DiffuseLighting<'a> {
         let mut rays = 0;
         for depth in 0..=self.bounces {
             let origin = ray_offset(x, face);
+            let sharp = depth > 0 || !self.skip_sharp_direct;
             let (direct, shadow_rays) =
-                self.direct(tracer, origin, n, face, seed, key, depth, index);
+                self.direct(tracer, origin, n, face, (seed, key, depth, index), sharp);
             total += weight * direct;
             rays += shadow_rays + 1;
             let (u1, u2) = sample_2d(seed, stream(key, depth, 0), index);
@@ -172,20 +186,18 @@ impl<'a> DiffuseLighting<'a> {
             .map_or(Vec3::splat(0.8), |m| m.base_color.truncate())
     }
 
-    /// Direct irradiance of every light at `origin` (already offset off the surface) on a
-    /// surface with shading normal `n` and face normal `face`, with at most one shadow ray
-    /// each; returns it with the number of shadow rays traced.
-    #[allow(clippy::too_many_arguments)]
+    /// Direct irradiance of every light (suns and point lights only when `sharp`) at `origin`
+    /// (already offset off the surface) on a surface with shading normal `n` and face normal
+    /// `face`, with at most one shadow ray each; `(seed, key, depth, index)` pick the random
+    /// numbers. Returns it with the number of shadow rays traced.
     fn direct(
         &self,
         tracer: &Tracer,
         origin: Vec3,
         n: Vec3,
         face: Vec3,
-        seed: u64,
-        key: u64,
-        depth: u32,
-        index: u32,
+        (seed, key, depth, index): (u64, u64, u32, u32),
+        sharp: bool,
     ) -> (Vec3, u32) {
         let traced = std::cell::Cell::new(0);
         let visible = |l: Vec3, tmax: f32| {
@@ -201,6 +213,7 @@ impl<'a> DiffuseLighting<'a> {
         for (li, light) in self.lights.iter().enumerate() {
             let strength = light.color * light.power;
             match light.shape {
+                LightShape::Sun { .. } | LightShape::Point { .. } if !sharp => {}
                 LightShape::Sun { direction } => {
                     let l = direction.normalize_or_zero();
                     if visible(l, f32::INFINITY) {
