@@ -354,12 +354,11 @@ impl Dynamics {
             for &(i, motion) in points {
                 let i = i as usize;
                 let count = inst.points.count[i];
-                let fraction = kept_fraction(motion, tolerance);
+                let kept = (count as f32 * kept_fraction(motion, tolerance)) as u32;
                 // Irradiance follows the same rule as AO (docs/LIGHTING.md).
                 if let Some(light) = &mut inst.points.light {
-                    light.keep(i, fraction);
+                    light.keep_as_ao(i, kept);
                 }
-                let kept = (count as f32 * fraction) as u32;
                 inst.points.sum[i] = if count == 0 {
                     0.0
                 } else {

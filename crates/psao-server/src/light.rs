@@ -101,10 +101,20 @@ impl LightSums {
             .is_some_and(|e| irradiance_changed(unpack_rgb9e5(self.published[i]), e, threshold))
     }
 
-    /// Keep the fraction `kept` of point `i`'s samples (their mean unchanged).
-    pub fn keep(&mut self, i: usize, kept: f32) {
+    /// Keep as many of point `i`'s paths (their mean unchanged) as its AO kept of its
+    /// samples, `ao_kept`, counted in paths and rounded up: the same fraction of both, and a
+    /// light progress never below the AO's, so that AO and irradiance that advanced together
+    /// stay together (the point is re-traced when the AO alone would have been).
+    pub fn keep_as_ao(&mut self, i: usize, ao_kept: u32) {
+        let paths = (u64::from(ao_kept) * u64::from(self.paths_per_point))
+            .div_ceil(u64::from(self.rays_per_point));
+        self.keep(i, u32::try_from(paths).unwrap_or(u32::MAX));
+    }
+
+    /// Keep `left` of point `i`'s paths (at most all; their mean unchanged).
+    fn keep(&mut self, i: usize, left: u32) {
         let count = self.count[i];
-        let left = (count as f32 * kept) as u32;
+        let left = left.min(count);
         self.sum[i] = if count == 0 {
             Vec3::ZERO
         } else {
@@ -223,7 +233,7 @@ impl Lighting {
                 };
                 match &list {
                     None => sums.clear(),
-                    Some(l) => l.iter().for_each(|&i| sums.keep(i as usize, 0.0)),
+                    Some(l) => l.iter().for_each(|&i| sums.keep(i as usize, 0)),
                 }
                 list
             })

@@ -589,3 +589,62 @@ fn updates_carry_irradiance_records_resent_past_the_threshold() {
     let update = ao_only.update_for(id);
     assert!(update.changed_cells() > 0 && !update.has_lights());
 }
+
+#[test]
+fn at_equal_points_per_frame_lighting_leaves_the_ao_of_a_moving_scene_unchanged() {
+    // The jumping box made to slide (3.75 cm per step, past the invalidation tolerance), so
+    // invalidated points keep part of their samples; 8 rays and 2 paths per point make the
+    // two counts differ in units. The lit server's budget is its charge per point (8 + 2
+    // paths × 2 vertices × (1 + 1 light) = 16) times the AO-only server's points per frame.
+    let mut scene = jumping_box();
+    let channel = &mut scene.animations[0].channels[0];
+    channel.interpolation = Interpolation::Linear;
+    channel.times = vec![0.0, 2.0];
+    channel.values.truncate(6);
+    let base = ServerConfig {
+        rays_per_point: 8,
+        max_samples: 16,
+        ray_budget: 8 * 150,
+        ..lit(1, 2)
+    };
+    let mut ao_only = Server::new(
+        &scene,
+        ServerConfig {
+            lighting: None,
+            ..base
+        },
+    )
+    .unwrap();
+    let mut with_light = Server::new(
+        &scene,
+        ServerConfig {
+            ray_budget: 16 * 150,
+            ..base
+        },
+    )
+    .unwrap();
+    let views = [wide_view()];
+    let mut invalidated = 0;
+    for k in 0..30 {
+        let t = if k < 10 { 0.0 } else { (k - 10) as f32 * 0.05 };
+        let (a, b) = (
+            ao_only.step_at(&views, t).unwrap(),
+            with_light.step_at(&views, t).unwrap(),
+        );
+        assert_eq!(
+            (a.traced_points, a.rays),
+            (b.traced_points, b.rays),
+            "step {k}"
+        );
+        assert_eq!(a.invalidated_points, b.invalidated_points);
+        invalidated += a.invalidated_points;
+    }
+    assert!(invalidated > 0);
+    for i in 0..ao_only.instance_count() {
+        let (x, y) = (ao_only.grid(i).unwrap(), with_light.grid(i).unwrap());
+        assert!(
+            x.cells().eq(y.cells()) && x.buckets().eq(y.buckets()),
+            "instance {i}"
+        );
+    }
+}
