@@ -146,6 +146,7 @@ fn hash_tracks_a_single_point() {
             instance: 0,
             buckets: Vec::new(),
             cells: vec![(slot as u32, cell)],
+            lights: Vec::new(),
         }],
     };
     client.apply(&one_cell(2, changed)).unwrap();
@@ -187,6 +188,7 @@ fn malformed_updates_are_rejected_without_change() {
                 instance: 1,
                 buckets: Vec::new(),
                 cells: vec![good_cell],
+                lights: Vec::new(),
             },
             extra,
         ],
@@ -195,6 +197,7 @@ fn malformed_updates_are_rejected_without_change() {
         instance,
         buckets,
         cells,
+        lights: Vec::new(),
     };
     // A key that exists in the grid but is put into the wrong bucket.
     let id = 0u64;
@@ -303,6 +306,7 @@ fn malformed_updates_are_rejected_without_change() {
                 instance: 1,
                 buckets: Vec::new(),
                 cells: vec![good_cell],
+                lights: Vec::new(),
             }],
             ..with(delta(0, Vec::new(), Vec::new()), Vec::new(), false)
         })
@@ -328,6 +332,7 @@ fn unusable_layouts_get_no_grid() {
                 instance: 2,
                 buckets: Vec::new(),
                 cells: Vec::new(),
+                lights: Vec::new(),
             }],
         })
         .unwrap_err();

@@ -18,9 +18,10 @@
 //! so a sample is deterministic per (pixel, frame).
 
 use crate::splat::Sample;
-use glam::{Affine3A, Mat3A, Vec3};
+use glam::Vec3;
 use psao_scene::{Camera, LightShape, Material, Scene, ScenePose};
 use psao_trace::ao::{hash64, orthonormal_basis, ray_offset, sample_2d};
+use psao_trace::surface::{SurfaceHit, Surfaces};
 use psao_trace::{Hit, Ray, Tracer};
 
 /// Roughness below which reflection is a single mirror ray and lights give no highlight.
@@ -61,19 +62,6 @@ impl Default for TraceSettings {
     }
 }
 
-/// A surface point found by a ray.
-struct Surface {
-    point: Vec3,
-    /// Interpolated unit normal, turned to face the incoming ray.
-    normal: Vec3,
-    /// Unit face normal, turned to face the incoming ray.
-    face: Vec3,
-    /// Whether the ray came from the front side of the triangle.
-    front: bool,
-    instance: u32,
-    material: usize,
-}
-
 /// Traces correction samples of a scene: every instance at its stored transform, or at a
 /// pose of its animation ([`CorrectionTracer::posed`]).
 pub struct CorrectionTracer<'a> {
@@ -81,9 +69,8 @@ pub struct CorrectionTracer<'a> {
     tracer: &'a Tracer,
     shade: &'a dyn DiffuseShade,
     settings: TraceSettings,
-    /// The pose the tracer holds, when not the stored one.
-    pose: Option<&'a ScenePose>,
-    normal_matrices: Vec<Mat3A>,
+    /// Hits to surfaces, in the pose the tracer holds.
+    surfaces: Surfaces<'a>,
 }
 
 /// Schlick's Fresnel approximation.
@@ -124,28 +111,19 @@ impl<'a> CorrectionTracer<'a> {
         shade: &'a dyn DiffuseShade,
         settings: TraceSettings,
     ) -> Self {
-        let normal_matrices = scene
-            .instances
-            .iter()
-            .map(|i| normal_matrix(&i.transform))
-            .collect();
         Self {
             scene,
             tracer,
             shade,
             settings,
-            pose: None,
-            normal_matrices,
+            surfaces: Surfaces::new(scene),
         }
     }
 
     /// The same tracer for the scene in `pose`, which its `tracer` must hold (see
     /// [`Tracer::apply_pose`]): surfaces take the posed transforms and skinned vertices.
     pub fn posed(mut self, pose: &'a ScenePose) -> Self {
-        self.normal_matrices = (self.scene.instances.iter().enumerate())
-            .map(|(i, inst)| normal_matrix(pose.transforms.get(i).unwrap_or(&inst.transform)))
-            .collect();
-        self.pose = Some(pose);
+        self.surfaces = self.surfaces.posed(pose);
         self
     }
 
@@ -161,45 +139,8 @@ impl<'a> CorrectionTracer<'a> {
         out[0]
     }
 
-    fn surface(&self, ray: &Ray, hit: &Hit) -> Option<Surface> {
-        let inst = self.scene.instances.get(hit.instance as usize)?;
-        let mesh = self.scene.meshes.get(inst.mesh)?;
-        let [a, b, c] = *mesh.indices.get(hit.triangle as usize)?;
-        let skinned = (self.pose)
-            .and_then(|p| p.skinned.get(hit.instance as usize))
-            .and_then(Option::as_ref);
-        let positions = skinned.map_or(&mesh.positions, |g| &g.positions);
-        let normals = skinned.map_or(&mesh.normals, |g| &g.normals);
-        let p = |i: u32| positions.get(i as usize).copied();
-        let (p0, p1, p2) = (p(a)?, p(b)?, p(c)?);
-        let (u, v) = (hit.u, hit.v);
-        let w = 1.0 - u - v;
-        let nm = self.normal_matrices[hit.instance as usize];
-        let face = (nm * (p1 - p0).cross(p2 - p0)).normalize_or_zero();
-        let interp = match (
-            normals.get(a as usize),
-            normals.get(b as usize),
-            normals.get(c as usize),
-        ) {
-            (Some(na), Some(nb), Some(nc)) => {
-                (nm * (*na * w + *nb * u + *nc * v)).normalize_or_zero()
-            }
-            _ => face,
-        };
-        let front = face.dot(ray.dir) < 0.0;
-        let face = if front { face } else { -face };
-        let mut normal = if interp == Vec3::ZERO { face } else { interp };
-        if normal.dot(face) < 0.0 {
-            normal = -normal;
-        }
-        Some(Surface {
-            point: ray.origin + ray.dir * hit.t,
-            normal,
-            face,
-            front,
-            instance: hit.instance,
-            material: mesh.material,
-        })
+    fn surface(&self, ray: &Ray, hit: &Hit) -> Option<SurfaceHit> {
+        self.surfaces.surface(ray, hit)
     }
 
     /// The radiance arriving along the primary ray from `eye` through direction `dir`, with
@@ -232,7 +173,7 @@ impl<'a> CorrectionTracer<'a> {
             .map_or(0, |s| self.object_of(&s))
     }
 
-    fn object_of(&self, s: &Surface) -> u32 {
+    fn object_of(&self, s: &SurfaceHit) -> u32 {
         let non_diffuse = self
             .scene
             .materials
@@ -297,7 +238,7 @@ impl<'a> CorrectionTracer<'a> {
         }
     }
 
-    fn shade_surface(&self, ray: &Ray, s: &Surface, depth: u32, key: u64, branch: bool) -> Vec3 {
+    fn shade_surface(&self, ray: &Ray, s: &SurfaceHit, depth: u32, key: u64, branch: bool) -> Vec3 {
         let fallback = Material::default();
         let m = self.scene.materials.get(s.material).unwrap_or(&fallback);
         if !m.is_non_diffuse() || depth >= self.settings.max_depth {
@@ -407,7 +348,15 @@ impl<'a> CorrectionTracer<'a> {
     }
 
     /// Glossy highlights of the scene's lights at `s`, with shadow rays.
-    fn highlights(&self, s: &Surface, v: Vec3, n_v: f32, f0: Vec3, alpha: f32, key: u64) -> Vec3 {
+    fn highlights(
+        &self,
+        s: &SurfaceHit,
+        v: Vec3,
+        n_v: f32,
+        f0: Vec3,
+        alpha: f32,
+        key: u64,
+    ) -> Vec3 {
         let n = s.normal;
         let origin = ray_offset(s.point, s.face);
         let brdf = |l: Vec3| -> Option<(Vec3, f32)> {
@@ -482,14 +431,4 @@ impl<'a> CorrectionTracer<'a> {
 fn pixel_ray(camera: &Camera, width: u32, height: u32, x: i32, y: i32) -> Ray {
     let dir = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, width, height);
     Ray::new(camera.position, dir.normalize(), f32::INFINITY)
-}
-
-/// The inverse transpose of a transform's linear part (for normals).
-fn normal_matrix(t: &Affine3A) -> Mat3A {
-    let m = t.matrix3;
-    if m.determinant().abs() > 1e-20 {
-        m.inverse().transpose()
-    } else {
-        m
-    }
 }

@@ -17,6 +17,7 @@
 //! key residuals: 8 byte planes of E u64 (byte 0 of every residual, then byte 1, …)
 //! slot residuals: 4 byte planes of E u32 · point residuals: 4 byte planes of P u32
 //! transforms: 12 words each (Affine3A columns, f32 bits), XORed with the reference, 4 planes
+//! [flag bit 1, lights: light residuals: 4 byte planes of P u32]
 //! ```
 //! The reference of a slot (instance + bucket index, instance + cell slot, or instance for
 //! transforms) is its content as last sent in this session, empty if never sent; a snapshot
@@ -38,6 +39,11 @@
 //!   the zigzag-coded difference `field − reference field` modulo the field's range; the
 //!   valid bit is not coded (every coded point is valid) and must be 0.
 //!
+//! * With lighting (flag bit 1) every coded point also has an irradiance record (RGB9E5,
+//!   `psao_points::irradiance`): its residual is the record XOR the irradiance record of the
+//!   point its choice refers to (the same reference point as its point residual). A cell sent
+//!   without lights has zero irradiance records in the reference.
+//!
 //! The encoder picks each choice to make the residual small: a point inserted into or removed
 //! from a cell shifts the others, a moving point changes its position fields a little, a new
 //! point resembles a point of the neighbouring cell; any choice decodes exactly. Both ends
@@ -56,6 +62,7 @@ pub const COMPACT_LEVEL: i32 = 3;
 
 const TAG: u32 = u32::from_le_bytes(*b"PSC2");
 const FLAG_SNAPSHOT: u32 = 1;
+const FLAG_LIGHTS: u32 = 2;
 const HEADER_BYTES: usize = 28;
 const TRANSFORM_WORDS: usize = 12;
 /// Point choices: the 7 points of the cell's reference, the 7 points of the previous cell.
@@ -94,6 +101,8 @@ struct Sent {
     transforms: Vec<[u32; TRANSFORM_WORDS]>,
     buckets: Vec<Vec<Entries>>,
     cells: Vec<Vec<[u32; CELL_POINTS]>>,
+    /// Irradiance records of the cells' points (empty until a lit update).
+    lights: Vec<Vec<[u32; CELL_POINTS]>>,
 }
 
 /// The decoder's reference: what it last received, dense like the encoder's. Its indices
@@ -147,6 +156,7 @@ impl Sent {
         self.transforms.clear();
         self.buckets.iter_mut().for_each(Vec::clear);
         self.cells.iter_mut().for_each(Vec::clear);
+        self.lights.iter_mut().for_each(Vec::clear);
     }
 }
 
@@ -315,7 +325,16 @@ struct Streams {
     slots: Vec<u32>,
     points: Vec<u32>,
     transforms: Vec<u32>,
+    lights: Vec<u32>,
 }
+
+/// The irradiance records of a cell being coded: (its own, its reference's, the previous
+/// cell's in the update).
+type LightRefs<'a> = (
+    &'a [u32; CELL_POINTS],
+    &'a [u32; CELL_POINTS],
+    &'a [u32; CELL_POINTS],
+);
 
 impl Streams {
     /// Code the used entries of compacted `bucket` against `reference`; `ranks` maps the
@@ -351,12 +370,14 @@ impl Streams {
         self.entry_counts.push(count_code(n, old, BUCKET_ENTRIES));
     }
 
-    /// Code the points of compacted `points` against `reference`.
+    /// Code the points of compacted `points` against `reference`, and their irradiance
+    /// records against those of the same reference points with `lights`.
     fn cell(
         &mut self,
         points: &[u32; CELL_POINTS],
         reference: &[u32; CELL_POINTS],
         previous: &[u32; CELL_POINTS],
+        lights: Option<LightRefs>,
     ) {
         let n = used_points(points);
         for (i, &point) in points[..n].iter().enumerate() {
@@ -380,6 +401,10 @@ impl Streams {
             }
             self.point_choices.push(best.1);
             self.points.push(best.2);
+            if let Some((own, reference, previous)) = lights {
+                self.lights
+                    .push(own[i] ^ point_reference(best.1, i, reference, previous));
+            }
         }
         let old = used_points(reference);
         self.cell_lengths.push(count_code(n, old, CELL_POINTS));
@@ -393,7 +418,8 @@ impl Streams {
             + self.cell_lengths.len()
             + self.entry_choices.len() * (1 + ENTRY_BYTES as usize)
             + self.point_choices.len() * (1 + POINT_BYTES as usize)
-            + self.transforms.len() * 4;
+            + self.transforms.len() * 4
+            + self.lights.len() * 4;
         let mut out = Vec::with_capacity(bytes);
         out.extend_from_slice(&TAG.to_le_bytes());
         out.extend_from_slice(&flags.to_le_bytes());
@@ -416,6 +442,7 @@ impl Streams {
         shuffle_into(&self.slots, &mut out);
         shuffle_into(&self.points, &mut out);
         shuffle_into(&self.transforms, &mut out);
+        shuffle_into(&self.lights, &mut out);
         out
     }
 }
@@ -472,6 +499,7 @@ impl CompactCodec {
         if update.snapshot {
             self.sent.clear();
         }
+        let lit = update.has_lights();
         let r = &mut self.sent;
         if let Some(st) = streams.as_deref_mut() {
             put_varint(&mut st.index, update.transforms.len() as u64);
@@ -517,19 +545,31 @@ impl CompactCodec {
                 }
             }
             let mut prev = -1i64;
-            let mut previous = [0; CELL_POINTS];
+            let (mut previous, mut previous_light) = ([0; CELL_POINTS], [0; CELL_POINTS]);
             let sent_cells = instance_of(&mut r.cells, d.instance);
+            let sent_lights = instance_of(&mut r.lights, d.instance);
             for (k, (s, cell)) in d.cells.iter().enumerate() {
                 if let Some((ahead, _)) = d.cells.get(k + PREFETCH_AHEAD) {
                     prefetch(sent_cells, *ahead);
                 }
                 let points = compact_cell(cell).points;
                 let old = swap_in(sent_cells, *s, points);
+                // Records past the cell's points are not coded: the reference holds 0 there.
+                let mut light = d.lights.get(k).copied().unwrap_or_default();
+                light[used_points(&points)..].fill(0);
+                let old_light = if lit {
+                    swap_in(sent_lights, *s, light)
+                } else {
+                    forget_light(sent_lights, *s);
+                    [0; CELL_POINTS]
+                };
                 if let Some(st) = streams.as_deref_mut() {
                     put_delta(&mut st.index, &mut prev, *s);
-                    st.cell(&points, &old, &previous);
+                    let lights = lit.then_some((&light, &old_light, &previous_light));
+                    st.cell(&points, &old, &previous, lights);
                 }
                 previous = points;
+                previous_light = light;
             }
         }
     }
@@ -543,7 +583,8 @@ impl Codec for CompactCodec {
     fn encode(&mut self, update: &Update) -> Vec<u8> {
         let mut st = Streams::default();
         self.record(update, Some(&mut st));
-        let flags = if update.snapshot { FLAG_SNAPSHOT } else { 0 };
+        let flags = if update.snapshot { FLAG_SNAPSHOT } else { 0 }
+            | if update.has_lights() { FLAG_LIGHTS } else { 0 };
         crate::zstd_io::compress(&st.payload(flags, update.frame), self.level)
     }
 
@@ -567,9 +608,10 @@ impl Codec for CompactCodec {
             });
         }
         let flags = word(4);
-        if flags & !FLAG_SNAPSHOT != 0 {
+        if flags & !(FLAG_SNAPSHOT | FLAG_LIGHTS) != 0 {
             return Err(DeltaError::UnknownFlags(flags));
         }
+        let lit = flags & FLAG_LIGHTS != 0;
         let frame = u64::from(word(8)) | (u64::from(word(12)) << 32);
         let index_len = word(16) as usize;
         let rest = &payload[HEADER_BYTES..];
@@ -583,7 +625,7 @@ impl Codec for CompactCodec {
         let (index, rest) = rest.split_at(index_len);
         let layout = parse_index(index)?;
         let totals = (word(20) as usize, word(24) as usize);
-        let sections = Sections::split(&layout, totals, rest)?;
+        let sections = Sections::split(&layout, totals, lit, rest)?;
         let snapshot = flags & FLAG_SNAPSHOT != 0;
         if snapshot {
             self.reference.clear();
@@ -662,20 +704,24 @@ struct Sections<'a> {
     slots: Vec<u32>,
     points: Vec<u32>,
     transforms: Vec<u32>,
+    /// Light residuals, one per point, when the update is lit.
+    lights: Option<Vec<u32>>,
 }
 
 impl<'a> Sections<'a> {
-    /// Split `bytes` for `layout` and the header's totals of (entries, points).
+    /// Split `bytes` for `layout`, the header's totals of (entries, points) and whether the
+    /// update is `lit`.
     fn split(
         layout: &IndexLayout,
         (entries, points): (usize, usize),
+        lit: bool,
         bytes: &'a [u8],
     ) -> Result<Self, DeltaError> {
         let (nb, nc) = (layout.buckets(), layout.cells());
         let transform_bytes = layout.transforms.len() as u64 * TRANSFORM_WORDS as u64 * 4;
         let expected = (nb + nc) as u64
             + entries as u64 * (1 + ENTRY_BYTES)
-            + points as u64 * (1 + POINT_BYTES)
+            + points as u64 * (1 + POINT_BYTES + if lit { 4 } else { 0 })
             + transform_bytes;
         if bytes.len() as u64 != expected {
             return Err(DeltaError::PlaneSize {
@@ -689,7 +735,8 @@ impl<'a> Sections<'a> {
         let (point_choices, rest) = rest.split_at(points);
         let (key_planes, rest) = rest.split_at(entries * 8);
         let (slot_planes, rest) = rest.split_at(entries * 4);
-        let (point_planes, transform_planes) = rest.split_at(points * 4);
+        let (point_planes, rest) = rest.split_at(points * 4);
+        let (transform_planes, light_planes) = rest.split_at(transform_bytes as usize);
         let mut keys = vec![0u64; entries];
         for (plane, bytes) in key_planes.chunks_exact(entries.max(1)).enumerate() {
             for (k, &b) in keys.iter_mut().zip(bytes) {
@@ -705,6 +752,7 @@ impl<'a> Sections<'a> {
             slots: unshuffle(slot_planes),
             points: unshuffle(point_planes),
             transforms: unshuffle(transform_planes),
+            lights: lit.then(|| unshuffle(light_planes)),
         })
     }
 }
@@ -777,13 +825,26 @@ fn assemble(
             buckets.push((b, bucket));
         }
         let mut cells = Vec::with_capacity(slot_ids.len());
-        let mut previous = [0; CELL_POINTS];
+        let mut lights = Vec::with_capacity(if s.lights.is_some() {
+            slot_ids.len()
+        } else {
+            0
+        });
+        let (mut previous, mut previous_light) = ([0; CELL_POINTS], [0; CELL_POINTS]);
         let received = grown(&mut records.cells, *instance, bytes, limit)?;
+        let mut received_lights = match s.lights {
+            Some(_) => Some(grown(&mut records.lights, *instance, bytes, limit)?),
+            None => records.lights.get_mut(*instance as usize),
+        };
         for (k, (&slot, &code)) in slot_ids.iter().zip(cell_lengths.by_ref()).enumerate() {
             if let Some(&ahead) = slot_ids.get(k + PREFETCH_AHEAD) {
                 prefetch(received, ahead);
             }
             let old = stored(received, slot);
+            let old_light = received_lights
+                .as_deref()
+                .map_or([0; CELL_POINTS], |l| stored(l, slot));
+            let mut light = [0; CELL_POINTS];
             let n = decode_count(
                 code,
                 used_points(&old),
@@ -792,9 +853,9 @@ fn assemble(
                 DeltaError::CellLength,
             )?;
             let mut cell = Cell::default();
-            for i in 0..n {
+            let decoded = cell.points.iter_mut().zip(light.iter_mut()).take(n);
+            for (i, (record, irradiance)) in decoded.enumerate() {
                 let (c, residual) = (s.point_choices[point], s.points[point]);
-                point += 1;
                 if c >= POINT_CHOICES {
                     return Err(DeltaError::BadChoice("point"));
                 }
@@ -802,16 +863,31 @@ fn assemble(
                     return Err(DeltaError::BadRecord("point residual"));
                 }
                 let reference = point_reference(c, i, &old, &previous);
-                cell.points[i] = apply_point_residual(residual, reference);
+                *record = apply_point_residual(residual, reference);
+                if let Some(residuals) = &s.lights {
+                    *irradiance =
+                        residuals[point] ^ point_reference(c, i, &old_light, &previous_light);
+                }
+                point += 1;
             }
             *grown(received, slot, bytes, limit)? = cell.points;
+            match (&s.lights, received_lights.as_deref_mut()) {
+                (Some(_), Some(l)) => {
+                    *grown(l, slot, bytes, limit)? = light;
+                    lights.push(light);
+                }
+                (None, Some(l)) => forget_light(l, slot),
+                _ => {}
+            }
             previous = cell.points;
+            previous_light = light;
             cells.push((slot, cell));
         }
         instances.push(InstanceDelta {
             instance: *instance,
             buckets,
             cells,
+            lights,
         });
     }
     if entry != s.entry_choices.len() || point != s.point_choices.len() {
@@ -825,6 +901,14 @@ fn assemble(
         transforms,
         instances,
     })
+}
+
+/// A cell sent without lights has zero irradiance records in the reference (nothing to do
+/// where the reference never held any).
+fn forget_light(lights: &mut [[u32; CELL_POINTS]], slot: u32) {
+    if let Some(l) = lights.get_mut(slot as usize) {
+        *l = [0; CELL_POINTS];
+    }
 }
 
 /// Append the byte planes of `words`: byte 0 of every word, then byte 1, …
@@ -953,11 +1037,13 @@ mod tests {
                         .clone()
                         .map(|s| (s, cell(ao + s, (s + ao) as usize % 8)))
                         .collect(),
+                    lights: Vec::new(),
                 },
                 InstanceDelta {
                     instance: 2,
                     buckets: vec![],
                     cells: vec![(40, cell(ao, 7)), (2, cell(ao, 3))],
+                    lights: Vec::new(),
                 },
             ],
         }
@@ -1053,6 +1139,7 @@ mod tests {
                         .iter()
                         .map(|&s| (s, to_cell(&cells[s as usize])))
                         .collect(),
+                    lights: Vec::new(),
                 }],
             });
         }
@@ -1108,6 +1195,7 @@ mod tests {
                         .filter(|k| k.0 .0 == i)
                         .map(|(k, v)| (k.1, *v))
                         .collect(),
+                    lights: Vec::new(),
                 })
                 .collect(),
         }
@@ -1152,6 +1240,67 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// `u` with irradiance records derived from each point's record (0 past the cell's
+    /// points), as a lit server sends them: unchanged points keep their records.
+    fn lit(u: &Update) -> Update {
+        let mut u = u.clone();
+        for d in &mut u.instances {
+            d.lights = (d.cells.iter())
+                .map(|(_, c)| {
+                    (compact_cell(c).points).map(|p| {
+                        if p == 0 {
+                            0
+                        } else {
+                            p.wrapping_mul(0x9e37_79b9) >> 5
+                        }
+                    })
+                })
+                .collect();
+        }
+        u
+    }
+
+    #[test]
+    fn irradiance_records_round_trip_in_both_codecs() {
+        for seed in 0..3 {
+            let (mut enc, mut dec) = (CompactCodec::new(), CompactCodec::new());
+            let mut plain = CompactCodec::new();
+            let (mut ao_bytes, mut lit_bytes, mut lit_updates) = (0, 0, 0);
+            for (k, u) in growing_session(seed, 150).iter().enumerate() {
+                // Every fifth update goes without lights: its cells forget theirs.
+                let sent = if k % 5 == 4 { u.clone() } else { lit(u) };
+                let paper = paper_round_trip(&sent);
+                let lights = |u: &Update| -> Vec<Vec<[u32; CELL_POINTS]>> {
+                    u.instances.iter().map(|d| d.lights.clone()).collect()
+                };
+                assert_eq!(
+                    lights(&paper),
+                    lights(&sent),
+                    "paper, seed {seed} update {k}"
+                );
+                let bytes = enc.encode(&sent);
+                let got = dec.decode(&bytes).unwrap();
+                assert_eq!(got, paper, "compact, seed {seed} update {k}");
+                lit_updates += usize::from(got.has_lights());
+                lit_bytes += bytes.len();
+                ao_bytes += plain.encode(u).len();
+            }
+            assert!(lit_updates > 100);
+            assert!(lit_bytes > ao_bytes, "{lit_bytes} vs {ao_bytes}");
+        }
+        // Unchanged records cost almost nothing: the same lit cells sent again.
+        let session = growing_session(1, 40);
+        let last = lit(session.last().unwrap());
+        let mut enc = CompactCodec::new();
+        session.iter().take(39).for_each(|u| enc.advance(&lit(u)));
+        enc.advance(&last);
+        let again = enc.encode(&last).len();
+        let mut plain = CompactCodec::new();
+        session.iter().for_each(|u| plain.advance(u));
+        let plain_again = plain.encode(session.last().unwrap()).len();
+        assert!(again <= plain_again + 16, "{again} vs {plain_again}");
     }
 
     #[test]
@@ -1235,6 +1384,7 @@ mod tests {
                     instance: 0,
                     buckets: vec![],
                     cells: cells.collect(),
+                    lights: Vec::new(),
                 }],
             }
         };
@@ -1404,10 +1554,16 @@ mod tests {
             Err(DeltaError::Truncated { .. })
         ));
         let mut flags = p.clone();
-        flags[4] = 2;
+        flags[4] = 4;
         assert!(matches!(
             dec.decode(&z(&flags)),
-            Err(DeltaError::UnknownFlags(2))
+            Err(DeltaError::UnknownFlags(4))
+        ));
+        // The lights flag without the light residuals: the planes do not add up.
+        flags[4] = FLAG_LIGHTS as u8;
+        assert!(matches!(
+            dec.decode(&z(&flags)),
+            Err(DeltaError::PlaneSize { .. })
         ));
     }
 

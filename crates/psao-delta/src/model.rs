@@ -2,7 +2,7 @@
 
 use glam::Affine3A;
 use psao_points::pack::is_valid;
-use psao_points::{Bucket, Cell, GridLayout};
+use psao_points::{Bucket, Cell, GridLayout, CELL_POINTS};
 
 /// What a joining client needs to know about one instance (part of the welcome).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -24,6 +24,11 @@ pub struct InstanceDelta {
     pub buckets: Vec<(u32, Bucket)>,
     /// (cell slot, new content), empty entries last.
     pub cells: Vec<(u32, Cell)>,
+    /// With lighting (DESIGN §12): one array per entry of `cells`, in the same order, whose
+    /// record `k` is the irradiance of the cell's point `k`
+    /// ([`psao_points::irradiance::pack_rgb9e5`]; 0 past the cell's points). Empty without
+    /// lighting.
+    pub lights: Vec<[u32; CELL_POINTS]>,
 }
 
 /// One server → client update: everything that changed since the client's previous update,
@@ -50,6 +55,11 @@ impl Update {
     /// Number of changed buckets over all instances.
     pub fn changed_buckets(&self) -> usize {
         self.instances.iter().map(|d| d.buckets.len()).sum()
+    }
+
+    /// Whether the update carries irradiance records.
+    pub fn has_lights(&self) -> bool {
+        self.instances.iter().any(|d| !d.lights.is_empty())
     }
 
     /// True when no bucket or cell changed (transforms do not count).
@@ -114,7 +124,9 @@ mod tests {
             instance: 3,
             buckets: vec![(1, Bucket::default())],
             cells: vec![(0, Cell::default()), (4, Cell::default())],
+            lights: Vec::new(),
         });
+        assert!(!u.has_lights());
         assert!(!u.is_empty());
         assert_eq!((u.changed_buckets(), u.changed_cells()), (1, 2));
     }

@@ -3,14 +3,17 @@
 //!
 //! Payload (little-endian 32-bit words) before compression:
 //! ```text
-//! tag "PSD1" · frame (2 words, low first) · flags (bit 0 snapshot, bit 1 wide keys)
+//! tag "PSD1" · frame (2 words, low first) · flags (bit 0 snapshot, bit 1 wide keys,
+//!     bit 2 lights)
 //! transform count · per transform: instance, 12 floats (Affine3A columns)
 //! instance count · per instance: instance, bucket count, cell count,
 //!     buckets: index, 8 × (key [key high word if wide], slot)
-//!     cells:   slot, 7 packed points
+//!     cells:   slot, 7 packed points [7 irradiance records if lights]
 //! ```
 //! Bucket entries and cell points are compacted, empty (zero) ones last. Keys (cell id + 1)
-//! take one word unless some key in the update needs two ("wide keys").
+//! take one word unless some key in the update needs two ("wide keys"). With lighting every
+//! cell carries its points' irradiance records (RGB9E5, `psao_points::irradiance`), raw like
+//! the points: an instance delta of a lit update without them sends zeros.
 
 use glam::Affine3A;
 use psao_points::{Bucket, BucketEntry, Cell, BUCKET_ENTRIES, CELL_POINTS};
@@ -35,9 +38,15 @@ pub const MAX_DECODE_LIMIT: u64 = 4 << 30;
 const TAG: u32 = u32::from_le_bytes(*b"PSD1");
 const FLAG_SNAPSHOT: u32 = 1;
 const FLAG_WIDE_KEYS: u32 = 2;
+const FLAG_LIGHTS: u32 = 4;
 const TRANSFORM_WORDS: usize = 13;
 const INSTANCE_HEADER_WORDS: usize = 3;
 const CELL_WORDS: usize = 1 + CELL_POINTS;
+
+/// Words per cell: slot and points, and the irradiance records with `lights`.
+fn cell_words(lights: bool) -> usize {
+    CELL_WORDS + if lights { CELL_POINTS } else { 0 }
+}
 
 /// The paper's codec: raw records + zstd level 15 with the "lazy" strategy. Stateless: every
 /// update decodes on its own, within the decode limit.
@@ -93,6 +102,7 @@ fn serialize(update: &Update) -> Vec<u8> {
         .flat_map(|d| d.buckets.iter())
         .flat_map(|(_, b)| b.entries.iter())
         .any(|e| e.key > u64::from(u32::MAX));
+    let lights = update.has_lights();
     let words = 5
         + update.transforms.len() * TRANSFORM_WORDS
         + update
@@ -101,14 +111,15 @@ fn serialize(update: &Update) -> Vec<u8> {
             .map(|d| {
                 INSTANCE_HEADER_WORDS
                     + d.buckets.len() * bucket_words(wide)
-                    + d.cells.len() * CELL_WORDS
+                    + d.cells.len() * cell_words(lights)
             })
             .sum::<usize>();
     let mut w = WordWriter::with_capacity(words);
     w.put(TAG);
     w.put_u64(update.frame);
     let flags = if update.snapshot { FLAG_SNAPSHOT } else { 0 };
-    w.put(flags | if wide { FLAG_WIDE_KEYS } else { 0 });
+    let flags = flags | if wide { FLAG_WIDE_KEYS } else { 0 };
+    w.put(flags | if lights { FLAG_LIGHTS } else { 0 });
     w.put_len(update.transforms.len());
     for (instance, t) in &update.transforms {
         w.put(*instance);
@@ -130,9 +141,13 @@ fn serialize(update: &Update) -> Vec<u8> {
                 w.put(e.slot);
             }
         }
-        for (slot, cell) in &d.cells {
+        for (k, (slot, cell)) in d.cells.iter().enumerate() {
             w.put(*slot);
             compact_cell(cell).points.iter().for_each(|&p| w.put(p));
+            if lights {
+                let records = d.lights.get(k).copied().unwrap_or_default();
+                records.iter().for_each(|&e| w.put(e));
+            }
         }
     }
     w.into_bytes()
@@ -150,10 +165,11 @@ fn deserialize(bytes: &[u8]) -> Result<Update, DeltaError> {
     }
     let frame = r.get_u64("frame number")?;
     let flags = r.get("flags")?;
-    if flags & !(FLAG_SNAPSHOT | FLAG_WIDE_KEYS) != 0 {
+    if flags & !(FLAG_SNAPSHOT | FLAG_WIDE_KEYS | FLAG_LIGHTS) != 0 {
         return Err(DeltaError::UnknownFlags(flags));
     }
     let wide = flags & FLAG_WIDE_KEYS != 0;
+    let lit = flags & FLAG_LIGHTS != 0;
 
     let count = r.get("transform count")?;
     r.require(count, TRANSFORM_WORDS, "transforms")?;
@@ -178,14 +194,26 @@ fn deserialize(bytes: &[u8]) -> Result<Update, DeltaError> {
         let buckets = (0..buckets)
             .map(|_| read_bucket(&mut r, wide))
             .collect::<Result<_, _>>()?;
-        r.require(cells, CELL_WORDS, "cells")?;
+        r.require(cells, cell_words(lit), "cells")?;
+        let mut lights = Vec::with_capacity(if lit { cells as usize } else { 0 });
         let cells = (0..cells)
-            .map(|_| read_cell(&mut r))
-            .collect::<Result<_, _>>()?;
+            .map(|_| {
+                let cell = read_cell(&mut r)?;
+                if lit {
+                    let mut records = [0; CELL_POINTS];
+                    for e in &mut records {
+                        *e = r.get("irradiance")?;
+                    }
+                    lights.push(records);
+                }
+                Ok(cell)
+            })
+            .collect::<Result<_, DeltaError>>()?;
         instances.push(InstanceDelta {
             instance,
             buckets,
             cells,
+            lights,
         });
     }
     r.finish()?;

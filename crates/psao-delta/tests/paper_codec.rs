@@ -71,6 +71,7 @@ fn random_update(rng: &mut Rng, wide: bool) -> Update {
                 instance: i as u32 * 3,
                 buckets,
                 cells,
+                lights: Vec::new(),
             }
         })
         .collect();
@@ -120,6 +121,7 @@ fn encoding_compacts_buckets_and_cells() {
             instance: 0,
             buckets: vec![(1, bucket)],
             cells: vec![(2, cell)],
+            lights: Vec::new(),
         }],
         ..Default::default()
     };
@@ -192,8 +194,8 @@ fn valid_zstd_with_malformed_payload_is_rejected() {
         (vec![0xdead_beef], |e| {
             matches!(e, DeltaError::BadTag { .. })
         }),
-        (vec![tag, 0, 0, 4], |e| {
-            matches!(e, DeltaError::UnknownFlags(4))
+        (vec![tag, 0, 0, 8], |e| {
+            matches!(e, DeltaError::UnknownFlags(8))
         }),
         // A count of 2^32 − 1 transforms with nothing behind it: refused before allocating.
         (vec![tag, 0, 0, 0, u32::MAX], |e| {

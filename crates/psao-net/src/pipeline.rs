@@ -62,6 +62,10 @@ pub struct FrameRecord {
     pub changed_cells: usize,
     /// Rays the server traced in this frame.
     pub rays: u64,
+    /// Light paths the server traced in this frame (with lighting, docs/LIGHTING.md), and
+    /// their rays (not included in `rays`).
+    pub light_paths: u64,
+    pub light_rays: u64,
     /// Points the server restarted because geometry near them moved.
     pub invalidated_points: usize,
     /// Restarted points the server traced in this frame, and their rays.
@@ -252,6 +256,8 @@ impl<'a> Pipeline<'a> {
             record.server_ms = t.elapsed().as_secs_f64() * 1e3;
             record.server_frame = true;
             record.rays = stats.rays;
+            record.light_paths = stats.light_paths;
+            record.light_rays = stats.light_rays;
             record.changed_points = stats.published_points;
             record.changed_cells = update.changed_cells();
             record.bytes = encoded.len();

@@ -85,6 +85,7 @@ fn session() -> Vec<Update> {
                 instance: i as u32,
                 buckets: buckets[i].clone(),
                 cells: cells[i].clone(),
+                lights: Vec::new(),
             })
             .collect(),
     }];

@@ -13,6 +13,7 @@ mod elimination;
 mod error;
 mod generate;
 mod grid;
+pub mod irradiance;
 mod key_map;
 mod layout;
 mod linear_fit;

@@ -14,15 +14,52 @@ pub struct Thresholds {
     /// Resend when the position moved by more than this many quantisation steps (cell / 32)
     /// along some axis.
     pub position_steps: f32,
+    /// With lighting: resend when the irradiance moved perceptibly from the published one
+    /// (a Weber fraction, [`psao_points::irradiance::irradiance_changed`]).
+    pub irradiance: f32,
 }
 
 impl Default for Thresholds {
-    /// The paper's values: 8/255 AO, cosine 0.6, 3 position steps.
+    /// The paper's values: 8/255 AO, cosine 0.6, 3 position steps; irradiance 8/255 of its
+    /// luminance.
     fn default() -> Self {
         Self {
             ao: 8.0 / 255.0,
             normal_cos: 0.6,
             position_steps: 3.0,
+            irradiance: 8.0 / 255.0,
+        }
+    }
+}
+
+/// Diffuse irradiance at the points besides their AO (DESIGN §12, docs/LIGHTING.md): light
+/// paths of [`psao_trace::gi::DiffuseLighting`] traced from each selected point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LightingConfig {
+    /// Indirect bounces per path (a fixed depth, see [`psao_trace::gi`]).
+    pub bounces: u32,
+    /// Light paths traced for a selected point in one frame, beside its
+    /// [`ServerConfig::rays_per_point`] AO rays.
+    pub paths_per_point: u32,
+    /// Whether the points also carry the direct light of suns and point lights. Off by
+    /// default: their sharp shadows need more resolution than the points have, so clients
+    /// render that light with shadow maps and the points carry only its bounces (DESIGN §12,
+    /// [`psao_trace::gi::DiffuseLighting::without_sharp_direct`]).
+    pub sharp_direct: bool,
+}
+
+/// Most bounces a server path may take (each costs a closest-hit ray and a shadow ray per
+/// light per path).
+pub const MAX_BOUNCES: u32 = 8;
+
+impl Default for LightingConfig {
+    /// One bounce (the bounce of the sun and of small lights), 4 paths per point and frame,
+    /// the direct light of suns and point lights left to the clients.
+    fn default() -> Self {
+        Self {
+            bounces: 1,
+            paths_per_point: 4,
+            sharp_direct: false,
         }
     }
 }
@@ -60,12 +97,14 @@ pub struct ServerConfig {
     /// near-field occlusion relative to open areas, at the same total count (1 = uniform
     /// placement, the default; see `start_points.rs` for the signal).
     pub adaptive_boost: f32,
+    /// Diffuse irradiance at the points (`None`: AO only, the default).
+    pub lighting: Option<LightingConfig>,
 }
 
 impl Default for ServerConfig {
     /// Density 1024, the scene's AO radius, 16 rays per point and frame, 2 M rays per
     /// frame, 256 samples to converge, 20 % frustum margin, paper thresholds, buried points
-    /// culled, proximity invalidation, seed 0, the default backend.
+    /// culled, proximity invalidation, seed 0, the default backend, AO only.
     fn default() -> Self {
         Self {
             density: psao_points::DEFAULT_DENSITY,
@@ -80,6 +119,7 @@ impl Default for ServerConfig {
             seed: 0,
             backend: Backend::default(),
             adaptive_boost: 1.0,
+            lighting: None,
         }
     }
 }
@@ -100,8 +140,17 @@ impl ServerConfig {
         if !(self.adaptive_boost.is_finite() && self.adaptive_boost >= 1.0) {
             return bad("adaptive_boost must be finite and >= 1");
         }
+        if let Some(l) = &self.lighting {
+            if l.paths_per_point == 0 {
+                return bad("lighting paths_per_point must be at least 1");
+            }
+            if l.bounces > MAX_BOUNCES {
+                return bad(&format!("lighting bounces must be at most {MAX_BOUNCES}"));
+            }
+        }
         let t = &self.thresholds;
-        if !(t.ao.is_finite() && t.normal_cos.is_finite() && t.position_steps.is_finite()) {
+        let finite = [t.ao, t.normal_cos, t.position_steps, t.irradiance];
+        if !finite.iter().all(|v| v.is_finite()) {
             return bad("thresholds must be finite");
         }
         Ok(())

@@ -219,6 +219,11 @@ impl Dynamics {
         self.animator.motion()
     }
 
+    /// The current pose (the stored one before the first).
+    pub fn pose(&self) -> &ScenePose {
+        &self.pose
+    }
+
     /// Scene time of the current pose (`None` before the first).
     pub fn time(&self) -> Option<f32> {
         self.time
@@ -296,6 +301,9 @@ impl Dynamics {
             for inst in instances.iter_mut() {
                 inst.points.sum.fill(0.0);
                 inst.points.count.fill(0);
+                if let Some(light) = &mut inst.points.light {
+                    light.clear();
+                }
                 stats.invalidated_points += inst.points.count.len();
             }
             let all = Restarted {
@@ -347,6 +355,10 @@ impl Dynamics {
                 let i = i as usize;
                 let count = inst.points.count[i];
                 let kept = (count as f32 * kept_fraction(motion, tolerance)) as u32;
+                // Irradiance follows the same rule as AO (docs/LIGHTING.md).
+                if let Some(light) = &mut inst.points.light {
+                    light.keep_as_ao(i, kept);
+                }
                 inst.points.sum[i] = if count == 0 {
                     0.0
                 } else {

@@ -3,12 +3,14 @@
 
 use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use psao_points::{
-    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, DEFAULT_INTERPOLATION_FACTOR,
+    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, CELL_POINTS,
+    DEFAULT_INTERPOLATION_FACTOR,
 };
 
 use crate::alloc::CellAlloc;
 use crate::blocks::CullBlocks;
 use crate::changes::{stamp, ChangeLog};
+use crate::light::LightSums;
 use crate::summary::BlockSummaries;
 use crate::ServerError;
 
@@ -50,6 +52,9 @@ pub(crate) struct InstanceState {
     /// publish: they must be refreshed even if no point is republished into them.
     pub pending_cells: Vec<u32>,
     pub pending_buckets: Vec<usize>,
+    /// With lighting: the published irradiance records of each published cell's points
+    /// (same order as its point records; empty without lighting or past the last lit slot).
+    pub light_cells: Vec<[u32; CELL_POINTS]>,
 }
 
 /// Per-point state of one instance.
@@ -68,6 +73,20 @@ pub(crate) struct Points {
     /// point's current slot (cleared when the point changes cell).
     pub published: Vec<u32>,
     pub published_here: Bits,
+    /// Irradiance accumulators, when the server computes lighting.
+    pub light: Option<LightSums>,
+}
+
+impl Points {
+    /// Point `i`'s progress for selection and convergence: its AO samples, or with lighting
+    /// the smaller of those and its light paths counted in AO samples (see `light.rs`).
+    #[inline]
+    pub fn progress(&self, i: usize) -> u32 {
+        match &self.light {
+            None => self.count[i],
+            Some(l) => self.count[i].min(l.progress(i)),
+        }
+    }
 }
 
 /// One bit per point.
@@ -148,6 +167,7 @@ impl InstanceState {
             count: vec![0; n],
             published: vec![0; n],
             published_here: Bits::new(n),
+            light: None,
         };
         let blocks = CullBlocks::new(&p.position, index, seed);
         let summaries = BlockSummaries::new(&blocks, &p, max_samples);
@@ -168,6 +188,7 @@ impl InstanceState {
             summaries,
             pending_cells: Vec::new(),
             pending_buckets: Vec::new(),
+            light_cells: Vec::new(),
         };
         state.refresh_cull_bounds();
         Ok(state)
@@ -295,6 +316,31 @@ impl InstanceState {
             *dst = bits;
         }
         cell
+    }
+
+    /// The irradiance records of [`InstanceState::published_cell`]'s points, in its order
+    /// (`None` without lighting).
+    pub fn published_light_cell(&self, slot: u32) -> Option<[u32; CELL_POINTS]> {
+        let light = self.points.light.as_ref()?;
+        let mut out = [0; CELL_POINTS];
+        let records = self
+            .alloc
+            .members(slot)
+            .iter()
+            .filter(|&&m| m != NONE && self.points.published_here.get(m as usize))
+            .map(|&m| light.published[m as usize]);
+        for (dst, bits) in out.iter_mut().zip(records) {
+            *dst = bits;
+        }
+        Some(out)
+    }
+
+    /// The published irradiance records of slot `slot` (zeros where none were published).
+    pub fn light_cell(&self, slot: u32) -> [u32; CELL_POINTS] {
+        self.light_cells
+            .get(slot as usize)
+            .copied()
+            .unwrap_or_default()
     }
 
     /// The published content of bucket `b`: the allocation bucket's entries whose cells hold

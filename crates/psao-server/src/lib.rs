@@ -1,5 +1,6 @@
 //! The PSAO server (DESIGN §3 "Server update" and "CPU server"): the authoritative point
-//! state of a scene, AO accumulated over server frames within a ray budget, thresholded
+//! state of a scene, AO (and optionally diffuse irradiance, DESIGN §12) accumulated over
+//! server frames within a ray budget, thresholded
 //! publishing into per-instance hash grids, and per-client deltas of what changed.
 //!
 //! Typical loop: [`Server::new`] → [`Server::instance_table`] (sent once per client) →
@@ -16,6 +17,7 @@ mod dynamics;
 mod error;
 mod frustum;
 mod instance;
+mod light;
 mod memory;
 mod near_field;
 pub mod partition;
@@ -28,10 +30,11 @@ mod trace;
 pub use blocks::morton_order;
 pub use bury::{BURIAL_MIN_INSIDE, BURIAL_RAYS};
 pub use clients::ClientId;
-pub use config::{ServerConfig, Thresholds};
+pub use config::{LightingConfig, ServerConfig, Thresholds, MAX_BOUNCES};
 pub use dynamics::{Invalidation, MotionStats};
 pub use error::ServerError;
 pub use frustum::{Frustum, View};
+pub use light::SUN_TOLERANCE_DEG;
 pub use memory::MemoryPart;
 pub use near_field::{NEAR_FIELD_RAYS, NEAR_FIELD_SPACINGS};
 pub use partition::{Owners, Partition};

@@ -14,11 +14,21 @@ pub struct MemoryPart {
     pub bytes: u64,
 }
 
-/// The parts of `instances` plus the skin bindings (`skins` bytes).
+/// The parts of `instances` plus the skin bindings (`skins` bytes); irradiance
+/// accumulators only when the server computes lighting.
 pub(crate) fn memory_parts(instances: &[InstanceState], skins: u64) -> Vec<MemoryPart> {
     let sum = |f: &dyn Fn(&InstanceState) -> u64| instances.iter().map(f).sum::<u64>();
     let part = |name, bytes| MemoryPart { name, bytes };
-    vec![
+    let lit = instances.iter().any(|i| i.points.light.is_some());
+    let light = lit.then(|| {
+        part(
+            "irradiance accumulators and published records",
+            sum(&|i| {
+                i.points.light.as_ref().map_or(0, |l| l.heap_bytes()) + vec_bytes(&i.light_cells)
+            }),
+        )
+    });
+    let mut parts = vec![
         part(
             "positions and normals",
             sum(&|i| vec_bytes(&i.points.position) + vec_bytes(&i.points.normal)),
@@ -52,7 +62,9 @@ pub(crate) fn memory_parts(instances: &[InstanceState], skins: u64) -> Vec<Memor
             sum(&|i| i.blocks.heap_bytes() + i.summaries.heap_bytes()),
         ),
         part("skin bindings", skins),
-    ]
+    ];
+    parts.extend(light);
+    parts
 }
 
 #[cfg(test)]

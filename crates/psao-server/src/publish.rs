@@ -1,7 +1,7 @@
 //! Thresholded publishing into the authoritative grids (DESIGN §3 "Server update").
 
 use psao_points::pack::{unpack_ao, unpack_normal, POSITION_STEPS};
-use psao_points::{Bucket, Cell};
+use psao_points::{Bucket, Cell, CELL_POINTS};
 use rayon::prelude::*;
 
 use crate::instance::InstanceState;
@@ -10,8 +10,10 @@ use crate::Thresholds;
 /// The record point `i` should be published with now, or `None` when what clients have is
 /// still good enough: never-traced and unstored points stay unpublished; a point is
 /// (re)published when it was never published, changed cell, or its AO, normal or position
-/// moved past the thresholds since it was last published. A point whose accumulation was
-/// restarted (invalidated, no samples yet) keeps its published AO.
+/// moved past the thresholds since it was last published, or (with lighting, then with its
+/// published AO record unchanged) its irradiance moved perceptibly from its published record.
+/// A point whose accumulation was restarted (invalidated, no samples yet) keeps its published
+/// AO and irradiance.
 pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Option<u32> {
     let p = &inst.points;
     let (count, old) = (p.count[i], p.published[i]);
@@ -37,7 +39,13 @@ pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Optio
     let changed = (ao - unpack_ao(old)).abs() > t.ao
         || p.normal[i].dot(unpack_normal(old)) < t.normal_cos
         || moved;
-    changed.then_some(bits)
+    if changed {
+        return Some(bits);
+    }
+    // Only the irradiance moved: the AO record stays as published.
+    (p.light.as_ref())
+        .is_some_and(|l| l.changed(i, t.irradiance))
+        .then_some(old)
 }
 
 /// Record new published values and refresh the affected cells and buckets of the published
@@ -53,19 +61,34 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
         // A point that changed cell had its flag cleared and its old cell queued (rehome).
         p.published_here.set(i, true);
         p.published[i] = bits;
+        if let Some(light) = &mut p.light {
+            light.published[i] = light.record(i);
+        }
     }
     dirty_cells.par_sort_unstable();
     dirty_cells.dedup();
     let mut dirty_buckets = std::mem::take(&mut inst.pending_buckets);
     // The new contents are read in parallel, then stored where they changed.
     let view: &InstanceState = inst;
-    let cells: Vec<(u32, Cell)> = dirty_cells
+    type Content = (u32, Cell, Option<[u32; CELL_POINTS]>);
+    let cells: Vec<Content> = dirty_cells
         .par_iter()
-        .map(|&slot| (slot, view.published_cell(slot)))
+        .map(|&slot| {
+            let light = view.published_light_cell(slot);
+            (slot, view.published_cell(slot), light)
+        })
         .collect();
-    for (slot, cell) in cells {
-        if *inst.grid.cell(slot) != cell {
+    for (slot, cell, light) in cells {
+        let light_changed = light.is_some_and(|l| l != inst.light_cell(slot));
+        if *inst.grid.cell(slot) != cell || light_changed {
             inst.publish_cell(slot, cell, frame);
+        }
+        if let (true, Some(light)) = (light_changed, light) {
+            let s = slot as usize;
+            if inst.light_cells.len() <= s {
+                inst.light_cells.resize(s + 1, [0; CELL_POINTS]);
+            }
+            inst.light_cells[s] = light;
         }
         dirty_buckets.push(inst.slot_bucket(slot));
     }

@@ -16,6 +16,7 @@ use crate::changes::changed_after;
 use crate::clients::Clients;
 use crate::dynamics::{Dynamics, Restarted};
 use crate::instance::InstanceState;
+use crate::light::{charge, LightSums, Lighting};
 use crate::publish::{apply, republish};
 use crate::trace::{cull, select};
 use crate::StartPoints;
@@ -42,6 +43,12 @@ pub struct StepStats {
     /// Traced points among this step's restarted ones, and the rays they got.
     pub retraced_points: usize,
     pub retrace_rays: u64,
+    /// Light paths traced (with lighting), and the rays they took (closest-hit and shadow).
+    pub light_paths: u64,
+    pub light_rays: u64,
+    /// Points whose irradiance restarted because a keyed sun turned past
+    /// [`crate::SUN_TOLERANCE_DEG`].
+    pub relit_points: usize,
     /// Milliseconds of the step spent posing the scene, updating the tracer, moving skinned
     /// points and invalidating (included in `ms`).
     pub animate_ms: f64,
@@ -99,6 +106,8 @@ pub struct Server {
     buried_points: usize,
     /// The partitions traced here, on a trace node (docs/SCALE-OUT.md).
     held: Option<scale::Held>,
+    /// Diffuse irradiance at the points, when configured.
+    lighting: Option<Lighting>,
 }
 
 /// Server frames whose changed buckets and cells are listed (2 s at 30 Hz): a client that
@@ -176,8 +185,9 @@ impl Server {
     ) -> Result<Server, ServerError> {
         let (points, buried_points) = (start.instances, start.buried);
         let dynamics = Dynamics::new(scene, &points, config.invalidation)?;
+        let lighting = config.lighting.map(|l| Lighting::new(scene, l));
         let motion = dynamics.motion();
-        let instances = points
+        let mut instances = points
             .par_iter()
             .zip(&scene.instances)
             .zip(motion)
@@ -194,7 +204,14 @@ impl Server {
                     config.max_samples,
                 )
             })
-            .collect::<Result<Vec<_>, _>>()?;
+            .collect::<Result<Vec<InstanceState>, _>>()?;
+        if let Some(l) = &config.lighting {
+            for inst in &mut instances {
+                let n = inst.points.position.len();
+                inst.points.light =
+                    Some(LightSums::new(n, config.rays_per_point, l.paths_per_point));
+            }
+        }
         let server = Server {
             config,
             radius,
@@ -208,6 +225,7 @@ impl Server {
             cut_guess: 0,
             buried_points,
             held: None,
+            lighting,
         };
         let (overflow_cells, overflow_points) = server.overflow();
         tracing::info!(
@@ -269,8 +287,10 @@ impl Server {
     /// scene (tracer, instance transforms, skinned points; proximity invalidation, see
     /// [`crate::Invalidation`]), cull points to the extended frusta, spend the ray budget on
     /// the visible points with the fewest samples (invalidated points have none), accumulate,
-    /// and publish what moved past the thresholds. Errors only when the tracer rejects a
-    /// skinned pose (non-finite vertices).
+    /// and publish what moved past the thresholds. With lighting, a keyed sun that turned
+    /// relights first, and each selected point also takes its light paths (the budget
+    /// charges both, see `light.rs`). Errors only when the tracer rejects a skinned pose
+    /// (non-finite vertices).
     pub fn step_at(&mut self, views: &[View], time: f32) -> Result<StepStats, ServerError> {
         let start = Instant::now();
         let crate::dynamics::Advanced {
@@ -278,11 +298,16 @@ impl Server {
             moved,
             restarted,
         } = self.pose(time)?;
+        let relit_points = self.relight(time);
         let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
         let c = &self.config;
+        let lights = self
+            .lighting
+            .as_ref()
+            .map(|l| (&l.config, l.lights().len()));
         let max_points =
-            usize::try_from(c.ray_budget / u64::from(c.rays_per_point)).unwrap_or(usize::MAX);
+            usize::try_from(c.ray_budget / charge(c.rays_per_point, lights)).unwrap_or(usize::MAX);
         let frusta: Vec<Frustum> = views
             .iter()
             .map(|v| Frustum::new(v, c.frustum_margin))
@@ -292,7 +317,12 @@ impl Server {
         let visible = culled.visible;
         let t_cull = Instant::now();
         let selected = select(culled.candidates, max_points);
-        let (traced, rays) = self.trace_held(&selected);
+        let scale::TracedFrame {
+            traced,
+            rays,
+            light_paths,
+            light_rays,
+        } = self.trace_held(&selected);
         let (mut retraced_points, mut retrace_rays) = (0, 0u64);
         for t in &traced {
             if restarted.contains(t.instance, t.index) {
@@ -302,6 +332,10 @@ impl Server {
             let p = &mut self.instances[t.instance as usize].points;
             p.sum[t.index as usize] += t.sum;
             p.count[t.index as usize] += t.rays;
+            if let Some(light) = &mut p.light {
+                light.sum[t.index as usize] += t.light.sum;
+                light.count[t.index as usize] += t.light.paths;
+            }
         }
         // `traced` is in (instance, index) order.
         let changed = runs_of(traced.iter().map(|t| (t.instance, t.index)));
@@ -340,6 +374,9 @@ impl Server {
             invalidated_points: motion.invalidated_points,
             retraced_points,
             retrace_rays,
+            light_paths,
+            light_rays,
+            relit_points,
             animate_ms,
             cull_ms,
             trace_ms,
@@ -360,6 +397,31 @@ impl Server {
         )?;
         self.refresh_summaries(&advanced.restarted, &advanced.moved);
         Ok(advanced)
+    }
+
+    /// Bring the lights to scene time `time` (a keyed sun that turned past the tolerance
+    /// restarts the irradiance of the points it lights, see `light.rs`) and the block
+    /// summaries of the restarted points up to date. Returns how many points restarted.
+    fn relight(&mut self, time: f32) -> usize {
+        let Some(restarted) =
+            (self.lighting.as_mut()).and_then(|l| l.relight(time, &mut self.instances))
+        else {
+            return 0;
+        };
+        self.instances
+            .par_iter_mut()
+            .zip(restarted)
+            .map(|(inst, list)| match list {
+                None => {
+                    inst.rebuild_summaries();
+                    inst.points.position.len()
+                }
+                Some(list) => {
+                    inst.refresh_summaries(&list);
+                    list.len()
+                }
+            })
+            .sum()
     }
 
     /// Bring the block summaries up to date after posing: the `restarted` points lost their
@@ -553,6 +615,26 @@ impl Server {
         &self.tracer
     }
 
+    /// Point `index` of `instance`'s irradiance: its mean linear RGB irradiance (zero before
+    /// the first path) and the number of light paths it averages. `None` without lighting
+    /// ([`ServerConfig::lighting`]) or for a point that does not exist.
+    pub fn irradiance(&self, instance: usize, index: usize) -> Option<(Vec3, u32)> {
+        let light = self.instances.get(instance)?.points.light.as_ref()?;
+        let (sum, count) = (*light.sum.get(index)?, light.count[index]);
+        let mean = if count == 0 {
+            Vec3::ZERO
+        } else {
+            sum / count as f32
+        };
+        Some((mean, count))
+    }
+
+    /// The lights the points' light paths are traced with (the scene's lights at the time of
+    /// the last relighting; empty without lighting).
+    pub fn lights(&self) -> &[psao_scene::Light] {
+        self.lighting.as_ref().map_or(&[], |l| l.lights())
+    }
+
     /// The participating medium AO rays pass through, if any.
     pub fn medium(&self) -> Option<&dyn Medium> {
         self.medium.as_deref()
@@ -627,6 +709,8 @@ fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> Instan
     match (snapshot, inst.changes.since(since)) {
         (false, Some(changed)) => {
             let grid = &inst.grid;
+            let cells: Vec<(u32, psao_points::Cell)> =
+                changed.cells.iter().map(|&s| (s, *grid.cell(s))).collect();
             InstanceDelta {
                 instance: index,
                 buckets: changed
@@ -634,7 +718,8 @@ fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> Instan
                     .iter()
                     .map(|&b| (b, grid.bucket(b as usize)))
                     .collect(),
-                cells: changed.cells.iter().map(|&s| (s, *grid.cell(s))).collect(),
+                lights: lights_of(inst, &cells),
+                cells,
             }
         }
         _ => scan_delta(index, inst, snapshot, since),
@@ -656,7 +741,7 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
         })
         .map(|(b, bucket)| (b as u32, bucket))
         .collect();
-    let cells = grid
+    let cells: Vec<(u32, psao_points::Cell)> = grid
         .cells()
         .enumerate()
         .filter(|&(s, cell)| {
@@ -673,8 +758,20 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
     InstanceDelta {
         instance: index,
         buckets,
+        lights: lights_of(inst, &cells),
         cells,
     }
+}
+
+/// The published irradiance records of `cells` (none without lighting).
+fn lights_of(
+    inst: &InstanceState,
+    cells: &[(u32, psao_points::Cell)],
+) -> Vec<[u32; psao_points::CELL_POINTS]> {
+    if inst.points.light.is_none() {
+        return Vec::new();
+    }
+    cells.iter().map(|&(s, _)| inst.light_cell(s)).collect()
 }
 
 #[cfg(test)]

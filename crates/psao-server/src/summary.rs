@@ -102,10 +102,10 @@ impl BlockSummaries {
     fn state(&self, blocks: &CullBlocks, points: &Points, i: usize, k: usize) -> u16 {
         if !points.stored.get(i) {
             UNSTORED
-        } else if points.count[i] >= self.max_samples {
+        } else if points.progress(i) >= self.max_samples {
             CONVERGED
         } else {
-            bin(points.count[i], blocks.tie(k))
+            bin(points.progress(i), blocks.tie(k))
         }
     }
 
@@ -310,6 +310,7 @@ mod tests {
                 .collect(),
             published: vec![0; n],
             published_here: crate::instance::Bits::new(n),
+            light: None,
         }
     }
 

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use crate::blocks::{WorldBox, BLOCK_POINTS, GROUP_BLOCKS, SUBS_PER_BLOCK, SUB_POINTS};
 use crate::frustum::Frustum;
 use crate::instance::InstanceState;
+use crate::light::LightSample;
 use crate::summary::{bin, bin_of, count_up_to, offset_of, LAST_BIN};
 
 /// Rays traced together per parallel work item. The batch's points are neighbours (the
@@ -42,6 +43,8 @@ pub(crate) struct Traced {
     pub sum: f32,
     /// Number of new samples.
     pub rays: u32,
+    /// New light paths, with lighting.
+    pub light: LightSample,
 }
 
 /// The key that identifies a point's AO sample sequence.
@@ -203,7 +206,7 @@ pub(crate) fn cull(
             vb.up_to(cut).map(move |e| {
                 let k = vb.start as usize + offset_of(e);
                 let i = inst.blocks.order.at(k);
-                let (count, tie) = (inst.points.count[i as usize], inst.blocks.tie(k));
+                let (count, tie) = (inst.points.progress(i as usize), inst.blocks.tie(k));
                 debug_assert_eq!(bin(count, tie), bin_of(e), "summaries are up to date");
                 Candidate {
                     key: (u64::from(count) << 32) | u64::from(tie),
@@ -517,6 +520,7 @@ fn trace_batch(
                 index: job.index,
                 sum,
                 rays: job.rays,
+                light: LightSample::default(),
             };
             (j, result)
         })

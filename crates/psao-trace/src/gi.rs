@@ -29,11 +29,12 @@
 //! Random numbers are hashed from (seed, key, sample index, depth, purpose), so a sample is
 //! the same whichever thread traces it and a point can resume at any index.
 
-use glam::{Affine3A, Mat3A, Vec3};
+use glam::Vec3;
 use psao_scene::{Light, LightShape, Scene, ScenePose};
 
 use crate::ao::{cosine_hemisphere, hash64, ray_offset, sample_2d};
-use crate::{Hit, Ray, Tracer};
+use crate::surface::Surfaces;
+use crate::{Ray, Tracer};
 
 /// Fraction of the distance to a point on a light left out of its shadow ray, so the light
 /// itself (when it lies on geometry) does not shadow.
@@ -42,48 +43,45 @@ const SHADOW_SHORTEN: f32 = 1e-4;
 /// The diffuse lighting of a scene at one scene time: its lights at that time, its
 /// environment and the surfaces' base colours, with `bounces` indirect bounces.
 pub struct DiffuseLighting<'a> {
-    scene: &'a Scene,
+    surfaces: Surfaces<'a>,
     lights: Vec<Light>,
     bounces: u32,
-    pose: Option<&'a ScenePose>,
-    normal_matrices: Vec<Mat3A>,
-}
-
-/// A surface point a ray found.
-struct Surface {
-    point: Vec3,
-    /// Interpolated unit normal, on the side the ray came from.
-    normal: Vec3,
-    /// Unit face normal, on the side the ray came from.
-    face: Vec3,
-    albedo: Vec3,
+    /// Whether the direct light of suns and point lights at the path's first vertex is left
+    /// out ([`Self::without_sharp_direct`]).
+    skip_sharp_direct: bool,
 }
 
 impl<'a> DiffuseLighting<'a> {
     /// The lighting of `scene` at scene time `time` seconds (lights as
     /// [`Scene::lights_at`]), every instance at its stored transform.
     pub fn new(scene: &'a Scene, time: f32, bounces: u32) -> Self {
-        let normal_matrices = scene
-            .instances
-            .iter()
-            .map(|i| normal_matrix(&i.transform))
-            .collect();
+        Self::with_lights(scene, scene.lights_at(time), bounces)
+    }
+
+    /// The lighting of `scene` with `lights` in place of its own (e.g. the lights at some
+    /// scene time, computed once), every instance at its stored transform.
+    pub fn with_lights(scene: &'a Scene, lights: Vec<Light>, bounces: u32) -> Self {
         Self {
-            scene,
-            lights: scene.lights_at(time),
+            surfaces: Surfaces::new(scene),
+            lights,
             bounces,
-            pose: None,
-            normal_matrices,
+            skip_sharp_direct: false,
         }
+    }
+
+    /// The same lighting without the direct light of suns and point lights at the point
+    /// itself (their bounces stay): what a client that renders those lights with shadow maps
+    /// takes from the points (DESIGN §12, as CloudLight leaves direct light to the client).
+    /// Rectangles and the environment, whose shadows are soft, stay whole.
+    pub fn without_sharp_direct(mut self) -> Self {
+        self.skip_sharp_direct = true;
+        self
     }
 
     /// The same lighting with the scene in `pose`, which the tracer given to the queries must
     /// hold: surfaces take the posed transforms and skinned vertices.
     pub fn posed(mut self, pose: &'a ScenePose) -> Self {
-        self.normal_matrices = (self.scene.instances.iter().enumerate())
-            .map(|(i, inst)| normal_matrix(pose.transforms.get(i).unwrap_or(&inst.transform)))
-            .collect();
-        self.pose = Some(pose);
+        self.surfaces = self.surfaces.posed(pose);
         self
     }
 
@@ -130,54 +128,83 @@ impl<'a> DiffuseLighting<'a> {
         key: u64,
         index: u32,
     ) -> Vec3 {
+        self.sample_counted(tracer, x, n, face, seed, key, index).0
+    }
+
+    /// [`Self::sample`] with the number of rays the path traced: per vertex (at most
+    /// `bounces + 1`) one closest-hit ray and at most one shadow ray per light.
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample_counted(
+        &self,
+        tracer: &Tracer,
+        x: Vec3,
+        n: Vec3,
+        face: Vec3,
+        seed: u64,
+        key: u64,
+        index: u32,
+    ) -> (Vec3, u32) {
         let (mut x, mut n, mut face) = (x, n.normalize_or(Vec3::Y), face.normalize_or(n));
         let mut weight = Vec3::ONE;
         let mut total = Vec3::ZERO;
+        let mut rays = 0;
         for depth in 0..=self.bounces {
             let origin = ray_offset(x, face);
-            total += weight * self.direct(tracer, origin, n, face, seed, key, depth, index);
+            let sharp = depth > 0 || !self.skip_sharp_direct;
+            let (direct, shadow_rays) =
+                self.direct(tracer, origin, n, face, (seed, key, depth, index), sharp);
+            total += weight * direct;
+            rays += shadow_rays + 1;
             let (u1, u2) = sample_2d(seed, stream(key, depth, 0), index);
             let ray = Ray::new(origin, cosine_hemisphere(n, u1, u2), f32::INFINITY);
             let mut hit = [None];
             tracer.intersect(std::slice::from_ref(&ray), &mut hit);
             let Some(hit) = hit[0] else {
-                let sky = self.scene.environment.radiance(ray.dir);
+                let sky = self.surfaces.scene().environment.radiance(ray.dir);
                 total += weight * std::f32::consts::PI * sky;
                 break;
             };
             if depth == self.bounces {
                 break;
             }
-            let Some(s) = self.surface(&ray, &hit) else {
+            let Some(s) = self.surfaces.surface(&ray, &hit) else {
                 break;
             };
-            weight *= s.albedo;
+            weight *= self.albedo(s.material);
             if weight == Vec3::ZERO {
                 break;
             }
             (x, n, face) = (s.point, s.normal, s.face);
         }
-        total
+        (total, rays)
     }
 
-    /// Direct irradiance of every light at `origin` (already offset off the surface) on a
-    /// surface with shading normal `n` and face normal `face`, with one shadow ray each.
-    #[allow(clippy::too_many_arguments)]
+    /// The diffuse albedo of material `material` (its base colour; 0.8 grey when missing).
+    fn albedo(&self, material: usize) -> Vec3 {
+        (self.surfaces.scene().materials)
+            .get(material)
+            .map_or(Vec3::splat(0.8), |m| m.base_color.truncate())
+    }
+
+    /// Direct irradiance of every light (suns and point lights only when `sharp`) at `origin`
+    /// (already offset off the surface) on a surface with shading normal `n` and face normal
+    /// `face`, with at most one shadow ray each; `(seed, key, depth, index)` pick the random
+    /// numbers. Returns it with the number of shadow rays traced.
     fn direct(
         &self,
         tracer: &Tracer,
         origin: Vec3,
         n: Vec3,
         face: Vec3,
-        seed: u64,
-        key: u64,
-        depth: u32,
-        index: u32,
-    ) -> Vec3 {
+        (seed, key, depth, index): (u64, u64, u32, u32),
+        sharp: bool,
+    ) -> (Vec3, u32) {
+        let traced = std::cell::Cell::new(0);
         let visible = |l: Vec3, tmax: f32| {
             if n.dot(l) <= 0.0 || face.dot(l) <= 0.0 {
                 return false;
             }
+            traced.set(traced.get() + 1);
             let mut out = [false];
             tracer.occluded(&[Ray::new(origin, l, tmax)], &mut out);
             !out[0]
@@ -186,6 +213,7 @@ impl<'a> DiffuseLighting<'a> {
         for (li, light) in self.lights.iter().enumerate() {
             let strength = light.color * light.power;
             match light.shape {
+                LightShape::Sun { .. } | LightShape::Point { .. } if !sharp => {}
                 LightShape::Sun { direction } => {
                     let l = direction.normalize_or_zero();
                     if visible(l, f32::INFINITY) {
@@ -220,54 +248,7 @@ impl<'a> DiffuseLighting<'a> {
                 }
             }
         }
-        e
-    }
-
-    /// The surface `hit` found on `ray`, in the pose the lighting holds.
-    fn surface(&self, ray: &Ray, hit: &Hit) -> Option<Surface> {
-        let inst = self.scene.instances.get(hit.instance as usize)?;
-        let mesh = self.scene.meshes.get(inst.mesh)?;
-        let [a, b, c] = *mesh.indices.get(hit.triangle as usize)?;
-        let skinned = (self.pose)
-            .and_then(|p| p.skinned.get(hit.instance as usize))
-            .and_then(Option::as_ref);
-        let positions = skinned.map_or(&mesh.positions, |g| &g.positions);
-        let normals = skinned.map_or(&mesh.normals, |g| &g.normals);
-        let p = |i: u32| positions.get(i as usize).copied();
-        let (p0, p1, p2) = (p(a)?, p(b)?, p(c)?);
-        let m = *self.normal_matrices.get(hit.instance as usize)?;
-        let toward_ray = |v: Vec3| if v.dot(ray.dir) > 0.0 { -v } else { v };
-        let face = toward_ray((m * (p1 - p0).cross(p2 - p0)).normalize_or_zero());
-        if face == Vec3::ZERO {
-            return None;
-        }
-        let w = 1.0 - hit.u - hit.v;
-        let interpolated = match (
-            normals.get(a as usize),
-            normals.get(b as usize),
-            normals.get(c as usize),
-        ) {
-            (Some(na), Some(nb), Some(nc)) => {
-                (m * (*na * w + *nb * hit.u + *nc * hit.v)).normalize_or_zero()
-            }
-            _ => Vec3::ZERO,
-        };
-        let normal = match interpolated {
-            v if v == Vec3::ZERO => face,
-            v if v.dot(face) < 0.0 => -v,
-            v => v,
-        };
-        let albedo = self
-            .scene
-            .materials
-            .get(mesh.material)
-            .map_or(Vec3::splat(0.8), |m| m.base_color.truncate());
-        Some(Surface {
-            point: ray.origin + ray.dir * hit.t,
-            normal,
-            face,
-            albedo,
-        })
+        (e, traced.get())
     }
 }
 
@@ -275,14 +256,4 @@ impl<'a> DiffuseLighting<'a> {
 /// of point `key`'s paths.
 fn stream(key: u64, depth: u32, purpose: u32) -> u64 {
     hash64(key ^ hash64((u64::from(depth) << 32 | u64::from(purpose)) ^ 0x6769_5f70_6174_6873))
-}
-
-/// The inverse transpose of a transform's linear part (for normals).
-fn normal_matrix(t: &Affine3A) -> Mat3A {
-    let m = t.matrix3;
-    if m.determinant().abs() > 1e-20 {
-        m.inverse().transpose()
-    } else {
-        m
-    }
 }

@@ -1,7 +1,8 @@
 //! psao-trace: one [`Tracer`] facade over a two-level ray-tracing structure (a BVH per mesh in
 //! mesh-local space, a top level over the instances), with the pure-Rust `obvhs` backend and
-//! Embree 3 behind the cargo feature `embree`; spatial ray sorting; and the [`ao`] and [`gi`]
-//! modules that define ambient occlusion and diffuse lighting for all of psao.
+//! Embree 3 behind the cargo feature `embree`; spatial ray sorting; the [`ao`] and [`gi`]
+//! modules that define ambient occlusion and diffuse lighting for all of psao; and the one
+//! hit-to-surface lookup ([`surface`]).
 
 pub mod ao;
 #[cfg(feature = "embree")]
@@ -10,6 +11,7 @@ mod geometry;
 pub mod gi;
 mod obvhs_backend;
 mod sort;
+pub mod surface;
 mod tracer;
 mod types;
 

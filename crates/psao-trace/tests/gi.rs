@@ -218,3 +218,49 @@ fn a_turning_sun_follows_its_keys() {
     assert!((at(0.0) - 1.0).abs() < 1e-5);
     assert!((at(9.999) - 0.5f32.sqrt()).abs() < 1e-3);
 }
+
+#[test]
+fn without_sharp_direct_the_point_keeps_only_the_bounces_of_suns_and_point_lights() {
+    // The furnace's point light, direct at the point left to the client: E₀ (a + … + aᴺ).
+    let a = 0.8f32;
+    let (s, x, n) = furnace(a);
+    let t = tracer(&s);
+    let e0 = n.dot((Vec3::ZERO - x).normalize()) / x.length_squared();
+    for (bounces, factor) in [(0, 0.0), (1, a), (2, a + a * a)] {
+        let lighting = DiffuseLighting::new(&s, 0.0, bounces).without_sharp_direct();
+        let e = irradiance(&lighting, &t, x, n, 2048);
+        assert!(
+            (e.x - e0 * factor).abs() <= 0.02 * e0 * factor,
+            "{bounces} bounces: {} vs {}",
+            e.x,
+            e0 * factor
+        );
+    }
+    // On an open plane a sun adds nothing to the sky's π·L; a rectangle light stays.
+    let sky = Vec3::new(0.5, 1.0, 2.0);
+    let mut s = floor(sky);
+    s.lights.push(Light {
+        shape: LightShape::Sun { direction: Vec3::Y },
+        color: Vec3::ONE,
+        power: 4.0,
+    });
+    let t = tracer(&s);
+    let lighting = DiffuseLighting::new(&s, 0.0, 1).without_sharp_direct();
+    let e = irradiance(&lighting, &t, Vec3::ZERO, Vec3::Y, 16);
+    assert!(
+        (e - std::f32::consts::PI * sky).abs().max_element() < 1e-4,
+        "{e}"
+    );
+    s.lights.push(Light {
+        shape: LightShape::Rect {
+            centre: Vec3::Y,
+            half_u: Vec3::X * 0.5,
+            half_v: Vec3::Z * 0.5,
+        },
+        color: Vec3::ONE,
+        power: 1.0,
+    });
+    let lighting = DiffuseLighting::new(&s, 0.0, 1).without_sharp_direct();
+    let e = irradiance(&lighting, &tracer(&s), Vec3::ZERO, Vec3::Y, 64);
+    assert!(e.x > std::f32::consts::PI * sky.x + 0.1, "{e}");
+}

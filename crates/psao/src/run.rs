@@ -3,11 +3,12 @@
 use crate::args::{FrameRange, Resolution};
 use crate::png_io::{write_ao_png, write_rgb_png};
 use crate::progress;
+use crate::reference::Lighting;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_net::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
-use psao_server::{Invalidation, ServerConfig};
+use psao_server::{Invalidation, LightingConfig, ServerConfig, MAX_BOUNCES};
 use psao_trace::Backend;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -157,6 +158,15 @@ pub struct RunArgs {
     pub server_hz: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
+    /// What the points carry: `ao` (ambient occlusion only) or `gi` (also diffuse irradiance
+    /// from the scene's environment and lights with `--bounces` bounces, traced on the server
+    /// and streamed as 32-bit records beside the AO; docs/LIGHTING.md).
+    #[arg(long, value_enum, default_value_t = Lighting::Ao)]
+    pub lighting: Lighting,
+    /// Indirect diffuse bounces of the points' light paths with `--lighting gi` (a fixed
+    /// depth).
+    #[arg(long, default_value_t = LightingConfig::default().bounces)]
+    pub bounces: u32,
     /// Output folder: `frame_NNNNN.png` (composited), `ao_NNNNN.png` (AO only), `stats.json`.
     #[arg(long)]
     pub out: PathBuf,
@@ -165,6 +175,22 @@ pub struct RunArgs {
     pub json: Option<PathBuf>,
     #[command(flatten)]
     pub corrective: crate::corrective::split_args::CorrectiveArgs,
+}
+
+impl RunArgs {
+    /// The server's lighting: `None` for `--lighting ao`.
+    fn lighting_config(&self) -> Result<Option<LightingConfig>> {
+        if self.bounces > MAX_BOUNCES {
+            bail!(
+                "--bounces must be at most {MAX_BOUNCES}, got {}",
+                self.bounces
+            );
+        }
+        Ok((self.lighting == Lighting::Gi).then(|| LightingConfig {
+            bounces: self.bounces,
+            ..LightingConfig::default()
+        }))
+    }
 }
 
 /// Summary and per-frame statistics of a run.
@@ -182,6 +208,11 @@ pub struct RunStats {
     pub points: usize,
     /// Server rate.
     pub server_hz: u32,
+    /// With `--lighting gi`: the bounces of the points' light paths.
+    pub bounces: Option<u32>,
+    /// Light paths the server traced over the run, and their rays.
+    pub light_paths: u64,
+    pub light_rays: u64,
     /// Client frames simulated.
     pub frames: usize,
     /// Bytes received over all frames.
@@ -219,6 +250,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut config = args.tuning.config(args.points, args.server_hz, args.res)?;
+    config.server.lighting = args.lighting_config()?;
     config.medium = input.medium();
     config.corrective = args.corrective.config()?;
     let mut pipeline = Pipeline::new(&input.scene, &config)?;
@@ -248,6 +280,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
         points_per_area: config.server.density,
         points: pipeline.server().point_count(),
         server_hz: config.server_hz,
+        bounces: config.server.lighting.map(|l| l.bounces),
+        light_paths: records.iter().map(|r| r.light_paths).sum(),
+        light_rays: records.iter().map(|r| r.light_rays).sum(),
         frames: records.len(),
         total_bytes: pipeline.total_bytes,
         mbit_s: pipeline.total_bytes as f64 * 8.0 / seconds / 1e6,
@@ -270,6 +305,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
         stats.state_hash,
         args.out.display()
     );
+    if let Some(bounces) = stats.bounces {
+        println!(
+            "lighting: {} light paths ({} rays) with {bounces} bounce(s) on the server",
+            stats.light_paths, stats.light_rays
+        );
+    }
     Ok(())
 }
 

@@ -188,6 +188,62 @@ fn run_is_deterministic_and_counts_bytes() {
 }
 
 #[test]
+fn run_with_lighting_traces_light_paths_and_sends_their_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |lighting: &str, bounces: &str| {
+        let out = dir.path().join(format!("{lighting}{bounces}"));
+        let summary = dir.path().join(format!("{lighting}{bounces}.json"));
+        let o = psao(&[
+            "run",
+            "--frames",
+            "0..4",
+            "--points",
+            "64",
+            "--res",
+            "64x36",
+            "--ray-budget",
+            "50000",
+            "--lighting",
+            lighting,
+            "--bounces",
+            bounces,
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+            summary.to_str().unwrap(),
+        ]);
+        (o, summary)
+    };
+    let (o, ao) = run("ao", "1");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let ao = json(&ao);
+    assert!(ao["bounces"].is_null() && ao["light_paths"].as_u64() == Some(0));
+    let (o, gi) = run("gi", "2");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let gi = json(&gi);
+    assert_eq!(gi["bounces"].as_u64(), Some(2));
+    let (paths, rays) = (
+        gi["light_paths"].as_u64().unwrap(),
+        gi["light_rays"].as_u64().unwrap(),
+    );
+    assert!(paths > 0 && rays > paths, "{paths} paths, {rays} rays");
+    // The snapshot carries an irradiance record beside each point record: more bytes per
+    // cell (fewer cells: the light paths take part of the budget).
+    let per_cell = |s: &serde_json::Value| {
+        let f = &s["per_frame"][0];
+        f["bytes"].as_f64().unwrap() / f["changed_cells"].as_f64().unwrap()
+    };
+    assert!(
+        per_cell(&gi) > per_cell(&ao),
+        "{} vs {}",
+        per_cell(&gi),
+        per_cell(&ao)
+    );
+    let (o, _) = run("gi", "99");
+    assert!(!o.status.success() && stderr(&o).contains("--bounces"));
+}
+
+#[test]
 fn eval_writes_the_report_rows() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("eval");

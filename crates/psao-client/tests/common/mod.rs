@@ -224,6 +224,7 @@ pub fn delta(
                 instance: i as u32,
                 buckets,
                 cells,
+                lights: Vec::new(),
             }
         })
         .filter(|d| !d.buckets.is_empty() || !d.cells.is_empty())

@@ -7,6 +7,7 @@
 use psao_points::pack::unpack_ao;
 
 use super::Server;
+use crate::light::LightSample;
 use crate::partition::Owners;
 use crate::publish::apply;
 use crate::trace::{trace, Candidate, Traced};
@@ -31,6 +32,18 @@ pub struct PointState {
     pub record: PointRecord,
     /// AO samples the point had.
     pub samples: u32,
+}
+
+/// What one frame's tracing did: the new samples of every selected point (on a trace node
+/// those of other nodes' points counted, not traced) and the rays and paths traced here.
+#[derive(Default)]
+pub(super) struct TracedFrame {
+    pub traced: Vec<Traced>,
+    /// AO rays traced.
+    pub rays: u64,
+    /// Light paths traced and the rays they took.
+    pub light_paths: u64,
+    pub light_rays: u64,
 }
 
 /// What a trace node holds: the owners of every point and the partitions it traces.
@@ -328,11 +341,11 @@ impl Server {
 
     /// Trace the `selected` points this server holds (all of them when it holds no
     /// partitions); the others only count the samples they would have got. Returns the
-    /// samples in (instance, index) order and the rays actually traced.
-    pub(super) fn trace_held(&self, selected: &[Candidate]) -> (Vec<Traced>, u64) {
+    /// samples in (instance, index) order with the rays and light paths actually traced.
+    pub(super) fn trace_held(&self, selected: &[Candidate]) -> TracedFrame {
         let c = &self.config;
         let run = |selected: &[Candidate]| {
-            trace(
+            let mut traced = trace(
                 &self.tracer,
                 self.medium.as_deref(),
                 &self.instances,
@@ -341,29 +354,60 @@ impl Server {
                 c.rays_per_point,
                 c.max_samples,
                 c.seed,
-            )
+            );
+            if let Some(lighting) = &self.lighting {
+                let pose = self.dynamics.pose();
+                let light = lighting.trace(
+                    &self.tracer,
+                    pose,
+                    &self.instances,
+                    selected,
+                    c.max_samples,
+                    c.seed,
+                );
+                // Both are in the order of `selected`.
+                for (t, l) in traced.iter_mut().zip(light) {
+                    t.light = l;
+                }
+            }
+            let mut frame = TracedFrame::default();
+            for t in &traced {
+                frame.rays += u64::from(t.rays);
+                frame.light_paths += u64::from(t.light.paths);
+                frame.light_rays += t.light.rays;
+            }
+            frame.traced = traced;
+            frame
         };
         let Some(held) = &self.held else {
-            let traced = run(selected);
-            let rays = traced.iter().map(|t| u64::from(t.rays)).sum();
-            return (traced, rays);
+            return run(selected);
         };
         let (mine, others): (Vec<Candidate>, Vec<Candidate>) = selected
             .iter()
             .partition(|s| held.owns(s.instance, s.index));
-        let mut traced = run(&mine);
-        let rays = traced.iter().map(|t| u64::from(t.rays)).sum();
-        traced.extend(others.iter().map(|s| {
-            let count = self.instances[s.instance as usize].points.count[s.index as usize];
+        let mut frame = run(&mine);
+        frame.traced.extend(others.iter().map(|s| {
+            let p = &self.instances[s.instance as usize].points;
+            let count = p.count[s.index as usize];
+            // The paths the owner traces, so that selection stays in step across nodes.
+            let paths =
+                (self.lighting.as_ref().zip(p.light.as_ref())).map_or(0, |(lighting, sums)| {
+                    let max = sums.max_paths(c.max_samples);
+                    lighting.paths_for(sums.count[s.index as usize], max)
+                });
             Traced {
                 instance: s.instance,
                 index: s.index,
                 sum: 0.0,
                 rays: c.rays_per_point.min(c.max_samples.saturating_sub(count)),
+                light: LightSample {
+                    paths,
+                    ..LightSample::default()
+                },
             }
         }));
-        traced.sort_unstable_by_key(|t| (t.instance, t.index));
-        (traced, rays)
+        frame.traced.sort_unstable_by_key(|t| (t.instance, t.index));
+        frame
     }
 
     /// Keep only the publishing candidates this server holds.

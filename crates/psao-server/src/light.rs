@@ -1,0 +1,294 @@
+//! Diffuse irradiance at the points (DESIGN §12, docs/LIGHTING.md): beside its AO, a point
+//! selected in a server frame takes [`LightingConfig::paths_per_point`] light paths of
+//! [`DiffuseLighting`] (environment, lights with shadow rays, `bounces` indirect bounces),
+//! accumulated into a running linear RGB mean.
+//!
+//! By default the points leave out the direct light of suns and point lights (clients render
+//! it with shadow maps) and keep its bounces ([`LightingConfig::sharp_direct`]).
+//!
+//! # One selection, one budget
+//!
+//! AO and irradiance share the point set, the selection and the ray budget: a point's
+//! *progress* is the smaller of its AO samples and its light paths counted in AO samples (a
+//! path is worth `rays_per_point / paths_per_point` of them), so the tracer's "fewest samples
+//! first" serves whichever of the two lags, a point whose irradiance was invalidated is
+//! selected again even when its AO is converged, and a point counts as converged when both
+//! are. Each selected point is charged [`charge`] rays: its AO rays plus the most rays its
+//! paths can trace.
+//!
+//! # Invalidation
+//!
+//! Moving geometry restarts a point's irradiance exactly as its AO (the proximity rule of
+//! [`crate::Invalidation`], the same kept fraction). A sun whose direction follows keys
+//! relights the points once it turned by more than [`SUN_TOLERANCE_DEG`] from the direction
+//! the points' paths were traced with: without bounces the points facing it before or
+//! after (none when the points leave its direct light to the clients); with bounces every
+//! point (its bounce may reach any of them). Paths are always
+//! traced with the lights of the last relighting, so the samples of a point agree.
+
+use glam::Vec3;
+use psao_points::irradiance::{irradiance_changed, pack_rgb9e5, unpack_rgb9e5};
+use psao_scene::{Light, LightShape, Scene, ScenePose};
+use psao_trace::gi::DiffuseLighting;
+use psao_trace::Tracer;
+use rayon::prelude::*;
+
+use crate::instance::InstanceState;
+use crate::trace::{sample_key, Candidate};
+use crate::LightingConfig;
+
+/// Angle in degrees a keyed sun turns before it relights the points. The direct light of
+/// an unshadowed surface changes by at most the angle in radians (≤ 1.75 % of the sun's
+/// irradiance, below the 8/255 ≈ 3.1 % the AO threshold allows), and the shadow edge of an
+/// occluder 2 m away moves by 3.5 cm, about the spacing of the points at the default
+/// density: finer turns would change what the points can show by less than they resolve.
+pub const SUN_TOLERANCE_DEG: f32 = 1.0;
+
+/// Irradiance accumulators of one instance's points.
+pub(crate) struct LightSums {
+    /// Sum of the irradiance samples (linear RGB) and their number, per point.
+    pub sum: Vec<Vec3>,
+    pub count: Vec<u32>,
+    /// Last published irradiance record (RGB9E5) per point.
+    pub published: Vec<u32>,
+    /// AO rays and light paths per selected point and frame: the rate between the counts.
+    rays_per_point: u32,
+    paths_per_point: u32,
+}
+
+impl LightSums {
+    /// Empty accumulators for `n` points.
+    pub fn new(n: usize, rays_per_point: u32, paths_per_point: u32) -> Self {
+        Self {
+            sum: vec![Vec3::ZERO; n],
+            count: vec![0; n],
+            published: vec![0; n],
+            rays_per_point,
+            paths_per_point,
+        }
+    }
+
+    /// Point `i`'s light paths counted in AO samples.
+    #[inline]
+    pub fn progress(&self, i: usize) -> u32 {
+        let scaled = u64::from(self.count[i]) * u64::from(self.rays_per_point)
+            / u64::from(self.paths_per_point);
+        u32::try_from(scaled).unwrap_or(u32::MAX)
+    }
+
+    /// The paths after which a point's irradiance counts as converged: as many frames of
+    /// paths as `max_samples` AO samples take.
+    pub fn max_paths(&self, max_samples: u32) -> u32 {
+        let paths = (u64::from(max_samples) * u64::from(self.paths_per_point))
+            .div_ceil(u64::from(self.rays_per_point));
+        u32::try_from(paths).unwrap_or(u32::MAX)
+    }
+
+    /// Point `i`'s mean irradiance, when it has paths.
+    pub fn mean(&self, i: usize) -> Option<Vec3> {
+        (self.count[i] > 0).then(|| self.sum[i] / self.count[i] as f32)
+    }
+
+    /// The record point `i` would be published with now: its mean, or what was published
+    /// while it has no paths (restarted).
+    pub fn record(&self, i: usize) -> u32 {
+        self.mean(i).map_or(self.published[i], pack_rgb9e5)
+    }
+
+    /// Whether point `i`'s irradiance moved perceptibly from its published record.
+    pub fn changed(&self, i: usize, threshold: f32) -> bool {
+        self.mean(i)
+            .is_some_and(|e| irradiance_changed(unpack_rgb9e5(self.published[i]), e, threshold))
+    }
+
+    /// Keep as many of point `i`'s paths (their mean unchanged) as its AO kept of its
+    /// samples, `ao_kept`, counted in paths and rounded up: the same fraction of both, and a
+    /// light progress never below the AO's, so that AO and irradiance that advanced together
+    /// stay together (the point is re-traced when the AO alone would have been).
+    pub fn keep_as_ao(&mut self, i: usize, ao_kept: u32) {
+        let paths = (u64::from(ao_kept) * u64::from(self.paths_per_point))
+            .div_ceil(u64::from(self.rays_per_point));
+        self.keep(i, u32::try_from(paths).unwrap_or(u32::MAX));
+    }
+
+    /// Keep `left` of point `i`'s paths (at most all; their mean unchanged).
+    fn keep(&mut self, i: usize, left: u32) {
+        let count = self.count[i];
+        let left = left.min(count);
+        self.sum[i] = if count == 0 {
+            Vec3::ZERO
+        } else {
+            self.sum[i] * (left as f32 / count as f32)
+        };
+        self.count[i] = left;
+    }
+
+    /// Forget every sample.
+    pub fn clear(&mut self) {
+        self.sum.fill(Vec3::ZERO);
+        self.count.fill(0);
+    }
+
+    /// Heap bytes.
+    pub fn heap_bytes(&self) -> u64 {
+        psao_points::vec_bytes(&self.sum)
+            + psao_points::vec_bytes(&self.count)
+            + psao_points::vec_bytes(&self.published)
+    }
+}
+
+/// Rays charged to the budget for one selected point: `rays_per_point` AO rays plus, with
+/// lighting, `paths × (bounces + 1) × (1 + lights)` (per path vertex one closest-hit ray
+/// and one shadow ray per light: the most a path traces).
+pub(crate) fn charge(rays_per_point: u32, lighting: Option<(&LightingConfig, usize)>) -> u64 {
+    let light = lighting.map_or(0, |(l, lights)| {
+        u64::from(l.paths_per_point) * (u64::from(l.bounces) + 1) * (1 + lights as u64)
+    });
+    u64::from(rays_per_point) + light
+}
+
+/// New light paths of one point in one frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct LightSample {
+    /// Sum of the paths' irradiance.
+    pub sum: Vec3,
+    /// Paths traced.
+    pub paths: u32,
+    /// Rays they traced.
+    pub rays: u64,
+}
+
+/// The server's lighting: its settings, the scene (owned: the paths look up the surfaces
+/// they hit, their base colours, the lights and the environment) and the lights the points'
+/// paths are traced with.
+pub(crate) struct Lighting {
+    pub config: LightingConfig,
+    scene: Scene,
+    lights: Vec<Light>,
+}
+
+impl Lighting {
+    /// The lighting of `scene` at scene time 0.
+    pub fn new(scene: &Scene, config: LightingConfig) -> Self {
+        Self {
+            config,
+            lights: scene.lights_at(0.0),
+            scene: scene.clone(),
+        }
+    }
+
+    /// The lights the paths are traced with.
+    pub fn lights(&self) -> &[Light] {
+        &self.lights
+    }
+
+    /// Bring the lights to scene time `time`: when a keyed sun turned by more than
+    /// [`SUN_TOLERANCE_DEG`] since the lights in use, take the lights at `time` and restart
+    /// the irradiance of the points the turned suns light (module docs). Returns, per
+    /// instance, the restarted points (sorted; `None` when every point was), or `None` when
+    /// nothing changed.
+    pub fn relight(
+        &mut self,
+        time: f32,
+        instances: &mut [InstanceState],
+    ) -> Option<Vec<Option<Vec<u32>>>> {
+        if !self.scene.lights_move() {
+            return None;
+        }
+        let now = self.scene.lights_at(time);
+        let cos_tolerance = SUN_TOLERANCE_DEG.to_radians().cos();
+        let turned: Vec<(Vec3, Vec3)> = (self.lights.iter().zip(&now))
+            .filter_map(|(a, b)| match (a.shape, b.shape) {
+                (LightShape::Sun { direction: d0 }, LightShape::Sun { direction: d1 })
+                    if d0.normalize_or_zero().dot(d1.normalize_or_zero()) < cos_tolerance =>
+                {
+                    Some((d0, d1))
+                }
+                _ => None,
+            })
+            .collect();
+        // Without bounces and without their direct light, suns do not reach the points.
+        if turned.is_empty() || (self.config.bounces == 0 && !self.config.sharp_direct) {
+            return None;
+        }
+        self.lights = now;
+        let everything = self.config.bounces > 0;
+        let restarted = instances
+            .par_iter_mut()
+            .map(|inst| {
+                let faces = |i: usize| {
+                    let (_, n) = inst.world(i);
+                    turned
+                        .iter()
+                        .any(|(a, b)| n.dot(*a) > 0.0 || n.dot(*b) > 0.0)
+                };
+                let list: Option<Vec<u32>> = (!everything).then(|| {
+                    (0..inst.points.position.len())
+                        .filter(|&i| faces(i))
+                        .map(|i| i as u32)
+                        .collect()
+                });
+                let Some(sums) = inst.points.light.as_mut() else {
+                    return Some(Vec::new());
+                };
+                match &list {
+                    None => sums.clear(),
+                    Some(l) => l.iter().for_each(|&i| sums.keep(i as usize, 0)),
+                }
+                list
+            })
+            .collect();
+        Some(restarted)
+    }
+
+    /// Trace new light paths for each of `selected` (up to `paths_per_point`, never beyond
+    /// the converged count for `max_samples`) with the scene in `pose`, which `tracer` holds.
+    /// Results in the order of `selected`; they do not depend on the number of threads.
+    pub fn trace(
+        &self,
+        tracer: &Tracer,
+        pose: &ScenePose,
+        instances: &[InstanceState],
+        selected: &[Candidate],
+        max_samples: u32,
+        seed: u64,
+    ) -> Vec<LightSample> {
+        let mut lighting =
+            DiffuseLighting::with_lights(&self.scene, self.lights.clone(), self.config.bounces)
+                .posed(pose);
+        if !self.config.sharp_direct {
+            lighting = lighting.without_sharp_direct();
+        }
+        selected
+            .par_iter()
+            .map(|c| {
+                let inst = &instances[c.instance as usize];
+                let i = c.index as usize;
+                let Some(sums) = inst.points.light.as_ref() else {
+                    return LightSample::default();
+                };
+                let first = sums.count[i];
+                let paths = self.paths_for(first, sums.max_paths(max_samples));
+                let (x, n) = inst.world(i);
+                let key = sample_key(c.instance, c.index);
+                let mut out = LightSample {
+                    paths,
+                    ..LightSample::default()
+                };
+                for k in first..first + paths {
+                    let (e, rays) = lighting.sample_counted(tracer, x, n, n, seed, key, k);
+                    out.sum += e;
+                    out.rays += u64::from(rays);
+                }
+                out
+            })
+            .collect()
+    }
+
+    /// Paths a point with `count` of `max_paths` takes this frame.
+    pub fn paths_for(&self, count: u32, max_paths: u32) -> u32 {
+        self.config
+            .paths_per_point
+            .min(max_paths.saturating_sub(count))
+    }
+}
