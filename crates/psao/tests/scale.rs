@@ -3,7 +3,6 @@
 //! `psao serve` alone; a dead trace node's partition is adopted; a late edge catches up.
 //! Every test skips with a note when `nats-server` is not installed.
 
-use std::io::{BufRead, BufReader};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
