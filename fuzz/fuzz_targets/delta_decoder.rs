@@ -22,7 +22,7 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let compress = mode & 1 == 1;
-    let mut paper = PaperCodec;
+    let mut paper = PaperCodec::new();
     if let Ok(update) = paper.decode(&frame(rest, compress)) {
         // One re-encode normalises (compaction); after that encoding is a fixed point.
         let first = paper.encode(&update);

@@ -291,23 +291,25 @@ mod tests {
         assert!(e2 < 0.05 * e1, "one lobe {e1}, two lobes {e2}");
     }
 
+    /// Two lobes whose axes drift with `t`.
+    fn two_drifting_lobes(t: f32) -> ShVec {
+        lobes_to_sh(&[
+            ZhLobe {
+                axis: Vec3::new(t, 0.2, 1.0).normalize(),
+                coeffs: [1.0, 0.8, 0.3, 0.1],
+            },
+            ZhLobe {
+                axis: Vec3::new(-1.0, t, 0.1).normalize(),
+                coeffs: [0.6, 0.5, 0.4, 0.2],
+            },
+        ])
+    }
+
     #[test]
     fn sequences_keep_lobes_in_correspondence() {
         // Two lobes drifting slowly: each fitted lobe follows its own.
         let frames: Vec<ShVec> = (0..10)
-            .map(|f| {
-                let t = f as f32 * 0.05;
-                lobes_to_sh(&[
-                    ZhLobe {
-                        axis: Vec3::new(t, 0.2, 1.0).normalize(),
-                        coeffs: [1.0, 0.8, 0.3, 0.1],
-                    },
-                    ZhLobe {
-                        axis: Vec3::new(-1.0, t, 0.1).normalize(),
-                        coeffs: [0.6, 0.5, 0.4, 0.2],
-                    },
-                ])
-            })
+            .map(|f| two_drifting_lobes(f as f32 * 0.05))
             .collect();
         let fits = fit_sequence(&frames, 2);
         for w in fits.windows(2) {
@@ -323,19 +325,7 @@ mod tests {
         // Two true lobes drifting, fitted with three: the third has little to explain and
         // must not wander (the linear model could not follow it).
         let frames: Vec<ShVec> = (0..12)
-            .map(|f| {
-                let t = f as f32 * 0.04;
-                lobes_to_sh(&[
-                    ZhLobe {
-                        axis: Vec3::new(t, 0.2, 1.0).normalize(),
-                        coeffs: [1.0, 0.8, 0.3, 0.1],
-                    },
-                    ZhLobe {
-                        axis: Vec3::new(-1.0, t, 0.1).normalize(),
-                        coeffs: [0.6, 0.5, 0.4, 0.2],
-                    },
-                ])
-            })
+            .map(|f| two_drifting_lobes(f as f32 * 0.04))
             .enumerate()
             .map(|(f, v)| {
                 // Deterministic noise like that of a few hundred visibility rays.

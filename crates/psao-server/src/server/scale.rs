@@ -518,6 +518,17 @@ mod tests {
         })
     }
 
+    /// One server per partition of `owners`, each holding only its own.
+    fn trace_nodes(scene: &Scene, owners: &Owners) -> Vec<Server> {
+        (0..owners.count())
+            .map(|k| {
+                let mut s = Server::new(scene, config()).unwrap();
+                s.hold_partitions(owners.clone(), &[k]);
+                s
+            })
+            .collect()
+    }
+
     #[test]
     fn trace_nodes_and_a_replica_equal_one_server() {
         let scene = scene();
@@ -526,13 +537,7 @@ mod tests {
         let owners = whole.owners(2);
         let per = owners.points_per_partition();
         assert!(per.iter().all(|&n| n > 0), "{per:?}");
-        let mut nodes: Vec<Server> = (0..2)
-            .map(|k| {
-                let mut s = Server::new(&scene, config()).unwrap();
-                s.hold_partitions(owners.clone(), &[k]);
-                s
-            })
-            .collect();
+        let mut nodes = trace_nodes(&scene, &owners);
         let (c_whole, c_replica) = (whole.add_client(), replica.add_client());
         let mut node_rays = 0;
         let mut whole_rays = 0;
@@ -565,13 +570,7 @@ mod tests {
         let scene = scene();
         let probe = Server::new(&scene, config()).unwrap();
         let owners = probe.owners(2);
-        let mut nodes: Vec<Server> = (0..2)
-            .map(|k| {
-                let mut s = Server::new(&scene, config()).unwrap();
-                s.hold_partitions(owners.clone(), &[k]);
-                s
-            })
-            .collect();
+        let mut nodes = trace_nodes(&scene, &owners);
         let mut replica = Server::new(&scene, config()).unwrap();
         for frame in 0..6u32 {
             let views = [view(frame)];
@@ -613,13 +612,7 @@ mod tests {
         let scene = scene();
         let probe = Server::new(&scene, config()).unwrap();
         let owners = probe.owners(2);
-        let mut nodes: Vec<Server> = (0..2)
-            .map(|k| {
-                let mut s = Server::new(&scene, config()).unwrap();
-                s.hold_partitions(owners.clone(), &[k]);
-                s
-            })
-            .collect();
+        let mut nodes = trace_nodes(&scene, &owners);
         let mut full = Server::new(&scene, config()).unwrap();
         let mut late = Server::new(&scene, config()).unwrap();
         let step = |nodes: &mut Vec<Server>, frame: u32| {
