@@ -2992,6 +2992,7 @@ void main() {
   if (token !== null) history.replaceState(null, "", location.pathname + location.search);
   var verify = params.get("verify") === "1";
   var pathName = params.get("path");
+  var orbitOnly = params.get("orbit") === "1";
   var testFrames = params.has("frames") ? Math.max(1, Number(params.get("frames"))) : null;
   var lockstep = params.get("lockstep") === "1";
   var fixedRes = /^(\d+)x(\d+)$/.exec(params.get("res") ?? "");
@@ -3180,9 +3181,24 @@ void main() {
     if (path && control.auto) {
       if (!pathStart) pathStart = now;
       pathFrame = Math.floor((now - pathStart) / 1e3 * 60);
-      return { cam: pathCamera(path, cameraFrame2, pathFrame), send: true };
+      pathShown = pathCamera(path, cameraFrame2, pathFrame);
+      return { cam: pathShown, send: true };
+    }
+    if (pathShown) {
+      takeOverFrom(pathShown);
+      pathShown = null;
     }
     return { cam: orbitCamera(now), send: true };
+  }
+  var pathShown = null;
+  function takeOverFrom(cam) {
+    if (!orbit) return;
+    const look = [0, 1, 2].map((i) => cam.target[i] - cam.position[i]);
+    const d = Math.hypot(look[0], look[1], look[2]) || 1;
+    control.pitch = Math.max(-1.5, Math.min(1.5, Math.asin(Math.max(-1, Math.min(1, -look[1] / d)))));
+    control.yaw = Math.atan2(-look[2], -look[0]);
+    control.distance = d;
+    orbit.centre = [cam.target[0], cam.target[1], cam.target[2]];
   }
   function measureCost() {
     const cam = status.camera;
@@ -3285,7 +3301,7 @@ void main() {
       `${status.fps} fps \xB7 ${status.mbitS.toFixed(2)} Mbit/s \xB7 server frame ${status.serverFrame} \xB7 round trip ${status.rttMs === null ? "-" : `${status.rttMs.toFixed(1)} ms`}`,
       `${status.updates} updates \xB7 ${status.points} points received \xB7 ${status.decodeMs ? status.decodeMs.toFixed(2) : "-"} ms decode per update`,
       !renderer ? "WebGL2 unavailable: nothing drawn" : grids?.problem ? grids.problem : `view: ${modeName} (keys 1 2 3)${cost ? ` \xB7 AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " \xB7 C: shader cost"}`,
-      status.path ? `camera path ${status.path}, frame ${status.pathFrame}` : "camera: orbit (drag, wheel, W A S D Q E; Space: auto)",
+      status.path ? `camera path ${status.path}, frame ${status.pathFrame} (drag, wheel or W A S D Q E to take over)` : `camera: ${path ? "yours" : "orbit"} (drag, wheel, W A S D Q E; Space: ${path ? "back to the path" : "auto"})`,
       verify ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ` : "state hash not checked (add ?verify=1)"
     ].join("\n");
     message.textContent = status.message ? status.fatal ? `error: ${status.message}` : `${status.message}; reconnecting` : status.stalled ? `updates stalled: ${status.stalled}` : "";
@@ -3307,6 +3323,8 @@ void main() {
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
         if (!path) status.message = `the scene has no camera path named ${pathName}`;
+      } else if (!orbitOnly) {
+        path = renderer.paths[0] ?? null;
       }
     }
   }).catch((e) => {

@@ -2,9 +2,10 @@
 // URL fragment, `#token=…`, which the browser never sends to a server, and goes in the hello
 // and as `Authorization: Bearer` for `/scene.glb`),
 // keeps the client state current and its grids in GPU textures, draws the scene with
-// per-pixel AO (keys 1/2/3 or the overlay's buttons: composited, AO only, no AO), orbits a
-// camera around the scene (bounds from `/scene.glb`) or follows a camera path of the scene
-// by name (`?path=NAME`) so the server traces what it would show, reconnects with backoff,
+// per-pixel AO (keys 1/2/3 or the overlay's buttons: composited, AO only, no AO), follows a
+// camera path of the scene (the first one, or `?path=NAME`) so the server traces what it
+// would show, or orbits the scene (bounds from `/scene.glb`) when it has no path or with
+// `?orbit=1`; the user takes over from wherever the camera is; reconnects with backoff,
 // and shows an overlay: fps, Mbit/s, server frame, round-trip time (a GET of `/health`
 // every 2 s), updates, points, decode ms, state-hash checks (`?verify=1` asks the server for
 // its hash with every update), and a clear message for a wrong token or protocol version.
@@ -110,6 +111,8 @@ const token = new URLSearchParams(location.hash.slice(1)).get("token");
 if (token !== null) history.replaceState(null, "", location.pathname + location.search);
 const verify = params.get("verify") === "1";
 const pathName = params.get("path");
+/// `?orbit=1`: orbit the scene from outside instead of following its first camera path.
+const orbitOnly = params.get("orbit") === "1";
 const testFrames = params.has("frames") ? Math.max(1, Number(params.get("frames"))) : null;
 const lockstep = params.get("lockstep") === "1";
 const fixedRes = /^(\d+)x(\d+)$/.exec(params.get("res") ?? "");
@@ -224,8 +227,9 @@ for (const [id, mode] of [
   document.getElementById(id)?.addEventListener("click", () => (status.mode = mode));
 }
 
-/// The camera: it orbits the scene by itself until the user drags (orbit), scrolls (zoom)
-/// or flies (W/A/S/D forward/left/back/right, Q/E down/up); Space resumes the auto-orbit.
+/// The camera: it follows the path (or orbits the scene) by itself until the user drags
+/// (orbit), scrolls (zoom) or flies (W/A/S/D forward/left/back/right, Q/E down/up); Space
+/// gives the camera back to the path (or the auto-orbit).
 const control = { auto: true, yaw: 0, pitch: 0.3, distance: 0, keys: new Set<string>(), last: 0 };
 
 canvas.addEventListener("mousedown", (e) => {
@@ -324,9 +328,29 @@ function currentCamera(now: number): { cam: Camera | null; send: boolean } {
   if (path && control.auto) {
     if (!pathStart) pathStart = now;
     pathFrame = Math.floor(((now - pathStart) / 1000) * 60);
-    return { cam: pathCamera(path, cameraFrame, pathFrame), send: true };
+    pathShown = pathCamera(path, cameraFrame, pathFrame);
+    return { cam: pathShown, send: true };
+  }
+  if (pathShown) {
+    takeOverFrom(pathShown);
+    pathShown = null;
   }
   return { cam: orbitCamera(now), send: true };
+}
+
+/// The followed path's camera last shown, until the user takes over from it.
+let pathShown: Camera | null = null;
+
+/// Puts the user's orbit camera where `cam` is: centred on its target, at its distance,
+/// looking the same way.
+function takeOverFrom(cam: Camera) {
+  if (!orbit) return;
+  const look = [0, 1, 2].map((i) => cam.target[i] - cam.position[i]);
+  const d = Math.hypot(look[0], look[1], look[2]) || 1;
+  control.pitch = Math.max(-1.5, Math.min(1.5, Math.asin(Math.max(-1, Math.min(1, -look[1] / d)))));
+  control.yaw = Math.atan2(-look[2], -look[0]);
+  control.distance = d;
+  orbit.centre = [cam.target[0], cam.target[1], cam.target[2]];
 }
 
 /// Draws one frame in the cost mode and reads it back: per covered pixel, the mean and
@@ -451,7 +475,9 @@ function tick(now: number) {
         : `view: ${modeName} (keys 1 2 3)${
             cost ? ` · AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " · C: shader cost"
           }`,
-    status.path ? `camera path ${status.path}, frame ${status.pathFrame}` : "camera: orbit (drag, wheel, W A S D Q E; Space: auto)",
+    status.path
+      ? `camera path ${status.path}, frame ${status.pathFrame} (drag, wheel or W A S D Q E to take over)`
+      : `camera: ${path ? "yours" : "orbit"} (drag, wheel, W A S D Q E; Space: ${path ? "back to the path" : "auto"})`,
     verify
       ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ`
       : "state hash not checked (add ?verify=1)",
@@ -485,6 +511,8 @@ fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
         if (!path) status.message = `the scene has no camera path named ${pathName}`;
+      } else if (!orbitOnly) {
+        path = renderer.paths[0] ?? null;
       }
     }
   })

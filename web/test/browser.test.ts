@@ -69,6 +69,7 @@ function drive(addr: string, frames: number): Promise<number> {
 type Cam = { position: number[]; target: number[] };
 type Status = {
   autoOrbit: boolean;
+  path: string | null;
   camera: Cam | null;
   drawn: number;
   sessions: number;
@@ -130,8 +131,11 @@ test("in chromium the viewer's state hash equals the server's", { timeout: 120_0
       return n / (c.width * c.height);
     });
     assert.ok(covered > 0.05, `the scene covers ${covered} of the canvas`);
-    // Dragging takes the camera over from the auto-orbit; W flies it forward.
-    assert.equal((await statusOf(page)).autoOrbit, true);
+    // The viewer opens on the scene's first camera path; dragging takes the camera over from
+    // it, W flies it forward and Space gives it back to the path.
+    const opened = await statusOf(page);
+    assert.equal(opened.autoOrbit, true);
+    assert.equal(opened.path, "default_a", "the viewer follows the scene's first camera path");
     await page.mouse.move(400, 300);
     await page.mouse.down();
     await page.mouse.move(500, 320, { steps: 5 });
@@ -144,6 +148,9 @@ test("in chromium the viewer's state hash equals the server's", { timeout: 120_0
     const moved = Math.hypot(...[0, 1, 2].map((i) => flown.camera!.target[i] - held.camera!.target[i]));
     assert.ok(moved > 0, "W did not move the camera");
     assert.equal(flown.autoOrbit, false);
+    assert.equal(flown.path, null);
+    await page.keyboard.press(" ");
+    await until(page, "Space to give the camera back to the path", (s) => s.path === "default_a");
     await page.screenshot({ path: join(fileURLToPath(new URL(".", import.meta.url)), "viewer.png") });
   } finally {
     await page.close();
