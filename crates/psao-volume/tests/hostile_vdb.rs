@@ -164,6 +164,21 @@ fn the_tile_bomb_is_refused_quickly_before_expanding() {
 }
 
 #[test]
+fn a_root_child_at_the_most_negative_coordinate_is_refused() {
+    // Found by the `vdb_reader` fuzzer: i32::MIN is a multiple of 4096, and its absolute
+    // value does not fit an i32 (the origin check overflowed).
+    for origin in [IVec3::new(i32::MIN, 0, 0), IVec3::new(0, 0, i32::MIN)] {
+        let bytes = write_vdb(&[Root {
+            origin,
+            tiles: vec![(0, 1.0)],
+            children: Vec::new(),
+        }]);
+        let e = vdb::read_vdb_bytes(&bytes, "origin.vdb", None).unwrap_err();
+        assert!(e.to_string().contains("root child origin"), "{e}");
+    }
+}
+
+#[test]
 fn tiles_load_as_tiles_and_sample_exactly() {
     // Two 128³ tiles and a 4-level child with an 8³ tile and a leaf, at the origin.
     let bytes = write_vdb(&[Root {
