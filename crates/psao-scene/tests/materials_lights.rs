@@ -283,3 +283,30 @@ fn bad_environment_and_sun_keys_are_named() {
         assert!(e.contains(needle), "{text}: {e}");
     }
 }
+
+#[test]
+fn the_committed_open_box_scene_holds_what_the_mitsuba_script_converts() {
+    // scenes/open_box.toml is compared with Mitsuba 3 by scripts/compare_mitsuba.py, which
+    // reads the OBJ's `Kd`, the constant sky and the sun itself: psao must read the same.
+    let file = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/open_box.toml");
+    let loaded = load(Path::new(file)).unwrap();
+    let scene = &loaded.scene;
+    let colour = |name: &str| {
+        let m = scene.materials.iter().find(|m| m.name == name).unwrap();
+        m.base_color.truncate()
+    };
+    assert_eq!(colour("red"), Vec3::new(0.75, 0.12, 0.1));
+    assert_eq!(colour("block"), Vec3::new(0.6, 0.55, 0.45));
+    assert!(scene.materials.iter().all(|m| !m.is_non_diffuse()));
+    assert_eq!(
+        scene.environment,
+        psao_scene::Environment::Constant(Vec3::new(0.35, 0.45, 0.6))
+    );
+    assert_eq!(scene.lights.len(), 1);
+    let LightShape::Sun { direction } = scene.lights[0].shape else {
+        panic!("not a sun");
+    };
+    assert!((direction - Vec3::new(0.45, 1.0, 0.35).normalize()).length() < 1e-6);
+    assert_eq!(scene.lights[0].power, 3.0);
+    assert_eq!(loaded.camera_paths.len(), 1);
+}

@@ -54,7 +54,8 @@ enum Command {
     Run(run::RunArgs),
     /// Evaluate PSAO against the reference, SSAO and few-spp RTAO; write report.json and report.md.
     Eval(eval::EvalArgs),
-    /// Render per-pixel reference AO (16-bit grayscale PNGs) along a camera path.
+    /// Render per-pixel reference AO (16-bit grayscale PNGs) or path-traced diffuse lighting
+    /// (`--lighting gi`: linear HDR and an sRGB preview) along a camera path.
     Reference(reference::ReferenceArgs),
     /// Compare two AO images: PSNR, SSIM and FLIP.
     Compare(compare::CompareArgs),
