@@ -3,13 +3,12 @@
 //! in process (`psao run`) and over loopback (`psao serve` + `psao view`), to the same state.
 //! Each part starts a server on 15 M points: the slowest tests of the suite.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 
 mod common;
 
-use common::{json, stderr, BIN};
+use common::{json, start_role, stderr, BIN};
 
 /// The scene file and camera path, from the workspace root.
 const SCENE: &str = "../../scenes/sponza.toml";
@@ -46,27 +45,13 @@ fn sponza_at_2048_points_decodes_in_process_and_over_serve_view() {
     let points = run["points"].as_u64().unwrap_or(0);
     assert!(points > 12_000_000, "a dense point set: {run}");
 
-    let mut server = Command::new(BIN)
-        .args(["--log", "warn", "serve", "--scene", SCENE])
-        .args(["--listen", "127.0.0.1:0", "--hz", "30", "--lockstep"])
-        .args(["--wait-clients", "1", "--once"])
-        .args(SERVER)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(server.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let lockstep = ["--listen", "127.0.0.1:0", "--hz", "30", "--lockstep"];
+    let once = [&["--wait-clients", "1", "--once"][..], SERVER].concat();
+    let (mut server, line) = start_role("serve", SCENE, &lockstep, &once);
     let addr = line
-        .trim()
         .strip_prefix("listening on ")
-        .map(str::to_string);
-    let Some(addr) = addr else {
-        let _ = server.kill();
-        panic!("unexpected serve output {line:?}");
-    };
+        .unwrap_or_else(|| panic!("unexpected serve output {line:?}"))
+        .to_string();
     let view_json = dir.path().join("view.json");
     let o = Command::new(BIN)
         .args([
@@ -89,7 +74,7 @@ fn sponza_at_2048_points_decodes_in_process_and_over_serve_view() {
         .args(["--json", view_json.to_str().unwrap()])
         .output()
         .unwrap();
-    let served = server.wait().unwrap();
+    let served = server.0.wait().unwrap();
     assert!(o.status.success(), "psao view: {}", stderr(&o));
     assert!(served.success());
     assert_eq!(json(&view_json)["state_hash"], run["state_hash"]);

@@ -1,47 +1,30 @@
 //! HTTP on the serve port: the viewer, `/scene.glb`, `/health`, the WebSocket at `/ws`, and
 //! 4xx answers to bad requests that leave the server serving.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 mod common;
 
-use common::{stderr, BIN};
+use common::{start_role, stderr, Proc, BIN};
 
 /// A `psao serve` of the built-in scene at few points, killed on drop.
 struct Serve {
-    child: Child,
+    child: Proc,
     addr: String,
 }
 
 impl Serve {
     fn start(extra: &[&str]) -> Serve {
-        let mut child = Command::new(BIN)
-            .args(["--log", "warn", "serve", "--listen", "127.0.0.1:0"])
-            .args(["--points", "48", "--ray-budget", "20000"])
-            .args(extra)
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
+        let server = ["--listen", "127.0.0.1:0", "--points", "48", "--ray-budget", "20000"];
+        let (child, line) = start_role("serve", "default", &server, extra);
         let addr = line
-            .trim()
             .strip_prefix("listening on ")
             .unwrap_or_else(|| panic!("unexpected serve output {line:?}"))
             .to_string();
         Serve { child, addr }
-    }
-}
-
-impl Drop for Serve {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 
@@ -338,7 +321,7 @@ fn view_within_5s(connect: &str) -> Result<serde_json::Value, String> {
 fn slow_readers_from_one_address_lock_nobody_out_and_memory_stays_bounded() {
     let server = Serve::start(&[]);
     let addr = server.addr.clone();
-    let pid = server.child.id();
+    let pid = server.child.0.id();
     // Idle: after the first full request of each kind.
     assert_eq!(request(&addr, "GET", "/scene.glb", "").0, 200);
     assert_eq!(request(&addr, "GET", "/viewer.js", "").0, 200);
