@@ -8,7 +8,7 @@ use std::process::Command;
 
 mod common;
 
-use common::{json, start_role, stderr, BIN};
+use common::{json, listening_addr, start_role, stderr, BIN};
 
 /// The scene file and camera path, from the workspace root.
 const SCENE: &str = "../../scenes/sponza.toml";
@@ -48,10 +48,7 @@ fn sponza_at_2048_points_decodes_in_process_and_over_serve_view() {
     let lockstep = ["--listen", "127.0.0.1:0", "--hz", "30", "--lockstep"];
     let once = [&["--wait-clients", "1", "--once"][..], SERVER].concat();
     let (mut server, line) = start_role("serve", SCENE, &lockstep, &once);
-    let addr = line
-        .strip_prefix("listening on ")
-        .unwrap_or_else(|| panic!("unexpected serve output {line:?}"))
-        .to_string();
+    let addr = listening_addr(&line);
     let view_json = dir.path().join("view.json");
     let o = Command::new(BIN)
         .args([

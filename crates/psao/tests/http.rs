@@ -8,7 +8,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{start_role, stderr, Proc, BIN};
+use common::{listening_addr, start_role, stderr, Proc, BIN};
 
 /// A `psao serve` of the built-in scene at few points, killed on drop.
 struct Serve {
@@ -18,12 +18,16 @@ struct Serve {
 
 impl Serve {
     fn start(extra: &[&str]) -> Serve {
-        let server = ["--listen", "127.0.0.1:0", "--points", "48", "--ray-budget", "20000"];
+        let server = [
+            "--listen",
+            "127.0.0.1:0",
+            "--points",
+            "48",
+            "--ray-budget",
+            "20000",
+        ];
         let (child, line) = start_role("serve", "default", &server, extra);
-        let addr = line
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| panic!("unexpected serve output {line:?}"))
-            .to_string();
+        let addr = listening_addr(&line);
         Serve { child, addr }
     }
 }

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::{free_port, Proc, BIN};
+use common::{free_port, listening_addr, Proc, BIN};
 
 /// Server settings of every process: few points, small budget.
 const SERVER: &[&str] = &["--points", "96", "--ray-budget", "20000", "--hz", "30"];
@@ -168,9 +168,7 @@ fn accounts_serve_a_viewer_and_forbid_forged_publishing() {
             &edge_pw,
         ],
     );
-    let addr = listening
-        .strip_prefix("listening on ")
-        .unwrap_or_else(|| panic!("unexpected edge output {listening:?}"));
+    let addr = listening_addr(&listening);
     let json = dir.path().join("view.json");
     let o = Command::new(BIN)
         .args([
@@ -178,7 +176,7 @@ fn accounts_serve_a_viewer_and_forbid_forged_publishing() {
             "warn",
             "view",
             "--connect",
-            addr,
+            &addr,
             "--scene",
             &scene,
         ])

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::{free_port, json, start_role, stderr, Proc, BIN};
+use common::{free_port, json, listening_addr, start_role, stderr, Proc, BIN};
 
 /// Server settings of every process: few points, small budget.
 const SERVER: &[&str] = &["--points", "96", "--ray-budget", "20000", "--hz", "30"];
@@ -101,13 +101,6 @@ fn start(role: &str, scene: &str, extra: &[&str]) -> (Proc, String) {
     start_role(role, scene, SERVER, extra)
 }
 
-/// The address of a server that printed `listening on ADDR`.
-fn addr(line: &str) -> String {
-    line.strip_prefix("listening on ")
-        .unwrap_or_else(|| panic!("unexpected output {line:?}"))
-        .to_string()
-}
-
 /// A `psao view` of `frames` frames writing its statistics to `out`.
 fn view(connect: &str, scene: &str, path: &str, frames: u32, out: &Path) -> Child {
     view_with(connect, scene, path, frames, out, &[])
@@ -177,7 +170,7 @@ fn serve_alone(
     ];
     args.extend(server_args);
     let (mut serve, line) = start("serve", scene, &args);
-    let at = addr(&line);
+    let at = listening_addr(&line);
     let files: Vec<PathBuf> = (0..viewers)
         .map(|i| dir.join(format!("s{i}.json")))
         .collect();
@@ -275,7 +268,7 @@ fn lockstep_edges(
     let edges = pair("edge", scene, args, extra, reports.map(|d| (d, "e")));
     edges
         .into_iter()
-        .map(|(p, line)| (p, addr(&line)))
+        .map(|(p, line)| (p, listening_addr(&line)))
         .collect()
 }
 
@@ -384,7 +377,13 @@ fn late_edge(dir: &Path, url: &str, scene: &str, path: &str) -> serde_json::Valu
             report.to_str().unwrap(),
         ],
     );
-    let v = view(&addr(&line), scene, path, 30, &dir.join("lv.json"));
+    let v = view(
+        &listening_addr(&line),
+        scene,
+        path,
+        30,
+        &dir.join("lv.json"),
+    );
     finished(v);
     late.wait(20);
     let late = json(&report);
@@ -415,7 +414,7 @@ fn clocked_edge(url: &str, scene: &str, dir: &Path, e: u32) -> (Proc, String) {
     args.extend(QUICK);
     args.extend(["--json", json.to_str().unwrap()]);
     let (p, line) = start("edge", scene, &args);
-    (p, addr(&line))
+    (p, listening_addr(&line))
 }
 
 #[test]
@@ -658,7 +657,7 @@ fn a_trace_node_starting_late_restarts_from_the_published_state() {
             ];
             args.extend(QUICK);
             let (p, line) = start("edge", &scene, &args);
-            (p, addr(&line))
+            (p, listening_addr(&line))
         })
         .collect();
     let files: Vec<PathBuf> = (0..2).map(|i| out(&format!("v{i}.json"))).collect();
@@ -794,7 +793,13 @@ fn at_defaults(
     };
     let lockstep = ["--listen", "127.0.0.1:0", "--lockstep", "--once"];
     let (mut serve, line) = start_role("serve", scene, server, &lockstep);
-    finished(view(&addr(&line), scene, path, frames, &out("s.json")));
+    finished(view(
+        &listening_addr(&line),
+        scene,
+        path,
+        frames,
+        &out("s.json"),
+    ));
     serve.wait(60);
     let alone = session("s.json");
 
@@ -823,7 +828,13 @@ fn at_defaults(
     args.extend(["--partitions", &count]);
     args.extend(lockstep);
     let (mut edge, line) = start_role("edge", scene, server, &args);
-    finished(view(&addr(&line), scene, path, frames, &out("v.json")));
+    finished(view(
+        &listening_addr(&line),
+        scene,
+        path,
+        frames,
+        &out("v.json"),
+    ));
     edge.wait(60);
     let split = session("v.json");
     let e = json(&report);

@@ -65,3 +65,11 @@ pub fn start_role(role: &str, scene: &str, server: &[&str], extra: &[&str]) -> (
         .unwrap();
     (Proc(child), line.trim().to_string())
 }
+
+/// The address of a server that printed `listening on ADDR` (the line of [`start_role`]).
+pub fn listening_addr(line: &str) -> String {
+    line.trim()
+        .strip_prefix("listening on ")
+        .unwrap_or_else(|| panic!("unexpected output {line:?}"))
+        .to_string()
+}
