@@ -260,3 +260,9 @@ fn no_maps_no_light_and_rectangles_are_left_out() {
         .render(&s, &[], &[sun(Vec3::Y)], &viewer(), 1.0)
         .is_err());
 }
+
+#[test]
+fn maps_can_be_shared_between_threads() {
+    fn shareable<T: Send + Sync>() {}
+    shareable::<ShadowMaps>();
+}
