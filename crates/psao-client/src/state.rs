@@ -147,6 +147,11 @@ impl ClientState {
             .map_or([0; CELL_POINTS], |l| l.value(slot as usize))
     }
 
+    /// `instance`'s irradiance records by cell slot (`None` out of range).
+    pub(crate) fn light_cells(&self, instance: usize) -> Option<&Paged<CellLights>> {
+        self.lights.get(instance)
+    }
+
     /// Whether any irradiance record was received since the last snapshot (the server has
     /// lighting on).
     pub fn has_lights(&self) -> bool {
