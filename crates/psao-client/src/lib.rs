@@ -17,7 +17,9 @@ mod hash;
 mod reconstruct;
 mod state;
 
-pub use composite::{composite, composite_srgb8, encode_srgb, Shading, SKY_GREY};
+pub use composite::{
+    composite, composite_lit, composite_srgb8, direct_light, encode_srgb, Shading, SKY_GREY,
+};
 pub use detail::{apply_detail, DetailSettings};
 pub use error::ClientError;
 pub use hash::{lit_state_hash_of, state_hash_of};
