@@ -1,8 +1,13 @@
-//! The client's final image: base colour × (ambient × AO + direct sun light), and its 8-bit
-//! sRGB encoding.
+//! The client's final image, and its 8-bit sRGB encoding. Without lighting (AO only):
+//! base colour × (ambient × AO + direct sun light) ([`composite`]). With lighting (DESIGN
+//! §12): the Lambertian radiance `base colour / π × (direct + irradiance)`
+//! ([`composite_lit`]), where the irradiance reconstructed from the points carries the
+//! environment, area lights and all bounced light, already occluded by the scene (so AO does
+//! not scale it again), and `direct` is the shadow-mapped light of suns and point lights
+//! ([`direct_light`]).
 
 use glam::Vec3;
-use psao_raster::GBuffer;
+use psao_raster::{GBuffer, ShadowMaps};
 use psao_scene::{Material, Scene};
 use rayon::prelude::*;
 
@@ -38,6 +43,50 @@ impl Default for Shading {
 /// attribute arrays counts as uncovered.
 pub fn composite(scene: &Scene, gbuffer: &GBuffer, ao: &[f32], shading: &Shading) -> Vec<[f32; 3]> {
     let light_dir = shading.light_dir.normalize_or_zero();
+    shade(scene, gbuffer, |i, base, normal| {
+        let occlusion = ao.get(i).copied().unwrap_or(1.0);
+        let direct = shading.light * normal.dot(light_dir).max(0.0);
+        base * (shading.ambient * occlusion + direct)
+    })
+}
+
+/// Linear RGB radiance per pixel with lighting: `base_colour / π × (direct + irradiance)`
+/// (the convention of the per-pixel reference, `psao_eval::reference_gi`), with the
+/// material's base colour as in [`composite`]; [`SKY_GREY`] where nothing is covered. A pixel
+/// missing from `irradiance` or `direct` counts as receiving none of it.
+pub fn composite_lit(
+    scene: &Scene,
+    gbuffer: &GBuffer,
+    irradiance: &[Vec3],
+    direct: &[Vec3],
+) -> Vec<[f32; 3]> {
+    shade(scene, gbuffer, |i, base, _| {
+        let e = irradiance.get(i).copied().unwrap_or(Vec3::ZERO)
+            + direct.get(i).copied().unwrap_or(Vec3::ZERO);
+        base * e / std::f32::consts::PI
+    })
+}
+
+/// The shadow-mapped direct irradiance of `shadows` ([`ShadowMaps::direct`]) at every covered
+/// pixel of `gbuffer` (its position and shading normal); zero elsewhere.
+pub fn direct_light(shadows: &ShadowMaps, gbuffer: &GBuffer) -> Vec<Vec3> {
+    let pixels = gbuffer.width as usize * gbuffer.height as usize;
+    (0..pixels)
+        .into_par_iter()
+        .map(|i| match (gbuffer.position.get(i), gbuffer.normal.get(i)) {
+            (Some(&p), Some(&n)) if gbuffer.covered(i) => shadows.direct(p, n),
+            _ => Vec3::ZERO,
+        })
+        .collect()
+}
+
+/// `colour(pixel, base colour, shading normal)` at every covered pixel, [`SKY_GREY`] where
+/// nothing is covered (or the G-buffer's attribute arrays miss the pixel). An unknown
+/// material uses the default material's colour.
+fn shade<F>(scene: &Scene, gbuffer: &GBuffer, colour: F) -> Vec<[f32; 3]>
+where
+    F: Fn(usize, Vec3, Vec3) -> Vec3 + Sync,
+{
     let fallback = Material::default().base_color.truncate();
     let pixels = gbuffer.width as usize * gbuffer.height as usize;
     (0..pixels)
@@ -54,9 +103,7 @@ pub fn composite(scene: &Scene, gbuffer: &GBuffer, ao: &[f32], shading: &Shading
                 .material(scene, i)
                 .and_then(|m| scene.materials.get(m))
                 .map_or(fallback, |m| m.base_color.truncate());
-            let occlusion = ao.get(i).copied().unwrap_or(1.0);
-            let direct = shading.light * normal.dot(light_dir).max(0.0);
-            (base * (shading.ambient * occlusion + direct)).to_array()
+            colour(i, base, normal).to_array()
         })
         .collect()
 }

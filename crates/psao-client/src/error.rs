@@ -55,6 +55,16 @@ pub enum ClientError {
         /// Number of addressable slots of the instance.
         max: usize,
     },
+    /// Irradiance records that do not pair with the delta's cells one to one.
+    #[error("instance {instance}: {lights} irradiance records for {cells} cells")]
+    LightsMismatch {
+        /// The instance index.
+        instance: u32,
+        /// Number of record arrays.
+        lights: usize,
+        /// Number of cells.
+        cells: usize,
+    },
     /// The point grid refused a change that validation accepted (an internal inconsistency;
     /// the update may then be partly applied).
     #[error("instance {instance}: {source}")]

@@ -1,4 +1,5 @@
-//! [`psao_points::reconstruct_ao`] with the neighbourhood lookup shared between pixels.
+//! [`psao_points::reconstruct_ao`] with the neighbourhood lookup shared between pixels, and
+//! with lighting the points' irradiance interpolated with the same weights.
 //!
 //! Neighbouring pixels of one surface usually fall into the same 2×2×2 block of cells (a cell
 //! spans several pixels at typical distances), so a [`Neighbourhood`] keeps the decoded points
@@ -6,10 +7,21 @@
 //! instance or the block changes. The weighting performs the same floating-point operations
 //! on the same points in the same order as `reconstruct_ao`, so results are bit-identical
 //! (tested).
+//!
+//! Irradiance (DESIGN §12) uses the AO kernel: the same points and weights give
+//! `Σ w·E_i / Σ w` per channel (the weighted mean also where AO uses a planar fit), the same
+//! nearest-point fallbacks give the fallback point's irradiance, and a pixel with no
+//! compatible point at all gets zero.
 
-use glam::{IVec3, Vec3};
+use glam::{IVec3, UVec3, Vec3};
+use psao_points::irradiance::unpack_rgb9e5;
 use psao_points::pack::{is_valid, normal_code, normal_table, unpack_ao};
-use psao_points::{InstanceGrid, LinearFit, NearestK, ReconstructParams, CELL_POINTS};
+use psao_points::{InstanceGrid, LinearFit, NearestK, Paged, ReconstructParams, CELL_POINTS};
+
+use crate::state::CellLights;
+
+/// An instance's irradiance records by cell slot.
+pub(crate) type Lights<'a> = Option<&'a Paged<CellLights>>;
 
 /// Most points a 2×2×2 block can hold.
 const MAX_POINTS: usize = 8 * CELL_POINTS;
@@ -23,6 +35,10 @@ pub(crate) struct Neighbourhood {
     position: [[f32; MAX_POINTS]; 3],
     normal: [[f32; MAX_POINTS]; 3],
     ao: [f32; MAX_POINTS],
+    /// Irradiance per point, one array per channel (decoded only with records).
+    irradiance: [[f32; MAX_POINTS]; 3],
+    /// Whether the gathered points came with irradiance records.
+    lit: bool,
 }
 
 impl Neighbourhood {
@@ -34,28 +50,32 @@ impl Neighbourhood {
             position: [[0.0; MAX_POINTS]; 3],
             normal: [[0.0; MAX_POINTS]; 3],
             ao: [0.0; MAX_POINTS],
+            irradiance: [[0.0; MAX_POINTS]; 3],
+            lit: false,
         }
     }
 
-    /// AO at local position `p` with local unit normal `n` on instance `instance` (whose grid
-    /// is `grid`): the result of `reconstruct_ao(grid, p, n, params)`.
+    /// AO and irradiance at local position `p` with local unit normal `n` on instance
+    /// `instance` (whose grid is `grid` and irradiance records `lights`): the AO is the result
+    /// of `reconstruct_ao(grid, p, n, params)`, the irradiance interpolated as the module
+    /// documentation says (zero without records).
     #[inline]
-    pub(crate) fn ao(
+    pub(crate) fn sample(
         &mut self,
         instance: u32,
-        grid: &InstanceGrid,
+        (grid, lights): (&InstanceGrid, Lights<'_>),
         p: Vec3,
         n: Vec3,
         params: &ReconstructParams,
-    ) -> f32 {
+    ) -> (f32, Vec3) {
         let layout = grid.layout();
         let mut r = layout.poisson_radius * params.interpolation_factor;
         if !(r > 0.0 && r.is_finite() && p.is_finite()) {
-            return 1.0;
+            return (1.0, Vec3::ZERO);
         }
         let base = layout.nearest_base(p);
         if self.key != Some((instance, base)) {
-            self.gather(grid, base);
+            self.gather(grid, lights, base);
             self.key = Some((instance, base));
         }
         let plane = params.plane_tolerance * layout.poisson_radius;
@@ -95,7 +115,7 @@ impl Neighbourhood {
             ao_sum += w * ao;
         }
         if w_sum > 0.0 {
-            match params.linear_ridge {
+            let ao = match params.linear_ridge {
                 Some(ridge) => {
                     // The same points, in the same order, as `reconstruct_ao` adds.
                     let mut fit = LinearFit::new(n);
@@ -107,43 +127,78 @@ impl Neighbourhood {
                         .unwrap_or(ao_sum / w_sum)
                 }
                 None => ao_sum / w_sum,
-            }
+            };
+            (ao, self.weighted_irradiance(&weight, w_sum))
         } else if params.nearest_fallback {
-            self.nearest(p, n, plane, params)
-                .or_else(|| ring_nearest(grid, base, p, n, plane, params))
-                .unwrap_or(1.0)
+            match self.nearest(p, n, plane, params) {
+                Some(i) => (self.ao[i], self.irradiance_of(i)),
+                None => ring_nearest((grid, lights), base, p, n, plane, params)
+                    .unwrap_or((1.0, Vec3::ZERO)),
+            }
         } else {
-            1.0
+            (1.0, Vec3::ZERO)
         }
     }
 
-    /// The fallback of `reconstruct_ao` when no point lies within the radius: the AO of the
-    /// block's nearest point passing the normal, plane and direction tests (first one on
+    /// `Σ w·E_i / w_sum` over the gathered points (zero without records).
+    fn weighted_irradiance(&self, weight: &[f32; MAX_POINTS], w_sum: f32) -> Vec3 {
+        if !self.lit {
+            return Vec3::ZERO;
+        }
+        let mut sum = [0.0f32; 3];
+        for (channel, values) in sum.iter_mut().zip(&self.irradiance) {
+            for (w, e) in weight.iter().zip(values).take(self.count) {
+                *channel += w * e;
+            }
+        }
+        Vec3::from(sum) / w_sum
+    }
+
+    /// The irradiance of gathered point `i` (zero without records).
+    fn irradiance_of(&self, i: usize) -> Vec3 {
+        let [r, g, b] = &self.irradiance;
+        if self.lit {
+            Vec3::new(r[i], g[i], b[i])
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// The fallback of `reconstruct_ao` when no point lies within the radius: the index of
+    /// the block's nearest point passing the normal, plane and direction tests (first one on
     /// ties), if any.
-    fn nearest(&self, p: Vec3, n: Vec3, plane: f32, params: &ReconstructParams) -> Option<f32> {
+    fn nearest(&self, p: Vec3, n: Vec3, plane: f32, params: &ReconstructParams) -> Option<usize> {
         let [px, py, pz] = &self.position;
         let [nx, ny, nz] = &self.normal;
-        let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, None);
+        let (mut nearest_d2, mut nearest) = (f32::INFINITY, None);
         for i in 0..self.count {
             let delta = Vec3::new(px[i], py[i], pz[i]) - p;
             let ni = Vec3::new(nx[i], ny[i], nz[i]);
             let d2 = delta.length_squared();
             if compatible(ni, n, delta, d2, plane, params) && d2 < nearest_d2 {
-                (nearest_d2, nearest_ao) = (d2, Some(self.ao[i]));
+                (nearest_d2, nearest) = (d2, Some(i));
             }
         }
-        nearest_ao
+        nearest
     }
 
     /// Decode the valid points of the allocated cells of the block at `base`, in the order
-    /// `reconstruct_ao` visits them.
-    fn gather(&mut self, grid: &InstanceGrid, base: IVec3) {
+    /// `reconstruct_ao` visits them, with their irradiance when `lights` has records.
+    fn gather(&mut self, grid: &InstanceGrid, lights: Lights<'_>, base: IVec3) {
         let layout = grid.layout();
         let normals = normal_table();
         self.count = 0;
+        self.lit = lights.is_some();
         for (coord, cell) in grid.block_cells(base) {
-            for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+            let records = records_of(grid, lights, coord);
+            for (k, &bits) in cell.points.iter().enumerate().filter(|(_, &b)| is_valid(b)) {
                 let i = self.count;
+                if let Some(records) = &records {
+                    let e = unpack_rgb9e5(records[k]);
+                    for (channel, value) in self.irradiance.iter_mut().zip(e.to_array()) {
+                        channel[i] = value;
+                    }
+                }
                 let position = layout.unpack_position(coord, bits);
                 let normal = normals[normal_code(bits) as usize];
                 for axis in 0..3 {
@@ -157,31 +212,43 @@ impl Neighbourhood {
     }
 }
 
+/// The irradiance records of the cell at `coord` (`None` without records).
+fn records_of(grid: &InstanceGrid, lights: Lights<'_>, coord: UVec3) -> Option<CellLights> {
+    let lights = lights?;
+    Some(
+        grid.find_cell(coord)
+            .map_or_else(CellLights::default, |slot| lights.value(slot as usize)),
+    )
+}
+
 /// The second fallback of `reconstruct_ao`, when the block has no compatible point: the AO
-/// of the nearest compatible point of the cells around it ([`InstanceGrid::ring_cells`]),
-/// decoded straight from the grid (this path is rare, so nothing is cached).
+/// (and irradiance, zero without records) of the nearest compatible point of the cells
+/// around it ([`InstanceGrid::ring_cells`]), decoded straight from the grid (this path is
+/// rare, so nothing is cached).
 fn ring_nearest(
-    grid: &InstanceGrid,
+    (grid, lights): (&InstanceGrid, Lights<'_>),
     base: IVec3,
     p: Vec3,
     n: Vec3,
     plane: f32,
     params: &ReconstructParams,
-) -> Option<f32> {
+) -> Option<(f32, Vec3)> {
     let layout = grid.layout();
     let normals = normal_table();
-    let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, None);
+    let (mut nearest_d2, mut nearest) = (f32::INFINITY, None);
     for (coord, cell) in grid.ring_cells(base) {
-        for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+        for (k, &bits) in cell.points.iter().enumerate().filter(|(_, &b)| is_valid(b)) {
             let delta = layout.unpack_position(coord, bits) - p;
             let d2 = delta.length_squared();
             let ni = normals[normal_code(bits) as usize];
             if compatible(ni, n, delta, d2, plane, params) && d2 < nearest_d2 {
-                (nearest_d2, nearest_ao) = (d2, Some(unpack_ao(bits)));
+                (nearest_d2, nearest) = (d2, Some((coord, k, unpack_ao(bits))));
             }
         }
     }
-    nearest_ao
+    let (coord, k, ao) = nearest?;
+    let e = records_of(grid, lights, coord).map_or(Vec3::ZERO, |r| unpack_rgb9e5(r[k]));
+    Some((ao, e))
 }
 
 /// The normal, tangent-plane and direction tests of `reconstruct_ao` for a point with normal

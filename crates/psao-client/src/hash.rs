@@ -6,13 +6,18 @@
 //! always hash differently; a 64-bit finaliser spreads the result. Buckets and cells are
 //! hashed in their compacted form (used entries first, in order; the form updates carry),
 //! so a server grid and a client mirror of it hash alike.
+//!
+//! Irradiance records (DESIGN §12) are folded in per instance only when some record of its
+//! used cells is non-zero: an AO-only state hashes exactly as before lighting existed.
 
 use psao_delta::{compact_bucket, compact_cell};
-use psao_points::InstanceGrid;
+use psao_points::{InstanceGrid, CELL_POINTS};
 
 const MULTIPLIER: u64 = 0x517c_c1b7_2722_0a95;
 /// Word folded in for an instance without a grid.
 const NO_GRID: u64 = 0x6e6f_5f67_7269_6421;
+/// Word folded in before an instance's irradiance records.
+const LIGHTS: u64 = 0x6c69_6768_745f_7265;
 
 /// Incremental word hasher.
 struct Hasher(u64);
@@ -36,14 +41,27 @@ impl Hasher {
 /// instance by instance, each bucket and cell compacted. Trailing cell slots without points are
 /// ignored, so a mirror that never received a freed trailing slot hashes like the server grid
 /// that still has it; so are counters, free lists and transforms. [`crate::ClientState::state_hash`]
-/// uses this; a server calls it on its own grids (`grids.iter().map(Some)`) to compare.
+/// uses [`lit_state_hash_of`]; a server without lighting calls this on its own grids
+/// (`grids.iter().map(Some)`) to compare.
 pub fn state_hash_of<'a, I>(grids: I) -> u64
 where
     I: IntoIterator<Item = Option<&'a InstanceGrid>>,
 {
+    lit_state_hash_of(grids, |_, _| [0; CELL_POINTS])
+}
+
+/// [`state_hash_of`] also covering irradiance records: `lights(instance, slot)` gives the
+/// records of a cell slot (zeros where none). An instance's records (those of its used slots)
+/// are folded in after its cells, and only when one of them is non-zero, so without lighting
+/// the hash is [`state_hash_of`]'s.
+pub fn lit_state_hash_of<'a, I, L>(grids: I, lights: L) -> u64
+where
+    I: IntoIterator<Item = Option<&'a InstanceGrid>>,
+    L: Fn(usize, u32) -> [u32; CELL_POINTS],
+{
     let mut h = Hasher(0x243f_6a88_85a3_08d3);
     let mut instances = 0u64;
-    for grid in grids {
+    for (index, grid) in grids.into_iter().enumerate() {
         instances += 1;
         let Some(grid) = grid else {
             h.word(NO_GRID);
@@ -63,12 +81,23 @@ where
         h.word(u64::from(used));
         for cell in grid.cells().take(used as usize) {
             let words = compact_cell(cell).points;
-            for pair in words.chunks(2) {
-                let hi = pair.get(1).map_or(0, |&w| u64::from(w) << 32);
-                h.word(hi | u64::from(pair[0]));
+            fold_pairs(&mut h, &words);
+        }
+        if (0..used).any(|s| lights(index, s) != [0; CELL_POINTS]) {
+            h.word(LIGHTS);
+            for s in 0..used {
+                fold_pairs(&mut h, &lights(index, s));
             }
         }
     }
     h.word(instances);
     h.finish()
+}
+
+/// Folds 32-bit words two at a time (an odd last word with a zero high half).
+fn fold_pairs(h: &mut Hasher, words: &[u32]) {
+    for pair in words.chunks(2) {
+        let hi = pair.get(1).map_or(0, |&w| u64::from(w) << 32);
+        h.word(hi | u64::from(pair[0]));
+    }
 }

@@ -17,9 +17,11 @@ mod hash;
 mod reconstruct;
 mod state;
 
-pub use composite::{composite, composite_srgb8, encode_srgb, Shading, SKY_GREY};
+pub use composite::{
+    composite, composite_lit, composite_srgb8, direct_light, encode_srgb, Shading, SKY_GREY,
+};
 pub use detail::{apply_detail, DetailSettings};
 pub use error::ClientError;
-pub use hash::state_hash_of;
-pub use reconstruct::{reconstruct, reconstruct_into, ReconstructSettings};
-pub use state::{layout_is_usable, ClientState};
+pub use hash::{lit_state_hash_of, state_hash_of};
+pub use reconstruct::{reconstruct, reconstruct_into, reconstruct_lit_into, ReconstructSettings};
+pub use state::{layout_is_usable, CellLights, ClientState};

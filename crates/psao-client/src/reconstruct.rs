@@ -1,7 +1,8 @@
 //! Per-pixel AO reconstruction from the mirrored point grids (DESIGN §3 "Client
-//! reconstruction", paper §3.5).
+//! reconstruction", paper §3.5), and with lighting the irradiance with the same kernel
+//! (DESIGN §12).
 
-use glam::{Affine3A, Mat3A, Vec3A};
+use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use psao_points::{
     InstanceGrid, ReconstructParams, DEFAULT_INTERPOLATION_FACTOR, DEFAULT_NORMAL_EXPONENT,
     DEFAULT_PLANE_TOLERANCE,
@@ -9,7 +10,7 @@ use psao_points::{
 use psao_raster::GBuffer;
 use rayon::prelude::*;
 
-use crate::gather::Neighbourhood;
+use crate::gather::{Lights, Neighbourhood};
 use crate::state::ClientState;
 
 /// Smallest |det| of an instance transform's linear part that is still inverted; flatter
@@ -49,6 +50,8 @@ impl Default for ReconstructSettings {
 /// What one instance needs per pixel, computed once per frame.
 struct InstanceView<'a> {
     grid: &'a InstanceGrid,
+    /// The instance's irradiance records, when they are wanted and the state has some.
+    lights: Lights<'a>,
     /// World → instance-local.
     to_local: Affine3A,
     /// World normal → (unnormalised) local normal: the transpose of the forward linear part,
@@ -57,7 +60,7 @@ struct InstanceView<'a> {
 }
 
 impl<'a> InstanceView<'a> {
-    fn new(state: &'a ClientState, instance: usize) -> Option<Self> {
+    fn new(state: &'a ClientState, instance: usize, with_lights: bool) -> Option<Self> {
         let grid = state.grid(instance)?;
         let transform = state.transform(instance)?;
         if transform.matrix3.determinant().abs() <= MIN_DETERMINANT {
@@ -74,6 +77,7 @@ impl<'a> InstanceView<'a> {
         .all(|c| c.is_finite());
         finite.then(|| Self {
             grid,
+            lights: with_lights.then(|| state.light_cells(instance)).flatten(),
             to_local,
             normal_to_local: transform.matrix3.transpose(),
         })
@@ -104,15 +108,50 @@ pub fn reconstruct_into(
     settings: &ReconstructSettings,
     out: &mut Vec<f32>,
 ) {
+    run(state, gbuffer, settings, out, None);
+}
+
+/// [`reconstruct_into`] that also interpolates the points' irradiance (linear RGB, DESIGN
+/// §12) per pixel into `irradiance` with the same kernel (see the `gather` module: the same
+/// points and weights, the same nearest-point fallbacks; zero where no point is compatible,
+/// on pixels that are not covered, on instances without grid or transform, and everywhere
+/// when the state has no irradiance records). The AO is exactly [`reconstruct_into`]'s.
+pub fn reconstruct_lit_into(
+    state: &ClientState,
+    gbuffer: &GBuffer,
+    settings: &ReconstructSettings,
+    ao: &mut Vec<f32>,
+    irradiance: &mut Vec<Vec3>,
+) {
+    run(state, gbuffer, settings, ao, Some(irradiance));
+}
+
+/// AO per pixel into `ao`, and irradiance into `irradiance` when given.
+fn run(
+    state: &ClientState,
+    gbuffer: &GBuffer,
+    settings: &ReconstructSettings,
+    ao: &mut Vec<f32>,
+    irradiance: Option<&mut Vec<Vec3>>,
+) {
     let width = gbuffer.width as usize;
     let pixels = width * gbuffer.height as usize;
-    out.clear();
-    out.resize(pixels, 1.0);
+    ao.clear();
+    ao.resize(pixels, 1.0);
+    let with_lights = irradiance.is_some() && state.has_lights();
+    let irradiance_rows: Vec<Option<&mut [Vec3]>> = match irradiance {
+        Some(e) => {
+            e.clear();
+            e.resize(pixels, Vec3::ZERO);
+            e.chunks_mut(width.max(1)).map(Some).collect()
+        }
+        None => (0..gbuffer.height).map(|_| None).collect(),
+    };
     if pixels == 0 {
         return;
     }
     let views: Vec<Option<InstanceView<'_>>> = (0..state.instance_count())
-        .map(|i| InstanceView::new(state, i))
+        .map(|i| InstanceView::new(state, i, with_lights))
         .collect();
     let params = ReconstructParams {
         interpolation_factor: settings.interpolation_factor,
@@ -125,21 +164,27 @@ pub fn reconstruct_into(
     };
     // Zipping row slices tolerates inconsistent attribute lengths: missing pixels stay 1.
     // The neighbourhood cache only saves work; results do not depend on how rows are split.
-    out.par_chunks_mut(width)
+    ao.par_chunks_mut(width)
+        .zip(irradiance_rows)
         .zip(gbuffer.instance.par_chunks(width))
         .zip(gbuffer.position.par_chunks(width))
         .zip(gbuffer.normal.par_chunks(width))
         .for_each_init(
             Neighbourhood::new,
-            |cache, (((row, instances), positions), normals)| {
+            |cache, ((((row, mut e_row), instances), positions), normals)| {
                 let pixels = row.iter_mut().zip(instances).zip(positions).zip(normals);
-                for (((ao, &instance), &position), &normal) in pixels {
+                for (x, (((ao, &instance), &position), &normal)) in pixels.enumerate() {
                     let Some(Some(view)) = views.get(instance as usize) else {
                         continue;
                     };
                     let p = view.to_local.transform_point3a(Vec3A::from(position));
                     let n = (view.normal_to_local * Vec3A::from(normal)).normalize_or_zero();
-                    *ao = cache.ao(instance, view.grid, p.into(), n.into(), &params);
+                    let grid = (view.grid, view.lights);
+                    let (a, e) = cache.sample(instance, grid, p.into(), n.into(), &params);
+                    *ao = a;
+                    if let Some(slot) = e_row.as_deref_mut().and_then(|r| r.get_mut(x)) {
+                        *slot = e;
+                    }
                 }
             },
         );

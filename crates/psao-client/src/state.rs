@@ -1,19 +1,28 @@
 //! The client's mirror of the server state: one point grid per instance, built only from
 //! applied updates, plus the instance transforms that came with them (DESIGN §3 "Client
-//! reconstruction", §4).
+//! reconstruction", §4). With lighting (DESIGN §12, docs/LIGHTING.md) also the points'
+//! irradiance records, stored per cell slot beside the cells.
 
 use glam::{Affine3A, Vec3};
 use psao_delta::{InstanceDelta, InstanceInfo, Update};
-use psao_points::{GridLayout, InstanceGrid, MAX_DIM};
+use psao_points::{GridLayout, InstanceGrid, Paged, CELL_POINTS, MAX_DIM};
 
 use crate::error::ClientError;
-use crate::hash::state_hash_of;
+use crate::hash::lit_state_hash_of;
+
+/// The irradiance records (RGB9E5, `psao_points::irradiance`) of one cell slot's points, in
+/// the order of the cell's point records; zeros where none were received.
+pub type CellLights = [u32; CELL_POINTS];
 
 /// What the client knows: per instance a grid mirror (or `None` when the table's layout was
-/// unusable) and the transform of the latest update that carried one.
+/// unusable), its irradiance records and the transform of the latest update that carried
+/// one.
 #[derive(Clone, Debug)]
 pub struct ClientState {
     grids: Vec<Option<InstanceGrid>>,
+    /// Per instance, the irradiance records by cell slot: paged like the cells, so an AO-only
+    /// mirror allocates no page for them.
+    lights: Vec<Paged<CellLights>>,
     transforms: Vec<Option<Affine3A>>,
     last_frame: Option<u64>,
 }
@@ -30,6 +39,7 @@ impl ClientState {
                 .iter()
                 .map(|info| layout_is_usable(&info.layout).then(|| InstanceGrid::new(info.layout)))
                 .collect(),
+            lights: vec![Paged::new(0); table.len()],
             transforms: vec![None; table.len()],
             last_frame: None,
         }
@@ -37,14 +47,16 @@ impl ClientState {
 
     /// Apply one server update. The whole update is validated first (instance indices,
     /// finite transforms, bucket indices, bucket entries, cell slots); on error nothing
-    /// changes. A snapshot first resets every grid to empty and forgets every transform.
-    /// Transforms not named by a delta keep their previous value.
+    /// changes. A snapshot first resets every grid to empty and forgets every transform and
+    /// irradiance record. Transforms not named by a delta keep their previous value. A cell
+    /// received without irradiance records (an update without lighting) has none (zeros).
     pub fn apply(&mut self, update: &Update) -> Result<(), ClientError> {
         self.validate(update)?;
         if update.snapshot {
             for grid in self.grids.iter_mut().flatten() {
                 *grid = InstanceGrid::new(*grid.layout());
             }
+            self.lights.fill(Paged::new(0));
             self.transforms.fill(None);
         }
         for &(instance, transform) in &update.transforms {
@@ -61,6 +73,18 @@ impl ClientState {
             }
             for (slot, cell) in &delta.cells {
                 grid.set_cell(*slot, *cell).map_err(fail)?;
+            }
+            let lights = &mut self.lights[instance as usize];
+            for (k, (slot, _)) in delta.cells.iter().enumerate() {
+                let (slot, records) = (*slot as usize, delta.lights.get(k).copied());
+                let records = records.unwrap_or_default();
+                // Zeros past the stored slots are implied: an AO-only mirror stores nothing.
+                if records != CellLights::default() {
+                    lights.grow(slot + 1);
+                }
+                if slot < lights.len() {
+                    lights.set(slot, records);
+                }
             }
         }
         self.last_frame = Some(update.frame);
@@ -107,10 +131,31 @@ impl ClientState {
         self.grids.len()
     }
 
-    /// Fingerprint of all buckets and cells, instance by instance (see [`state_hash_of`]);
-    /// equal to the server's when the mirror is exact.
+    /// Fingerprint of all buckets, cells and irradiance records, instance by instance (see
+    /// [`lit_state_hash_of`]; without records it is [`crate::state_hash_of`]'s); equal to the
+    /// server's when the mirror is exact.
     pub fn state_hash(&self) -> u64 {
-        state_hash_of(self.grids.iter().map(Option::as_ref))
+        lit_state_hash_of(self.grids.iter().map(Option::as_ref), |i, s| {
+            self.cell_lights(i, s)
+        })
+    }
+
+    /// The irradiance records of `instance`'s cell slot `slot` (zeros where none).
+    pub fn cell_lights(&self, instance: usize, slot: u32) -> CellLights {
+        self.lights
+            .get(instance)
+            .map_or([0; CELL_POINTS], |l| l.value(slot as usize))
+    }
+
+    /// `instance`'s irradiance records by cell slot (`None` out of range).
+    pub(crate) fn light_cells(&self, instance: usize) -> Option<&Paged<CellLights>> {
+        self.lights.get(instance)
+    }
+
+    /// Whether any irradiance record was received since the last snapshot (the server has
+    /// lighting on).
+    pub fn has_lights(&self) -> bool {
+        self.lights.iter().any(|l| l.page_bytes() > 0)
     }
 
     /// Local-to-world transform of `instance` from the latest update carrying one.
@@ -125,11 +170,13 @@ impl ClientState {
 
     /// Heap bytes of the mirror's grids (allocated capacity of their tables).
     pub fn heap_bytes(&self) -> u64 {
-        self.grids
+        let grids: u64 = self
+            .grids
             .iter()
             .flatten()
             .map(InstanceGrid::heap_bytes)
-            .sum()
+            .sum();
+        grids + self.lights.iter().map(Paged::heap_bytes).sum::<u64>()
     }
 
     /// Where the mirror's heap bytes go, summed over its grids.
@@ -212,6 +259,13 @@ fn validate_delta(layout: &GridLayout, delta: &InstanceDelta) -> Result<(), Clie
     }
     for (slot, _) in &delta.cells {
         check_slot(*slot)?;
+    }
+    if !delta.lights.is_empty() && delta.lights.len() != delta.cells.len() {
+        return Err(ClientError::LightsMismatch {
+            instance,
+            lights: delta.lights.len(),
+            cells: delta.cells.len(),
+        });
     }
     Ok(())
 }

@@ -1,10 +1,11 @@
-//! Compositing: AO scales exactly the ambient term, the background is sky grey, and the
-//! sRGB encoding matches the transfer function.
+//! Compositing: AO scales exactly the ambient term, the lit composite is the Lambertian
+//! radiance of direct + reconstructed irradiance, the background is sky grey, and the sRGB
+//! encoding matches the transfer function.
 
 mod common;
 
 use glam::Vec3;
-use psao_client::{composite, composite_srgb8, encode_srgb, Shading, SKY_GREY};
+use psao_client::{composite, composite_lit, composite_srgb8, encode_srgb, Shading, SKY_GREY};
 use psao_raster::{rasterize, RasterOptions};
 
 #[test]
@@ -69,4 +70,49 @@ fn srgb_encoding() {
     // Monotone.
     let codes: Vec<u8> = (0..=1000).map(|i| encode_srgb(i as f32 / 1000.0)).collect();
     assert!(codes.windows(2).all(|w| w[0] <= w[1]));
+}
+
+#[test]
+fn lit_composite_is_the_radiance_of_direct_plus_irradiance() {
+    let scene = common::scene(2.0, 2);
+    let g = rasterize(&scene, &common::camera(), &RasterOptions::new(120, 90));
+    let n = g.len();
+    // Per-pixel fields that differ between pixels and channels.
+    let e: Vec<Vec3> = (0..n)
+        .map(|i| Vec3::new(0.5, 1.0, 2.0) * (1.0 + (i % 7) as f32))
+        .collect();
+    let d: Vec<Vec3> = (0..n)
+        .map(|i| Vec3::new(3.0, 0.0, 1.0) * (i % 5) as f32)
+        .collect();
+    let zero = vec![Vec3::ZERO; n];
+    let both = composite_lit(&scene, &g, &e, &d);
+    let only_e = composite_lit(&scene, &g, &e, &zero);
+    let only_d = composite_lit(&scene, &g, &zero, &d);
+    let black = composite_lit(&scene, &g, &zero, &zero);
+    assert_eq!(both.len(), n);
+    let mut covered = 0;
+    for i in 0..n {
+        if !g.covered(i) {
+            assert_eq!(both[i], SKY_GREY);
+            continue;
+        }
+        covered += 1;
+        let base = scene.materials[g.material(&scene, i).unwrap()]
+            .base_color
+            .truncate();
+        let expected = base * (e[i] + d[i]) / std::f32::consts::PI;
+        let got = Vec3::from(both[i]);
+        assert!(
+            (got - expected).abs().max_element() < 1e-5,
+            "pixel {i}: {got} vs {expected}"
+        );
+        // Additive in the two terms; no light, no radiance (AO plays no part).
+        let sum = Vec3::from(only_e[i]) + Vec3::from(only_d[i]);
+        assert!((got - sum).abs().max_element() < 1e-5, "pixel {i}");
+        assert_eq!(black[i], [0.0; 3]);
+    }
+    assert!(covered > 1000, "{covered}");
+    // Missing values count as no light.
+    assert_eq!(composite_lit(&scene, &g, &e, &[]), only_e);
+    assert_eq!(composite_lit(&scene, &g, &[], &[]), black);
 }

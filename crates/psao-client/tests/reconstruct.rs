@@ -312,3 +312,62 @@ fn reconstruction_speed_720p() {
     assert!(covered > 1280 * 720 / 2, "{covered}");
     assert!(ao.iter().all(|v| (0.0..=1.0).contains(v)));
 }
+
+/// Client state after a lit snapshot whose point `k` of each cell carries `light(its local
+/// position)`.
+fn setup_lit(scene: &Scene, light: impl Fn(Vec3) -> Vec3) -> ClientState {
+    let points = common::points(scene, 512.0, 11);
+    let grids: Vec<_> = common::grids(&points, pattern)
+        .into_iter()
+        .map(|(g, _)| g)
+        .collect();
+    let mut state = ClientState::new(&common::table(&points, &grids));
+    let snapshot = common::snapshot(1, &grids, common::transforms(scene));
+    state
+        .apply(&common::with_lights(snapshot, &grids, light))
+        .unwrap();
+    state
+}
+
+#[test]
+fn irradiance_reconstructs_constants_and_keeps_zero_at_zero() {
+    // Exactly representable in RGB9E5 (multiples of 2⁻⁸ below 2).
+    let c = Vec3::new(1.5, 0.75, 0.25);
+    let scene = common::scene(2.0, 0);
+    // Half the plane (local x > 0) lit with `c`, the other half black.
+    let state = setup_lit(&scene, |p| if p.x > 0.0 { c } else { Vec3::ZERO });
+    assert!(state.has_lights());
+    let g = render(&scene, &common::camera(), 160, 120);
+    let settings = ReconstructSettings::default();
+    let (mut ao, mut e) = (Vec::new(), Vec::new());
+    psao_client::reconstruct_lit_into(&state, &g, &settings, &mut ao, &mut e);
+    // The AO is exactly the AO-only reconstruction's.
+    assert_eq!(ao, reconstruct(&state, &g, &settings));
+    assert_eq!(e.len(), 160 * 120);
+    let to_local = scene.instances[0].transform.inverse();
+    let (mut lit, mut dark) = (0, 0);
+    for (i, &v) in e.iter().enumerate() {
+        if !g.covered(i) {
+            assert_eq!(v, Vec3::ZERO, "uncovered pixel {i}");
+            continue;
+        }
+        // Always a convex combination of the records.
+        assert!(
+            v.cmpge(Vec3::ZERO).all() && v.cmple(c * (1.0 + 1e-6)).all(),
+            "{i}: {v}"
+        );
+        let x = to_local.transform_point3(g.position[i]).x;
+        if x > 0.2 {
+            lit += 1;
+            assert!((v - c).abs().max_element() < 1e-5, "pixel {i}: {v}");
+        } else if x < -0.2 {
+            dark += 1;
+            assert_eq!(v, Vec3::ZERO, "pixel {i}");
+        }
+    }
+    assert!(lit > 1000 && dark > 1000, "{lit} lit, {dark} dark pixels");
+    // Without records (an AO-only state) the irradiance is zero everywhere.
+    let ao_only = setup(&scene, 512.0, pattern);
+    psao_client::reconstruct_lit_into(&ao_only, &g, &settings, &mut ao, &mut e);
+    assert!(e.iter().all(|&v| v == Vec3::ZERO));
+}

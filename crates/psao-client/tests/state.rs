@@ -168,6 +168,87 @@ fn hash_tracks_a_single_point() {
 }
 
 #[test]
+fn irradiance_records_are_kept_and_hashed_only_when_present() {
+    let s = server(5);
+    let snapshot = common::snapshot(1, &s.grids, common::transforms(&s.scene));
+    let mut ao_only = client_for(&s);
+    ao_only.apply(&snapshot).unwrap();
+    let ao_hash = ao_only.state_hash();
+    // Without records the hash is exactly the grids' hash of before lighting.
+    assert_eq!(
+        ao_hash,
+        psao_client::state_hash_of(s.grids.iter().map(Some))
+    );
+    assert!(!ao_only.has_lights());
+
+    let lit_update = common::with_lights(snapshot.clone(), &s.grids, |p| {
+        Vec3::new(1.0 + p.x.abs(), 0.5, 0.25 + p.z.abs())
+    });
+    let mut lit = client_for(&s);
+    lit.apply(&lit_update).unwrap();
+    assert!(lit.has_lights());
+    // The same grids as without records; only the records differ.
+    for i in 0..lit.instance_count() {
+        assert_eq!(lit.grid(i), ao_only.grid(i), "instance {i}");
+    }
+    let lit_hash = lit.state_hash();
+    assert_ne!(lit_hash, ao_hash);
+    // The records are kept as received, per cell slot.
+    let d = &lit_update.instances[0];
+    let (slot, _) = d.cells[3];
+    assert_eq!(lit.cell_lights(0, slot), d.lights[3]);
+    assert_ne!(lit.cell_lights(0, slot), [0; psao_points::CELL_POINTS]);
+
+    // One record of one cell changes: the hash changes; restoring it restores the hash.
+    let mut one = Update {
+        frame: 2,
+        instances: vec![InstanceDelta {
+            instance: 0,
+            buckets: Vec::new(),
+            cells: vec![d.cells[3]],
+            lights: vec![d.lights[3]],
+        }],
+        ..Update::default()
+    };
+    let k = d.lights[3].iter().position(|&r| r != 0).unwrap();
+    one.instances[0].lights[0][k] ^= 1;
+    lit.apply(&one).unwrap();
+    assert_ne!(lit.state_hash(), lit_hash);
+    one.instances[0].lights[0][k] ^= 1;
+    lit.apply(&one).unwrap();
+    assert_eq!(lit.state_hash(), lit_hash);
+
+    // The server's hash over the same records agrees with the mirror's.
+    let server_hash = psao_client::lit_state_hash_of(s.grids.iter().map(Some), |i, slot| {
+        lit_update.instances[i]
+            .cells
+            .iter()
+            .position(|(s, _)| *s == slot)
+            .map_or([0; psao_points::CELL_POINTS], |c| {
+                lit_update.instances[i].lights[c]
+            })
+    });
+    assert_eq!(server_hash, lit_hash);
+
+    // Records that do not pair with the cells are refused, and change nothing.
+    let mut bad = one.clone();
+    bad.instances[0].lights.push([0; psao_points::CELL_POINTS]);
+    assert!(matches!(
+        lit.apply(&bad),
+        Err(ClientError::LightsMismatch {
+            lights: 2,
+            cells: 1,
+            ..
+        })
+    ));
+    assert_eq!(lit.state_hash(), lit_hash);
+
+    // A snapshot without records forgets them: back to the AO-only hash.
+    lit.apply(&snapshot).unwrap();
+    assert_eq!(lit.state_hash(), ao_hash);
+}
+
+#[test]
 fn malformed_updates_are_rejected_without_change() {
     let s = server(4);
     let mut client = client_for(&s);

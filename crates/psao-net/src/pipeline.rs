@@ -4,10 +4,11 @@
 
 use crate::corrective::{CorrectiveClient, CorrectiveConfig, InProcessCorrections};
 use crate::{NetError, Resolution};
+use glam::Vec3;
 use psao_client::{ClientState, DetailSettings, ReconstructSettings, Shading};
 use psao_delta::Codec;
 use psao_eval::AoImage;
-use psao_raster::{GBuffer, InstancePose, RasterOptions, Rasterizer};
+use psao_raster::{GBuffer, InstancePose, RasterOptions, Rasterizer, ShadowMaps, ShadowSettings};
 use psao_scene::{Animator, Camera, Motion, Scene, ScenePose};
 use psao_server::{ClientId, Server, ServerConfig, View};
 use psao_trace::ao::Medium;
@@ -95,6 +96,9 @@ pub struct ClientFrame {
     pub ao: AoImage,
     /// With corrections: the client's frame (linear RGB) with the cached samples splatted.
     pub corrected: Option<Vec<[f32; 3]>>,
+    /// With lighting (the client state holds irradiance records): the lit composite, linear
+    /// RGB radiance ([`psao_client::composite_lit`]).
+    pub lit: Option<Vec<[f32; 3]>>,
 }
 
 /// A server and one client in one process.
@@ -303,6 +307,8 @@ pub struct ClientRenderer {
     detail: Option<DetailSettings>,
     /// Reconstruction settings.
     reconstruct: ReconstructSettings,
+    /// Shadow maps of the suns and point lights, made on the first lit frame.
+    shadows: Option<ShadowMaps>,
 }
 
 impl ClientRenderer {
@@ -316,6 +322,7 @@ impl ClientRenderer {
                 .then(|| (animator, ScenePose::default())),
             detail: None,
             reconstruct: ReconstructSettings::default(),
+            shadows: None,
         })
     }
 
@@ -335,6 +342,11 @@ impl ClientRenderer {
     /// On an animated scene every instance is rasterized at the transform of the last server
     /// update `state` applied (so AO lags with the update instead of ghosting) and skinned
     /// instances deformed by the client's own animation at `time` (see [`client_poses`]).
+    ///
+    /// When `state` holds irradiance records (the server computes lighting), the frame also
+    /// gets the lit composite: the irradiance reconstructed with the AO kernel plus the
+    /// direct light of the scene's suns and point lights at `time`, shadow-mapped in the
+    /// same pose ([`ShadowSettings::for_image`] of the image size).
     pub fn render(
         &mut self,
         scene: &Scene,
@@ -345,21 +357,54 @@ impl ClientRenderer {
     ) -> Result<ClientFrame, NetError> {
         let mut gbuffer = GBuffer::empty(res.width, res.height);
         let opts = RasterOptions::new(res.width, res.height);
-        match &mut self.animation {
-            None => self
-                .rasterizer
-                .rasterize(scene, camera, &opts, &mut gbuffer),
+        let poses = match &mut self.animation {
+            None => {
+                self.rasterizer
+                    .rasterize(scene, camera, &opts, &mut gbuffer);
+                None
+            }
             Some((animator, pose)) => {
                 animator.pose_into(time, pose);
                 let poses = client_poses(scene, animator, pose, state);
                 self.rasterizer
                     .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)?;
+                Some(poses)
             }
+        };
+        let (mut ao, mut irradiance) = (Vec::new(), Vec::new());
+        let lit = state.has_lights();
+        if lit {
+            psao_client::reconstruct_lit_into(
+                state,
+                &gbuffer,
+                &self.reconstruct,
+                &mut ao,
+                &mut irradiance,
+            );
+        } else {
+            psao_client::reconstruct_into(state, &gbuffer, &self.reconstruct, &mut ao);
         }
-        let mut ao = psao_client::reconstruct(state, &gbuffer, &self.reconstruct);
         if let Some(detail) = &self.detail {
             psao_client::apply_detail(state, &gbuffer, camera, detail, &mut ao);
         }
+        let lit = if lit {
+            let poses =
+                poses.unwrap_or_else(|| scene.instances.iter().map(InstancePose::rest).collect());
+            let shadows = self.shadows.get_or_insert_with(|| {
+                ShadowMaps::new(ShadowSettings::for_image(res.width, res.height))
+            });
+            let aspect = res.width as f32 / res.height.max(1) as f32;
+            shadows.render(scene, &poses, &scene.lights_at(time), camera, aspect)?;
+            let direct: Vec<Vec3> = psao_client::direct_light(shadows, &gbuffer);
+            Some(psao_client::composite_lit(
+                scene,
+                &gbuffer,
+                &irradiance,
+                &direct,
+            ))
+        } else {
+            None
+        };
         Ok(ClientFrame {
             ao: AoImage {
                 width: gbuffer.width,
@@ -368,6 +413,7 @@ impl ClientRenderer {
             },
             gbuffer,
             corrected: None,
+            lit,
         })
     }
 }
@@ -399,6 +445,15 @@ pub fn client_poses<'p>(
             }
         })
         .collect()
+}
+
+/// The client's composited image as 8-bit sRGB RGB: the lit composite when the frame has one,
+/// else base shading × AO ([`composite_rgb8`]).
+pub fn frame_rgb8(scene: &Scene, frame: &ClientFrame) -> Vec<u8> {
+    match &frame.lit {
+        Some(lit) => psao_client::composite_srgb8(lit),
+        None => composite_rgb8(scene, &frame.gbuffer, &frame.ao),
+    }
 }
 
 /// The composited client image (base shading × AO) as 8-bit sRGB RGB.

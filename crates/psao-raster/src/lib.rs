@@ -12,6 +12,9 @@
 //! camera's far distance are dropped, and so are fragments of alpha-masked materials where the
 //! surface is cut out ([`psao_scene::Material::opaque_at`] at the pixel centre's texture
 //! coordinates), so what lies behind shows through.
+//!
+//! [`ShadowMaps`] renders depth maps of suns and point lights with the same rasterizer and
+//! gives the shadowed direct light they cast (the client's share of DESIGN §12).
 
 mod clip;
 mod gbuffer;
@@ -22,6 +25,7 @@ mod raster;
 mod rasterizer;
 mod resolve;
 mod setup;
+mod shadow;
 mod view;
 
 use psao_scene::{Camera, Scene};
@@ -30,6 +34,7 @@ pub use gbuffer::GBuffer;
 pub use pose::{validate_poses, InstancePose, PoseError};
 pub use rasterizer::Rasterizer;
 pub use setup::MAX_DIMENSION;
+pub use shadow::{ShadowMaps, ShadowSettings};
 
 /// Image size and culling for one rasterization.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -61,7 +61,7 @@ impl Rasterizer {
     }
 
     /// Rasterizes with poses already validated.
-    fn render(
+    pub(crate) fn render(
         &mut self,
         scene: &Scene,
         poses: &[InstancePose<'_>],

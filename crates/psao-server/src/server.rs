@@ -645,6 +645,15 @@ impl Server {
         self.instances.len()
     }
 
+    /// The published irradiance records of `instance`'s cell `slot`, aligned with the
+    /// published cell's points (what clients mirror beside the grid; zeros without lighting,
+    /// out of range, or where none were published).
+    pub fn light_cell(&self, instance: usize, slot: u32) -> [u32; psao_points::CELL_POINTS] {
+        self.instances
+            .get(instance)
+            .map_or_else(Default::default, |i| i.light_cell(slot))
+    }
+
     /// The published (authoritative) grid of an instance: what clients mirror.
     pub fn grid(&self, instance: usize) -> Option<&InstanceGrid> {
         self.instances.get(instance).map(|i| &i.grid)

@@ -164,7 +164,7 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             height: 1,
         },
     )?;
-    let make = || crate::serve::scene_server(&input, &args.tuning, args.points, args.hz);
+    let make = || crate::serve::scene_server(&input, &args.tuning, None, args.points, args.hz);
     let (serve_rays_per_s, serve_hash) = {
         let mut server = make()?;
         let (mut rays, mut ms) = (0u64, 0.0);

@@ -7,7 +7,7 @@ use crate::reference::Lighting;
 use crate::scene_source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use psao_net::pipeline::{composite_rgb8, FrameRecord, Pipeline, PipelineConfig};
+use psao_net::pipeline::{frame_rgb8, FrameRecord, Pipeline, PipelineConfig};
 use psao_server::{Invalidation, LightingConfig, ServerConfig, MAX_BOUNCES};
 use psao_trace::Backend;
 use serde::Serialize;
@@ -158,15 +158,8 @@ pub struct RunArgs {
     pub server_hz: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
-    /// What the points carry: `ao` (ambient occlusion only) or `gi` (also diffuse irradiance
-    /// from the scene's environment and lights with `--bounces` bounces, traced on the server
-    /// and streamed as 32-bit records beside the AO; docs/LIGHTING.md).
-    #[arg(long, value_enum, default_value_t = Lighting::Ao)]
-    pub lighting: Lighting,
-    /// Indirect diffuse bounces of the points' light paths with `--lighting gi` (a fixed
-    /// depth).
-    #[arg(long, default_value_t = LightingConfig::default().bounces)]
-    pub bounces: u32,
+    #[command(flatten)]
+    pub lighting: LightingArgs,
     /// Output folder: `frame_NNNNN.png` (composited), `ao_NNNNN.png` (AO only), `stats.json`.
     #[arg(long)]
     pub out: PathBuf,
@@ -177,9 +170,24 @@ pub struct RunArgs {
     pub corrective: crate::corrective::split_args::CorrectiveArgs,
 }
 
-impl RunArgs {
+/// What the server's points carry (`psao run`, `psao serve`).
+#[derive(Args, Debug, Clone)]
+pub struct LightingArgs {
+    /// What the points carry: `ao` (ambient occlusion only) or `gi` (also diffuse irradiance
+    /// from the scene's environment and lights with `--bounces` bounces, traced on the server
+    /// and streamed as 32-bit records beside the AO; clients then show
+    /// base colour / π × (shadow-mapped direct light + irradiance); docs/LIGHTING.md).
+    #[arg(long, value_enum, default_value_t = Lighting::Ao)]
+    pub lighting: Lighting,
+    /// Indirect diffuse bounces of the points' light paths with `--lighting gi` (a fixed
+    /// depth).
+    #[arg(long, default_value_t = LightingConfig::default().bounces)]
+    pub bounces: u32,
+}
+
+impl LightingArgs {
     /// The server's lighting: `None` for `--lighting ao`.
-    fn lighting_config(&self) -> Result<Option<LightingConfig>> {
+    pub fn config(&self) -> Result<Option<LightingConfig>> {
         if self.bounces > MAX_BOUNCES {
             bail!(
                 "--bounces must be at most {MAX_BOUNCES}, got {}",
@@ -250,7 +258,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut config = args.tuning.config(args.points, args.server_hz, args.res)?;
-    config.server.lighting = args.lighting_config()?;
+    config.server.lighting = args.lighting.config()?;
     config.medium = input.medium();
     config.corrective = args.corrective.config()?;
     let mut pipeline = Pipeline::new(&input.scene, &config)?;
@@ -314,7 +322,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     Ok(())
 }
 
-/// Writes the composited and AO-only images of one frame.
+/// Writes the composited (lit when the frame has lighting) and AO-only images of one frame.
 pub fn write_frame_images(
     dir: &Path,
     frame: u32,
@@ -322,7 +330,7 @@ pub fn write_frame_images(
     img: &psao_net::pipeline::ClientFrame,
 ) -> Result<()> {
     write_ao_png(&dir.join(format!("ao_{frame:05}.png")), &img.ao)?;
-    let rgb = composite_rgb8(scene, &img.gbuffer, &img.ao);
+    let rgb = frame_rgb8(scene, img);
     write_rgb_png(
         &dir.join(format!("frame_{frame:05}.png")),
         img.ao.width,

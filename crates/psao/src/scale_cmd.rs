@@ -92,7 +92,7 @@ impl SceneArgs {
     /// The scene's name, its server, and the scene as binary glTF (for browsers).
     fn server(&self) -> Result<(String, Server, Vec<u8>)> {
         let input = SceneInput::load(&self.scene)?;
-        let server = crate::serve::scene_server(&input, &self.tuning, self.points, self.hz)?;
+        let server = crate::serve::scene_server(&input, &self.tuning, None, self.points, self.hz)?;
         let glb = psao_net::glb::scene_glb(&input.scene, &input.paths)?;
         Ok((input.name, server, glb))
     }

@@ -9,7 +9,7 @@ use psao_net::start_cache::start_server;
 use psao_net::Resolution;
 
 use crate::access_args::ExposureArgs;
-use crate::run::{write_json, ServerTuning};
+use crate::run::{write_json, LightingArgs, ServerTuning};
 use crate::scene_source::SceneInput;
 
 /// Arguments of `psao serve`.
@@ -31,6 +31,8 @@ pub struct ServeArgs {
     pub hz: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
+    #[command(flatten)]
+    pub lighting: LightingArgs,
     /// Step once per round of client camera messages (deterministic; see docs/STREAMING.md).
     #[arg(long)]
     pub lockstep: bool,
@@ -55,7 +57,8 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let tls = args.exposure.tls()?;
     let token = args.exposure.token.token()?;
     let input = SceneInput::load(&args.scene)?;
-    let server = scene_server(&input, &args.tuning, args.points, args.hz)?;
+    let lighting = args.lighting.config()?;
+    let server = scene_server(&input, &args.tuning, lighting, args.points, args.hz)?;
     tracing::info!(
         "{} points on {} instances; codec {}",
         server.point_count(),
@@ -100,16 +103,17 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     Ok(())
 }
 
-/// A server for `input` with `tuning` at `points` per unit area and `hz` server frames per
-/// second, started from stored start points when `tuning` allows (serving has no image, so
-/// the resolution is 1×1).
+/// A server for `input` with `tuning` and `lighting` (`None`: AO only) at `points` per unit
+/// area and `hz` server frames per second, started from stored start points when `tuning` allows (serving
+/// has no image, so the resolution is 1×1).
 pub(crate) fn scene_server(
     input: &SceneInput,
     tuning: &ServerTuning,
+    lighting: Option<psao_server::LightingConfig>,
     points: f32,
     hz: u32,
 ) -> Result<psao_server::Server> {
-    let config = tuning.config(
+    let mut config = tuning.config(
         points,
         hz,
         Resolution {
@@ -117,6 +121,7 @@ pub(crate) fn scene_server(
             height: 1,
         },
     )?;
+    config.server.lighting = lighting;
     start_server(
         &input.scene,
         config.server,

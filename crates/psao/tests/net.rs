@@ -56,6 +56,18 @@ impl Fixture {
         }
     }
 
+    /// The room under a sun and a point light (their direct light is the clients' to render).
+    fn lit() -> Self {
+        let mut fx = Self::new();
+        let scene = "ao_radius = 0.6\n\
+            [[asset]]\nfile = \"room.obj\"\n\
+            [[light]]\nkind = \"sun\"\ndirection = [0.5, 1.0, 0.3]\npower = 2.0\n\
+            [[light]]\nkind = \"point\"\nposition = [2.0, 2.0, 2.0]\npower = 3.0\n";
+        std::fs::write(fx.dir.path().join("lit.toml"), scene).unwrap();
+        fx.scene = "lit.toml";
+        fx
+    }
+
     /// The room with a box sliding over its floor and back (a 1.5 s loop).
     fn animated() -> Self {
         let mut fx = Self::new();
@@ -169,8 +181,8 @@ fn view_cmd(fx: &Fixture, addr: &str, frames: u32, extra: &[&str]) -> Command {
 
 /// A view's JSON must show a final state equal to the server's at its last update.
 /// `psao run` of the fixture's first `frames` frames at the settings the net tests' servers
-/// use, writing frames into `out`.
-fn run_in_process(fx: &Fixture, frames: u32, out: &Path) {
+/// use (and `extra`), writing frames into `out`.
+fn run_in_process(fx: &Fixture, frames: u32, out: &Path, extra: &[&str]) {
     let o = Command::new(BIN)
         .args([
             "--log",
@@ -185,6 +197,7 @@ fn run_in_process(fx: &Fixture, frames: u32, out: &Path) {
         .args(["--server-hz", "30", "--res", "48x32"])
         .args(["--frames", &format!("0..{frames}")])
         .args(["--out", out.to_str().unwrap()])
+        .args(extra)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
@@ -234,7 +247,7 @@ fn lockstep_serve_and_two_views_reproduce_run() {
     assert!(va.wait().unwrap().success());
     assert!(server.wait(10).success());
     let r = fx.file("r");
-    run_in_process(&fx, 5, &r);
+    run_in_process(&fx, 5, &r, &[]);
     assert_same_frames(&r, &a, 5, "tcp view");
     assert_same_frames(&r, &b, 5, "ws view");
 }
@@ -265,7 +278,7 @@ fn animated_scene_lockstep_view_matches_run_and_the_server_state() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(server.wait(10).success());
     assert_exact(&json(&json_a));
-    run_in_process(&fx, 8, &r);
+    run_in_process(&fx, 8, &r, &[]);
     let stats = json(&r.join("stats.json"));
     let invalidated: u64 = stats["per_frame"]
         .as_array()
@@ -276,6 +289,53 @@ fn animated_scene_lockstep_view_matches_run_and_the_server_state() {
     assert!(invalidated > 0, "the sliding box invalidates floor points");
     assert_eq!(stats["state_hash"], json(&json_a)["state_hash"]);
     assert_same_frames(&r, &a, 8, "view");
+}
+
+#[test]
+fn lit_lockstep_view_matches_run_and_the_server_state() {
+    let fx = Fixture::lit();
+    let lit = ["--lighting", "gi"];
+    let server = Serve::start(
+        &fx,
+        "127.0.0.1:0",
+        &[
+            &["--hz", "30", "--lockstep", "--wait-clients", "1", "--once"][..],
+            &lit,
+        ]
+        .concat(),
+    );
+    let (a, r, ao) = (fx.file("a"), fx.file("r"), fx.file("ao"));
+    let json_a = fx.file("a.json");
+    let o = view_cmd(
+        &fx,
+        &server.addr,
+        5,
+        &[
+            "--out",
+            a.to_str().unwrap(),
+            "--json",
+            json_a.to_str().unwrap(),
+        ],
+    )
+    .output()
+    .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(server.wait(10).success());
+    // The server's hash covers its published irradiance records, the view's its received ones.
+    assert_exact(&json(&json_a));
+    run_in_process(&fx, 5, &r, &lit);
+    let stats = json(&r.join("stats.json"));
+    assert!(stats["light_paths"].as_u64().unwrap() > 0, "{stats}");
+    assert_eq!(stats["state_hash"], json(&json_a)["state_hash"]);
+    assert_same_frames(&r, &a, 5, "lit view");
+    // The same session without lighting hashes and looks otherwise.
+    run_in_process(&fx, 5, &ao, &[]);
+    assert_ne!(
+        json(&ao.join("stats.json"))["state_hash"],
+        stats["state_hash"]
+    );
+    let frame = |dir: &Path| std::fs::read(dir.join("frame_00004.png")).unwrap();
+    assert_ne!(frame(&ao), frame(&r));
 }
 
 #[test]

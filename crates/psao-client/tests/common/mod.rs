@@ -237,6 +237,36 @@ pub fn delta(
     }
 }
 
+/// `update` with irradiance records for every cell: record `k` of a cell holds
+/// `light(position of its point k)` (zeros past the cell's points), as a lit server sends them.
+pub fn with_lights(
+    mut update: Update,
+    grids: &[InstanceGrid],
+    light: impl Fn(Vec3) -> Vec3,
+) -> Update {
+    for d in &mut update.instances {
+        let layout = *grids[d.instance as usize].layout();
+        d.lights = d
+            .cells
+            .iter()
+            .map(|(slot, cell)| {
+                let coord = grids[d.instance as usize]
+                    .buckets()
+                    .flat_map(|b| b.entries)
+                    .find(|e| e.key != 0 && e.slot == *slot)
+                    .and_then(|e| layout.coord_of_id(e.key - 1));
+                std::array::from_fn(|k| match (coord, cell.points[k]) {
+                    (Some(c), bits) if psao_points::pack::is_valid(bits) => {
+                        psao_points::irradiance::pack_rgb9e5(light(layout.unpack_position(c, bits)))
+                    }
+                    _ => 0,
+                })
+            })
+            .collect();
+    }
+    update
+}
+
 /// Assert that the client mirrors `grids` exactly (up to compaction) and hashes alike.
 pub fn assert_mirrors(state: &psao_client::ClientState, grids: &[InstanceGrid]) {
     for (i, g) in grids.iter().enumerate() {

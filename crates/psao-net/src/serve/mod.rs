@@ -973,8 +973,13 @@ impl Simulation {
         }
     }
 
+    /// The hash a client's mirror reaches (grids and, with lighting, irradiance records).
     fn state_hash(&self) -> u64 {
-        psao_client::state_hash_of((0..self.server.instance_count()).map(|i| self.server.grid(i)))
+        let server = &self.server;
+        psao_client::lit_state_hash_of(
+            (0..server.instance_count()).map(|i| server.grid(i)),
+            |i, s| server.light_cell(i, s),
+        )
     }
 
     /// Say bye to everyone and collect the statistics.
