@@ -78,10 +78,9 @@ pub(super) fn scan(bytes: &[u8], label: &str, layout: TreeLayout) -> Result<Tree
     }
     for _ in 0..roots {
         let origin = [r.i32()?, r.i32()?, r.i32()?];
-        if origin
-            .iter()
-            .any(|&c| c.rem_euclid(ROOT_CHILD_SPAN) != 0 || c.unsigned_abs() > MAX_ORIGIN.unsigned_abs())
-        {
+        if origin.iter().any(|&c| {
+            c.rem_euclid(ROOT_CHILD_SPAN) != 0 || c.unsigned_abs() > MAX_ORIGIN.unsigned_abs()
+        }) {
             return Err(r.bad(&format!(
                 "root child origin {origin:?} is not a multiple of 4096 within ±2^30"
             )));
