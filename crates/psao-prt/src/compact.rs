@@ -12,7 +12,7 @@
 //! within a tolerance (a model without limits has no box and keeps every component).
 //!
 //! The rows left (base and components) are stored vertex by vertex, each vertex's
-//! `lobes·7` numbers padded to a multiple of 8, as 16-bit integers with one factor per row:
+//! `lobes·7` numbers per row, as 16-bit integers with one factor per row:
 //! a frame reads a vertex's numbers once, in order, right before shading it.
 
 use crate::model::{PoseModel, LOBE_DIM};
@@ -35,15 +35,13 @@ pub struct CompactModel {
     model_shape: PoseModel,
     /// Outputs per vertex (`lobes·7`).
     per_vertex: usize,
-    /// `per_vertex` rounded up to a multiple of 8.
-    stride: usize,
     /// Stored rows: the base, then one per kept component.
     rows: usize,
     /// Per kept component: coefficients on the coordinates (`σⱼ·rⱼ / b`, `k` numbers).
     projection: Vec<f32>,
     /// Per row: the factor of its stored integers.
     scale: Vec<f32>,
-    /// Vertex-major `vertices × rows × stride` integers.
+    /// Vertex-major `vertices × rows × per_vertex` integers.
     values: Vec<i16>,
     /// Largest change the dropped components and the rounding to integers can make to an
     /// output, for poses within the box.
@@ -166,7 +164,7 @@ impl CompactModel {
             .chain(components.iter().map(|(_, q, _)| q.as_slice()))
             .collect();
         let per_vertex = model.lobes * LOBE_DIM;
-        let stride = per_vertex.next_multiple_of(8);
+        let stride = per_vertex.max(1);
         let rows = rows_data.len();
         let scale: Vec<f32> = rows_data.iter().map(|r| max_abs(r) / I16_MAX).collect();
         let mut values = vec![0i16; model.vertices * rows * stride];
@@ -195,7 +193,6 @@ impl CompactModel {
                 ..model.clone()
             },
             per_vertex,
-            stride,
             rows,
             projection,
             scale,
@@ -248,12 +245,12 @@ impl CompactModel {
             .collect()
     }
 
-    /// The outputs of vertex `v` (`lobes·7` numbers, then padding) for the factors of
-    /// [`Self::row_factors`] into `out` (at least the padded count).
-    #[inline]
+    /// The outputs of vertex `v` (`lobes·7` numbers) for the factors of
+    /// [`Self::row_factors`] into `out` (at least that long).
+    #[inline(always)]
     pub fn vertex_outputs(&self, factors: &[f32], v: usize, out: &mut [f32]) {
-        let stride = self.stride;
-        let out = &mut out[..stride];
+        let stride = self.per_vertex.max(1);
+        let out = &mut out[..self.per_vertex];
         out.fill(0.0);
         let rows = &self.values[v * self.rows * stride..(v + 1) * self.rows * stride];
         for (row, &f) in rows.chunks_exact(stride).zip(factors) {
@@ -270,7 +267,7 @@ impl CompactModel {
         let per = self.per_vertex.max(1);
         out.resize(self.vertices() * self.per_vertex, 0.0);
         out.par_chunks_mut(per * 256).enumerate().for_each_init(
-            || vec![0.0f32; self.stride],
+            || vec![0.0f32; per],
             |buf, (c, chunk)| {
                 for (k, o) in chunk.chunks_mut(per).enumerate() {
                     self.vertex_outputs(&factors, c * 256 + k, buf);
@@ -278,11 +275,6 @@ impl CompactModel {
                 }
             },
         );
-    }
-
-    /// Outputs per vertex including padding (a multiple of 8).
-    pub fn padded_outputs(&self) -> usize {
-        self.stride
     }
 
     /// Outputs per vertex (`lobes·7`).

@@ -199,17 +199,8 @@ impl Relighter {
             eye,
         };
         out.par_chunks_mut(ch * CHUNK).enumerate().for_each_init(
-            || {
-                (
-                    vec![0.0f32; frame.compact.padded_outputs()],
-                    vec![0.0f32; table.width()],
-                )
-            },
-            |(outputs, transfer), (c, chunk)| {
-                for (k, slot) in chunk.chunks_mut(ch).enumerate() {
-                    frame.shade_vertex(c * CHUNK + k, outputs, transfer, slot);
-                }
-            },
+            || Scratch::new(frame.compact, table),
+            |scratch, (c, chunk)| frame.shade_chunk(c * CHUNK, ch, scratch, chunk),
         );
         Ok(())
     }
@@ -229,38 +220,125 @@ struct Frame<'a> {
 }
 
 impl Frame<'_> {
-    /// Synthesises vertex `v`'s lobes and writes its shade per channel into `slot`
-    /// (`outputs` and `transfer`: scratch of the padded outputs and the table's width).
-    #[inline]
-    fn shade_vertex(&self, v: usize, outputs: &mut [f32], transfer: &mut [f32], slot: &mut [f32]) {
-        self.compact.vertex_outputs(self.factors, v, outputs);
-        // The frame that follows the skin (as `character::skin_frames`), to world.
-        let p = self.pose.positions[v];
-        let n = self.pose.normals[v].normalize_or(Vec3::Z);
-        let e = self.pose.positions[self.neighbours[v] as usize] - p;
-        let t = (e - n * e.dot(n)).normalize_or_zero();
-        let t = if t == Vec3::ZERO {
-            orthonormal_basis(n).0
-        } else {
-            t
-        };
-        let to_world = self.linear * Mat3::from_cols(t, n.cross(t), n);
-        // Visibility in world space: the lobes with their axes turned to world (eq. 1).
-        let mut vis: ShVec = [0.0; COEFFS];
-        for lobe in outputs[..self.compact.outputs_per_vertex()].chunks_exact(LOBE_DIM) {
-            let axis = to_world * Vec3::new(lobe[0], lobe[1], lobe[2]).normalize_or(Vec3::Z);
-            let y = sh::eval(axis);
-            let scale: [f32; 4] = std::array::from_fn(|l| ZH_SCALE[l] * lobe[3 + l]);
-            for (i, (o, y)) in vis.iter_mut().zip(y).enumerate() {
-                *o += scale[sh::band_of(i)] * y;
+    /// Shades the vertices from `first` on into `chunk` (`ch` values each), with the
+    /// processor's wider vector instructions where it has them.
+    fn shade_chunk(&self, first: usize, ch: usize, scratch: &mut Scratch, chunk: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the processor has AVX2 and FMA (checked just above).
+            unsafe { self.shade_chunk_avx2(first, ch, scratch, chunk) };
+            return;
+        }
+        self.shade_chunk_plain(first, ch, scratch, chunk);
+    }
+
+    /// [`Self::shade_chunk`] compiled for AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The processor must have AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn shade_chunk_avx2(
+        &self,
+        first: usize,
+        ch: usize,
+        scratch: &mut Scratch,
+        chunk: &mut [f32],
+    ) {
+        self.shade_chunk_plain(first, ch, scratch, chunk);
+    }
+
+    /// [`Self::shade_chunk`] in portable code: blocks of [`BLOCK`] vertices, each in three
+    /// passes over a structure of arrays (synthesis and gathering per vertex; frames,
+    /// lobes and visibility lane by lane, which the compiler vectorises; the table per
+    /// vertex).
+    #[inline(always)]
+    fn shade_chunk_plain(&self, first: usize, ch: usize, scratch: &mut Scratch, chunk: &mut [f32]) {
+        for (b, slots) in chunk.chunks_mut(ch * BLOCK).enumerate() {
+            let start = first + b * BLOCK;
+            let count = slots.len() / ch;
+            self.gather(start, count, scratch);
+            self.visibility(scratch);
+            for (i, slot) in slots.chunks_mut(ch).enumerate() {
+                self.shade_vertex(start + i, i, scratch, slot);
             }
         }
+    }
+
+    /// Pass 1: each vertex's synthesised lobes, position, normal and the offset to its
+    /// tangent neighbour, into the lanes (lanes beyond `count` are zero).
+    #[inline(always)]
+    fn gather(&self, start: usize, count: usize, s: &mut Scratch) {
+        let per = self.compact.outputs_per_vertex();
+        for lanes in s.lobes.iter_mut().chain(&mut s.normal).chain(&mut s.edge) {
+            lanes.fill(0.0);
+        }
+        for i in 0..count {
+            let v = start + i;
+            let out = &mut s.outputs[..per];
+            self.compact.vertex_outputs(self.factors, v, out);
+            for (lanes, x) in s.lobes.iter_mut().zip(&out[..per]) {
+                lanes[i] = *x;
+            }
+            let p = self.pose.positions[v];
+            let n = self.pose.normals[v];
+            let e = self.pose.positions[self.neighbours[v] as usize] - p;
+            for k in 0..3 {
+                s.normal[k][i] = n[k];
+                s.edge[k][i] = e[k];
+            }
+        }
+    }
+
+    /// Pass 2, lane by lane: the frame that follows the skin (as
+    /// `character::skin_frames`) turned to world, and the visibility in world space (the
+    /// lobes with their axes turned to world, eq. 1).
+    #[inline(always)]
+    fn visibility(&self, s: &mut Scratch) {
+        for lanes in &mut s.vis {
+            lanes.fill(0.0);
+        }
+        for i in 0..BLOCK {
+            let n = Vec3::new(s.normal[0][i], s.normal[1][i], s.normal[2][i]).normalize_or(Vec3::Z);
+            let e = Vec3::new(s.edge[0][i], s.edge[1][i], s.edge[2][i]);
+            let t = e - n * e.dot(n);
+            let len2 = t.length_squared();
+            let t = if len2 > 0.0 && len2.is_finite() {
+                t / len2.sqrt()
+            } else {
+                orthonormal_basis(n).0
+            };
+            let to_world = self.linear * Mat3::from_cols(t, n.cross(t), n);
+            for k in 0..3 {
+                s.world_normal[k][i] = to_world.z_axis[k];
+            }
+            for lobe in s.lobes.chunks_exact(LOBE_DIM) {
+                let local = Vec3::new(lobe[0][i], lobe[1][i], lobe[2][i]).normalize_or(Vec3::Z);
+                let y = sh::eval(to_world * local);
+                for (c, y) in y.iter().enumerate() {
+                    s.vis[c][i] += ZH_SCALE[sh::band_of(c)] * lobe[3 + sh::band_of(c)][i] * y;
+                }
+            }
+        }
+    }
+
+    /// Pass 3 for vertex `v` in lane `i`: the filter, the BRDF axis and horizon, the table
+    /// and the shade per channel into `slot`.
+    #[inline(always)]
+    fn shade_vertex(&self, v: usize, i: usize, s: &mut Scratch, slot: &mut [f32]) {
+        let mut vis: ShVec = std::array::from_fn(|c| s.vis[c][i]);
         self.shader.filter_visibility(&mut vis);
+        let normal = Vec3::new(
+            s.world_normal[0][i],
+            s.world_normal[1][i],
+            s.world_normal[2][i],
+        );
         // The BRDF axis and the share of its lobe above the horizon.
-        let normal = to_world.z_axis;
         let (axis, above) = match self.shader.mode() {
             Mode::Phong { .. } => {
-                let wo = (self.eye - self.pose.transform.transform_point3(p)).normalize_or(normal);
+                let p = self.pose.transform.transform_point3(self.pose.positions[v]);
+                let wo = (self.eye - p).normalize_or(normal);
                 let cos = normal.dot(wo);
                 (
                     (2.0 * cos * normal - wo).normalize_or(normal),
@@ -269,10 +347,46 @@ impl Frame<'_> {
             }
             _ => (normal, 1.0),
         };
-        self.table.lookup(axis, transfer);
-        for (o, t) in slot.iter_mut().zip(transfer.chunks_exact(COEFFS + 1)) {
+        self.table.lookup(axis, &mut s.transfer);
+        for (o, t) in slot.iter_mut().zip(s.transfer.chunks_exact(COEFFS + 1)) {
             *o = above * sh::dot(&vis, t[..COEFFS].try_into().expect("16 values")) + t[COEFFS];
         }
+    }
+}
+
+/// Vertices per block of a chunk's passes.
+const BLOCK: usize = 64;
+
+/// One thread's scratch for a block of vertices, as a structure of arrays (one array of
+/// [`BLOCK`] lanes per quantity).
+struct Scratch {
+    /// One vertex's synthesised outputs.
+    outputs: Vec<f32>,
+    /// Per lobe number (`lobes·7`), its lanes.
+    lobes: Vec<[f32; BLOCK]>,
+    /// Skinned normal, per component.
+    normal: [[f32; BLOCK]; 3],
+    /// Offset to the tangent neighbour, per component.
+    edge: [[f32; BLOCK]; 3],
+    /// The frame's normal in world space, per component.
+    world_normal: [[f32; BLOCK]; 3],
+    /// Visibility in world space, per coefficient.
+    vis: [[f32; BLOCK]; COEFFS],
+    /// The table's values at one vertex's BRDF axis.
+    transfer: Vec<f32>,
+}
+
+impl Scratch {
+    fn new(compact: &CompactModel, table: &SphereTable) -> Box<Self> {
+        Box::new(Self {
+            outputs: vec![0.0; compact.outputs_per_vertex()],
+            lobes: vec![[0.0; BLOCK]; compact.outputs_per_vertex()],
+            normal: [[0.0; BLOCK]; 3],
+            edge: [[0.0; BLOCK]; 3],
+            world_normal: [[0.0; BLOCK]; 3],
+            vis: [[0.0; BLOCK]; COEFFS],
+            transfer: vec![0.0; table.width()],
+        })
     }
 }
 

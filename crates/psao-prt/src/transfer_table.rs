@@ -49,7 +49,7 @@ impl SphereTable {
     }
 
     /// The interpolated values at the unit direction `d` into `out` (`width` values).
-    #[inline]
+    #[inline(always)]
     pub fn lookup(&self, d: Vec3, out: &mut [f32]) {
         let res = self.res as f32;
         let uv = (encode(d) + Vec2::ONE) * (0.5 * res);
