@@ -7,10 +7,12 @@
 //! ([`visibility`]), multi-lobe zonal fits kept in correspondence over frames ([`fit`]), the
 //! linear pose model ([`model`]), environment lighting ([`lighting`]) and run-time shading
 //! ([`shade`]) with its Monte Carlo reference ([`reference`]); [`runtime`] relights a
-//! character frame by frame from its joint transforms, as a client does. Pure code: no
+//! character frame by frame from its joint transforms, as a client does, with the model
+//! compacted ([`compact`]) and the lighting tabulated over the sphere ([`transfer_table`]). Pure code: no
 //! file I/O.
 
 pub mod character;
+pub mod compact;
 mod error;
 pub mod filter;
 pub mod fit;
@@ -27,6 +29,7 @@ pub mod sh;
 pub mod shade;
 pub mod shrink;
 mod small;
+pub mod transfer_table;
 pub mod visibility;
 pub mod zonal;
 

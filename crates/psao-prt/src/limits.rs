@@ -43,21 +43,33 @@ impl PoseLimits {
     /// no-op when empty or of another length.
     pub fn apply(&self, x: &mut [f32]) {
         let p = self.mean.len();
-        if self.range.is_empty() || x.len() != p {
+        let Some(coords) = self.limited_coords(x) else {
             return;
+        };
+        x.copy_from_slice(&self.mean);
+        for (axis, c) in self.axes.chunks_exact(p).zip(&coords) {
+            for (o, a) in x.iter_mut().zip(axis) {
+                *o += *c * a;
+            }
+        }
+    }
+
+    /// The principal coordinates of the pose features `x` (`3·active` numbers) moved into
+    /// the box, then into the ball: the limited pose is the mean plus these times the
+    /// axes. `None` when the limits are empty or `x` has another length.
+    pub fn limited_coords(&self, x: &[f32]) -> Option<Vec<f32>> {
+        if self.range.is_empty() || x.len() != self.mean.len() {
+            return None;
         }
         let mut coords = self.coords(x);
         for (c, &[lo, hi]) in coords.iter_mut().zip(&self.range) {
             *c = c.clamp(lo, hi);
         }
         let factor = self.ball_factor(&coords);
-        x.copy_from_slice(&self.mean);
-        for (axis, c) in self.axes.chunks_exact(p).zip(&mut coords) {
+        for c in &mut coords {
             *c *= factor;
-            for (o, a) in x.iter_mut().zip(axis) {
-                *o += *c * a;
-            }
         }
+        Some(coords)
     }
 
     /// How far the pose features `x` are from the training mean, as a multiple of the

@@ -195,6 +195,40 @@ impl Shader {
         self.filter.filter()
     }
 
+    /// Applies the visibility filter to `v` (a function on the sphere, in any frame).
+    pub fn filter_visibility(&self, v: &mut ShVec) {
+        self.filter.apply(v);
+    }
+
+    /// The share of a glossy lobe above the horizon for `cos = r·n` (1 for the modes whose
+    /// lobes are about the normal).
+    pub fn above_horizon(&self, cos: f32) -> f32 {
+        self.horizon.as_ref().map_or(1.0, |h| h.fraction(cos))
+    }
+
+    /// What the shade of a vertex whose BRDF axis (the normal, or Phong's reflection vector)
+    /// is the unit `axis` (world) is made of under `light` (SH radiance, world): `(g, back)`
+    /// with `shade = above · v·g + back` for the vertex's visibility `v` in world space and
+    /// the horizon share `above` ([`Self::above_horizon`]). With R the rotation of SH
+    /// coefficients into a frame whose z is the axis and M the operator, `v·g` is
+    /// `(M·R·v)·(R·L)` as [`Self::shade`] computes it, so `g = Rᵀ·M·R·L` (M is symmetric);
+    /// the operator is symmetric about z, so every such frame gives the same `g`.
+    /// Translucency's share `1 − τ` is folded into `g` and its unshadowed back lobe (about
+    /// −axis) is `back`; the other modes have `back = 0`.
+    pub fn axis_transfer(&self, axis: Vec3, light: &ShVec) -> (ShVec, f32) {
+        let (t, b) = orthonormal_basis(axis);
+        let frame = Mat3::from_cols(t, b, axis);
+        let local = ShRotation::new(frame.transpose()).apply(light);
+        let g = ShRotation::new(frame).apply(&self.op.apply(&local));
+        match self.mode {
+            Mode::Translucent { transmission } => (
+                g.map(|x| (1.0 - transmission) * x),
+                transmission * crate::sh::dot(&self.back, &local),
+            ),
+            _ => (g, 0.0),
+        }
+    }
+
     /// Shades every vertex under `lights` (SH radiance in world space, one vector per
     /// channel) seen from `eye` (world; used by Phong). Returns `channels` values per vertex,
     /// interleaved. Runs on all rayon threads. Errors when the visibility, frames and

@@ -12,6 +12,7 @@ mod corrective;
 mod error;
 mod frame;
 mod message;
+mod relighting;
 
 pub use corrective::{
     Region, RegionsMsg, SampleMsg, SamplesMsg, MAX_RADIANCE, MAX_REGIONS, MAX_REGION_IMAGE_SIDE,
@@ -27,3 +28,4 @@ pub use message::{
     SceneTime, StatusMsg, Welcome, MAX_CODEC_NAME, MAX_INSTANCES, MAX_TEXT, MAX_TOKEN,
     PROTOCOL_VERSION,
 };
+pub use relighting::{RelightingMsg, MAX_LIGHT_CHANNELS, MAX_MODEL_BYTES, SH_COEFFS};

@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::corrective::{RegionsMsg, SamplesMsg};
+use crate::relighting::RelightingMsg;
 use crate::WireError;
 
 /// Protocol version spoken here; a hello with another version is refused.
@@ -29,8 +30,11 @@ pub mod capabilities {
     pub const CORRECTIVE: u32 = 8;
     /// Understands [`super::Message::Status`] (a server sends it only to such clients).
     pub const STATUS: u32 = 16;
+    /// Relights skinned characters: wants [`super::Message::Relighting`] after the welcome
+    /// (docs/RELIGHTING.md).
+    pub const RELIGHT: u32 = 32;
     /// Every bit defined by this version.
-    pub const ALL: u32 = CODEC_PAPER | CODEC_COMPACT | STATE_HASH | CORRECTIVE | STATUS;
+    pub const ALL: u32 = CODEC_PAPER | CODEC_COMPACT | STATE_HASH | CORRECTIVE | STATUS | RELIGHT;
 }
 
 /// Every message of the protocol; the variant index (a postcard varint) comes first.
@@ -61,6 +65,9 @@ pub enum Message {
     /// 11, server → client (only with [`capabilities::STATUS`]): updates stalled, or flowing
     /// again (a scale-out edge waiting for its trace nodes, docs/SCALE-OUT.md).
     Status(StatusMsg),
+    /// 12, server → client (only with [`capabilities::RELIGHT`]), after the welcome: a
+    /// skinned character's relighting model and the scene's lighting.
+    Relighting(RelightingMsg),
 }
 
 /// Client → server, first message.
@@ -308,6 +315,7 @@ impl Message {
             Message::Status(s) => check_text("status text", &s.text, MAX_TEXT),
             Message::Regions(r) => r.validate(),
             Message::Samples(s) => s.validate(),
+            Message::Relighting(r) => r.validate(),
             _ => Ok(()),
         }
     }
@@ -327,6 +335,7 @@ impl Message {
             Message::Regions(_) => "regions",
             Message::Samples(_) => "samples",
             Message::Status(_) => "status",
+            Message::Relighting(_) => "relighting",
         }
     }
 }

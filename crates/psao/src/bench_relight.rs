@@ -64,9 +64,15 @@ struct BenchResult {
     /// not grow when other processes take the cores; on an otherwise idle machine with both
     /// cores busy it is up to 2 × `ms_per_frame`.
     cpu_ms_per_frame: Option<f64>,
-    /// Median milliseconds of the model's matrix product alone.
+    /// Median milliseconds of the compacted model's synthesis alone (every vertex's lobes).
     synthesis_ms: f64,
     model_mb: f64,
+    /// Size of the compacted model's rows (16-bit integers).
+    compact_mb: f64,
+    /// Rows of the compacted model: its base and one per kept component.
+    compact_rows: usize,
+    /// Largest change the compaction can make to a lobe number (pose within the box).
+    compact_bound: f32,
 }
 
 /// Runs `psao bench relight`.
@@ -122,7 +128,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("cannot start the thread pool")?;
-    let mut raw = Vec::new();
+    let (mut raw, mut shaded) = (Vec::new(), Vec::new());
     let mut total = Vec::with_capacity(args.runs);
     let mut synth = Vec::with_capacity(args.runs);
     let mut cpu = Vec::with_capacity(args.runs);
@@ -139,15 +145,14 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         };
         let cpu_start = fine_cpu_seconds();
         let start = Instant::now();
-        let v = pool.install(|| relighter.shade(&frame, &lights, camera.position))?;
+        pool.install(|| relighter.shade_into(&frame, &lights, camera.position, &mut shaded))?;
         let wall = start.elapsed();
         let cpu_end = fine_cpu_seconds();
-        std::hint::black_box(v);
-        // The synthesis alone (the model's matrix product), timed apart.
-        let model = relighter.model();
-        let a = model.pose_vector(&pose.joint_rotations);
+        std::hint::black_box(&shaded);
+        // The synthesis alone (the compacted model's product), timed apart.
+        let compact = relighter.compact();
         let start = Instant::now();
-        pool.install(|| model.predict_raw(&a, &mut raw));
+        pool.install(|| compact.predict(&pose.joint_rotations, &mut raw));
         let synthesis = start.elapsed();
         if run > 0 {
             total.push(wall.as_secs_f64() * 1e3);
@@ -173,12 +178,15 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         cpu_ms_per_frame: (cpu.len() == total.len()).then(|| median(&mut cpu)),
         synthesis_ms: median(&mut synth),
         model_mb,
+        compact_mb: relighter.compact().megabytes(),
+        compact_rows: relighter.compact().rows(),
+        compact_bound: relighter.compact().bound(),
     };
     let cpu_text = result
         .cpu_ms_per_frame
         .map_or("not available".to_string(), |c| format!("{c:.3} ms"));
     println!(
-        "{}: {} vertices, {} lobes, {} on {} threads: {:.3} ms per frame (synthesis {:.3} ms), CPU {cpu_text} per frame, model {:.2} MB",
+        "{}: {} vertices, {} lobes, {} on {} threads: {:.3} ms per frame (synthesis {:.3} ms), CPU {cpu_text} per frame, model {:.2} MB (compacted {} rows, {:.2} MB, bound {:.1e})",
         result.character,
         result.vertices,
         result.lobes,
@@ -186,7 +194,10 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         result.threads,
         result.ms_per_frame,
         result.synthesis_ms,
-        result.model_mb
+        result.model_mb,
+        result.compact_rows,
+        result.compact_mb,
+        result.compact_bound
     );
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&result)?)
