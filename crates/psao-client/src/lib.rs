@@ -6,6 +6,12 @@
 //! A frame: `state.apply(&update)?` for every update received since the last frame, rasterize
 //! the scene (`psao_raster`), then `reconstruct(&state, &gbuffer, &settings)` and
 //! `composite(&scene, &gbuffer, &ao, &shading)`.
+//!
+//! With lighting (DESIGN §12; the state then holds irradiance records,
+//! [`ClientState::has_lights`]): `reconstruct_lit_into` gives the AO and the points'
+//! irradiance per pixel, [`direct_light`] the shadow-mapped light of suns and point lights
+//! (`psao_raster::ShadowMaps`), and [`composite_lit`] the radiance
+//! `base colour / π × (direct + irradiance)`.
 
 #![warn(missing_docs)]
 

@@ -372,8 +372,8 @@ impl ClientRenderer {
             }
         };
         let (mut ao, mut irradiance) = (Vec::new(), Vec::new());
-        let lit = state.has_lights();
-        if lit {
+        let has_lights = state.has_lights();
+        if has_lights {
             psao_client::reconstruct_lit_into(
                 state,
                 &gbuffer,
@@ -387,7 +387,7 @@ impl ClientRenderer {
         if let Some(detail) = &self.detail {
             psao_client::apply_detail(state, &gbuffer, camera, detail, &mut ao);
         }
-        let lit = if lit {
+        let lit = if has_lights {
             let poses =
                 poses.unwrap_or_else(|| scene.instances.iter().map(InstancePose::rest).collect());
             let shadows = self.shadows.get_or_insert_with(|| {

@@ -61,12 +61,13 @@ impl Default for ShadowSettings {
 }
 
 impl ShadowSettings {
-    /// Maps matched to a `width`×`height` image: a sun cascade of twice the image's larger
-    /// side (256 to 2048 texels), point faces of half of it (64 to 512), 3 cascades, 3×3 taps.
+    /// Maps matched to a `width`×`height` image: sun cascades of the image's larger side
+    /// (256 to 2048 texels; the cascades already give the view's near part the finest
+    /// texels), point faces of half of it (64 to 512), 3 cascades, 3×3 taps.
     pub fn for_image(width: u32, height: u32) -> Self {
         let side = width.max(height);
         Self {
-            sun_resolution: (2 * side).clamp(256, 2048),
+            sun_resolution: side.clamp(256, 2048),
             point_resolution: (side / 2).clamp(64, 512),
             ..Self::default()
         }

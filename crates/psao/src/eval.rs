@@ -1,5 +1,12 @@
 //! `psao eval`: PSAO at several densities and server rates against SSAO and few-spp RTAO,
 //! all measured against a cached per-pixel reference (DESIGN §5).
+//!
+//! With `--lighting gi` (DESIGN §12, docs/LIGHTING.md) the servers also trace irradiance, and
+//! the composited columns (`*_comp`) measure the image a person sees against the path-traced
+//! diffuse lighting of `psao reference --lighting gi` (luma of the sRGB images, as for AO):
+//! row `psao` is the lit client composite, row `psao-ao` the same session's AO-only
+//! composite (what the client showed before lighting), and SSAO and RTAO enter with their
+//! AO-only composites. The AO columns stay against the reference AO.
 
 use crate::args::{FrameRange, Resolution};
 use crate::lpips_weights::{LpipsArgs, LpipsChoice};
@@ -7,12 +14,12 @@ use crate::png_io::{read_ao_png, write_ao_png};
 use crate::progress;
 use crate::reference::ReferenceRenderer;
 use crate::report::{self, Report, Row, Series, ServerWork};
-use crate::run::ServerTuning;
+use crate::run::{LightingArgs, ServerTuning};
 use crate::scene_source::{SceneArgs, SceneInput};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_eval::{compare, ssao, AoImage, Lpips, Metrics, SsaoSettings};
-use psao_net::pipeline::{client_time, composite_rgb8, luma, Pipeline, CLIENT_HZ};
+use psao_net::pipeline::{client_time, composite_rgb8, frame_rgb8, luma, Pipeline, CLIENT_HZ};
 use psao_raster::GBuffer;
 use psao_scene::path::CameraPath;
 use psao_scene::{Animator, Scene};
@@ -54,6 +61,8 @@ pub struct EvalArgs {
     #[command(flatten)]
     pub tuning: ServerTuning,
     #[command(flatten)]
+    pub lighting: LightingArgs,
+    #[command(flatten)]
     pub lpips: LpipsArgs,
     /// Folder of cached reference images.
     #[arg(long, default_value = "out/cache")]
@@ -63,7 +72,9 @@ pub struct EvalArgs {
     pub out: PathBuf,
 }
 
-/// One evaluated frame: its G-buffer, reference AO and composited reference.
+/// One evaluated frame: its G-buffer, reference AO and the reference of the composited
+/// images (luma): the AO composite of the reference AO, or with `--lighting gi` the reference
+/// diffuse lighting.
 struct EvalFrame {
     frame: u32,
     gbuffer: GBuffer,
@@ -82,6 +93,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             crate::reference::MAX_SPP
         );
     }
+    // Checked before any work.
+    args.lighting.config()?;
     let (input, path) = args.input.load()?;
     let count = path.frame_count() as u32;
     let range = FrameRange::within_path(args.frames, count)?;
@@ -114,13 +127,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     )];
     for &hz in &args.server_hz {
         for &points in &args.points {
-            let (row, series, middle) =
+            let (psao_rows, series, middle) =
                 eval_psao(&input, &path, range, &frames, points, hz, args, lpips)?;
             if hz == args.server_hz[0] && (crops.len() == 1) {
                 crops.push((format!("PSAO-{points}"), middle));
             }
             bandwidth.push(series);
-            rows.push(row);
+            rows.extend(psao_rows);
         }
     }
     let (ssao_row, ssao_middle) = eval_ssao(&input.scene, &path, &frames, lpips)?;
@@ -166,7 +179,18 @@ fn prepare_frames(
     )?
     .with_medium(input.medium());
     let pixels = args.res.width as u64 * args.res.height as u64;
-    let bar = progress::bar(pixels * eval_frames.len() as u64, "reference AO", "px");
+    let lighting = args.lighting.config()?;
+    let per_frame = pixels * if lighting.is_some() { 2 } else { 1 };
+    let bar = progress::bar(per_frame * eval_frames.len() as u64, "references", "px");
+    let gi_dir = match &lighting {
+        Some(l) => {
+            let dir = cache_dir.join(gi_key(&input.scene, l.bounces));
+            std::fs::create_dir_all(&dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            Some((dir, l.bounces))
+        }
+        None => None,
+    };
     let mut frames = Vec::new();
     for &frame in eval_frames {
         let file = crate::reference::frame_file(&cache_dir, frame);
@@ -185,7 +209,26 @@ fn prepare_frames(
                 AoImage::from_u16(img.width, img.height, &img.to_u16())
             }
         };
-        let reference_comp = composite_luma(&input.scene, &gbuffer, &reference);
+        let reference_comp = match &gi_dir {
+            None => composite_luma(&input.scene, &gbuffer, &reference),
+            Some((dir, bounces)) => {
+                let file = dir.join(format!("gi_luma_{frame:05}.png"));
+                match read_ao_png(&file) {
+                    Ok(img) if (img.width, img.height) == (args.res.width, args.res.height) => {
+                        bar.inc(pixels);
+                        img
+                    }
+                    _ => {
+                        let gi =
+                            renderer.render_gi(path, frame, args.res, *bounces, &|n| bar.inc(n))?;
+                        let img =
+                            luma(gi.width, gi.height, &psao_client::composite_srgb8(&gi.data));
+                        write_ao_png(&file, &img)?;
+                        AoImage::from_u16(img.width, img.height, &img.to_u16())
+                    }
+                }
+            }
+        };
         frames.push(EvalFrame {
             frame,
             gbuffer,
@@ -238,6 +281,34 @@ fn reference_key(
     ))
 }
 
+/// The cache folder name (inside the reference's) of the reference lighting with `bounces`
+/// bounces: a hash of what lights the scene beyond its geometry (lights, sun keys, base
+/// colours, environment: its constant, or its map's intensity, turn and radiance in 26
+/// directions).
+fn gi_key(scene: &Scene, bounces: u32) -> String {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    format!("{:?}{:?}", scene.lights, scene.sun_keys).hash(&mut h);
+    for m in &scene.materials {
+        format!("{:?}", m.base_color).hash(&mut h);
+    }
+    match &scene.environment {
+        psao_scene::Environment::Constant(c) => format!("{c:?}").hash(&mut h),
+        env => {
+            for x in -1..=1 {
+                for y in -1..=1 {
+                    for z in -1..=1 {
+                        let d = glam::Vec3::new(x as f32, y as f32, z as f32);
+                        if d != glam::Vec3::ZERO {
+                            format!("{:?}", env.radiance(d.normalize())).hash(&mut h);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    format!("gi{bounces}_{:016x}", h.finish())
+}
+
 fn composite_luma(scene: &Scene, gbuffer: &GBuffer, ao: &AoImage) -> AoImage {
     luma(
         gbuffer.width,
@@ -266,14 +337,18 @@ impl<'a> MetricSums<'a> {
         }
     }
 
+    /// Adds a frame's AO and its AO-only composite.
     fn add(&mut self, scene: &Scene, f: &EvalFrame, ao: &AoImage) -> Result<()> {
+        self.add_composited(f, ao, &composite_luma(scene, &f.gbuffer, ao))
+    }
+
+    /// Adds a frame's AO and a composite (luma) made otherwise.
+    fn add_composited(&mut self, f: &EvalFrame, ao: &AoImage, comp: &AoImage) -> Result<()> {
         self.ao.push(compare(&f.reference, ao)?);
-        let comp = composite_luma(scene, &f.gbuffer, ao);
-        self.comp.push(compare(&f.reference_comp, &comp)?);
+        self.comp.push(compare(&f.reference_comp, comp)?);
         if let Some(net) = self.lpips {
             self.lpips_ao.push(net.distance(&f.reference, ao)?);
-            self.lpips_comp
-                .push(net.distance(&f.reference_comp, &comp)?);
+            self.lpips_comp.push(net.distance(&f.reference_comp, comp)?);
         }
         Ok(())
     }
@@ -307,7 +382,9 @@ impl<'a> MetricSums<'a> {
     }
 }
 
-/// Runs the split pipeline over the whole range and measures the evaluated frames.
+/// Runs the split pipeline over the whole range and measures the evaluated frames: one row
+/// (`psao`), or with lighting the lit composite's row (`psao`) and the AO-only composite's
+/// (`psao-ao`, same session, same figures but the composited ones).
 #[allow(clippy::too_many_arguments)]
 fn eval_psao(
     input: &SceneInput,
@@ -318,10 +395,12 @@ fn eval_psao(
     hz: u32,
     args: &EvalArgs,
     lpips: Option<&Lpips>,
-) -> Result<(Row, Series, AoImage)> {
+) -> Result<(Vec<Row>, Series, AoImage)> {
     let scene = &input.scene;
     let mut config = args.tuning.config(points, hz, args.res)?;
     config.medium = input.medium();
+    config.server.lighting = args.lighting.config()?;
+    let lit = config.server.lighting.is_some();
     let mut pipeline = Pipeline::new(scene, &config)?;
     if args.warm_up > 0 {
         let camera = path.camera_at_frame(range.start as usize);
@@ -333,6 +412,7 @@ fn eval_psao(
         "frames",
     );
     let mut sums = MetricSums::new(lpips);
+    let mut lit_sums = MetricSums::new(lpips);
     let (mut server_ms, mut server_frames, mut client_ms) = (0.0, 0u32, 0.0);
     let mut work = ServerWork {
         invalidation: format!("{:?}", args.tuning.invalidation).to_lowercase(),
@@ -360,6 +440,10 @@ fn eval_psao(
         if let (Some(f), Some(img)) = (eval, image) {
             client_ms += record.client_ms;
             sums.add(scene, f, &img.ao)?;
+            if lit {
+                let (w, h) = (img.ao.width, img.ao.height);
+                lit_sums.add_composited(f, &img.ao, &luma(w, h, &frame_rgb8(scene, &img)))?;
+            }
             if std::ptr::eq(f, &frames[frames.len() / 2]) {
                 middle = Some(img.ao);
             }
@@ -368,7 +452,11 @@ fn eval_psao(
     }
     bar.finish_and_clear();
     let seconds = (range.end - range.start) as f64 / CLIENT_HZ as f64;
-    let mut row = sums.row("psao");
+    let mut row = if lit {
+        lit_sums.row("psao")
+    } else {
+        sums.row("psao")
+    };
     row.points = Some(points);
     row.server_hz = Some(hz);
     row.codec = Some(config.codec.clone());
@@ -390,7 +478,21 @@ fn eval_psao(
         label: format!("PSAO-{points} @ {hz} Hz"),
         mbit_per_second: per_second.iter().map(|&b| b as f64 * 8.0 / 1e6).collect(),
     };
-    Ok((row, series, middle.context("no evaluated frame")?))
+    // With lighting, the AO-only composite of the same session: only the composited figures
+    // differ.
+    let ao_only = lit.then(|| {
+        let ao_only = sums.row("psao-ao");
+        Row {
+            method: ao_only.method,
+            psnr_comp: ao_only.psnr_comp,
+            ssim_comp: ao_only.ssim_comp,
+            flip_comp: ao_only.flip_comp,
+            lpips_comp: ao_only.lpips_comp,
+            ..row.clone()
+        }
+    });
+    let rows = std::iter::once(row).chain(ao_only).collect();
+    Ok((rows, series, middle.context("no evaluated frame")?))
 }
 
 /// SSAO on the same G-buffers.

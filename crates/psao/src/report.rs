@@ -10,7 +10,8 @@ use std::path::Path;
 /// One method's mean results (a row of the paper's Table 1).
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
-    /// `psao`, `ssao` or `rtao`.
+    /// `psao`, `ssao` or `rtao`; with `--lighting gi` also `psao-ao` (the PSAO session's
+    /// AO-only composite).
     pub method: String,
     /// Points per unit area (PSAO only).
     pub points: Option<f32>,
@@ -299,7 +300,9 @@ fn plot_quality_vs_points(file: &Path, rows: &[Row]) -> Result<()> {
             markers: true,
         })
         .collect();
-    lines.extend(rows.iter().filter(|r| r.method != "psao").map(|r| Line {
+    // Baselines: the methods without a density (the AO-only composite rows of a lit
+    // evaluation, `psao-ao`, have the same AO as their `psao` rows).
+    lines.extend(rows.iter().filter(|r| r.points.is_none()).map(|r| Line {
         label: r.method.clone(),
         points: vec![(0.0, r.psnr_ao), (x_max, r.psnr_ao)],
         markers: false,
