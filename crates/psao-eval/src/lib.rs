@@ -6,6 +6,7 @@
 pub mod ao_image;
 pub mod lpips;
 pub mod metrics;
+pub mod path_caster;
 pub mod reference;
 pub mod reference_gi;
 pub mod ssao;
