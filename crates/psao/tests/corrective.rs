@@ -69,6 +69,70 @@ fn eval_converges_on_a_static_view_and_beats_the_base_frame() {
     }
 }
 
+/// The eval on generated paths over two seeds: a summary of every row over both seeds, the
+/// saliency ordering paired against uniform, and the same numbers on a second run.
+#[test]
+fn eval_on_generated_paths_reports_mean_and_spread_over_seeds() {
+    let run = || {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().to_str().unwrap();
+        let o = psao(&[
+            "corrective",
+            "eval",
+            "--scene",
+            SCENE,
+            "--res",
+            "64x36",
+            "--frames",
+            "0..3",
+            "--budget",
+            "200",
+            "--order",
+            "saliency,uniform",
+            "--static-frames",
+            "0",
+            "--ao-spp",
+            "1",
+            "--random-paths",
+            "2",
+            "--seeds",
+            "1,2",
+            "--out",
+            out,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        json(&dir.path().join("seeds.json"))
+    };
+    let r = run();
+    let runs = r["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        let paths = run["paths"].as_array().unwrap();
+        assert_eq!(paths.len(), 2);
+        assert_ne!(paths[0]["per_frame"], paths[1]["per_frame"]);
+    }
+    // The two seeds walk different paths, so their frames differ.
+    assert_ne!(
+        runs[0]["paths"][0]["per_frame"],
+        runs[1]["paths"][0]["per_frame"]
+    );
+    let summary = r["summary"].as_array().unwrap();
+    assert_eq!(summary.len(), 3);
+    for row in summary {
+        let metrics = row["metrics"].as_array().unwrap();
+        let names: Vec<&str> = metrics.iter().map(|m| m[0].as_str().unwrap()).collect();
+        for name in ["psnr", "flip", "centre_flip", "saliency_flip"] {
+            assert!(names.contains(&name), "{row}");
+        }
+        assert!(metrics.iter().all(|m| m[1]["n"].as_u64() <= Some(2)));
+        let flip = &metrics[1][1];
+        assert!(flip["min"].as_f64() <= flip["mean"].as_f64());
+        assert!(flip["mean"].as_f64() <= flip["max"].as_f64());
+    }
+    assert!(!r["saliency_vs_uniform"].as_array().unwrap().is_empty());
+    assert_eq!(r["summary"], run()["summary"]);
+}
+
 #[test]
 fn bad_arguments_and_scenes_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
