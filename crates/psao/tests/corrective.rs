@@ -402,6 +402,43 @@ fn threaded_serve_streams_every_sample_within_the_budget_and_shuts_down_cleanly(
     assert!(sent <= frames * 100, "{sent} samples in {frames} frames");
 }
 
+/// `--correction-ms`: with a microsecond of tracing per server frame each of the two workers
+/// starts at most one job (64 positions) per frame, far below the 30 000 samples per second
+/// granted; every examined position still counts against the sample budget, and the server
+/// reports the workers' samples per second.
+#[test]
+fn a_time_budget_per_frame_bounds_the_workers_and_reports_their_rate() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let stats = fx.path().join("serve.json");
+    let server_args: Vec<&str> = SPLIT_SERVER
+        .iter()
+        .map(|&a| if a == "3000" { "30000" } else { a })
+        .chain(["--correction-ms", "0.001", "--hz", "30", "--once"])
+        .chain(["--json", stats.to_str().unwrap()])
+        .collect();
+    let (mut server, addr) = start_serve(scene, &server_args);
+    let view_json = fx.path().join("view.json");
+    let o = view_with_corrections(scene, &addr, 60, &view_json);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(server.0.wait().unwrap().success());
+    let client = &json(&stats)["clients"][0];
+    let frames = client["frames"].as_u64().unwrap();
+    let budget = client["correction_budget"].as_u64().unwrap();
+    let examined = client["correction_examined"].as_u64().unwrap();
+    assert!(json(&view_json)["samples"].as_u64().unwrap() > 0);
+    assert!(examined > 0 && examined <= budget, "{client}");
+    assert!(
+        examined <= frames * 2 * 64,
+        "{examined} positions in {frames} frames"
+    );
+    assert!(
+        client["correction_samples_per_s"].as_f64().unwrap() > 0.0,
+        "{client}"
+    );
+}
+
 #[test]
 fn one_worker_pool_serves_two_clients_and_shuts_down_when_they_leave() {
     let fx = split_fixture();
