@@ -133,6 +133,55 @@ fn eval_on_generated_paths_reports_mean_and_spread_over_seeds() {
     assert_eq!(r["summary"], run()["summary"]);
 }
 
+/// `--budget-ms`: a time budget per frame next to a sample budget; the rows say what was
+/// traced per frame, and a budget of no time is an error.
+#[test]
+fn eval_takes_time_budgets_next_to_sample_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let args = |ms: &'static str| {
+        [
+            "corrective",
+            "eval",
+            "--scene",
+            SCENE,
+            "--res",
+            "64x36",
+            "--frames",
+            "0..2",
+            "--budget",
+            "50",
+            "--budget-ms",
+            ms,
+            "--order",
+            "uniform",
+            "--static-frames",
+            "0",
+            "--ao-spp",
+            "1",
+            "--out",
+            out,
+        ]
+    };
+    let o = psao(&args("20"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = json(&dir.path().join("report.json"));
+    let rows = r["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[1]["budget"]["samples"], 50);
+    assert!(rows[1]["traced_per_frame"].as_f64().unwrap() <= 50.0);
+    assert_eq!(rows[2]["budget"]["ms"], 20.0);
+    assert!(
+        rows[2]["traced_per_frame"].as_f64().unwrap() > 0.0,
+        "{}",
+        rows[2]
+    );
+    assert!(r["timing"]["worker_samples_per_s"].as_f64().unwrap() > 0.0);
+    let o = psao(&args("0"));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("milliseconds"), "{}", stderr(&o));
+}
+
 #[test]
 fn bad_arguments_and_scenes_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();

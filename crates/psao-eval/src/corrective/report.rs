@@ -14,11 +14,11 @@ const TITLES: [&str; 6] = [
 ];
 
 fn header(first: &str) -> String {
-    let mut s = format!("| {first} | samples / frame |");
+    let mut s = format!("| {first} | budget / frame | traced / frame |");
     for t in TITLES {
         s += &format!(" {t} |");
     }
-    s += "\n|---|---|";
+    s += "\n|---|---|---|";
     s += &"---|".repeat(TITLES.len());
     s + "\n"
 }
@@ -36,7 +36,7 @@ fn digits(name: &str) -> usize {
 pub fn rows_table(rows: &[Row]) -> String {
     let mut s = header("order");
     for r in rows {
-        s += &format!("| {} | {} |", r.order, r.budget);
+        s += &format!("| {} | {} | {:.0} |", r.order, r.budget, r.traced_per_frame);
         for &(name, _) in &METRICS {
             s += &match super::seeds::metric(&r.error, name) {
                 Some(v) => format!(" {v:.*} |", digits(name)),
@@ -56,7 +56,7 @@ fn mean_sd(s: &Spread, digits: usize) -> String {
 pub fn summary_table(report: &SeedsReport) -> String {
     let mut s = header("order");
     for r in &report.summary {
-        s += &format!("| {} | {} |", r.order, r.budget);
+        s += &format!("| {} | {} | {:.0} |", r.order, r.budget, r.traced_per_frame);
         for &(name, _) in &METRICS {
             s += &match r.metrics.iter().find(|(n, _)| n == name) {
                 Some((_, v)) => format!(" {} |", mean_sd(v, digits(name))),
@@ -71,7 +71,7 @@ pub fn summary_table(report: &SeedsReport) -> String {
 /// A table of paired differences: saliency − uniform relative to uniform, per seed.
 pub fn paired_table(pairs: &[Paired]) -> String {
     let mut s = String::from(
-        "| samples / frame | metric | saliency − uniform (% of uniform, mean ± sd) | min … max | seeds saliency better |\n|---|---|---|---|---|\n",
+        "| budget / frame | metric | saliency − uniform (% of uniform, mean ± sd) | min … max | seeds saliency better |\n|---|---|---|---|---|\n",
     );
     for p in pairs {
         let d = &p.difference_pct;
@@ -93,7 +93,7 @@ pub fn path_markdown(scene: &str, config: &EvalConfig, eval: &PathEval) -> Strin
     s += "## Averages over the frames (against the reference)\n\n";
     s += &rows_table(&eval.rows);
     if !eval.convergence.is_empty() {
-        s += "\n## Static view (first frame's camera)\n\n| order | samples / frame | non-diffuse pixels | samples traced | bit-identical at the end |\n|---|---|---|---|---|\n";
+        s += "\n## Static view (first frame's camera)\n\n| order | budget / frame | non-diffuse pixels | samples traced | bit-identical at the end |\n|---|---|---|---|---|\n";
         for c in &eval.convergence {
             s += &format!(
                 "| {} | {} | {} | {} | {} |\n",
@@ -108,7 +108,7 @@ pub fn path_markdown(scene: &str, config: &EvalConfig, eval: &PathEval) -> Strin
         "| worker samples/s | threads | aging ms | reprojection + splatting ms | analysis ms | mean cache size | max cache size |\n|---|---|---|---|---|---|---|\n| {:.0} | {} | {:.3} | {:.3} | {:.1} | {:.0} | {} |\n",
         t.worker_samples_per_s, t.threads, t.aging_ms, t.splat_ms, t.analysis_ms, t.mean_cache_size, t.max_cache_size
     );
-    s += "\nImages of the middle frame: `base.png`, `corrected.png` (first ordering, largest budget), `reference.png`.\n";
+    s += "\nImages of the middle frame: `base.png`, `corrected.png` (first ordering, largest sample budget), `reference.png`.\n";
     s
 }
 

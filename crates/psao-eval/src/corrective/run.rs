@@ -1,8 +1,10 @@
 //! One evaluation along one camera path: corrected frames at several sample budgets and
 //! orderings against the reference, and a static-view convergence run per ordering.
 //!
-//! Budgets are samples per frame (not time, so the results are deterministic). The scene is
-//! frozen by the caller. Every analysis period the ordering assigns region priorities:
+//! Budgets are samples per frame (deterministic per seed) or milliseconds of tracing per
+//! frame (the paper's 1/f: jobs are traced, all threads at once, until the frame's time is
+//! spent, so the result depends on the machine and its load). The scene is frozen by the
+//! caller. Every analysis period the ordering assigns region priorities:
 //! `saliency` (bottom-up saliency of the frame as shown blended with task importance),
 //! `uniform` (all equal) or `random` (hashed from the seed, frame, object and region).
 //! Regions are the objects' parts in the tiles of [`analyze_tiles`].
@@ -67,6 +69,25 @@ impl Order {
     }
 }
 
+/// What a simulated viewer may trace per frame.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Budget {
+    /// Samples (positions examined) per frame.
+    Samples(usize),
+    /// Milliseconds of tracing per frame.
+    Ms(f64),
+}
+
+impl std::fmt::Display for Budget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Budget::Samples(n) => write!(f, "{n}"),
+            Budget::Ms(ms) => write!(f, "{ms} ms"),
+        }
+    }
+}
+
 /// Settings of an evaluation.
 #[derive(Clone, Debug)]
 pub struct EvalConfig {
@@ -76,8 +97,8 @@ pub struct EvalConfig {
     pub height: u32,
     /// Frames of the path evaluated (`None`: the first 48, or fewer on a shorter path).
     pub frames: Option<Range<u32>>,
-    /// Samples traced per frame.
-    pub budgets: Vec<usize>,
+    /// Budgets per frame.
+    pub budgets: Vec<Budget>,
     /// Orderings.
     pub orders: Vec<Order>,
     /// Priority reduction per finished √5 level, in [0, 1).
@@ -98,8 +119,12 @@ impl EvalConfig {
         if self.width == 0 || self.height == 0 {
             return bad("the image size must be positive");
         }
-        if self.budgets.is_empty() || self.budgets.contains(&0) {
-            return bad("the budgets must be positive sample counts");
+        let positive = |b: &Budget| match *b {
+            Budget::Samples(n) => n > 0,
+            Budget::Ms(ms) => ms.is_finite() && ms > 0.0,
+        };
+        if self.budgets.is_empty() || !self.budgets.iter().all(positive) {
+            return bad("the budgets must be positive sample counts or milliseconds");
         }
         if self.orders.is_empty() {
             return bad("at least one ordering is needed");
@@ -148,13 +173,15 @@ impl Tracers {
     }
 }
 
-/// Average errors of one ordering and budget (budget 0: the base frame).
+/// Average errors of one ordering and budget (0 samples: the base frame).
 #[derive(Serialize, Clone, Debug)]
 pub struct Row {
     /// Ordering (`base` for the base frame).
     pub order: String,
-    /// Samples per frame.
-    pub budget: usize,
+    /// Budget per frame.
+    pub budget: Budget,
+    /// Samples traced per frame, on average.
+    pub traced_per_frame: f64,
     /// The averages over the frames.
     #[serde(flatten)]
     pub error: MeanError,
@@ -167,8 +194,8 @@ pub struct FrameRow {
     pub frame: u32,
     /// Ordering.
     pub order: String,
-    /// Samples per frame.
-    pub budget: usize,
+    /// Budget per frame.
+    pub budget: Budget,
     /// The errors.
     #[serde(flatten)]
     pub error: FrameError,
@@ -181,8 +208,8 @@ pub struct FrameRow {
 pub struct Convergence {
     /// Ordering.
     pub order: String,
-    /// Samples per frame.
-    pub budget: usize,
+    /// Budget per frame.
+    pub budget: Budget,
     /// Non-diffuse pixels of the view.
     pub non_diffuse_pixels: usize,
     /// Samples traced in all.
@@ -216,7 +243,7 @@ pub struct Timing {
 pub struct MiddleFrame {
     /// The base frame.
     pub base: Vec<u8>,
-    /// The first ordering at the largest budget.
+    /// The first ordering at the largest sample budget (else the first budget).
     pub corrected: Vec<u8>,
     /// The reference.
     pub reference: Vec<u8>,
@@ -247,9 +274,11 @@ pub struct PathEval {
 /// One simulated viewer.
 struct Sim {
     order: Order,
-    budget: usize,
+    budget: Budget,
     corrector: Corrector,
     sums: ErrorSums,
+    /// Samples traced on the path.
+    traced: usize,
 }
 
 /// Accumulated timings.
@@ -278,7 +307,7 @@ struct Context<'a> {
 }
 
 impl Context<'_> {
-    fn sim(&self, order: Order, budget: usize) -> Result<Sim, EvalError> {
+    fn sim(&self, order: Order, budget: Budget) -> Result<Sim, EvalError> {
         Ok(Sim {
             order,
             budget,
@@ -289,6 +318,7 @@ impl Context<'_> {
                 self.config.decay,
             )?,
             sums: ErrorSums::default(),
+            traced: 0,
         })
     }
 
@@ -376,15 +406,18 @@ fn splatted(corrector: &Corrector, f: &FrameImages) -> Vec<[f32; 3]> {
     color
 }
 
-/// One frame of one simulated viewer: plan, trace, cache, splat; returns the corrected frame.
-fn step(
+/// Plans `positions` of `sim`'s queue, traces them on all threads and caches the samples;
+/// false when the queue had nothing to plan.
+fn trace_batch(
     sim: &mut Sim,
     f: &FrameImages,
     tracer: &CorrectionTracer<'_>,
+    positions: usize,
     clock: &mut Clock,
-) -> Result<Vec<[f32; 3]>, EvalError> {
-    let w = f.gbuffer.width as usize;
-    let planned = sim.corrector.plan(&f.ids, w, sim.budget);
+) -> Result<bool, EvalError> {
+    let planned = sim
+        .corrector
+        .plan(&f.ids, f.gbuffer.width as usize, positions);
     let t = Instant::now();
     let samples: Vec<Sample> = planned
         .par_iter()
@@ -392,7 +425,31 @@ fn step(
         .collect();
     clock.trace_s += t.elapsed().as_secs_f64();
     clock.traced += samples.len();
+    sim.traced += samples.len();
     sim.corrector.add(&samples)?;
+    Ok(!planned.is_empty())
+}
+
+/// One frame of one simulated viewer: plan and trace within its budget, cache, splat;
+/// returns the corrected frame. A time budget is spent in batches of one job per thread.
+fn step(
+    sim: &mut Sim,
+    f: &FrameImages,
+    tracer: &CorrectionTracer<'_>,
+    clock: &mut Clock,
+) -> Result<Vec<[f32; 3]>, EvalError> {
+    match sim.budget {
+        Budget::Samples(n) => {
+            trace_batch(sim, f, tracer, n, clock)?;
+        }
+        Budget::Ms(ms) => {
+            let batch = DEFAULT_JOB_SIZE as usize * rayon::current_num_threads();
+            let start = Instant::now();
+            while start.elapsed().as_secs_f64() * 1e3 < ms
+                && trace_batch(sim, f, tracer, batch, clock)?
+            {}
+        }
+    }
     let t = Instant::now();
     let color = splatted(&sim.corrector, f);
     clock.splat_ms.push(t.elapsed().as_secs_f64() * 1e3);
@@ -438,7 +495,13 @@ pub fn evaluate_path(
             sims.push(cx.sim(order, budget)?);
         }
     }
-    let largest = config.budgets.iter().max().copied().unwrap_or(0);
+    let shown_budget = (config.budgets.iter())
+        .filter_map(|b| match *b {
+            Budget::Samples(n) => Some(n),
+            Budget::Ms(_) => None,
+        })
+        .max()
+        .map_or(config.budgets[0], Budget::Samples);
     let mut base_sums = ErrorSums::default();
     let mut per_frame = Vec::new();
     let mut clock = Clock::default();
@@ -459,7 +522,7 @@ pub fn evaluate_path(
         per_frame.push(FrameRow {
             frame,
             order: "base".into(),
-            budget: 0,
+            budget: Budget::Samples(0),
             error: base_err,
             cache_size: 0,
         });
@@ -485,7 +548,7 @@ pub fn evaluate_path(
                 error: e,
                 cache_size: sim.corrector.cache().len(),
             });
-            if frame == show && sim.budget == largest && sim.order == config.orders[0] {
+            if frame == show && sim.budget == shown_budget && sim.order == config.orders[0] {
                 middle = Some(MiddleFrame {
                     base: psao_client::composite_srgb8(&f.base),
                     corrected: psao_client::composite_srgb8(&corrected),
@@ -495,14 +558,17 @@ pub fn evaluate_path(
         }
         tick();
     }
+    let frames = f64::from(range.end - range.start);
     let mut rows = vec![Row {
         order: "base".into(),
-        budget: 0,
+        budget: Budget::Samples(0),
+        traced_per_frame: 0.0,
         error: base_sums.mean(),
     }];
     rows.extend(sims.iter().map(|s| Row {
         order: s.order.name().into(),
         budget: s.budget,
+        traced_per_frame: s.traced as f64 / frames,
         error: s.sums.mean(),
     }));
     let camera = path.camera_at_frame(range.start as usize);

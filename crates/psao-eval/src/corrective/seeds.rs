@@ -5,7 +5,7 @@ use psao_scene::{generate_paths, CameraPath, PathGenConfig, Scene};
 use serde::Serialize;
 
 use super::metrics::MeanError;
-use super::run::{evaluate_path, EvalConfig, PathEval, Row, Tracers};
+use super::run::{evaluate_path, Budget, EvalConfig, PathEval, Row, Tracers};
 use super::EvalError;
 use crate::path_caster::TracerCaster;
 
@@ -152,8 +152,10 @@ pub fn metric(e: &MeanError, name: &str) -> Option<f64> {
 pub struct SummaryRow {
     /// Ordering (`base` for the base frame).
     pub order: String,
-    /// Samples per frame.
-    pub budget: usize,
+    /// Budget per frame.
+    pub budget: Budget,
+    /// Samples traced per frame (mean over the seeds).
+    pub traced_per_frame: f64,
     /// Each metric of [`METRICS`] with its spread over the seeds (metrics no seed has are
     /// left out).
     pub metrics: Vec<(String, Spread)>,
@@ -175,6 +177,8 @@ pub fn average_rows(paths: &[Vec<Row>]) -> Vec<Row> {
             Row {
                 order: first[i].order.clone(),
                 budget: first[i].budget,
+                traced_per_frame: paths.iter().map(|p| p[i].traced_per_frame).sum::<f64>()
+                    / paths.len() as f64,
                 error: MeanError {
                     psnr: avg(|e| Some(e.psnr)).unwrap_or(0.0),
                     flip: avg(|e| Some(e.flip)).unwrap_or(0.0),
@@ -197,6 +201,8 @@ pub fn summarize(per_seed: &[Vec<Row>]) -> Vec<SummaryRow> {
         .map(|i| SummaryRow {
             order: first[i].order.clone(),
             budget: first[i].budget,
+            traced_per_frame: per_seed.iter().map(|r| r[i].traced_per_frame).sum::<f64>()
+                / per_seed.len() as f64,
             metrics: METRICS
                 .iter()
                 .filter_map(|&(name, _)| {
@@ -214,8 +220,8 @@ pub fn summarize(per_seed: &[Vec<Row>]) -> Vec<SummaryRow> {
 /// Ordering `a` against ordering `b` on one metric at one budget, paired by seed.
 #[derive(Clone, Debug, Serialize)]
 pub struct Paired {
-    /// Samples per frame.
-    pub budget: usize,
+    /// Budget per frame.
+    pub budget: Budget,
     /// Metric name.
     pub metric: String,
     /// `a − b` per seed, relative to `b`, in percent.
@@ -229,7 +235,7 @@ pub fn paired(per_seed: &[Vec<Row>], a: &str, b: &str) -> Vec<Paired> {
     let Some(first) = per_seed.first() else {
         return Vec::new();
     };
-    let find = |rows: &[Row], order: &str, budget: usize| {
+    let find = |rows: &[Row], order: &str, budget: Budget| {
         rows.iter()
             .find(|r| r.order == order && r.budget == budget)
             .map(|r| r.error)
@@ -273,7 +279,8 @@ mod tests {
     fn row(order: &str, budget: usize, flip: f64, nd: Option<f64>) -> Row {
         Row {
             order: order.into(),
-            budget,
+            budget: Budget::Samples(budget),
+            traced_per_frame: budget as f64,
             error: MeanError {
                 psnr: 30.0 + 10.0 * flip,
                 flip,
@@ -338,7 +345,7 @@ mod tests {
         ];
         let p = paired(&seeds, "saliency", "uniform");
         let flip = p.iter().find(|p| p.metric == "flip").unwrap();
-        assert_eq!((flip.budget, flip.a_better), (10, 2));
+        assert_eq!((flip.budget, flip.a_better), (Budget::Samples(10), 2));
         assert!((flip.difference_pct.mean - (-50.0 + 50.0 - 75.0) / 3.0).abs() < 1e-9);
         // PSNR: higher is better, so the same seeds win.
         assert_eq!(p.iter().find(|p| p.metric == "psnr").unwrap().a_better, 1);

@@ -11,7 +11,7 @@ use clap::Args;
 use psao_corrective::schedule::DEFAULT_DECAY;
 use psao_eval::corrective::report::{path_markdown, rows_table, seeds_markdown, summary_table};
 use psao_eval::corrective::seeds::{evaluate_seeds, Paths};
-use psao_eval::corrective::{EvalConfig, Order, PathEval, Tracers};
+use psao_eval::corrective::{Budget, EvalConfig, Order, PathEval, Tracers};
 use psao_scene::{PathGenConfig, PATH_HZ};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -30,6 +30,10 @@ pub struct EvalArgs {
     /// Samples traced per frame, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "150,600", value_parser = positive_count)]
     pub budget: Vec<usize>,
+    /// Milliseconds of tracing per frame, comma-separated (the paper's 1/f; timing-dependent),
+    /// evaluated next to the sample budgets.
+    #[arg(long, value_delimiter = ',')]
+    pub budget_ms: Vec<f64>,
     /// Orderings, comma-separated: saliency, uniform, random.
     #[arg(long, value_delimiter = ',', default_value = "saliency,uniform,random")]
     pub order: Vec<Order>,
@@ -100,7 +104,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         width: args.res.width,
         height: args.res.height,
         frames: args.frames.map(|r| r.start..r.end),
-        budgets: args.budget.clone(),
+        budgets: (args.budget.iter().map(|&n| Budget::Samples(n)))
+            .chain(args.budget_ms.iter().map(|&ms| Budget::Ms(ms)))
+            .collect(),
         orders: args.order.clone(),
         decay: args.decay,
         analyze_every: args.analyze_every,
