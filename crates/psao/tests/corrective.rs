@@ -50,6 +50,9 @@ fn eval_converges_on_a_static_view_and_beats_the_base_frame() {
     for row in &rows[1..] {
         assert!(row["flip"].as_f64().unwrap() < base_flip, "{row}");
         assert!(row["saliency_flip"].as_f64().is_some() && row["psnr"].as_f64().is_some());
+        for share in ["worse_psnr_share", "worse_flip_share"] {
+            assert!((0.0..=1.0).contains(&row[share].as_f64().unwrap()), "{row}");
+        }
     }
     for c in r["convergence"].as_array().unwrap() {
         let pixels = c["non_diffuse_pixels"].as_u64().unwrap();

@@ -18,8 +18,8 @@ fn header(first: &str) -> String {
     for t in TITLES {
         s += &format!(" {t} |");
     }
-    s += "\n|---|---|---|";
-    s += &"---|".repeat(TITLES.len());
+    s += " frames worse than base: PSNR / FLIP |\n|---|---|---|";
+    s += &"---|".repeat(TITLES.len() + 1);
     s + "\n"
 }
 
@@ -43,9 +43,14 @@ pub fn rows_table(rows: &[Row]) -> String {
                 None => " – |".into(),
             };
         }
-        s += "\n";
+        s += &worse(r.worse_psnr_share, r.worse_flip_share);
     }
     s
+}
+
+/// The last column: shares of frames worse than the base frame, in percent.
+fn worse(psnr: f64, flip: f64) -> String {
+    format!(" {:.1} % / {:.1} % |\n", 100.0 * psnr, 100.0 * flip)
 }
 
 fn mean_sd(s: &Spread, digits: usize) -> String {
@@ -63,7 +68,7 @@ pub fn summary_table(report: &SeedsReport) -> String {
                 None => " – |".into(),
             };
         }
-        s += "\n";
+        s += &worse(r.worse_psnr_share, r.worse_flip_share);
     }
     s
 }

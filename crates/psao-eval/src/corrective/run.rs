@@ -182,6 +182,10 @@ pub struct Row {
     pub budget: Budget,
     /// Samples traced per frame, on average.
     pub traced_per_frame: f64,
+    /// Share of the frames in which this frame has a lower PSNR than the base frame.
+    pub worse_psnr_share: f64,
+    /// Share of the frames in which this frame has a higher FLIP than the base frame.
+    pub worse_flip_share: f64,
     /// The averages over the frames.
     #[serde(flatten)]
     pub error: MeanError,
@@ -279,6 +283,10 @@ struct Sim {
     sums: ErrorSums,
     /// Samples traced on the path.
     traced: usize,
+    /// Frames with a lower PSNR than the base frame.
+    worse_psnr: usize,
+    /// Frames with a higher FLIP than the base frame.
+    worse_flip: usize,
 }
 
 /// Accumulated timings.
@@ -319,6 +327,8 @@ impl Context<'_> {
             )?,
             sums: ErrorSums::default(),
             traced: 0,
+            worse_psnr: 0,
+            worse_flip: 0,
         })
     }
 
@@ -541,6 +551,8 @@ pub fn evaluate_path(
             let corrected = step(sim, &f, &tracer, &mut clock)?;
             let e = cx.error(&f, &corrected);
             sim.sums.add(&e);
+            sim.worse_psnr += usize::from(e.psnr < base_err.psnr);
+            sim.worse_flip += usize::from(e.flip > base_err.flip);
             per_frame.push(FrameRow {
                 frame,
                 order: sim.order.name().into(),
@@ -563,12 +575,16 @@ pub fn evaluate_path(
         order: "base".into(),
         budget: Budget::Samples(0),
         traced_per_frame: 0.0,
+        worse_psnr_share: 0.0,
+        worse_flip_share: 0.0,
         error: base_sums.mean(),
     }];
     rows.extend(sims.iter().map(|s| Row {
         order: s.order.name().into(),
         budget: s.budget,
         traced_per_frame: s.traced as f64 / frames,
+        worse_psnr_share: s.worse_psnr as f64 / frames,
+        worse_flip_share: s.worse_flip as f64 / frames,
         error: s.sums.mean(),
     }));
     let camera = path.camera_at_frame(range.start as usize);

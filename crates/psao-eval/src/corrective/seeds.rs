@@ -156,9 +156,18 @@ pub struct SummaryRow {
     pub budget: Budget,
     /// Samples traced per frame (mean over the seeds).
     pub traced_per_frame: f64,
+    /// Share of frames with a lower PSNR than the base frame (mean over the seeds).
+    pub worse_psnr_share: f64,
+    /// Share of frames with a higher FLIP than the base frame (mean over the seeds).
+    pub worse_flip_share: f64,
     /// Each metric of [`METRICS`] with its spread over the seeds (metrics no seed has are
     /// left out).
     pub metrics: Vec<(String, Spread)>,
+}
+
+/// The mean of `value` of row `i` over `runs` (each a list of rows in one order).
+fn mean_of(runs: &[Vec<Row>], i: usize, value: fn(&Row) -> f64) -> f64 {
+    runs.iter().map(|r| value(&r[i])).sum::<f64>() / runs.len().max(1) as f64
 }
 
 /// Averages rows of the same ordering and budget over paths (`paths[p]` are path `p`'s rows,
@@ -177,8 +186,9 @@ pub fn average_rows(paths: &[Vec<Row>]) -> Vec<Row> {
             Row {
                 order: first[i].order.clone(),
                 budget: first[i].budget,
-                traced_per_frame: paths.iter().map(|p| p[i].traced_per_frame).sum::<f64>()
-                    / paths.len() as f64,
+                traced_per_frame: mean_of(paths, i, |r| r.traced_per_frame),
+                worse_psnr_share: mean_of(paths, i, |r| r.worse_psnr_share),
+                worse_flip_share: mean_of(paths, i, |r| r.worse_flip_share),
                 error: MeanError {
                     psnr: avg(|e| Some(e.psnr)).unwrap_or(0.0),
                     flip: avg(|e| Some(e.flip)).unwrap_or(0.0),
@@ -201,8 +211,9 @@ pub fn summarize(per_seed: &[Vec<Row>]) -> Vec<SummaryRow> {
         .map(|i| SummaryRow {
             order: first[i].order.clone(),
             budget: first[i].budget,
-            traced_per_frame: per_seed.iter().map(|r| r[i].traced_per_frame).sum::<f64>()
-                / per_seed.len() as f64,
+            traced_per_frame: mean_of(per_seed, i, |r| r.traced_per_frame),
+            worse_psnr_share: mean_of(per_seed, i, |r| r.worse_psnr_share),
+            worse_flip_share: mean_of(per_seed, i, |r| r.worse_flip_share),
             metrics: METRICS
                 .iter()
                 .filter_map(|&(name, _)| {
@@ -281,6 +292,8 @@ mod tests {
             order: order.into(),
             budget: Budget::Samples(budget),
             traced_per_frame: budget as f64,
+            worse_psnr_share: 0.0,
+            worse_flip_share: 0.0,
             error: MeanError {
                 psnr: 30.0 + 10.0 * flip,
                 flip,
