@@ -9,6 +9,10 @@
 //! traced either way), so workers examine at most as many positions as were granted, and
 //! never more than the lane's `max_outstanding` are granted but not yet drained. A region of
 //! an object that is nowhere on screen thus costs its lane's budget, not unbounded work.
+//! A lane may also have a time budget per grant ([`Lane::set_time_budget`], the paper's
+//! per-frame 1/f): each grant refills it, each job's tracing time is taken from it, and no
+//! job of the lane starts once it is spent, so a lane examines at most its granted positions
+//! and starts no job after its time is used up (the job running then may overrun it).
 //!
 //! Plain `std` threads rather than rayon: the workers block on a condition variable between
 //! jobs and run for the pool's lifetime, which rayon's task pool is not made for.
@@ -52,6 +56,20 @@ pub struct PoolStats {
     pub traced: u64,
     /// Samples drained.
     pub drained: u64,
+    /// Wall-clock time the workers spent tracing the lane's jobs (summed over workers).
+    pub trace_time: Duration,
+}
+
+impl PoolStats {
+    /// Samples traced per second of tracing time (0 before any job).
+    pub fn samples_per_second(&self) -> f64 {
+        let s = self.trace_time.as_secs_f64();
+        if s > 0.0 {
+            self.traced as f64 / s
+        } else {
+            0.0
+        }
+    }
 }
 
 /// One viewer's region queue, view, allowance and sample queue.
@@ -61,6 +79,10 @@ struct LaneState<T: JobTracer> {
     max_outstanding: u64,
     /// Positions the workers may still examine.
     allowance: u64,
+    /// Tracing time each grant allows (`None`: no time limit).
+    time_per_grant: Option<Duration>,
+    /// Tracing time left of the latest grant.
+    time_left: Option<Duration>,
     /// Positions of jobs in flight (their samples not yet queued).
     reserved: u64,
     /// Jobs in flight.
@@ -71,7 +93,10 @@ struct LaneState<T: JobTracer> {
 
 impl<T: JobTracer> LaneState<T> {
     fn can_work(&self) -> bool {
-        self.allowance > 0 && self.view.is_some() && self.planner.has_work()
+        self.allowance > 0
+            && self.time_left.is_none_or(|t| !t.is_zero())
+            && self.view.is_some()
+            && self.planner.has_work()
     }
 }
 
@@ -175,6 +200,8 @@ impl<T: JobTracer> WorkerPool<T> {
                 view: None,
                 max_outstanding,
                 allowance: 0,
+                time_per_grant: None,
+                time_left: None,
                 reserved: 0,
                 busy: 0,
                 samples: VecDeque::new(),
@@ -247,18 +274,33 @@ impl<T: JobTracer> Lane<T> {
         self.shared.work.notify_all();
     }
 
+    /// Give every later grant `time` of tracing (`None`: no time limit, the default); until
+    /// the next grant the time left is at most `time`. The sample allowance applies all the
+    /// same.
+    pub fn set_time_budget(&self, time: Option<Duration>) {
+        self.with(|l| {
+            l.time_per_grant = time;
+            l.time_left = match (l.time_left, time) {
+                (Some(left), Some(t)) => Some(left.min(t)),
+                (_, t) => t,
+            };
+        });
+        self.shared.work.notify_all();
+    }
+
     /// Allow `samples` more samples, as far as `max_outstanding` leaves room (granted, in
-    /// flight and queued samples count); returns the samples actually granted. Each pays for
-    /// one examined position, which gives at most one sample.
+    /// flight and queued samples count), and refill the time budget; returns the samples
+    /// actually granted. Each pays for one examined position, which gives at most one sample.
     pub fn grant(&self, samples: u64) -> u64 {
-        let granted = self.with(|l| {
+        let (granted, refilled) = self.with(|l| {
+            l.time_left = l.time_per_grant;
             let outstanding = l.allowance + l.reserved + l.samples.len() as u64;
             let granted = samples.min(l.max_outstanding.saturating_sub(outstanding));
             l.allowance += granted;
             l.stats.granted += granted;
-            granted
+            (granted, l.time_per_grant.is_some())
         });
-        if granted > 0 {
+        if granted > 0 || refilled {
             self.shared.work.notify_all();
         }
         granted
@@ -358,10 +400,14 @@ fn work<T: JobTracer>(shared: &Shared<T>, tracer: &T) {
         lane.reserved += cost;
         lane.busy += 1;
         drop(s);
+        let started = Instant::now();
         let mut samples = tracer.trace_job(&view, &job, &positions);
+        let took = started.elapsed();
         samples.truncate(positions.len());
         s = shared.lock();
         if let Some(lane) = s.lanes.get_mut(&id) {
+            lane.time_left = lane.time_left.map(|t| t.saturating_sub(took));
+            lane.stats.trace_time += took;
             lane.reserved -= cost;
             lane.busy -= 1;
             lane.stats.jobs += 1;
@@ -457,6 +503,41 @@ mod tests {
             let stats = p.stats();
             assert_eq!(stats.traced, on_object() as u64);
             assert_eq!(stats.drained, stats.traced);
+        }
+    }
+
+    #[test]
+    fn a_spent_time_budget_starts_no_job_and_each_grant_refills_it() {
+        for workers in [1, 2] {
+            let (_pool, p) = pool(workers, u64::MAX);
+            // No time at all: the allowance stays unspent.
+            p.set_time_budget(Some(Duration::ZERO));
+            assert_eq!(p.grant(500), 500);
+            assert!(p.wait_idle(WAIT));
+            assert_eq!(p.stats().examined, 0);
+            // A nanosecond per grant (from the next grant on): each worker starts at most one
+            // job (16 positions) before the first job ends and spends it, far below the 500
+            // allowed, and at least one.
+            p.set_time_budget(Some(Duration::from_nanos(1)));
+            let mut before = 0;
+            for _ in 0..3 {
+                p.grant(0);
+                assert!(p.wait_idle(WAIT));
+                let examined = p.stats().examined;
+                assert!(examined > before, "{workers} workers");
+                assert!(
+                    examined - before <= 16 * workers as u64,
+                    "{workers} workers"
+                );
+                before = examined;
+            }
+            let stats = p.stats();
+            assert!(stats.trace_time > Duration::ZERO && stats.samples_per_second() > 0.0);
+            // Without a time limit the rest of the allowance is examined.
+            p.set_time_budget(None);
+            p.grant(0);
+            assert!(p.wait_idle(WAIT));
+            assert_eq!(p.stats().examined, 500);
         }
     }
 

@@ -732,6 +732,9 @@ impl CorrectiveClient {
 pub struct CorrectiveConfig {
     /// Samples per second per client.
     pub samples_per_second: u32,
+    /// Milliseconds of worker tracing per server frame per client, when limited (threaded
+    /// serving only).
+    pub frame_ms: Option<f32>,
     /// AO rays per diffuse point the correction rays reach.
     pub ao_spp: u32,
     /// The client's side.
@@ -742,6 +745,7 @@ impl Default for CorrectiveConfig {
     fn default() -> Self {
         Self {
             samples_per_second: DEFAULT_SAMPLES_PER_SECOND,
+            frame_ms: None,
             ao_spp: 8,
             client: CorrectiveClientConfig::default(),
         }

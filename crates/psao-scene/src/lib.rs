@@ -15,6 +15,7 @@ pub mod model;
 pub mod obj;
 pub mod orbit;
 pub mod path;
+pub mod path_gen;
 pub mod scene_file;
 
 pub use alpha::{AlphaImage, AlphaTexture, Wrap};
@@ -27,3 +28,4 @@ pub use load::{load, load_scene, LoadedScene};
 pub use model::*;
 pub use orbit::orbit_path;
 pub use path::{CameraKey, CameraPath, PATH_HZ};
+pub use path_gen::{generate_paths, CastHit, PathGenConfig, PathGenError, RayCaster};

@@ -89,11 +89,17 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             c.ao_spp,
             args.tuning.seed,
         )?;
-        serve = serve.with_corrections(psao_net::serve::Corrections::new(
-            std::sync::Arc::new(engine),
-            c.samples_per_second,
-            psao_net::serve::DEFAULT_CORRECTION_WORKERS,
-        ));
+        serve = serve.with_corrections(
+            psao_net::serve::Corrections::new(
+                std::sync::Arc::new(engine),
+                c.samples_per_second,
+                psao_net::serve::DEFAULT_CORRECTION_WORKERS,
+            )
+            .with_time_budget(
+                c.frame_ms
+                    .map(|ms| std::time::Duration::from_secs_f32(ms / 1e3)),
+            ),
+        );
     }
     println!("listening on {}", serve.local_addr());
     let stats = serve.run();

@@ -50,6 +50,9 @@ fn eval_converges_on_a_static_view_and_beats_the_base_frame() {
     for row in &rows[1..] {
         assert!(row["flip"].as_f64().unwrap() < base_flip, "{row}");
         assert!(row["saliency_flip"].as_f64().is_some() && row["psnr"].as_f64().is_some());
+        for share in ["worse_psnr_share", "worse_flip_share"] {
+            assert!((0.0..=1.0).contains(&row[share].as_f64().unwrap()), "{row}");
+        }
     }
     for c in r["convergence"].as_array().unwrap() {
         let pixels = c["non_diffuse_pixels"].as_u64().unwrap();
@@ -67,6 +70,119 @@ fn eval_converges_on_a_static_view_and_beats_the_base_frame() {
     ] {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
+}
+
+/// The eval on generated paths over two seeds: a summary of every row over both seeds, the
+/// saliency ordering paired against uniform, and the same numbers on a second run.
+#[test]
+fn eval_on_generated_paths_reports_mean_and_spread_over_seeds() {
+    let run = || {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().to_str().unwrap();
+        let o = psao(&[
+            "corrective",
+            "eval",
+            "--scene",
+            SCENE,
+            "--res",
+            "64x36",
+            "--frames",
+            "0..3",
+            "--budget",
+            "200",
+            "--order",
+            "saliency,uniform",
+            "--static-frames",
+            "0",
+            "--ao-spp",
+            "1",
+            "--random-paths",
+            "2",
+            "--seeds",
+            "1,2",
+            "--out",
+            out,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        json(&dir.path().join("seeds.json"))
+    };
+    let r = run();
+    let runs = r["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for run in runs {
+        let paths = run["paths"].as_array().unwrap();
+        assert_eq!(paths.len(), 2);
+        assert_ne!(paths[0]["per_frame"], paths[1]["per_frame"]);
+    }
+    // The two seeds walk different paths, so their frames differ.
+    assert_ne!(
+        runs[0]["paths"][0]["per_frame"],
+        runs[1]["paths"][0]["per_frame"]
+    );
+    let summary = r["summary"].as_array().unwrap();
+    assert_eq!(summary.len(), 3);
+    for row in summary {
+        let metrics = row["metrics"].as_array().unwrap();
+        let names: Vec<&str> = metrics.iter().map(|m| m[0].as_str().unwrap()).collect();
+        for name in ["psnr", "flip", "centre_flip", "saliency_flip"] {
+            assert!(names.contains(&name), "{row}");
+        }
+        assert!(metrics.iter().all(|m| m[1]["n"].as_u64() <= Some(2)));
+        let flip = &metrics[1][1];
+        assert!(flip["min"].as_f64() <= flip["mean"].as_f64());
+        assert!(flip["mean"].as_f64() <= flip["max"].as_f64());
+    }
+    assert!(!r["saliency_vs_uniform"].as_array().unwrap().is_empty());
+    assert_eq!(r["summary"], run()["summary"]);
+}
+
+/// `--budget-ms`: a time budget per frame next to a sample budget; the rows say what was
+/// traced per frame, and a budget of no time is an error.
+#[test]
+fn eval_takes_time_budgets_next_to_sample_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let args = |ms: &'static str| {
+        [
+            "corrective",
+            "eval",
+            "--scene",
+            SCENE,
+            "--res",
+            "64x36",
+            "--frames",
+            "0..2",
+            "--budget",
+            "50",
+            "--budget-ms",
+            ms,
+            "--order",
+            "uniform",
+            "--static-frames",
+            "0",
+            "--ao-spp",
+            "1",
+            "--out",
+            out,
+        ]
+    };
+    let o = psao(&args("20"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = json(&dir.path().join("report.json"));
+    let rows = r["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[1]["budget"]["samples"], 50);
+    assert!(rows[1]["traced_per_frame"].as_f64().unwrap() <= 50.0);
+    assert_eq!(rows[2]["budget"]["ms"], 20.0);
+    assert!(
+        rows[2]["traced_per_frame"].as_f64().unwrap() > 0.0,
+        "{}",
+        rows[2]
+    );
+    assert!(r["timing"]["worker_samples_per_s"].as_f64().unwrap() > 0.0);
+    let o = psao(&args("0"));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("milliseconds"), "{}", stderr(&o));
 }
 
 #[test]
@@ -336,6 +452,43 @@ fn threaded_serve_streams_every_sample_within_the_budget_and_shuts_down_cleanly(
     // Every sample the server sent arrived, and no more than 3000 / 30 per server frame.
     assert_eq!(received, sent);
     assert!(sent <= frames * 100, "{sent} samples in {frames} frames");
+}
+
+/// `--correction-ms`: with a microsecond of tracing per server frame each of the two workers
+/// starts at most one job (64 positions) per frame, far below the 30 000 samples per second
+/// granted; every examined position still counts against the sample budget, and the server
+/// reports the workers' samples per second.
+#[test]
+fn a_time_budget_per_frame_bounds_the_workers_and_reports_their_rate() {
+    let fx = split_fixture();
+    let scene = fx.path().join("scene.toml");
+    let scene = scene.to_str().unwrap();
+    let stats = fx.path().join("serve.json");
+    let server_args: Vec<&str> = SPLIT_SERVER
+        .iter()
+        .map(|&a| if a == "3000" { "30000" } else { a })
+        .chain(["--correction-ms", "0.001", "--hz", "30", "--once"])
+        .chain(["--json", stats.to_str().unwrap()])
+        .collect();
+    let (mut server, addr) = start_serve(scene, &server_args);
+    let view_json = fx.path().join("view.json");
+    let o = view_with_corrections(scene, &addr, 60, &view_json);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(server.0.wait().unwrap().success());
+    let client = &json(&stats)["clients"][0];
+    let frames = client["frames"].as_u64().unwrap();
+    let budget = client["correction_budget"].as_u64().unwrap();
+    let examined = client["correction_examined"].as_u64().unwrap();
+    assert!(json(&view_json)["samples"].as_u64().unwrap() > 0);
+    assert!(examined > 0 && examined <= budget, "{client}");
+    assert!(
+        examined <= frames * 2 * 64,
+        "{examined} positions in {frames} frames"
+    );
+    assert!(
+        client["correction_samples_per_s"].as_f64().unwrap() > 0.0,
+        "{client}"
+    );
 }
 
 #[test]

@@ -56,6 +56,8 @@ pub const DRAIN_SHARE: f64 = 0.1;
 pub struct Corrections {
     engine: Arc<CorrectionEngine>,
     samples_per_second: u32,
+    /// Tracing time per server frame per client (`None`: only the sample budget limits).
+    time_per_frame: Option<Duration>,
     workers: usize,
     /// The shared workers, started with the first threaded client.
     pool: Arc<OnceLock<WorkerPool<EngineJobs>>>,
@@ -68,9 +70,18 @@ impl Corrections {
         Self {
             engine,
             samples_per_second,
+            time_per_frame: None,
             workers,
             pool: Arc::new(OnceLock::new()),
         }
+    }
+
+    /// The same corrections with at most `time` of worker tracing per server frame per
+    /// threaded client (the paper's per-frame budget 1/f; `None`: no time limit). The sample
+    /// budget still bounds every client: each examined position costs one sample of it.
+    pub fn with_time_budget(mut self, time: Option<Duration>) -> Self {
+        self.time_per_frame = time;
+        self
     }
 
     /// The shared workers (started on first use; stopped when the last copy is dropped).
@@ -141,6 +152,9 @@ pub(super) fn record(corrections: Option<&SessionCorrections>, stats: &mut Clien
         stats.correction_budget = counters.budget;
         stats.correction_examined = counters.examined;
         stats.regions_dropped = counters.regions_dropped;
+        if let SessionCorrections::Threaded(t) = c {
+            stats.correction_samples_per_s = t.lane.stats().samples_per_second();
+        }
     }
 }
 
@@ -232,8 +246,10 @@ impl ThreadedCorrections {
         // Samples granted and not yet sent: a quarter second of budget (at least a job).
         let outstanding =
             (u64::from(c.samples_per_second) / 4).max(psao_corrective::schedule::DEFAULT_JOB_SIZE);
+        let lane = c.pool().lane(new_planner(1, 1), outstanding);
+        lane.set_time_budget(c.time_per_frame);
         Self {
-            lane: c.pool().lane(new_planner(1, 1), outstanding),
+            lane,
             samples_per_second: c.samples_per_second,
             camera: ClientCamera::default(),
             size: None,

@@ -108,6 +108,9 @@ pub struct ClientStats {
     pub correction_examined: u64,
     /// Regions dropped on arrival because the scene has no such object.
     pub regions_dropped: u64,
+    /// Correction samples the workers traced per second of their tracing time (threaded
+    /// serving; 0 in lockstep, where the simulation thread traces).
+    pub correction_samples_per_s: f64,
 }
 
 /// What `psao serve --json` writes.

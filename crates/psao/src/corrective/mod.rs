@@ -2,8 +2,6 @@
 
 mod bench;
 mod eval;
-mod frame;
-mod metrics;
 mod plot;
 pub mod split_args;
 

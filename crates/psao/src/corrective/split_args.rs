@@ -16,6 +16,10 @@ pub struct CorrectiveArgs {
     /// Server: correction samples per second per client.
     #[arg(long, default_value_t = DEFAULT_SAMPLES_PER_SECOND)]
     pub samples_per_second: u32,
+    /// Server: milliseconds of worker tracing per server frame per client (the paper's
+    /// per-frame time budget), on top of `--samples-per-second`; not in lockstep.
+    #[arg(long)]
+    pub correction_ms: Option<f32>,
     /// Client: frames between analyses of its frame (18 = 0.3 s at 60 Hz); a view not in
     /// lockstep analyses on its own thread every that many 60ths of a second of wall clock.
     #[arg(long, default_value_t = DEFAULT_ANALYZE_EVERY)]
@@ -40,8 +44,14 @@ impl CorrectiveArgs {
                 self.samples_per_second
             );
         }
+        if let Some(ms) = self.correction_ms {
+            if !(ms > 0.0 && ms <= 1000.0) {
+                bail!("--correction-ms must be in (0, 1000], got {ms}");
+            }
+        }
         Ok(Some(CorrectiveConfig {
             samples_per_second: self.samples_per_second,
+            frame_ms: self.correction_ms,
             ao_spp: self.corrective_ao_spp.clamp(1, 1024),
             client: CorrectiveClientConfig {
                 analyze_every: self.analyze_every,

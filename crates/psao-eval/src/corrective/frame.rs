@@ -16,12 +16,19 @@ use rayon::prelude::*;
 
 /// Shared images of one frame.
 pub struct FrameImages {
+    /// The camera.
     pub camera: Camera,
+    /// The camera as the splatting sees it.
     pub view: ScreenView,
+    /// The rasterized G-buffer.
     pub gbuffer: GBuffer,
+    /// Object id per pixel (0 = diffuse).
     pub ids: Vec<u32>,
+    /// The base frame (linear RGB).
     pub base: Vec<[f32; 3]>,
+    /// The reference (linear RGB).
     pub reference: Vec<[f32; 3]>,
+    /// The reference as 8-bit sRGB.
     pub reference_srgb: Vec<u8>,
     /// Saliency of the reference, normalised (metric weights).
     pub reference_saliency: Map,
