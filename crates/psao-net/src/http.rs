@@ -1,15 +1,18 @@
 //! HTTP on the serve port, through hyper: `/` the browser viewer (embedded in the binary),
-//! `/viewer.js` its script, `/scene.glb` the served scene as binary glTF, `/health` a JSON
-//! status, and the WebSocket upgrade at `/ws`, after which the connection speaks frames.
-//! Only GET and HEAD are answered (405 otherwise); unknown paths get 404, a `/ws` request
-//! that is no valid upgrade 400; request heads are limited in size and time.
+//! `/viewer.js` its script, `/scene.glb` the served scene as binary glTF,
+//! `/characters/N.prt` the relighting model of skinned character N (404 when there is
+//! none), `/health` a JSON status, and the WebSocket upgrade at `/ws`, after which the
+//! connection speaks frames. Only GET and HEAD are answered (405 otherwise); unknown paths
+//! get 404, a `/ws` request that is no valid upgrade 400; request heads are limited in size
+//! and time.
 //!
-//! With a token ([`Access`]), `/scene.glb` needs `Authorization: Bearer TOKEN` (401 without)
-//! and `/health` tells only that the server is up; `/` and `/viewer.js` are the viewer
-//! program itself (the same bytes in every psao build, no scene data) and answer anyone, so
-//! that a page opened with `#token=…` can start. Every request's `Host` and every upgrade's
-//! `Origin` must be allowed (403 otherwise); `/health` is readable cross-origin by allowed
-//! origins only (a viewer loaded from another edge of a session asks it).
+//! With a token ([`Access`]), `/scene.glb` and `/characters/N.prt` need
+//! `Authorization: Bearer TOKEN` (401 without) and `/health` tells only that the server is
+//! up; `/` and `/viewer.js` are the viewer program itself (the same bytes in every psao
+//! build, no scene data) and answer anyone, so that a page opened with `#token=…` can start.
+//! Every request's `Host` and every upgrade's `Origin` must be allowed (403 otherwise);
+//! `/health` is readable cross-origin by allowed origins only (a viewer loaded from another
+//! edge of a session asks it).
 
 use std::convert::Infallible;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -29,6 +32,7 @@ use tokio_tungstenite::tungstenite::handshake::derive_accept_key;
 
 use crate::access::Access;
 use crate::admission::Permit;
+use crate::characters::ServedCharacters;
 use crate::io::BoxIo;
 use crate::transport::{websocket_server, FrameReader, FrameWriter};
 
@@ -61,6 +65,8 @@ pub type WebSocketHandler = dyn Fn(FrameReader, FrameWriter, Permit) + Send + Sy
 pub struct HttpContext {
     /// `/scene.glb`.
     pub scene_glb: Bytes,
+    /// `/characters/N.prt`: the relit characters' models.
+    pub characters: Arc<ServedCharacters>,
     /// The scene's name, for `/health`.
     pub scene_name: String,
     /// `/health`'s live numbers.
@@ -129,6 +135,19 @@ fn route(req: Request<Incoming>, ctx: &Arc<HttpContext>, permit: Permit) -> Resp
             r
         }
         "/scene.glb" => body("model/gltf-binary", ctx.scene_glb.clone()),
+        p if p.starts_with("/characters/") && !ctx.access.request_authorized(req.headers()) => {
+            let mut r = text(
+                StatusCode::UNAUTHORIZED,
+                "/characters/N.prt needs the token (Authorization: Bearer TOKEN)\n",
+            );
+            r.headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+            r
+        }
+        p if p.starts_with("/characters/") => match ctx.characters.model_at(p) {
+            Some(model) => body("application/octet-stream", model),
+            None => text(StatusCode::NOT_FOUND, "no such character\n"),
+        },
         "/health" => health(&req, ctx, host),
         "/ws" => match req.headers().get(header::ORIGIN) {
             Some(o) if !ctx.access.origin_allowed(o.to_str().unwrap_or(""), host) => text(

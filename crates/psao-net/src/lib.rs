@@ -9,6 +9,7 @@
 
 pub mod access;
 pub mod admission;
+pub mod characters;
 pub mod convert;
 pub mod corrective;
 pub mod cpu_time;

@@ -2,7 +2,9 @@
 //! settings reads its generated, burial-tested points back instead of making them again.
 //! One file per [`StartPoints::key`] and build of the running program (another build may
 //! generate points differently, so its files count as stale); a stale, foreign or damaged
-//! file is reported and replaced, never trusted.
+//! file is reported and replaced, never trusted. [`read_stored`] and [`keep_stored`] keep
+//! other derived data (the relit characters' models, `.prt`) the same way, keyed by the
+//! caller.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -28,7 +30,70 @@ pub fn default_dir() -> Option<PathBuf> {
 
 /// The file in `dir` holding the start points of `key` made by the build `build`.
 pub fn file_for(dir: &Path, key: u64, build: u64) -> PathBuf {
-    dir.join(format!("{key:016x}-{build:016x}.points"))
+    stored_file(dir, key, build, POINTS)
+}
+
+/// Extension of the start-point files.
+const POINTS: &str = "points";
+
+/// The file in `dir` holding the data of `key` with extension `ext` made by `build`.
+fn stored_file(dir: &Path, key: u64, build: u64, ext: &str) -> PathBuf {
+    dir.join(format!("{key:016x}-{build:016x}.{ext}"))
+}
+
+/// The bytes this build stored in `dir` for `key` with extension `ext`, with their file,
+/// when present and `size_ok` accepts their length (a refused or unreadable file is logged
+/// and ignored; the caller validates the content).
+pub fn read_stored(
+    dir: &Path,
+    key: u64,
+    ext: &str,
+    size_ok: impl Fn(u64) -> bool,
+) -> Option<(PathBuf, Vec<u8>)> {
+    let build = build_id();
+    if build == 0 {
+        return None;
+    }
+    let file = stored_file(dir, key, build, ext);
+    let read = std::fs::metadata(&file).and_then(|m| {
+        if size_ok(m.len()) {
+            std::fs::read(&file).map(Some)
+        } else {
+            Ok(None)
+        }
+    });
+    match read {
+        Ok(Some(bytes)) => Some((file, bytes)),
+        Ok(None) => {
+            tracing::warn!("{}: not of a usable size; ignored", file.display());
+            None
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => {
+            tracing::warn!("cannot read {}: {e}", file.display());
+            None
+        }
+    }
+}
+
+/// Stores `bytes` in `dir` for `key` with extension `ext` (atomically, removing what other
+/// builds stored for that key); the file, or `None` when nothing was stored (logged).
+pub fn keep_stored(dir: &Path, key: u64, ext: &str, bytes: &[u8]) -> Option<PathBuf> {
+    let build = build_id();
+    if build == 0 {
+        return None;
+    }
+    let file = stored_file(dir, key, build, ext);
+    match store(dir, &file, bytes) {
+        Ok(()) => {
+            forget_other_builds(dir, key, ext, &file);
+            Some(file)
+        }
+        Err(e) => {
+            tracing::warn!("cannot store {}: {e}", file.display());
+            None
+        }
+    }
 }
 
 /// An identity of the running program's build: a hash of its executable's path, size and
@@ -79,15 +144,16 @@ pub fn start_server(
     let start = StartPoints::generate(scene, &config)?;
     if build != 0 {
         match store(dir, &file, &start.to_bytes()) {
-            Ok(()) => forget_other_builds(dir, key, &file),
+            Ok(()) => forget_other_builds(dir, key, POINTS, &file),
             Err(e) => tracing::warn!("cannot store the start points in {}: {e}", file.display()),
         }
     }
     Ok(Server::with_start_points(scene, config, medium, start)?)
 }
 
-/// Remove the files of `key` that other builds stored in `dir` (they are never read again).
-fn forget_other_builds(dir: &Path, key: u64, kept: &Path) {
+/// Remove the files of `key` with extension `ext` that other builds stored in `dir` (they
+/// are never read again).
+fn forget_other_builds(dir: &Path, key: u64, ext: &str, kept: &Path) {
     let prefix = format!("{key:016x}-");
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
@@ -97,7 +163,7 @@ fn forget_other_builds(dir: &Path, key: u64, kept: &Path) {
         let ours = path
             .file_name()
             .and_then(|n| n.to_str())
-            .is_some_and(|n| n.starts_with(&prefix) && n.ends_with(".points"));
+            .is_some_and(|n| n.starts_with(&prefix) && n.ends_with(&format!(".{ext}")));
         if ours && path != kept {
             let _ = std::fs::remove_file(&path);
         }

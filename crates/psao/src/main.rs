@@ -27,6 +27,7 @@ mod scale_cmd;
 mod scene_source;
 mod scene_volume;
 mod serve;
+mod served_characters;
 mod video;
 mod view;
 mod volume_cmd;

@@ -245,6 +245,7 @@ pub fn run_edge(args: &EdgeArgs) -> Result<()> {
         once: args.once,
         stop_on_ctrl_c: true,
         scene_glb,
+        characters: Default::default(),
         tls: args.exposure.tls()?,
     };
     let serve = Serve::bind(server, config)?;

@@ -11,6 +11,7 @@ use psao_net::Resolution;
 use crate::access_args::ExposureArgs;
 use crate::run::{write_json, LightingArgs, ServerTuning};
 use crate::scene_source::SceneInput;
+use crate::served_characters::{served_characters, RelightArgs};
 
 /// Arguments of `psao serve`.
 #[derive(clap::Args, Debug, Clone)]
@@ -50,6 +51,8 @@ pub struct ServeArgs {
     pub json: Option<PathBuf>,
     #[command(flatten)]
     pub corrective: crate::corrective::split_args::CorrectiveArgs,
+    #[command(flatten)]
+    pub relight: RelightArgs,
 }
 
 /// Runs `psao serve`.
@@ -65,6 +68,12 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         input.scene.instances.len(),
         args.tuning.codec
     );
+    let characters = served_characters(
+        &input.scene,
+        &args.relight,
+        args.tuning.seed,
+        args.tuning.points_cache_dir().as_deref(),
+    )?;
     let config = ServeConfig {
         listen: args.listen,
         token,
@@ -79,6 +88,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
         once: args.once,
         stop_on_ctrl_c: true,
         scene_glb: psao_net::glb::scene_glb(&input.scene, &input.paths)?,
+        characters: std::sync::Arc::new(characters),
         tls,
     };
     let mut serve = Serve::bind(server, config)?;

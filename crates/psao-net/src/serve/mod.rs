@@ -30,6 +30,7 @@ pub use corrective::{Corrections, DEFAULT_WORKERS as DEFAULT_CORRECTION_WORKERS}
 
 use crate::access::Access;
 use crate::admission::{Admission, MAX_CONNECTIONS};
+use crate::characters::ServedCharacters;
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
 use crate::deadline::{Deadlined, SERVER_DEADLINES};
@@ -78,6 +79,9 @@ pub struct ServeConfig {
     pub stop_on_ctrl_c: bool,
     /// What `/scene.glb` serves (see [`crate::glb::scene_glb`]).
     pub scene_glb: Vec<u8>,
+    /// The relit characters: `/characters/N.prt`, and the relighting messages after the
+    /// welcome (empty: none).
+    pub characters: Arc<ServedCharacters>,
     /// Serve every connection over TLS (https, wss, and raw frames inside TLS); see
     /// [`crate::tls::acceptor`].
     pub tls: Option<tokio_rustls::TlsAcceptor>,
@@ -320,6 +324,7 @@ impl Serve {
             admission: Admission::new(MAX_CONNECTIONS, config.max_per_source),
             tls: config.tls.clone(),
             scene_glb: bytes::Bytes::from(config.scene_glb),
+            characters: config.characters.clone(),
             scene_name: config.scene_name.clone(),
             health: health.clone(),
         };
@@ -372,16 +377,20 @@ impl Serve {
 async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: HttpShared) {
     let ctx = Arc::new(HttpContext {
         scene_glb: http.scene_glb,
+        characters: http.characters.clone(),
         scene_name: http.scene_name,
         health: http.health,
         access: http.access.clone(),
         on_websocket: {
             let (events, access) = (events.clone(), http.access.clone());
+            let characters = http.characters.clone();
             Box::new(move |reader, writer, permit| {
                 let (events, access) = (events.clone(), access.clone());
+                let characters = characters.clone();
                 tokio::spawn(async move {
                     let _permit = permit;
-                    if let Err(e) = session(reader, writer, "websocket", events, &access).await {
+                    let ends = (events, &*access, &*characters);
+                    if let Err(e) = session(reader, writer, "websocket", ends).await {
                         tracing::info!("WebSocket session ended: {e}");
                     }
                 });
@@ -401,6 +410,7 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: H
                 let _ = stream.set_nodelay(true);
                 let stream = Deadlined::new(stream, SERVER_DEADLINES);
                 let (events, access, ctx) = (events.clone(), http.access.clone(), ctx.clone());
+                let characters = http.characters.clone();
                 let tls = http.tls.clone();
                 tokio::spawn(async move {
                     let io: BoxIo = match tls {
@@ -422,7 +432,8 @@ async fn accept_loop(listener: TcpListener, events: mpsc::Sender<Event>, http: H
                     match accept(io, HELLO_TIMEOUT).await {
                         Ok(Accepted::Frames(reader, writer)) => {
                             let _permit = permit;
-                            if let Err(e) = session(reader, writer, "tcp", events, &access).await {
+                            let ends = (events, &*access, &*characters);
+                            if let Err(e) = session(reader, writer, "tcp", ends).await {
                                 tracing::info!("session with {peer} ended: {e}");
                             }
                         }
@@ -449,6 +460,7 @@ struct HttpShared {
     admission: Arc<Admission>,
     tls: Option<tokio_rustls::TlsAcceptor>,
     scene_glb: bytes::Bytes,
+    characters: Arc<ServedCharacters>,
     scene_name: String,
     health: Arc<Health>,
 }
@@ -469,14 +481,13 @@ async fn refuse(
     NetError::Protocol(format!("refused ({code:?}): {text}"))
 }
 
-/// One client session on a frame transport: handshake, then cameras/acks in, queued frames
-/// out.
+/// One client session on a frame transport: handshake (the welcome, then the relighting
+/// messages the client asked for), then cameras/acks in, queued frames out.
 async fn session(
     mut reader: FrameReader,
     mut writer: FrameWriter,
     kind: &'static str,
-    events: mpsc::Sender<Event>,
-    access: &Access,
+    (events, access, characters): (mpsc::Sender<Event>, &Access, &ServedCharacters),
 ) -> Result<(), NetError> {
     let first = tokio::time::timeout(HELLO_TIMEOUT, reader.next(MAX_CLIENT_FRAME)).await;
     let hello = match first {
@@ -532,6 +543,9 @@ async fn session(
     writer
         .send(encode_frame(&Message::Welcome(welcome))?)
         .await?;
+    for m in characters.messages_for(hello.capabilities) {
+        writer.send(encode_frame(&m)?).await?;
+    }
     let writer_task = tokio::spawn(async move {
         while let Some(frame) = out_rx.recv().await {
             if writer.send(frame).await.is_err() {

@@ -1,0 +1,166 @@
+//! `psao serve --relight` on a scene with one skinned character (CesiumMan from the shared
+//! data, skipped when missing): `/characters/N.prt` (token-guarded, 404 out of range), the
+//! relighting message after the welcome only for clients announcing it, and the model cache
+//! reused on the next start.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+mod common;
+
+use common::{listening_addr, start_role, Proc};
+use psao_wire::{
+    capabilities, decode_frame, encode_frame, Hello, Message, HEADER_LEN, PROTOCOL_VERSION,
+};
+
+const TOKEN: &str = "sesame";
+
+/// CesiumMan, or `None` (test skipped) without the shared data.
+fn cesium_man() -> Option<PathBuf> {
+    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"))
+        .join("characters/CesiumMan/CesiumMan.gltf");
+    if p.exists() {
+        Some(p.canonicalize().unwrap())
+    } else {
+        eprintln!("note: {} missing, test skipped", p.display());
+        None
+    }
+}
+
+/// A scene file in `dir` with a floor box and the character.
+fn scene(dir: &Path, character: &Path) -> String {
+    let file = dir.join("relit.toml");
+    let text = format!(
+        "[[asset]]\nfile = \"builtin:box\"\nscale = [4.0, 0.1, 4.0]\ntranslation = [0.0, -0.1, 0.0]\n\n\
+         [[asset]]\nfile = {:?}\n",
+        character.display().to_string()
+    );
+    std::fs::write(&file, text).unwrap();
+    file.display().to_string()
+}
+
+/// `psao serve --relight` of `scene` with its models cached in `cache`.
+fn serve(scene: &str, cache: &Path) -> (Proc, String) {
+    let cache = cache.display().to_string();
+    let server = [
+        "--listen",
+        "127.0.0.1:0",
+        "--points",
+        "48",
+        "--ray-budget",
+        "20000",
+        "--token",
+        TOKEN,
+        "--points-cache",
+        &cache,
+        "--relight",
+    ];
+    let (child, line) = start_role("serve", scene, &server, &[]);
+    (child, listening_addr(&line))
+}
+
+/// Status and body of `GET path` with the extra header lines.
+fn get(addr: &str, path: &str, headers: &str) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    let req = format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n{headers}\r\n");
+    s.write_all(req.as_bytes()).unwrap();
+    let mut all = Vec::new();
+    let _ = s.read_to_end(&mut all);
+    let end = all.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&all[..end]);
+    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    (status, all[end + 4..].to_vec())
+}
+
+/// The messages a client announcing `caps` receives before the server closes the session
+/// (it closes its side right after the hello).
+fn session(addr: &str, caps: u32) -> Vec<Message> {
+    let hello = Message::Hello(Hello {
+        version: PROTOCOL_VERSION,
+        capabilities: caps,
+        token: Some(TOKEN.into()),
+        name: "test".into(),
+    });
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    s.write_all(&encode_frame(&hello).unwrap()).unwrap();
+    let _ = s.shutdown(std::net::Shutdown::Write);
+    let mut all = Vec::new();
+    s.read_to_end(&mut all)
+        .expect("the server closes the session");
+    let mut out = Vec::new();
+    let mut rest = &all[..];
+    while rest.len() >= HEADER_LEN {
+        let len = u32::from_le_bytes(rest[4..8].try_into().unwrap()) as usize;
+        let (frame, tail) = rest.split_at(HEADER_LEN + len);
+        out.push(decode_frame(frame, 1 << 28).unwrap());
+        rest = tail;
+    }
+    out
+}
+
+fn cached_models(cache: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(cache)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "prt"))
+        .collect()
+}
+
+#[test]
+fn served_characters_go_over_http_and_tcp_and_their_models_are_cached() {
+    let Some(character) = cesium_man() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let scene = scene(dir.path(), &character);
+    let (first, addr) = serve(&scene, &cache);
+    let bearer = format!("Authorization: Bearer {TOKEN}\r\n");
+
+    let (status, model) = get(&addr, "/characters/0.prt", &bearer);
+    assert_eq!(status, 200);
+    let read = psao_prt::model_file::from_bytes(&model).expect("a readable model");
+    assert!(read.vertices > 1000, "{} vertices", read.vertices);
+    assert_eq!(get(&addr, "/characters/0.prt", "").0, 401);
+    assert_eq!(get(&addr, "/characters/1.prt", &bearer).0, 404);
+    assert_eq!(get(&addr, "/characters/x.prt", &bearer).0, 404);
+
+    let with = session(&addr, capabilities::ALL);
+    assert!(
+        matches!(with.first(), Some(Message::Welcome(_))),
+        "{with:?}"
+    );
+    let relit: Vec<_> = with
+        .iter()
+        .filter_map(|m| match m {
+            Message::Relighting(r) => Some(r),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(relit.len(), 1);
+    assert!(
+        matches!(with[1], Message::Relighting(_)),
+        "right after the welcome"
+    );
+    assert_eq!((relit[0].character, &relit[0].model), (0, &model));
+    assert_eq!(relit[0].channels(), 3);
+    let without = session(&addr, capabilities::ALL & !capabilities::RELIGHT);
+    assert!(matches!(without.first(), Some(Message::Welcome(_))));
+    assert!(!without.iter().any(|m| matches!(m, Message::Relighting(_))));
+    drop(first);
+
+    // The next start reads the stored model: the same file (not rewritten) and bytes.
+    let stored = cached_models(&cache);
+    assert_eq!(stored.len(), 1, "{stored:?}");
+    let inode = std::fs::metadata(&stored[0]).unwrap().ino();
+    let (_second, addr) = serve(&scene, &cache);
+    assert_eq!(get(&addr, "/characters/0.prt", &bearer), (200, model));
+    assert_eq!(cached_models(&cache), stored);
+    assert_eq!(std::fs::metadata(&stored[0]).unwrap().ino(), inode);
+}
