@@ -180,6 +180,16 @@ pub unsafe extern "C" fn psao_max_cells(handle: *const Handle, instance: u32) ->
     grid.map_or(0, |g| g.layout().max_cells() as u32)
 }
 
+/// Cell slots `instance`'s grid has allocated (0 when it has none or no grid).
+///
+/// # Safety
+/// `handle` is null or a live session.
+#[no_mangle]
+pub unsafe extern "C" fn psao_slot_count(handle: *const Handle, instance: u32) -> u32 {
+    let grid = viewer(handle).and_then(|v| v.state().grid(instance as usize));
+    grid.map_or(0, |g| g.slot_count() as u32)
+}
+
 /// Valid points over all grids.
 ///
 /// # Safety
@@ -291,6 +301,7 @@ mod tests {
             psao_free(p, payload.len());
             assert_eq!(psao_state_hash(h), reference.state_hash());
             assert_eq!(psao_point_count(h), 1);
+            assert_eq!((psao_slot_count(h, 0), psao_slot_count(h, 1)), (1, 0));
             assert!(psao_changes_len(h) > 0);
             let translation = std::slice::from_raw_parts(psao_transform(h, 0), 12);
             assert_eq!(translation[9..], [0.0, 1.0, 0.0]);
