@@ -7,9 +7,10 @@
 // and the ms of one full state hash. RECORD=FILE also writes every received WebSocket
 // message to FILE (u32 little-endian length, then the bytes) for `bench/replay.ts`.
 import { spawn } from "node:child_process";
-import { appendFileSync, writeFileSync } from "node:fs";
+import { appendFileSync, readFileSync, writeFileSync } from "node:fs";
 import { createInterface } from "node:readline";
 import { fileURLToPath } from "node:url";
+import { Codec } from "../src/codec";
 import { Session } from "../src/session";
 
 // Bundled into build/bench/: the workspace's target/ is three levels up.
@@ -38,9 +39,11 @@ if (process.env.RECORD) {
 }
 let bytes = 0;
 const cpuStart = process.cpuUsage();
+const codec = await Codec.load(readFileSync(new URL("../../dist/psao.wasm", import.meta.url)));
 const session = new Session(
+  codec,
   { url: `ws://${addr}/ws`, token: null, verify: false, name: "bench" },
-  { welcome: () => {}, update: (_u, size) => (bytes += size), closed: () => {} },
+  { welcome: () => {}, update: (_frame, size) => (bytes += size), closed: () => {} },
 );
 const view = spawn(BIN, ["--log", "warn", "view", "--connect", addr, "--frames", FRAMES, "--res", "640x360"], {
   stdio: ["ignore", "ignore", "inherit"],

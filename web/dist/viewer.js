@@ -1,1254 +1,118 @@
 "use strict";
 (() => {
-  // node_modules/fzstd/esm/index.mjs
-  var ab = ArrayBuffer;
-  var u8 = Uint8Array;
-  var u16 = Uint16Array;
-  var i16 = Int16Array;
-  var i32 = Int32Array;
-  var slc = function(v, s, e) {
-    if (u8.prototype.slice)
-      return u8.prototype.slice.call(v, s, e);
-    if (s == null || s < 0)
-      s = 0;
-    if (e == null || e > v.length)
-      e = v.length;
-    var n = new u8(e - s);
-    n.set(v.subarray(s, e));
-    return n;
-  };
-  var fill = function(v, n, s, e) {
-    if (u8.prototype.fill)
-      return u8.prototype.fill.call(v, n, s, e);
-    if (s == null || s < 0)
-      s = 0;
-    if (e == null || e > v.length)
-      e = v.length;
-    for (; s < e; ++s)
-      v[s] = n;
-    return v;
-  };
-  var cpw = function(v, t, s, e) {
-    if (u8.prototype.copyWithin)
-      return u8.prototype.copyWithin.call(v, t, s, e);
-    if (s == null || s < 0)
-      s = 0;
-    if (e == null || e > v.length)
-      e = v.length;
-    while (s < e) {
-      v[t++] = v[s++];
+  // src/codec.ts
+  var TABLE_WORDS = 11;
+  var DecodeError = class extends Error {
+    constructor(message2, code) {
+      super(message2);
+      this.code = code;
     }
   };
-  var ec = [
-    "invalid zstd data",
-    "window size too large (>2046MB)",
-    "invalid block type",
-    "FSE accuracy too high",
-    "match distance too far back",
-    "unexpected EOF"
-  ];
-  var err = function(ind, msg, nt) {
-    var e = new Error(msg || ec[ind]);
-    e.code = ind;
-    if (Error.captureStackTrace)
-      Error.captureStackTrace(e, err);
-    if (!nt)
-      throw e;
-    return e;
-  };
-  var rb = function(d, b, n) {
-    var i = 0, o = 0;
-    for (; i < n; ++i)
-      o |= d[b++] << (i << 3);
-    return o;
-  };
-  var b4 = function(d, b) {
-    return (d[b] | d[b + 1] << 8 | d[b + 2] << 16 | d[b + 3] << 24) >>> 0;
-  };
-  var rzfh = function(dat, w) {
-    var n3 = dat[0] | dat[1] << 8 | dat[2] << 16;
-    if (n3 == 3126568 && dat[3] == 253) {
-      var flg = dat[4];
-      var ss = flg >> 5 & 1, cc = flg >> 2 & 1, df = flg & 3, fcf = flg >> 6;
-      if (flg & 8)
-        err(0);
-      var bt = 6 - ss;
-      var db = df == 3 ? 4 : df;
-      var di = rb(dat, bt, db);
-      bt += db;
-      var fsb = fcf ? 1 << fcf : ss;
-      var fss = rb(dat, bt, fsb) + (fcf == 1 && 256);
-      var ws = fss;
-      if (!ss) {
-        var wb = 1 << 10 + (dat[5] >> 3);
-        ws = wb + (wb >> 3) * (dat[5] & 7);
-      }
-      if (ws > 2145386496)
-        err(1);
-      var buf = new u8((w == 1 ? fss || ws : w ? 0 : ws) + 12);
-      buf[0] = 1, buf[4] = 4, buf[8] = 8;
-      return {
-        b: bt + fsb,
-        y: 0,
-        l: 0,
-        d: di,
-        w: w && w != 1 ? w : buf.subarray(12),
-        e: ws,
-        o: new i32(buf.buffer, 0, 3),
-        u: fss,
-        c: cc,
-        m: Math.min(131072, ws)
-      };
-    } else if ((n3 >> 4 | dat[3] << 20) == 25481893) {
-      return b4(dat, 4) + 8;
+  var Codec = class _Codec {
+    constructor(exports) {
+      this.exports = exports;
     }
-    err(0);
-  };
-  var msb = function(val) {
-    var bits = 0;
-    for (; 1 << bits <= val; ++bits)
-      ;
-    return bits - 1;
-  };
-  var rfse = function(dat, bt, mal) {
-    var tpos = (bt << 3) + 4;
-    var al = (dat[bt] & 15) + 5;
-    if (al > mal)
-      err(3);
-    var sz = 1 << al;
-    var probs = sz, sym = -1, re = -1, i = -1, ht = sz;
-    var buf = new ab(512 + (sz << 2));
-    var freq = new i16(buf, 0, 256);
-    var dstate = new u16(buf, 0, 256);
-    var nstate = new u16(buf, 512, sz);
-    var bb1 = 512 + (sz << 1);
-    var syms = new u8(buf, bb1, sz);
-    var nbits = new u8(buf, bb1 + sz);
-    while (sym < 255 && probs > 0) {
-      var bits = msb(probs + 1);
-      var cbt = tpos >> 3;
-      var msk = (1 << bits + 1) - 1;
-      var val = (dat[cbt] | dat[cbt + 1] << 8 | dat[cbt + 2] << 16) >> (tpos & 7) & msk;
-      var msk1fb = (1 << bits) - 1;
-      var msv = msk - probs - 1;
-      var sval = val & msk1fb;
-      if (sval < msv)
-        tpos += bits, val = sval;
-      else {
-        tpos += bits + 1;
-        if (val > msk1fb)
-          val -= msv;
-      }
-      freq[++sym] = --val;
-      if (val == -1) {
-        probs += val;
-        syms[--ht] = sym;
-      } else
-        probs -= val;
-      if (!val) {
-        do {
-          var rbt = tpos >> 3;
-          re = (dat[rbt] | dat[rbt + 1] << 8) >> (tpos & 7) & 3;
-          tpos += 2;
-          sym += re;
-        } while (re == 3);
-      }
+    /// Instantiates the module from its bytes or a fetch of them.
+    static async load(source) {
+      const { instance } = source instanceof Promise ? await WebAssembly.instantiateStreaming(source) : await WebAssembly.instantiate(source);
+      return new _Codec(instance.exports);
     }
-    if (sym > 255 || probs)
-      err(0);
-    var sympos = 0;
-    var sstep = (sz >> 1) + (sz >> 3) + 3;
-    var smask = sz - 1;
-    for (var s = 0; s <= sym; ++s) {
-      var sf = freq[s];
-      if (sf < 1) {
-        dstate[s] = -sf;
-        continue;
-      }
-      for (i = 0; i < sf; ++i) {
-        syms[sympos] = s;
-        do {
-          sympos = sympos + sstep & smask;
-        } while (sympos >= ht);
-      }
-    }
-    if (sympos)
-      err(0);
-    for (i = 0; i < sz; ++i) {
-      var ns = dstate[syms[i]]++;
-      var nb = nbits[i] = al - msb(ns);
-      nstate[i] = (ns << nb) - sz;
-    }
-    return [tpos + 7 >> 3, {
-      b: al,
-      s: syms,
-      n: nbits,
-      t: nstate
-    }];
-  };
-  var rhu = function(dat, bt) {
-    var i = 0, wc = -1;
-    var buf = new u8(292), hb = dat[bt];
-    var hw = buf.subarray(0, 256);
-    var rc = buf.subarray(256, 268);
-    var ri = new u16(buf.buffer, 268);
-    if (hb < 128) {
-      var _a = rfse(dat, bt + 1, 6), ebt = _a[0], fdt = _a[1];
-      bt += hb;
-      var epos = ebt << 3;
-      var lb = dat[bt];
-      if (!lb)
-        err(0);
-      var st1 = 0, st2 = 0, btr1 = fdt.b, btr2 = btr1;
-      var fpos = (++bt << 3) - 8 + msb(lb);
-      for (; ; ) {
-        fpos -= btr1;
-        if (fpos < epos)
-          break;
-        var cbt = fpos >> 3;
-        st1 += (dat[cbt] | dat[cbt + 1] << 8) >> (fpos & 7) & (1 << btr1) - 1;
-        hw[++wc] = fdt.s[st1];
-        fpos -= btr2;
-        if (fpos < epos)
-          break;
-        cbt = fpos >> 3;
-        st2 += (dat[cbt] | dat[cbt + 1] << 8) >> (fpos & 7) & (1 << btr2) - 1;
-        hw[++wc] = fdt.s[st2];
-        btr1 = fdt.n[st1];
-        st1 = fdt.t[st1];
-        btr2 = fdt.n[st2];
-        st2 = fdt.t[st2];
-      }
-      if (++wc > 255)
-        err(0);
-    } else {
-      wc = hb - 127;
-      for (; i < wc; i += 2) {
-        var byte = dat[++bt];
-        hw[i] = byte >> 4;
-        hw[i + 1] = byte & 15;
-      }
-      ++bt;
-    }
-    var wes = 0;
-    for (i = 0; i < wc; ++i) {
-      var wt = hw[i];
-      if (wt > 11)
-        err(0);
-      wes += wt && 1 << wt - 1;
-    }
-    var mb = msb(wes) + 1;
-    var ts = 1 << mb;
-    var rem = ts - wes;
-    if (rem & rem - 1)
-      err(0);
-    hw[wc++] = msb(rem) + 1;
-    for (i = 0; i < wc; ++i) {
-      var wt = hw[i];
-      ++rc[hw[i] = wt && mb + 1 - wt];
-    }
-    var hbuf = new u8(ts << 1);
-    var syms = hbuf.subarray(0, ts), nb = hbuf.subarray(ts);
-    ri[mb] = 0;
-    for (i = mb; i > 0; --i) {
-      var pv = ri[i];
-      fill(nb, i, pv, ri[i - 1] = pv + rc[i] * (1 << mb - i));
-    }
-    if (ri[0] != ts)
-      err(0);
-    for (i = 0; i < wc; ++i) {
-      var bits = hw[i];
-      if (bits) {
-        var code = ri[bits];
-        fill(syms, i, code, ri[bits] = code + (1 << mb - bits));
-      }
-    }
-    return [bt, {
-      n: nb,
-      b: mb,
-      s: syms
-    }];
-  };
-  var dllt = rfse(/* @__PURE__ */ new u8([
-    81,
-    16,
-    99,
-    140,
-    49,
-    198,
-    24,
-    99,
-    12,
-    33,
-    196,
-    24,
-    99,
-    102,
-    102,
-    134,
-    70,
-    146,
-    4
-  ]), 0, 6)[1];
-  var dmlt = rfse(/* @__PURE__ */ new u8([
-    33,
-    20,
-    196,
-    24,
-    99,
-    140,
-    33,
-    132,
-    16,
-    66,
-    8,
-    33,
-    132,
-    16,
-    66,
-    8,
-    33,
-    68,
-    68,
-    68,
-    68,
-    68,
-    68,
-    68,
-    68,
-    36,
-    9
-  ]), 0, 6)[1];
-  var doct = rfse(/* @__PURE__ */ new u8([
-    32,
-    132,
-    16,
-    66,
-    102,
-    70,
-    68,
-    68,
-    68,
-    68,
-    36,
-    73,
-    2
-  ]), 0, 5)[1];
-  var b2bl = function(b, s) {
-    var len = b.length, bl = new i32(len);
-    for (var i = 0; i < len; ++i) {
-      bl[i] = s;
-      s += 1 << b[i];
-    }
-    return bl;
-  };
-  var llb = /* @__PURE__ */ new u8((/* @__PURE__ */ new i32([
-    0,
-    0,
-    0,
-    0,
-    16843009,
-    50528770,
-    134678020,
-    202050057,
-    269422093
-  ])).buffer, 0, 36);
-  var llbl = /* @__PURE__ */ b2bl(llb, 0);
-  var mlb = /* @__PURE__ */ new u8((/* @__PURE__ */ new i32([
-    0,
-    0,
-    0,
-    0,
-    0,
-    0,
-    0,
-    0,
-    16843009,
-    50528770,
-    117769220,
-    185207048,
-    252579084,
-    16
-  ])).buffer, 0, 53);
-  var mlbl = /* @__PURE__ */ b2bl(mlb, 3);
-  var dhu = function(dat, out, hu) {
-    var len = dat.length, ss = out.length, lb = dat[len - 1], msk = (1 << hu.b) - 1, eb = -hu.b;
-    if (!lb)
-      err(0);
-    var st = 0, btr = hu.b, pos = (len << 3) - 8 + msb(lb) - btr, i = -1;
-    for (; pos > eb && i < ss; ) {
-      var cbt = pos >> 3;
-      var val = (dat[cbt] | dat[cbt + 1] << 8 | dat[cbt + 2] << 16) >> (pos & 7);
-      st = (st << btr | val) & msk;
-      out[++i] = hu.s[st];
-      pos -= btr = hu.n[st];
-    }
-    if (pos != eb || i + 1 != ss)
-      err(0);
-  };
-  var dhu4 = function(dat, out, hu) {
-    var bt = 6;
-    var ss = out.length, sz1 = ss + 3 >> 2, sz2 = sz1 << 1, sz3 = sz1 + sz2;
-    dhu(dat.subarray(bt, bt += dat[0] | dat[1] << 8), out.subarray(0, sz1), hu);
-    dhu(dat.subarray(bt, bt += dat[2] | dat[3] << 8), out.subarray(sz1, sz2), hu);
-    dhu(dat.subarray(bt, bt += dat[4] | dat[5] << 8), out.subarray(sz2, sz3), hu);
-    dhu(dat.subarray(bt), out.subarray(sz3), hu);
-  };
-  var rzb = function(dat, st, out) {
-    var _a;
-    var bt = st.b;
-    var b0 = dat[bt], btype = b0 >> 1 & 3;
-    st.l = b0 & 1;
-    var sz = b0 >> 3 | dat[bt + 1] << 5 | dat[bt + 2] << 13;
-    var ebt = (bt += 3) + sz;
-    if (btype == 1) {
-      if (bt >= dat.length)
-        return;
-      st.b = bt + 1;
-      if (out) {
-        fill(out, dat[bt], st.y, st.y += sz);
-        return out;
-      }
-      return fill(new u8(sz), dat[bt]);
-    }
-    if (ebt > dat.length)
-      return;
-    if (btype == 0) {
-      st.b = ebt;
-      if (out) {
-        out.set(dat.subarray(bt, ebt), st.y);
-        st.y += sz;
-        return out;
-      }
-      return slc(dat, bt, ebt);
-    }
-    if (btype == 2) {
-      var b3 = dat[bt], lbt = b3 & 3, sf = b3 >> 2 & 3;
-      var lss = b3 >> 4, lcs = 0, s4 = 0;
-      if (lbt < 2) {
-        if (sf & 1)
-          lss |= dat[++bt] << 4 | (sf & 2 && dat[++bt] << 12);
-        else
-          lss = b3 >> 3;
-      } else {
-        s4 = sf;
-        if (sf < 2)
-          lss |= (dat[++bt] & 63) << 4, lcs = dat[bt] >> 6 | dat[++bt] << 2;
-        else if (sf == 2)
-          lss |= dat[++bt] << 4 | (dat[++bt] & 3) << 12, lcs = dat[bt] >> 2 | dat[++bt] << 6;
-        else
-          lss |= dat[++bt] << 4 | (dat[++bt] & 63) << 12, lcs = dat[bt] >> 6 | dat[++bt] << 2 | dat[++bt] << 10;
-      }
-      ++bt;
-      var buf = out ? out.subarray(st.y, st.y + st.m) : new u8(st.m);
-      var spl = buf.length - lss;
-      if (lbt == 0)
-        buf.set(dat.subarray(bt, bt += lss), spl);
-      else if (lbt == 1)
-        fill(buf, dat[bt++], spl);
-      else {
-        var hu = st.h;
-        if (lbt == 2) {
-          var hud = rhu(dat, bt);
-          lcs += bt - (bt = hud[0]);
-          st.h = hu = hud[1];
-        } else if (!hu)
-          err(0);
-        (s4 ? dhu4 : dhu)(dat.subarray(bt, bt += lcs), buf.subarray(spl), hu);
-      }
-      var ns = dat[bt++];
-      if (ns) {
-        if (ns == 255)
-          ns = (dat[bt++] | dat[bt++] << 8) + 32512;
-        else if (ns > 127)
-          ns = ns - 128 << 8 | dat[bt++];
-        var scm = dat[bt++];
-        if (scm & 3)
-          err(0);
-        var dts = [dmlt, doct, dllt];
-        for (var i = 2; i > -1; --i) {
-          var md = scm >> (i << 1) + 2 & 3;
-          if (md == 1) {
-            var rbuf = new u8([0, 0, dat[bt++]]);
-            dts[i] = {
-              s: rbuf.subarray(2, 3),
-              n: rbuf.subarray(0, 1),
-              t: new u16(rbuf.buffer, 0, 1),
-              b: 0
-            };
-          } else if (md == 2) {
-            _a = rfse(dat, bt, 9 - (i & 1)), bt = _a[0], dts[i] = _a[1];
-          } else if (md == 3) {
-            if (!st.t)
-              err(0);
-            dts[i] = st.t[i];
-          }
-        }
-        var _b = st.t = dts, mlt = _b[0], oct = _b[1], llt = _b[2];
-        var lb = dat[ebt - 1];
-        if (!lb)
-          err(0);
-        var spos = (ebt << 3) - 8 + msb(lb) - llt.b, cbt = spos >> 3, oubt = 0;
-        var lst = (dat[cbt] | dat[cbt + 1] << 8) >> (spos & 7) & (1 << llt.b) - 1;
-        cbt = (spos -= oct.b) >> 3;
-        var ost = (dat[cbt] | dat[cbt + 1] << 8) >> (spos & 7) & (1 << oct.b) - 1;
-        cbt = (spos -= mlt.b) >> 3;
-        var mst = (dat[cbt] | dat[cbt + 1] << 8) >> (spos & 7) & (1 << mlt.b) - 1;
-        for (++ns; --ns; ) {
-          var llc = llt.s[lst];
-          var lbtr = llt.n[lst];
-          var mlc = mlt.s[mst];
-          var mbtr = mlt.n[mst];
-          var ofc = oct.s[ost];
-          var obtr = oct.n[ost];
-          cbt = (spos -= ofc) >> 3;
-          var ofp = 1 << ofc;
-          var off = ofp + ((dat[cbt] | dat[cbt + 1] << 8 | dat[cbt + 2] << 16 | dat[cbt + 3] << 24) >>> (spos & 7) & ofp - 1);
-          cbt = (spos -= mlb[mlc]) >> 3;
-          var ml = mlbl[mlc] + ((dat[cbt] | dat[cbt + 1] << 8 | dat[cbt + 2] << 16) >> (spos & 7) & (1 << mlb[mlc]) - 1);
-          cbt = (spos -= llb[llc]) >> 3;
-          var ll = llbl[llc] + ((dat[cbt] | dat[cbt + 1] << 8 | dat[cbt + 2] << 16) >> (spos & 7) & (1 << llb[llc]) - 1);
-          cbt = (spos -= lbtr) >> 3;
-          lst = llt.t[lst] + ((dat[cbt] | dat[cbt + 1] << 8) >> (spos & 7) & (1 << lbtr) - 1);
-          cbt = (spos -= mbtr) >> 3;
-          mst = mlt.t[mst] + ((dat[cbt] | dat[cbt + 1] << 8) >> (spos & 7) & (1 << mbtr) - 1);
-          cbt = (spos -= obtr) >> 3;
-          ost = oct.t[ost] + ((dat[cbt] | dat[cbt + 1] << 8) >> (spos & 7) & (1 << obtr) - 1);
-          if (off > 3) {
-            st.o[2] = st.o[1];
-            st.o[1] = st.o[0];
-            st.o[0] = off -= 3;
-          } else {
-            var idx = off - (ll != 0);
-            if (idx) {
-              off = idx == 3 ? st.o[0] - 1 : st.o[idx];
-              if (idx > 1)
-                st.o[2] = st.o[1];
-              st.o[1] = st.o[0];
-              st.o[0] = off;
-            } else
-              off = st.o[0];
-          }
-          for (var i = 0; i < ll; ++i) {
-            buf[oubt + i] = buf[spl + i];
-          }
-          oubt += ll, spl += ll;
-          var stin = oubt - off;
-          if (stin < 0) {
-            var len = -stin;
-            var bs = st.e + stin;
-            if (len > ml)
-              len = ml;
-            for (var i = 0; i < len; ++i) {
-              buf[oubt + i] = st.w[bs + i];
-            }
-            oubt += len, ml -= len, stin = 0;
-          }
-          for (var i = 0; i < ml; ++i) {
-            buf[oubt + i] = buf[stin + i];
-          }
-          oubt += ml;
-        }
-        if (oubt != spl) {
-          while (spl < buf.length) {
-            buf[oubt++] = buf[spl++];
-          }
-        } else
-          oubt = buf.length;
-        if (out)
-          st.y += oubt;
-        else
-          buf = slc(buf, 0, oubt);
-      } else if (out) {
-        st.y += lss;
-        if (spl) {
-          for (var i = 0; i < lss; ++i) {
-            buf[i] = buf[spl + i];
-          }
-        }
-      } else if (spl)
-        buf = slc(buf, spl);
-      st.b = ebt;
-      return buf;
-    }
-    err(2);
-  };
-  var cct = function(bufs, ol) {
-    if (bufs.length == 1)
-      return bufs[0];
-    var buf = new u8(ol);
-    for (var i = 0, b = 0; i < bufs.length; ++i) {
-      var chk = bufs[i];
-      buf.set(chk, b);
-      b += chk.length;
-    }
-    return buf;
-  };
-  function decompress(dat, buf) {
-    var bufs = [], nb = +!buf;
-    var bt = 0, ol = 0;
-    for (; dat.length; ) {
-      var st = rzfh(dat, nb || buf);
-      if (typeof st == "object") {
-        if (nb) {
-          buf = null;
-          if (st.w.length == st.u) {
-            bufs.push(buf = st.w);
-            ol += st.u;
-          }
-        } else {
-          bufs.push(buf);
-          st.e = 0;
-        }
-        for (; !st.l; ) {
-          var blk = rzb(dat, st, buf);
-          if (!blk)
-            err(5);
-          if (buf)
-            st.e = st.y;
-          else {
-            bufs.push(blk);
-            ol += blk.length;
-            cpw(st.w, 0, blk.length);
-            st.w.set(blk, st.w.length - blk.length);
-          }
-        }
-        bt = st.b + st.c * 4;
-      } else
-        bt = st;
-      dat = dat.subarray(bt);
-    }
-    return cct(bufs, ol);
-  }
-
-  // src/compact.ts
-  var BUCKET_ENTRIES = 8;
-  var CELL_POINTS = 7;
-  var VALID_BIT = 2147483648;
-  var TAG = 843273040;
-  var FLAG_SNAPSHOT = 1;
-  var HEADER_BYTES = 28;
-  var TRANSFORM_WORDS = 12;
-  var POINT_CHOICES = 2 * CELL_POINTS;
-  var RANK_CHOICE = BUCKET_ENTRIES;
-  var ENTRY_BYTES = 12;
-  var POINT_BYTES = 4;
-  var FIELDS = [
-    [26, 5],
-    [21, 5],
-    [16, 5],
-    [12, 4],
-    [8, 4],
-    [0, 8]
-  ];
-  var MAX_DECODED_BYTES = 256 << 20;
-  var MAX_DECODE_LIMIT = 4 * 2 ** 30;
-  var DeltaError = class extends Error {
-  };
-  function zstdContentSize(bytes) {
-    if (bytes.length < 5) throw new DeltaError("corrupt compressed data: too short");
-    const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
-    if (view.getUint32(0, true) !== 4247762216) throw new DeltaError("corrupt compressed data: bad zstd magic");
-    const fhd = bytes[4];
-    const fcsFlag = fhd >> 6;
-    const single = fhd >> 5 & 1;
-    const dictBytes = [0, 1, 2, 4][fhd & 3];
-    const fcsBytes = fcsFlag === 0 ? single : [0, 2, 4, 8][fcsFlag];
-    if (fcsBytes === 0) throw new DeltaError("compressed data does not record its decompressed size");
-    const at = 5 + (single ? 0 : 1) + dictBytes;
-    if (bytes.length < at + fcsBytes) throw new DeltaError("corrupt compressed data: truncated header");
-    switch (fcsBytes) {
-      case 1:
-        return bytes[at];
-      case 2:
-        return view.getUint16(at, true) + 256;
-      case 4:
-        return view.getUint32(at, true);
-      default: {
-        const v = view.getBigUint64(at, true);
-        return v > BigInt(Number.MAX_SAFE_INTEGER) ? Number.MAX_SAFE_INTEGER : Number(v);
-      }
-    }
-  }
-  function decompressLimited(bytes, limit) {
-    const size = zstdContentSize(bytes);
-    if (size > limit) {
-      throw new DeltaError(`decompressed size ${size} bytes exceeds the limit of ${limit} bytes`);
-    }
-    let out;
-    try {
-      out = decompress(bytes, new Uint8Array(size));
-    } catch (e) {
-      throw new DeltaError(`corrupt compressed data: ${e}`);
-    }
-    if (out.length !== size) {
-      throw new DeltaError(`corrupt compressed data: expanded to ${out.length} bytes, ${size} recorded`);
-    }
-    return out;
-  }
-  var VarReader = class {
-    constructor(bytes) {
-      this.bytes = bytes;
-      this.at = 0;
-    }
-    left() {
-      return this.bytes.length - this.at;
-    }
-    /// A varint as a number: exact up to 7 bytes (49 bits); longer ones (which no count or
-    /// u32 delta can be) go through [`VarReader.varint`] for its checks and come back large.
-    num(what) {
-      const start = this.at;
-      let v = 0;
-      for (let k = 0; k < 7; k++) {
-        if (this.at >= this.bytes.length) throw new DeltaError(`truncated ${what}`);
-        const b = this.bytes[this.at++];
-        v += (b & 127) * 2 ** (7 * k);
-        if ((b & 128) === 0) return v;
-      }
-      this.at = start;
-      return Number(this.varint(what));
-    }
-    varint(what) {
-      let v = 0n;
-      for (let shift = 0n; shift < 64n; shift += 7n) {
-        if (this.at >= this.bytes.length) throw new DeltaError(`truncated ${what}`);
-        const b = this.bytes[this.at++];
-        const bits = BigInt(b & 127);
-        if (shift === 63n && bits > 1n) throw new DeltaError(`bad varint in ${what}`);
-        v |= bits << shift;
-        if ((b & 128) === 0) return v;
-      }
-      throw new DeltaError(`bad varint in ${what}`);
-    }
-    /// A count of entries that each take at least one more byte.
-    count(what) {
-      const n = this.num(what);
-      if (n > this.left()) throw new DeltaError(`truncated ${what}`);
-      return n;
-    }
-    /// A zigzag delta against `prev.v`; the result must be a u32.
-    delta(prev, what) {
-      const z = this.num(what);
-      const d = z % 2 === 0 ? z / 2 : -(z + 1) / 2;
-      const v = prev.v + d;
-      if (!(v >= 0 && v <= 4294967295)) throw new DeltaError(`bad varint in ${what}`);
-      prev.v = v;
-      return v;
+    /// Copies `bytes` into a fresh wasm buffer; the caller frees it.
+    put(bytes) {
+      const ptr = this.exports.psao_alloc(bytes.length);
+      new Uint8Array(this.exports.memory.buffer, ptr, bytes.length).set(bytes);
+      return ptr;
     }
   };
-  function unshuffle(planes) {
-    const n = planes.length / 4;
-    const words = new Uint32Array(n);
-    for (let plane = 0; plane < 4; plane++) {
-      const base = plane * n;
-      const shift = 8 * plane;
-      for (let i = 0; i < n; i++) words[i] |= planes[base + i] << shift;
-    }
-    return words;
-  }
-  function applyPointResidual(residual, reference) {
-    let acc = VALID_BIT;
-    for (const [shift, bits] of FIELDS) {
-      const mask = (1 << bits) - 1;
-      const z = residual >>> shift & mask;
-      const d = (z >>> 1 ^ -(z & 1) & mask) >>> 0;
-      acc = (acc | ((reference >>> shift) + d & mask) << shift) >>> 0;
-    }
-    return acc >>> 0;
-  }
-  function usedEntries(lo, hi, base) {
-    let n = 0;
-    while (n < BUCKET_ENTRIES && (lo[base + n] !== 0 || hi[base + n] !== 0)) n++;
-    return n;
-  }
-  function usedPoints(points, base) {
-    let n = 0;
-    while (n < CELL_POINTS && points[base + n] !== 0) n++;
-    return n;
-  }
-  function grown(a, words, max, what) {
-    if (words <= a.length) return a;
-    if (words > max) throw new DeltaError(`${what} out of range`);
-    const b = new Uint32Array(Math.min(Math.max(words, 2 * a.length, 64), max));
-    b.set(a);
-    return b;
-  }
-  var OwnReferences = class {
-    constructor(limit, bucketCounts) {
-      this.limit = limit;
-      this.bucketCounts = bucketCounts;
-      this.isClientState = false;
-      this.received = /* @__PURE__ */ new Map();
-    }
-    clear() {
-      this.received.clear();
-    }
-    referenceOf(instance) {
-      let r = this.received.get(instance);
-      if (!r) {
-        let buckets = Math.floor(this.limit / 4 / BUCKET_ENTRIES);
-        if (this.bucketCounts) {
-          if (instance >= this.bucketCounts.length) throw new DeltaError(`instance ${instance} out of range`);
-          buckets = this.bucketCounts[instance];
-        }
-        const maxPoints = this.bucketCounts ? buckets * BUCKET_ENTRIES * CELL_POINTS : Math.floor(this.limit / 4);
-        const empty = new Uint32Array(0);
-        r = { keyLo: empty, keyHi: empty, slots: empty, points: empty, maxBucketWords: buckets * BUCKET_ENTRIES, maxPointWords: maxPoints };
-        this.received.set(instance, r);
-      }
-      return r;
-    }
-  };
-  function decodeCount(code, old, capacity, at, plane, what) {
-    if (code > capacity) throw new DeltaError(`${what} ${code} exceeds ${capacity}`);
-    const n = (code + old) % (capacity + 1);
-    if (at + n > plane) throw new DeltaError(`byte planes hold ${plane} records, the index stream implies ${at + n}`);
-    return n;
-  }
-  var EMPTY_CELL = new Uint32Array(CELL_POINTS);
-  var CompactDecoder = class {
-    /// Most decompressed bytes accepted per update (a client sets it from its instance table),
-    /// and the instances' bucket counts when known (indices beyond them are refused; without
-    /// them the reference arrays are bounded by the limit). With `store` (the client state),
-    /// the references are the client's grids and every update is decoded into them.
-    constructor(limit = MAX_DECODED_BYTES, bucketCounts = null, store = null) {
-      this.limit = limit;
-      this.transforms = /* @__PURE__ */ new Map();
-      this.limit = Math.min(limit, MAX_DECODE_LIMIT);
-      this.references = store ?? new OwnReferences(this.limit, bucketCounts);
-    }
-    clear() {
-      this.transforms.clear();
-      this.references.clear();
-    }
-    /// Decodes one update. After an error the state is undefined: the session must restart.
-    decode(bytes) {
-      const payload = decompressLimited(bytes, this.limit);
-      if (payload.length < HEADER_BYTES) throw new DeltaError("truncated compact header");
-      const view = new DataView(payload.buffer, payload.byteOffset, payload.byteLength);
-      const word = (i) => view.getUint32(i, true);
-      if (word(0) !== TAG) throw new DeltaError(`bad format tag ${word(0).toString(16)}`);
-      const flags = word(4);
-      if ((flags & ~FLAG_SNAPSHOT) !== 0) throw new DeltaError(`unknown flag bits ${flags}`);
-      const frame = BigInt(word(8)) | BigInt(word(12)) << 32n;
-      const indexLen = word(16);
-      const rest = payload.subarray(HEADER_BYTES);
-      if (indexLen > rest.length) throw new DeltaError("truncated index stream");
-      const layout = parseIndex(rest.subarray(0, indexLen));
-      const entries = word(20);
-      const points = word(24);
-      const s = split(layout, entries, points, rest.subarray(indexLen));
-      const snapshot = (flags & FLAG_SNAPSHOT) !== 0;
-      if (snapshot) this.clear();
-      return this.assemble(layout, s, frame, snapshot);
-    }
-    assemble(layout, s, frame, snapshot) {
-      const transforms = layout.transforms.map((instance, k) => {
-        const old = this.transforms.get(instance) ?? new Uint32Array(TRANSFORM_WORDS);
-        const words = new Uint32Array(TRANSFORM_WORDS);
-        for (let i = 0; i < TRANSFORM_WORDS; i++) words[i] = (s.transforms[k * TRANSFORM_WORDS + i] ^ old[i]) >>> 0;
-        this.transforms.set(instance, words);
-        return [instance, new Float32Array(words.buffer.slice(0))];
-      });
-      let entryCount = 0;
-      let cellCount = 0;
-      let entry = 0;
-      let point = 0;
-      const instances = [];
-      for (const { instance, buckets: bucketIds, cells: slotIds } of layout.instances) {
-        const r = this.references.referenceOf(instance);
-        const nb = bucketIds.length;
-        const lo = new Uint32Array(nb * BUCKET_ENTRIES);
-        const hi = new Uint32Array(nb * BUCKET_ENTRIES);
-        const slots = new Uint32Array(nb * BUCKET_ENTRIES);
-        for (let k = 0; k < nb; k++) {
-          const b = bucketIds[k];
-          const base = b * BUCKET_ENTRIES;
-          const end = base + BUCKET_ENTRIES;
-          r.keyLo = grown(r.keyLo, end, r.maxBucketWords, `bucket ${b}`);
-          r.keyHi = grown(r.keyHi, end, r.maxBucketWords, `bucket ${b}`);
-          r.slots = grown(r.slots, end, r.maxBucketWords, `bucket ${b}`);
-          const code = s.entryCounts[entryCount++];
-          const n = decodeCount(code, usedEntries(r.keyLo, r.keyHi, base), BUCKET_ENTRIES, entry, s.entryChoices.length, "bucket entry count");
-          const out = k * BUCKET_ENTRIES;
-          for (let i = 0; i < n; i++) {
-            const c = s.entryChoices[entry];
-            let tLo = s.keyLo[entry];
-            let tHi = s.keyHi[entry];
-            const sr = s.slots[entry];
-            entry++;
-            let slot;
-            if (c === RANK_CHOICE) {
-              if (sr >= slotIds.length) throw new DeltaError("bad reference choice for a bucket entry");
-              slot = slotIds[sr];
-            } else if (c < RANK_CHOICE) {
-              const o = base + (i + c) % BUCKET_ENTRIES;
-              const rLo2 = r.keyLo[o];
-              const rHi2 = r.keyHi[o];
-              if (rLo2 !== 0 || rHi2 !== 0) {
-                const mLo = rLo2 === 0 ? 4294967295 : rLo2 - 1;
-                const mHi = rLo2 === 0 ? rHi2 - 1 : rHi2;
-                tLo = (tLo ^ mLo ^ b) >>> 0;
-                tHi = (tHi ^ mHi) >>> 0;
-              }
-              slot = (sr ^ r.slots[o]) >>> 0;
-            } else {
-              throw new DeltaError("bad reference choice for a bucket entry");
-            }
-            const xLo = (tLo ^ b) >>> 0;
-            if (xLo === 4294967295 && tHi === 4294967295) throw new DeltaError("bad bucket key");
-            lo[out + i] = xLo === 4294967295 ? 0 : xLo + 1;
-            hi[out + i] = xLo === 4294967295 ? tHi + 1 : tHi;
-            slots[out + i] = slot;
-          }
-          const rLo = r.keyLo;
-          const rHi = r.keyHi;
-          const rSlots = r.slots;
-          for (let i = 0; i < BUCKET_ENTRIES; i++) {
-            rLo[base + i] = lo[out + i];
-            rHi[base + i] = hi[out + i];
-            rSlots[base + i] = slots[out + i];
-          }
-        }
-        const nc = slotIds.length;
-        const pts = new Uint32Array(nc * CELL_POINTS);
-        for (let k = 0; k < nc; k++) {
-          const slot = slotIds[k];
-          const base = slot * CELL_POINTS;
-          r.points = grown(r.points, base + CELL_POINTS, r.maxPointWords, `cell slot ${slot}`);
-          const old = r.points;
-          const code = s.cellLengths[cellCount++];
-          const n = decodeCount(code, usedPoints(old, base), CELL_POINTS, point, s.pointChoices.length, "cell length");
-          const out = k * CELL_POINTS;
-          for (let i = 0; i < n; i++) {
-            const c = s.pointChoices[point];
-            const residual = s.points[point];
-            point++;
-            if (c >= POINT_CHOICES) throw new DeltaError("bad reference choice for a point");
-            if ((residual & VALID_BIT) !== 0) throw new DeltaError("bad point residual");
-            const reference = c < CELL_POINTS ? old[base + (i + c) % CELL_POINTS] : k > 0 ? pts[out - CELL_POINTS + c - CELL_POINTS] : EMPTY_CELL[0];
-            pts[out + i] = applyPointResidual(residual, reference);
-          }
-          for (let i = 0; i < CELL_POINTS; i++) old[base + i] = pts[out + i];
-        }
-        instances.push({
-          instance,
-          bucketIds: Uint32Array.from(bucketIds),
-          keyLo: lo,
-          keyHi: hi,
-          slots,
-          cellSlots: Uint32Array.from(slotIds),
-          points: pts
-        });
-      }
-      if (entry !== s.entryChoices.length || point !== s.pointChoices.length) {
-        throw new DeltaError(`${s.entryChoices.length - entry + s.pointChoices.length - point} trailing records`);
-      }
-      return { frame, snapshot, transforms, instances, inPlace: this.references.isClientState };
-    }
-  };
-  function parseIndex(bytes) {
-    const r = new VarReader(bytes);
-    const transforms = [];
-    let n = r.count("transform count");
-    const prevT = { v: -1 };
-    for (let i = 0; i < n; i++) transforms.push(r.delta(prevT, "transform instance"));
-    n = r.count("instance count");
-    const instances = [];
-    const prevI = { v: -1 };
-    for (let k = 0; k < n; k++) {
-      const instance = r.delta(prevI, "instance");
-      const nb = r.count("bucket count");
-      const nc = r.count("cell count");
-      const buckets = [];
-      const prevB = { v: -1 };
-      for (let i = 0; i < nb; i++) buckets.push(r.delta(prevB, "bucket index"));
-      const cells = [];
-      const prevC = { v: -1 };
-      for (let i = 0; i < nc; i++) cells.push(r.delta(prevC, "cell slot"));
-      instances.push({ instance, buckets, cells });
-    }
-    if (r.left() !== 0) throw new DeltaError(`${r.left()} trailing bytes after the index stream`);
-    return { transforms, instances };
-  }
-  function split(layout, entries, points, bytes) {
-    let nb = 0;
-    let nc = 0;
-    for (const i of layout.instances) {
-      nb += i.buckets.length;
-      nc += i.cells.length;
-    }
-    const transformBytes = layout.transforms.length * TRANSFORM_WORDS * 4;
-    const expected = nb + nc + entries * (1 + ENTRY_BYTES) + points * (1 + POINT_BYTES) + transformBytes;
-    if (bytes.length !== expected) {
-      throw new DeltaError(`byte planes hold ${bytes.length} bytes, the index stream implies ${expected}`);
-    }
-    let at = 0;
-    const take = (n) => bytes.subarray(at, at += n);
-    const entryCounts = take(nb);
-    const cellLengths = take(nc);
-    const entryChoices = take(entries);
-    const pointChoices = take(points);
-    const keyPlanes = take(entries * 8);
-    const slots = unshuffle(take(entries * 4));
-    const pts = unshuffle(take(points * 4));
-    const transforms = unshuffle(take(transformBytes));
-    const keyLo = new Uint32Array(entries);
-    const keyHi = new Uint32Array(entries);
-    for (let p = 0; p < 4; p++) {
-      for (let i = 0; i < entries; i++) {
-        keyLo[i] |= keyPlanes[p * entries + i] << 8 * p;
-        keyHi[i] |= keyPlanes[(p + 4) * entries + i] << 8 * p;
+  var ViewerState = class {
+    /// An empty state for the welcome's table; a table the Rust client refuses throws.
+    constructor(codec2, table) {
+      this.codec = codec2;
+      this.table = table;
+      this.cached = [];
+      this.transformsStale = true;
+      const words = new Float64Array(table.length * TABLE_WORDS);
+      table.forEach(
+        (e, k) => words.set(
+          [...e.origin, e.cellSize, ...e.dims, e.layoutPoissonRadius, e.bucketCount, e.poissonRadius, e.pointCount],
+          k * TABLE_WORDS
+        )
+      );
+      const bytes = new Uint8Array(words.buffer);
+      const x = codec2.exports;
+      const ptr = codec2.put(bytes);
+      this.handle = x.psao_viewer_new(ptr, bytes.length);
+      x.psao_free(ptr, bytes.length);
+      const status2 = x.psao_table_status(this.handle);
+      if (status2 !== 0) {
+        const text = this.error();
+        this.free();
+        throw new DecodeError(text, status2);
       }
     }
-    return { entryCounts, cellLengths, entryChoices, pointChoices, keyLo, keyHi, slots, points: pts, transforms };
-  }
-
-  // src/state.ts
-  var MAX_DIM = 1 << 21;
-  var ApplyError = class extends Error {
-  };
-  var Grid = class {
-    constructor(entry) {
-      this.entry = entry;
-      /// Cell slots in use (at most the length `points` covers).
-      this.slotCount = 0;
-      this.maxBucketWords = entry.bucketCount * BUCKET_ENTRIES;
-      this.maxPointWords = this.maxBucketWords * CELL_POINTS;
-      this.keyLo = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
-      this.keyHi = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
-      this.slots = new Uint32Array(entry.bucketCount * BUCKET_ENTRIES);
-      this.points = new Uint32Array(0);
+    /// Decodes and applies one update payload (`snapshot`: its message was a snapshot); throws
+    /// a DecodeError (the session must then end).
+    apply(payload, snapshot) {
+      const x = this.codec.exports;
+      const ptr = this.codec.put(payload);
+      const status2 = x.psao_apply(this.handle, ptr, payload.length, snapshot ? 1 : 0);
+      x.psao_free(ptr, payload.length);
+      this.transformsStale = true;
+      if (status2 !== 0) throw new DecodeError(this.error(), status2);
     }
-    /// Empties the grid (a snapshot follows), keeping its memory.
-    clear() {
-      this.keyLo.fill(0);
-      this.keyHi.fill(0);
-      this.slots.fill(0);
-      this.points.fill(0);
-      this.slotCount = 0;
-    }
-    /// Most cell slots the layout allows.
-    maxCells() {
-      return this.entry.bucketCount * BUCKET_ENTRIES;
-    }
-    ensureSlot(slot) {
-      if (slot < this.slotCount) return;
-      this.slotCount = slot + 1;
-      if (this.points.length < this.slotCount * CELL_POINTS) {
-        const cells = Math.min(Math.max(this.slotCount, 2 * Math.floor(this.points.length / CELL_POINTS)), Math.max(this.slotCount, this.maxCells()));
-        const grown2 = new Uint32Array(cells * CELL_POINTS);
-        grown2.set(this.points);
-        this.points = grown2;
+    /// Every instance's transform from the latest update carrying one (Affine3A: columns x, y,
+    /// z, then translation, 12 floats), or null; read from the wasm once per applied update.
+    get transforms() {
+      if (this.transformsStale) {
+        this.transformsStale = false;
+        this.cached = Array.from({ length: this.instanceCount() }, (_, i) => this.transform(i));
       }
+      return this.cached;
     }
-    /// Whether cell id `hi · 2^32 + lo` lies in the grid (psao-points' `coord_of_id`): in
-    /// doubles below 2^53 (exact), else in BigInt.
-    idIsValid(hi, lo) {
-      const [dx, dy, dz] = this.entry.dims;
-      const slice = dx * dy * 31;
-      const row = dx * 17;
-      if (hi < 1 << 21 && slice < 2 ** 52) {
-        const id = hi * 2 ** 32 + lo;
-        let z = Math.floor(id / slice);
-        if (z * slice > id) z--;
-        const rem = id - z * slice;
-        let y = Math.floor(rem / row);
-        if (y * row > rem) y--;
-        const x = rem - y * row;
-        return x < dx && y < dy && z < dz;
-      }
-      return this.idIsValidBig(BigInt(hi) << 32n | BigInt(lo));
-    }
-    idIsValidBig(id) {
-      const [dx, dy, dz] = this.entry.dims.map(BigInt);
-      const slice = dx * dy * 31n;
-      const row = dx * 17n;
-      const z = id / slice;
-      const rem = id % slice;
-      return rem % row < dx && rem / row < dy && z < dz;
-    }
-  };
-  function usable(e) {
-    const ids = 31n * e.dims.reduce((a, d) => a * BigInt(d), 1n);
-    return e.origin.every(Number.isFinite) && Number.isFinite(e.cellSize) && e.cellSize > 0 && Number.isFinite(e.layoutPoissonRadius) && e.layoutPoissonRadius >= 0 && e.dims.every((d) => d >= 1 && d <= MAX_DIM) && ids < 0xffffffffffffffffn && e.bucketCount > 0 && (e.bucketCount & e.bucketCount - 1) === 0;
-  }
-  var ClientState = class {
-    constructor(table) {
-      this.isClientState = true;
-      this.lastFrame = null;
-      this.grids = table.map((e) => usable(e) ? new Grid(e) : null);
-      this.transforms = table.map(() => null);
-    }
-    /// Instance `instance`'s grid as the decoder's reference.
-    referenceOf(instance) {
-      if (instance >= this.grids.length) throw new DeltaError(`instance ${instance} out of range (${this.grids.length} instances)`);
-      const g = this.grids[instance];
-      if (!g) throw new DeltaError(`instance ${instance} has no grid`);
-      return g;
-    }
-    /// Empties every grid and forgets the transforms (a snapshot follows).
-    clear() {
-      for (const g of this.grids) g?.clear();
-      this.transforms.fill(null);
-    }
-    /// Applies a decoded update after checking all of it. An update decoded elsewhere changes
-    /// nothing on an error; one decoded into this state (`inPlace`) is already in the grids,
-    /// so after an error the state is undefined and the session must restart.
-    apply(u) {
-      this.validate(u);
-      if (u.snapshot && !u.inPlace) this.clear();
-      for (const [instance, t] of u.transforms) this.transforms[instance] = t;
-      for (const d of u.instances) {
-        const g = this.grids[d.instance];
-        if (u.inPlace) {
-          for (let i = 0; i < d.keyLo.length; i++) {
-            if (d.keyLo[i] !== 0 || d.keyHi[i] !== 0) g.ensureSlot(d.slots[i]);
-          }
-          for (let k = 0; k < d.cellSlots.length; k++) g.ensureSlot(d.cellSlots[k]);
-          continue;
-        }
-        for (let k = 0; k < d.bucketIds.length; k++) {
-          const base = d.bucketIds[k] * BUCKET_ENTRIES;
-          const src = k * BUCKET_ENTRIES;
-          for (let i = 0; i < BUCKET_ENTRIES; i++) {
-            const lo = d.keyLo[src + i];
-            const hi = d.keyHi[src + i];
-            g.keyLo[base + i] = lo;
-            g.keyHi[base + i] = hi;
-            g.slots[base + i] = d.slots[src + i];
-            if (lo !== 0 || hi !== 0) g.ensureSlot(d.slots[src + i]);
-          }
-        }
-        for (let k = 0; k < d.cellSlots.length; k++) {
-          const slot = d.cellSlots[k];
-          g.ensureSlot(slot);
-          g.points.set(d.points.subarray(k * CELL_POINTS, (k + 1) * CELL_POINTS), slot * CELL_POINTS);
-        }
-      }
-      this.lastFrame = u.frame;
-    }
-    validate(u) {
-      const count = this.grids.length;
-      const inRange = (i) => {
-        if (i >= count) throw new ApplyError(`instance ${i} out of range (${count} instances)`);
-      };
-      for (const [i, t] of u.transforms) {
-        inRange(i);
-        if (!t.every(Number.isFinite)) throw new ApplyError(`instance ${i}: transform is not finite`);
-      }
-      for (const d of u.instances) {
-        inRange(d.instance);
-        const g = this.grids[d.instance];
-        if (!g) throw new ApplyError(`instance ${d.instance} has no grid`);
-        const max = g.maxCells();
-        const mask = g.entry.bucketCount - 1;
-        for (let k = 0; k < d.bucketIds.length; k++) {
-          const b = d.bucketIds[k];
-          if (b >= g.entry.bucketCount) throw new ApplyError(`instance ${d.instance}: bucket ${b} out of range`);
-          for (let i = k * BUCKET_ENTRIES; i < (k + 1) * BUCKET_ENTRIES; i++) {
-            const lo = d.keyLo[i];
-            const hi = d.keyHi[i];
-            if (lo === 0 && hi === 0) continue;
-            if (d.slots[i] >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${d.slots[i]} out of range`);
-            const idLo = lo === 0 ? 4294967295 : lo - 1;
-            const idHi = lo === 0 ? hi - 1 : hi;
-            if (!g.idIsValid(idHi, idLo) || (idLo & mask) >>> 0 !== b) {
-              throw new ApplyError(`instance ${d.instance}: bucket ${b} has an invalid cell key`);
-            }
-          }
-        }
-        for (const slot of d.cellSlots) {
-          if (slot >= max) throw new ApplyError(`instance ${d.instance}: cell slot ${slot} out of range`);
-        }
-      }
-    }
-    /// The state hash of psao-client (`state_hash_of`): every grid's compacted buckets and
-    /// used cells folded into one 64-bit word.
+    /// psao-client's state hash (compared with the server's).
     stateHash() {
-      const h = new Hasher(608135816, 2242054355);
-      for (const g of this.grids) {
-        if (!g) {
-          h.word(NO_GRID_HI, NO_GRID_LO);
-          continue;
-        }
-        h.word(0, g.entry.bucketCount);
-        for (let b = 0; b < g.entry.bucketCount; b++) {
-          const base = b * BUCKET_ENTRIES;
-          let used = 0;
-          for (let i = 0; i < BUCKET_ENTRIES; i++) {
-            const lo = g.keyLo[base + i];
-            const hi = g.keyHi[base + i];
-            if (lo === 0 && hi === 0) continue;
-            h.word(hi, lo);
-            h.word(0, g.slots[base + i]);
-            used++;
-          }
-          for (; used < BUCKET_ENTRIES; used++) {
-            h.word(0, 0);
-            h.word(0, 0);
-          }
-        }
-        let usedCells = 0;
-        for (let s = g.slotCount - 1; s >= 0; s--) {
-          if (validPoints(g.points, s) > 0) {
-            usedCells = s + 1;
-            break;
-          }
-        }
-        h.word(0, usedCells);
-        const compact = new Uint32Array(CELL_POINTS + 1);
-        for (let s = 0; s < usedCells; s++) {
-          compact.fill(0);
-          let n = 0;
-          for (let i = 0; i < CELL_POINTS; i++) {
-            const p = g.points[s * CELL_POINTS + i];
-            if ((p & VALID_BIT) !== 0) compact[n++] = p;
-          }
-          for (let i = 0; i < CELL_POINTS; i += 2) {
-            h.word(compact[i + 1], compact[i]);
-          }
-        }
-      }
-      h.word(0, this.grids.length);
-      return h.finish();
+      return BigInt.asUintN(64, this.codec.exports.psao_state_hash(this.handle));
     }
-  };
-  function validPoints(points, slot) {
-    let n = 0;
-    for (let i = 0; i < CELL_POINTS; i++) if ((points[slot * CELL_POINTS + i] & VALID_BIT) !== 0) n++;
-    return n;
-  }
-  var NO_GRID_HI = 1852792679;
-  var NO_GRID_LO = 1919509537;
-  var K_HI = 1367130551;
-  var K_LO = 656542357;
-  var K_LO0 = K_LO & 65535;
-  var K_LO1 = K_LO >>> 16;
-  var M64 = 0xffffffffffffffffn;
-  var Hasher = class {
-    constructor(hi, lo) {
-      this.hi = hi;
-      this.lo = lo;
+    /// What the last update changed, as crates/psao-wasm/src/changes.rs lays it out: a view of
+    /// wasm memory, valid until the next call on this state.
+    changes() {
+      const x = this.codec.exports;
+      return new Uint32Array(x.memory.buffer, x.psao_changes_ptr(this.handle), x.psao_changes_len(this.handle));
     }
-    word(wHi, wLo) {
-      const xHi = (this.hi << 5 | this.lo >>> 27) ^ wHi;
-      const xLo = (this.lo << 5 | this.hi >>> 27) ^ wLo;
-      const a0 = xLo & 65535;
-      const a1 = xLo >>> 16;
-      const p00 = a0 * K_LO0;
-      const p01 = a0 * K_LO1;
-      const p10 = a1 * K_LO0;
-      const mid = (p00 >>> 16) + (p01 & 65535) + (p10 & 65535);
-      const carry = a1 * K_LO1 + (p01 >>> 16) + (p10 >>> 16) + (mid >>> 16);
-      this.lo = Math.imul(xLo, K_LO) >>> 0;
-      this.hi = carry + Math.imul(xHi, K_LO) + Math.imul(xLo, K_HI) >>> 0;
+    /// Instances in the table.
+    instanceCount() {
+      return this.codec.exports.psao_instance_count(this.handle);
     }
-    finish() {
-      let z = BigInt(this.hi) << 32n | BigInt(this.lo);
-      z = (z ^ z >> 30n) * 0xbf58476d1ce4e5b9n & M64;
-      z = (z ^ z >> 27n) * 0x94d049bb133111ebn & M64;
-      return z ^ z >> 31n;
+    /// Hash buckets of an instance's grid, 0 when it has none (an unusable layout).
+    bucketCount(instance) {
+      return this.codec.exports.psao_bucket_count(this.handle, instance);
+    }
+    /// Cell slots an instance's layout addresses (0 without a grid).
+    maxCells(instance) {
+      return this.codec.exports.psao_max_cells(this.handle, instance);
+    }
+    /// Cell slots an instance's grid has allocated (0 without a grid).
+    slotCount(instance) {
+      return this.codec.exports.psao_slot_count(this.handle, instance);
+    }
+    /// Valid points over all grids.
+    pointCount() {
+      return this.codec.exports.psao_point_count(this.handle);
+    }
+    transform(instance) {
+      const x = this.codec.exports;
+      const ptr = x.psao_transform(this.handle, instance);
+      return ptr === 0 ? null : new Float32Array(x.memory.buffer, ptr, 12).slice();
+    }
+    /// Frees the wasm side (the state is unusable afterwards).
+    free() {
+      if (this.handle !== 0) this.codec.exports.psao_viewer_free(this.handle);
+      this.handle = 0;
+    }
+    error() {
+      const x = this.codec.exports;
+      const bytes = new Uint8Array(x.memory.buffer, x.psao_error_ptr(this.handle), x.psao_error_len(this.handle));
+      return new TextDecoder().decode(bytes);
     }
   };
 
@@ -1553,13 +417,9 @@
 
   // src/session.ts
   var KEEP_ALIVE_MS = 5e3;
-  function decodeLimit(table) {
-    let total = 4096;
-    for (const e of table) total += 64 + e.bucketCount * 110 + e.bucketCount * 8 * 40;
-    return total;
-  }
   var Session = class {
-    constructor(opts, handler) {
+    constructor(codec2, opts, handler) {
+      this.codec = codec2;
       this.opts = opts;
       this.handler = handler;
       this.state = null;
@@ -1570,7 +430,6 @@
       this.lastHash = null;
       /// Milliseconds spent decoding and applying updates (hash checks excluded).
       this.decodeMs = 0;
-      this.decoder = null;
       this.done = false;
       /// When the last frame went to the server (ms, `performance.now()`).
       this.lastSent = 0;
@@ -1593,7 +452,8 @@
         try {
           this.handle(decodeFrame(bytes), bytes.length);
         } catch (e) {
-          this.fail(`bad frame from the server: ${e.message}`, true);
+          const what = e instanceof DecodeError ? "bad update" : "bad frame";
+          this.fail(`${what} from the server: ${e.message}`, true);
         }
       };
       this.ws.onclose = () => this.end("the connection closed", false);
@@ -1608,24 +468,16 @@
           }
           if (w.codec !== "compact") return this.fail(`the server's codec \`${w.codec}\` is not supported`, true);
           this.welcomeMsg = w;
-          this.state = new ClientState(w.instances);
-          this.decoder = new CompactDecoder(
-            decodeLimit(w.instances),
-            w.instances.map((e) => e.bucketCount),
-            this.state
-          );
+          this.state?.free();
+          this.state = new ViewerState(this.codec, w.instances);
           this.handler.welcome(w);
           return;
         }
         case "delta":
         case "snapshot": {
-          if (!this.decoder || !this.state) return this.fail("update before the welcome", true);
+          if (!this.state) return this.fail("update before the welcome", true);
           const t0 = performance.now();
-          const u = this.decoder.decode(m.delta.payload);
-          if (u.snapshot !== (m.kind === "snapshot")) {
-            return this.fail("the update's snapshot flag does not match its message", true);
-          }
-          this.state.apply(u);
+          this.state.apply(m.delta.payload, m.kind === "snapshot");
           this.decodeMs += performance.now() - t0;
           this.updates++;
           let verified = false;
@@ -1636,7 +488,7 @@
           }
           this.lastAck = m.delta.frame;
           this.send(ackFrame(m.delta.frame));
-          this.handler.update(u, size, verified);
+          this.handler.update(m.delta.frame, size, verified);
           this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame, m.delta.sceneTime);
           return;
         }
@@ -1664,6 +516,11 @@
     send(frame) {
       this.lastSent = performance.now();
       this.ws.send(frame);
+    }
+    /// Frees the session's state in wasm memory (when a new session replaces this one).
+    release() {
+      this.state?.free();
+      this.state = null;
     }
     /// Ends the session with a bye.
     close() {
@@ -1715,6 +572,10 @@
   }
 
   // src/grids.ts
+  var CELL_POINTS = 7;
+  var BUCKET = 0;
+  var CELL = 1;
+  var RESET = 2;
   var TEX_WIDTH = 1024;
   var CELL_PAGE = 32;
   var NO_PAGE = 4294967295;
@@ -1736,16 +597,16 @@
       return this.channels;
     }
     /// Makes room for `texels` (rows doubling), keeping the contents; `fill` initialises new words.
-    ensure(texels, fill2 = 0) {
+    ensure(texels, fill = 0) {
       const rows = Math.max(1, Math.ceil(texels / TEX_WIDTH));
       if (rows <= this.rows) return;
-      const grown2 = Math.max(rows, 2 * this.rows);
-      const mirror = new Uint32Array(grown2 * TEX_WIDTH * this.channels);
+      const grown = Math.max(rows, 2 * this.rows);
+      const mirror = new Uint32Array(grown * TEX_WIDTH * this.channels);
       mirror.set(this.mirror);
-      if (fill2 !== 0) mirror.fill(fill2, this.mirror.length);
+      if (fill !== 0) mirror.fill(fill, this.mirror.length);
       this.mirror = mirror;
-      this.rows = grown2;
-      this.dirty = new Uint8Array(grown2).fill(1);
+      this.rows = grown;
+      this.dirty = new Uint8Array(grown).fill(1);
       this.anyDirty = true;
       this.stale = true;
     }
@@ -1838,8 +699,6 @@
       /// Bytes uploaded so far and full rebuilds.
       this.uploadedBytes = 0;
       this.rebuilds = 0;
-      this.state = null;
-      this.stale = true;
       this.pool = new ChunkPool();
       /// Pages of cells allocated (0 until the grids hold points).
       this.cellPages = 0;
@@ -1850,61 +709,69 @@
     }
     /// Follows a new session's (empty) state: lays out its directory and page table.
     reset(state) {
-      this.state = state;
-      this.stale = true;
       let buckets = 0;
       let pages = 0;
-      this.slots = state.grids.map((g) => {
-        if (!g) return null;
-        const s = { bucketBase: buckets, cellPageBase: pages, maxCells: g.maxCells() };
-        buckets += g.entry.bucketCount;
-        pages += Math.ceil(g.maxCells() / CELL_PAGE);
+      this.slots = Array.from({ length: state.instanceCount() }, (_, k) => {
+        const bucketCount = state.bucketCount(k);
+        if (bucketCount === 0) return null;
+        const maxCells = state.maxCells(k);
+        const s = { bucketBase: buckets, cellPageBase: pages, maxCells };
+        buckets += bucketCount;
+        pages += Math.ceil(maxCells / CELL_PAGE);
         return s;
       });
       const maxRows = this.gl.getParameter(this.gl.MAX_TEXTURE_SIZE);
       const rows = Math.ceil(Math.max(buckets, pages) / TEX_WIDTH);
       this.problem = rows > maxRows ? `the grids need ${rows} texture rows, this GPU allows ${maxRows}: AO not drawn` : null;
       if (this.problem) {
-        this.slots = state.grids.map(() => null);
+        this.slots = this.slots.map(() => null);
         return;
       }
       this.directory.ensure(buckets);
       this.pageTable.ensure(pages, NO_PAGE);
+      this.clear();
     }
-    /// Mirrors one applied update (call after `state.apply(u)`).
-    apply(u) {
-      const state = this.state;
-      if (!state || this.stale || u.snapshot || this.problem) {
-        this.stale = true;
-        return;
-      }
-      for (const d of u.instances) {
-        const slot = this.slots[d.instance];
-        const grid = state.grids[d.instance];
-        if (!slot || !grid) continue;
-        for (let k = 0; k < d.bucketIds.length; k++) this.setBucket(grid, slot, d.bucketIds[k]);
-        for (let k = 0; k < d.cellSlots.length; k++) this.setCell(grid, slot, d.cellSlots[k]);
+    /// Patches in the change records of one applied update (`state.changes()`).
+    apply(changes) {
+      if (this.problem) return;
+      for (let at = 0; at < changes.length && !this.problem; ) {
+        const tag = changes[at];
+        if (tag === RESET) {
+          this.clear();
+          at += 1;
+          continue;
+        }
+        const slot = this.slots[changes[at + 1]];
+        const index = changes[at + 2];
+        if (tag === BUCKET) {
+          const count = changes[at + 3];
+          if (slot) this.setBucket(slot, index, changes.subarray(at + 4, at + 4 + 3 * count));
+          at += 4 + 3 * count;
+        } else if (tag === CELL) {
+          if (slot) this.setCell(slot, index, changes.subarray(at + 3, at + 3 + CELL_POINTS));
+          at += 3 + CELL_POINTS;
+        } else {
+          this.problem = `unknown change record ${tag}: AO not drawn`;
+        }
       }
     }
-    /// Brings the textures up to date (a full rebuild when needed) and binds nothing.
+    /// Uploads the texture rows changed since the last upload; binds nothing.
     upload() {
       if (this.problem) return;
-      if (this.stale && this.state) this.rebuild(this.state);
       this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload();
     }
     /// Bytes of texture storage in use.
     textureBytes() {
       return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes();
     }
-    /// Bucket `b` of `grid` as the state holds it: its used entries into a chunk of the pool.
-    setBucket(grid, slot, b) {
+    /// Bucket `b` of an instance: its used entries (key low, key high, cell slot each) into a
+    /// chunk of the pool.
+    setBucket(slot, b, entries) {
       const at = slot.bucketBase + b;
       const dir = this.directory.mirror;
       const old = dir[at];
       const oldCount = old & 15;
-      const base = b * BUCKET_ENTRIES;
-      let count = 0;
-      for (let e = 0; e < BUCKET_ENTRIES; e++) if (grid.keyLo[base + e] !== 0 || grid.keyHi[base + e] !== 0) count++;
+      const count = entries.length / 3;
       let first = old >>> 4;
       if (oldCount > 0 && (count === 0 || sizeClass(count) !== sizeClass(oldCount))) {
         this.pool.release(first, sizeClass(oldCount));
@@ -1918,31 +785,26 @@
         this.entries.ensure(this.pool.texels);
       }
       const m = this.entries.mirror;
-      let o = first * 4;
-      for (let e = 0; e < BUCKET_ENTRIES; e++) {
-        const lo = grid.keyLo[base + e];
-        const hi = grid.keyHi[base + e];
-        if (lo === 0 && hi === 0) continue;
-        m[o] = lo;
-        m[o + 1] = hi;
-        m[o + 2] = grid.slots[base + e];
-        o += 4;
+      for (let e = 0; e < count; e++) {
+        const o = (first + e) * 4;
+        m[o] = entries[3 * e];
+        m[o + 1] = entries[3 * e + 1];
+        m[o + 2] = entries[3 * e + 2];
       }
       if (count > 0) this.entries.touch(first, count);
       dir[at] = count === 0 ? 0 : (first << 4 | count) >>> 0;
       this.directory.touch(at, 1);
     }
-    /// Cell slot `s` of `grid` as the state holds it, into its page (allocated when it first
+    /// Cell slot `s` of an instance (its point words), into its page (allocated when it first
     /// holds points).
-    setCell(grid, slot, s) {
+    setCell(slot, s, points) {
       if (s >= slot.maxCells) return;
       const at = slot.cellPageBase + Math.floor(s / CELL_PAGE);
       const table = this.pageTable.mirror;
       let page = table[at];
-      const src = s * CELL_POINTS;
       if (page === NO_PAGE) {
         let any = false;
-        for (let i = 0; i < CELL_POINTS; i++) if (grid.points[src + i] !== 0) any = true;
+        for (let i = 0; i < CELL_POINTS; i++) if (points[i] !== 0) any = true;
         if (!any) return;
         page = this.cellPages++;
         table[at] = page;
@@ -1951,29 +813,17 @@
       }
       const texel = 2 * (page * CELL_PAGE + s % CELL_PAGE);
       const m = this.cells.mirror;
-      for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = grid.points[src + i] ?? 0;
+      for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = points[i];
       m[texel * 4 + 7] = 0;
       this.cells.touch(texel, 2);
     }
-    rebuild(state) {
-      this.stale = false;
+    /// Empties the directory, page table and pools (a new state or a snapshot).
+    clear() {
       this.rebuilds++;
       this.pool.clear();
       this.cellPages = 0;
       this.directory.reset(0);
       this.pageTable.reset(NO_PAGE);
-      state.grids.forEach((g, k) => {
-        const slot = this.slots[k];
-        if (!g || !slot) return;
-        const n = g.entry.bucketCount * BUCKET_ENTRIES;
-        for (let e = 0; e < n; e++) {
-          if (g.keyLo[e] === 0 && g.keyHi[e] === 0) continue;
-          const b = Math.floor(e / BUCKET_ENTRIES);
-          this.setBucket(g, slot, b);
-          e = (b + 1) * BUCKET_ENTRIES - 1;
-        }
-        for (let s = 0; s < g.slotCount; s++) this.setCell(g, slot, s);
-      });
     }
   };
 
@@ -2856,11 +1706,10 @@ void main() {
     }
     /// Instance i's row of the instance textures: its view and grid layout.
     instanceRow(i, t, state, grids2, f, u) {
-      const grid = state?.grids[i] ?? null;
       const slot = grids2?.slots[i] ?? null;
-      const view = t && grid && slot ? instanceView(t) : null;
-      if (!view || !grid || !slot) return;
-      const e = grid.entry;
+      const view = t && state && slot ? instanceView(t) : null;
+      if (!view || !state || !slot) return;
+      const e = state.table[i];
       const fo = i * INST_F * 4;
       f.set(view.toLocal, fo);
       const n = view.normalToLocal;
@@ -2877,7 +1726,7 @@ void main() {
           slot.bucketBase,
           slot.cellPageBase,
           slot.maxCells,
-          grid.slotCount > 0 ? 1 : 0,
+          state.slotCount(i) > 0 ? 1 : 0,
           Number(row & 0xffffffffn),
           Number(row >> 32n),
           Number(slice & 0xffffffffn),
@@ -3005,12 +1854,15 @@ void main() {
   }
   var edgeIndex = 0;
   var wsUrl = (host) => `${location.protocol === "https:" ? "wss" : "ws"}://${host}/ws`;
+  var codec = null;
   var session = null;
   var backoff = 200;
   var received = [];
   function connect() {
     status.edge = edges[edgeIndex];
+    session?.release();
     session = new Session(
+      codec,
       { url: wsUrl(status.edge), token, verify, name: "psao browser viewer" },
       {
         welcome: () => {
@@ -3030,14 +1882,14 @@ void main() {
           if (clientFrame !== null) answered = Math.max(answered, clientFrame);
           serverTime = { seconds, at: performance.now() };
         },
-        update: (u, bytes, verified) => {
+        update: (frame, bytes, verified) => {
           var _a;
           (_a = status.milestones).update ?? (_a.update = performance.now());
-          grids?.apply(u);
+          if (session?.state) grids?.apply(session.state.changes());
           status.updates++;
           if (verified) status.verified++;
           status.mismatches = session?.mismatches ?? status.mismatches;
-          status.serverFrame = Number(u.frame);
+          status.serverFrame = frame;
           received.push({ t: performance.now(), bytes });
           if (session?.lastHash != null) status.hash = session.lastHash.toString(16).padStart(16, "0");
         },
@@ -3060,15 +1912,6 @@ void main() {
   var frames = [];
   var cameraFrame2 = 0;
   var orbit = null;
-  function countPoints() {
-    let n = 0;
-    for (const g of session?.state?.grids ?? []) {
-      if (!g) continue;
-      const p = g.points;
-      for (let i = 0; i < g.slotCount * 7; i++) if (p[i] >>> 31) n++;
-    }
-    return n;
-  }
   var canvas = document.getElementById("view");
   var gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
   var renderer = null;
@@ -3288,7 +2131,7 @@ void main() {
     }
     if (now - lastPointCount > 500) {
       lastPointCount = now;
-      status.points = countPoints();
+      status.points = session?.state?.pointCount() ?? 0;
     }
     status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
     status.uploadedBytes = grids?.uploadedBytes ?? 0;
@@ -3330,6 +2173,11 @@ void main() {
   }).catch((e) => {
     status.message = `cannot load /scene.glb: ${e}`;
   });
-  connect();
+  Codec.load(fetch("/psao.wasm")).then((c) => {
+    codec = c;
+    connect();
+  }).catch((e) => {
+    status.message = `cannot load the decoder /psao.wasm: ${e}`;
+  });
   requestAnimationFrame(tick);
 })();

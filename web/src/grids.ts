@@ -1,8 +1,9 @@
 // The client's grids on the GPU, sparse: only the buckets that hold entries and the pages of
 // cell slots that hold points take texture memory (the grids' hash tables are sized for every
 // cell of an instance, four times over, while a viewer receives the cells it sees). Kept
-// equal to the client state (`state.ts`) by re-reading each update's changed buckets and cells
-// from it; only the texture rows they touched are uploaded (texSubImage2D). The AO fragment
+// equal to the client state (the wasm's, `codec.ts`) by patching in the records of what each
+// update changed (crates/psao-wasm/src/changes.rs); only the texture rows they touched are
+// uploaded (texSubImage2D). The AO fragment
 // shader (`aoshader.ts`) reads four textures with texelFetch (texel index i at
 // (i % TEX_WIDTH, i / TEX_WIDTH)):
 // * bucket directory (R32UI): one texel per bucket of every instance, instance k's bucket b
@@ -15,10 +16,16 @@
 //   `NO_PAGE` (no points there yet).
 // * cell pool (RGBA32UI): two texels per cell slot of each allocated page, points 0–3 and
 //   4–6 (the eighth word is 0): slot s of page q is texels `2·(CELL_PAGE·q + s % CELL_PAGE)`.
-// A snapshot empties the pools and rebuilds everything from the state.
+// A snapshot's records start with a reset: the pools empty, then every bucket and cell.
 
-import { BUCKET_ENTRIES, CELL_POINTS, type Update } from "./compact";
-import type { ClientState, Grid } from "./state";
+import type { ViewerState } from "./codec";
+
+/// Points per cell.
+const CELL_POINTS = 7;
+/// Change record tags (crates/psao-wasm/src/changes.rs).
+const BUCKET = 0;
+const CELL = 1;
+const RESET = 2;
 
 /// Texels per texture row.
 export const TEX_WIDTH = 1024;
@@ -177,8 +184,6 @@ export class GridTextures {
   /// Bytes uploaded so far and full rebuilds.
   uploadedBytes = 0;
   rebuilds = 0;
-  private state: ClientState | null = null;
-  private stale = true;
   private pool = new ChunkPool();
   /// Pages of cells allocated (0 until the grids hold points).
   cellPages = 0;
@@ -191,49 +196,58 @@ export class GridTextures {
   }
 
   /// Follows a new session's (empty) state: lays out its directory and page table.
-  reset(state: ClientState) {
-    this.state = state;
-    this.stale = true;
+  reset(state: ViewerState) {
     let buckets = 0;
     let pages = 0;
-    this.slots = state.grids.map((g) => {
-      if (!g) return null;
-      const s = { bucketBase: buckets, cellPageBase: pages, maxCells: g.maxCells() };
-      buckets += g.entry.bucketCount;
-      pages += Math.ceil(g.maxCells() / CELL_PAGE);
+    this.slots = Array.from({ length: state.instanceCount() }, (_, k) => {
+      const bucketCount = state.bucketCount(k);
+      if (bucketCount === 0) return null;
+      const maxCells = state.maxCells(k);
+      const s = { bucketBase: buckets, cellPageBase: pages, maxCells };
+      buckets += bucketCount;
+      pages += Math.ceil(maxCells / CELL_PAGE);
       return s;
     });
     const maxRows = this.gl.getParameter(this.gl.MAX_TEXTURE_SIZE) as number;
     const rows = Math.ceil(Math.max(buckets, pages) / TEX_WIDTH);
     this.problem = rows > maxRows ? `the grids need ${rows} texture rows, this GPU allows ${maxRows}: AO not drawn` : null;
     if (this.problem) {
-      this.slots = state.grids.map(() => null);
+      this.slots = this.slots.map(() => null);
       return;
     }
     this.directory.ensure(buckets);
     this.pageTable.ensure(pages, NO_PAGE);
+    this.clear();
   }
 
-  /// Mirrors one applied update (call after `state.apply(u)`).
-  apply(u: Update) {
-    const state = this.state;
-    if (!state || this.stale || u.snapshot || this.problem) {
-      this.stale = true;
-      return;
-    }
-    for (const d of u.instances) {
-      const slot = this.slots[d.instance];
-      const grid = state.grids[d.instance];
-      if (!slot || !grid) continue;
-      for (let k = 0; k < d.bucketIds.length; k++) this.setBucket(grid, slot, d.bucketIds[k]);
-      for (let k = 0; k < d.cellSlots.length; k++) this.setCell(grid, slot, d.cellSlots[k]);
+  /// Patches in the change records of one applied update (`state.changes()`).
+  apply(changes: Uint32Array) {
+    if (this.problem) return;
+    for (let at = 0; at < changes.length && !this.problem; ) {
+      const tag = changes[at];
+      if (tag === RESET) {
+        this.clear();
+        at += 1;
+        continue;
+      }
+      const slot = this.slots[changes[at + 1]];
+      const index = changes[at + 2];
+      if (tag === BUCKET) {
+        const count = changes[at + 3];
+        if (slot) this.setBucket(slot, index, changes.subarray(at + 4, at + 4 + 3 * count));
+        at += 4 + 3 * count;
+      } else if (tag === CELL) {
+        if (slot) this.setCell(slot, index, changes.subarray(at + 3, at + 3 + CELL_POINTS));
+        at += 3 + CELL_POINTS;
+      } else {
+        this.problem = `unknown change record ${tag}: AO not drawn`;
+      }
     }
   }
 
-  /// Brings the textures up to date (a full rebuild when needed) and binds nothing.
+  /// Uploads the texture rows changed since the last upload; binds nothing.
   upload() {
     if (this.problem) return;
-    if (this.stale && this.state) this.rebuild(this.state);
     this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload();
   }
 
@@ -242,15 +256,14 @@ export class GridTextures {
     return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes();
   }
 
-  /// Bucket `b` of `grid` as the state holds it: its used entries into a chunk of the pool.
-  private setBucket(grid: Grid, slot: GridSlot, b: number) {
+  /// Bucket `b` of an instance: its used entries (key low, key high, cell slot each) into a
+  /// chunk of the pool.
+  private setBucket(slot: GridSlot, b: number, entries: Uint32Array) {
     const at = slot.bucketBase + b;
     const dir = this.directory.mirror;
     const old = dir[at];
     const oldCount = old & 15;
-    const base = b * BUCKET_ENTRIES;
-    let count = 0;
-    for (let e = 0; e < BUCKET_ENTRIES; e++) if (grid.keyLo[base + e] !== 0 || grid.keyHi[base + e] !== 0) count++;
+    const count = entries.length / 3;
     let first = old >>> 4;
     if (oldCount > 0 && (count === 0 || sizeClass(count) !== sizeClass(oldCount))) {
       this.pool.release(first, sizeClass(oldCount));
@@ -264,32 +277,27 @@ export class GridTextures {
       this.entries.ensure(this.pool.texels);
     }
     const m = this.entries.mirror;
-    let o = first * 4;
-    for (let e = 0; e < BUCKET_ENTRIES; e++) {
-      const lo = grid.keyLo[base + e];
-      const hi = grid.keyHi[base + e];
-      if (lo === 0 && hi === 0) continue;
-      m[o] = lo;
-      m[o + 1] = hi;
-      m[o + 2] = grid.slots[base + e];
-      o += 4;
+    for (let e = 0; e < count; e++) {
+      const o = (first + e) * 4;
+      m[o] = entries[3 * e];
+      m[o + 1] = entries[3 * e + 1];
+      m[o + 2] = entries[3 * e + 2];
     }
     if (count > 0) this.entries.touch(first, count);
     dir[at] = count === 0 ? 0 : ((first << 4) | count) >>> 0;
     this.directory.touch(at, 1);
   }
 
-  /// Cell slot `s` of `grid` as the state holds it, into its page (allocated when it first
+  /// Cell slot `s` of an instance (its point words), into its page (allocated when it first
   /// holds points).
-  private setCell(grid: Grid, slot: GridSlot, s: number) {
+  private setCell(slot: GridSlot, s: number, points: Uint32Array) {
     if (s >= slot.maxCells) return;
     const at = slot.cellPageBase + Math.floor(s / CELL_PAGE);
     const table = this.pageTable.mirror;
     let page = table[at];
-    const src = s * CELL_POINTS;
     if (page === NO_PAGE) {
       let any = false;
-      for (let i = 0; i < CELL_POINTS; i++) if (grid.points[src + i] !== 0) any = true;
+      for (let i = 0; i < CELL_POINTS; i++) if (points[i] !== 0) any = true;
       if (!any) return;
       page = this.cellPages++;
       table[at] = page;
@@ -298,29 +306,17 @@ export class GridTextures {
     }
     const texel = 2 * (page * CELL_PAGE + (s % CELL_PAGE));
     const m = this.cells.mirror;
-    for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = grid.points[src + i] ?? 0;
+    for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = points[i];
     m[texel * 4 + 7] = 0;
     this.cells.touch(texel, 2);
   }
 
-  private rebuild(state: ClientState) {
-    this.stale = false;
+  /// Empties the directory, page table and pools (a new state or a snapshot).
+  private clear() {
     this.rebuilds++;
     this.pool.clear();
     this.cellPages = 0;
     this.directory.reset(0);
     this.pageTable.reset(NO_PAGE);
-    state.grids.forEach((g, k) => {
-      const slot = this.slots[k];
-      if (!g || !slot) return;
-      const n = g.entry.bucketCount * BUCKET_ENTRIES;
-      for (let e = 0; e < n; e++) {
-        if (g.keyLo[e] === 0 && g.keyHi[e] === 0) continue;
-        const b = Math.floor(e / BUCKET_ENTRIES);
-        this.setBucket(g, slot, b);
-        e = (b + 1) * BUCKET_ENTRIES - 1;
-      }
-      for (let s = 0; s < g.slotCount; s++) this.setCell(g, slot, s);
-    });
   }
 }

@@ -20,6 +20,7 @@
 // moves to the next one.
 // `window.psao` exposes the numbers to tests; `window.psaoCost()` measures the shader's cost.
 
+import { Codec } from "./codec";
 import { Session } from "./session";
 import { sceneBounds } from "./bounds";
 import { GridTextures } from "./grids";
@@ -130,13 +131,17 @@ for (const e of (params.get("edges") ?? "").split(",").map((e) => e.trim())) {
 let edgeIndex = 0;
 const wsUrl = (host: string) => `${location.protocol === "https:" ? "wss" : "ws"}://${host}/ws`;
 
+/// The decoder (`/psao.wasm`), loaded before the first connection.
+let codec: Codec | null = null;
 let session: Session | null = null;
 let backoff = 200;
 let received: { t: number; bytes: number }[] = [];
 
 function connect() {
   status.edge = edges[edgeIndex];
+  session?.release();
   session = new Session(
+    codec!,
     { url: wsUrl(status.edge), token, verify, name: "psao browser viewer" },
     {
       welcome: () => {
@@ -156,13 +161,13 @@ function connect() {
         if (clientFrame !== null) answered = Math.max(answered, clientFrame);
         serverTime = { seconds, at: performance.now() };
       },
-      update: (u, bytes, verified) => {
+      update: (frame, bytes, verified) => {
         status.milestones.update ??= performance.now();
-        grids?.apply(u);
+        if (session?.state) grids?.apply(session.state.changes());
         status.updates++;
         if (verified) status.verified++;
         status.mismatches = session?.mismatches ?? status.mismatches;
-        status.serverFrame = Number(u.frame);
+        status.serverFrame = frame;
         received.push({ t: performance.now(), bytes });
         if (session?.lastHash != null) status.hash = session.lastHash.toString(16).padStart(16, "0");
       },
@@ -187,15 +192,6 @@ let frames: number[] = [];
 let cameraFrame = 0;
 let orbit: { centre: [number, number, number]; radius: number } | null = null;
 
-function countPoints(): number {
-  let n = 0;
-  for (const g of session?.state?.grids ?? []) {
-    if (!g) continue;
-    const p = g.points;
-    for (let i = 0; i < g.slotCount * 7; i++) if (p[i] >>> 31) n++;
-  }
-  return n;
-}
 
 const canvas = document.getElementById("view") as HTMLCanvasElement;
 // Kept after compositing so that tests (and screenshots) can read the frame back.
@@ -450,7 +446,7 @@ function tick(now: number) {
   }
   if (now - lastPointCount > 500) {
     lastPointCount = now;
-    status.points = countPoints();
+    status.points = session?.state?.pointCount() ?? 0;
   }
   status.decodeMs = session && session.updates > 0 ? session.decodeMs / session.updates : 0;
   status.uploadedBytes = grids?.uploadedBytes ?? 0;
@@ -519,5 +515,12 @@ fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${
   .catch((e) => {
     status.message = `cannot load /scene.glb: ${e}`;
   });
-connect();
+Codec.load(fetch("/psao.wasm"))
+  .then((c) => {
+    codec = c;
+    connect();
+  })
+  .catch((e) => {
+    status.message = `cannot load the decoder /psao.wasm: ${e}`;
+  });
 requestAnimationFrame(tick);

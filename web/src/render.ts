@@ -8,7 +8,7 @@
 import { FRAGMENT, FULLSCREEN, GBUFFER, VERTEX } from "./aoshader";
 import { TEX_WIDTH, type GridTextures } from "./grids";
 import { Animation, JOINT_TEXELS, type AnimationDoc } from "./skin";
-import type { ClientState } from "./state";
+import type { ViewerState } from "./codec";
 import type { Camera } from "./wire";
 
 interface Primitive {
@@ -160,7 +160,7 @@ function instanceView(t: Float32Array): InstanceView | null {
 /// What a frame draws.
 export interface DrawOptions {
   mode: number;
-  state: ClientState | null;
+  state: ViewerState | null;
   grids: GridTextures | null;
   /// G-buffer samples per canvas pixel and axis (odd; default 1).
   scale?: number;
@@ -464,16 +464,15 @@ export class SceneRenderer {
   private instanceRow(
     i: number,
     t: Float32Array | null,
-    state: ClientState | null,
+    state: ViewerState | null,
     grids: GridTextures | null,
     f: Float32Array,
     u: Uint32Array,
   ) {
-    const grid = state?.grids[i] ?? null;
     const slot = grids?.slots[i] ?? null;
-    const view = t && grid && slot ? instanceView(t) : null;
-    if (!view || !grid || !slot) return; // has_view stays 0
-    const e = grid.entry;
+    const view = t && state && slot ? instanceView(t) : null;
+    if (!view || !state || !slot) return; // has_view stays 0
+    const e = state.table[i];
     const fo = i * INST_F * 4;
     f.set(view.toLocal, fo);
     const n = view.normalToLocal;
@@ -484,7 +483,7 @@ export class SceneRenderer {
     u.set(
       [
         e.dims[0], e.dims[1], e.dims[2], e.bucketCount - 1,
-        slot.bucketBase, slot.cellPageBase, slot.maxCells, grid.slotCount > 0 ? 1 : 0,
+        slot.bucketBase, slot.cellPageBase, slot.maxCells, state.slotCount(i) > 0 ? 1 : 0,
         Number(row & 0xffffffffn), Number(row >> 32n), Number(slice & 0xffffffffn), Number(slice >> 32n),
       ],
       i * INST_U * 4,

@@ -1,10 +1,9 @@
 // One session with `psao serve` over a WebSocket: hello, welcome, then updates decoded into
-// the client state and acknowledged; every update that carries the server's state hash is
+// the client state (the Rust decoder and state in wasm, `codec.ts`) and acknowledged; every update that carries the server's state hash is
 // checked against the client's (as `psao view` does). Runs in the browser and in Node (whose
 // global WebSocket has the same interface).
 
-import { CompactDecoder, type Update } from "./compact";
-import { ClientState } from "./state";
+import { DecodeError, ViewerState, type Codec } from "./codec";
 import {
   ackFrame,
   byeFrame,
@@ -25,19 +24,12 @@ import {
 /// silent for 30 s.
 const KEEP_ALIVE_MS = 5000;
 
-/// Most bytes one decoded update can legitimately take for this table (psao-net's
-/// `decode_limit`: a snapshot of every bucket and addressable cell, generous per record).
-export function decodeLimit(table: InstanceEntry[]): number {
-  let total = 4096;
-  for (const e of table) total += 64 + e.bucketCount * 110 + e.bucketCount * 8 * 40;
-  return total;
-}
-
 /// What a session reports to its owner.
 export interface SessionHandler {
   welcome(w: Welcome): void;
-  /// An update was applied; `verified` is whether it carried the server's hash (it matched).
-  update(u: Update, frameBytes: number, verified: boolean): void;
+  /// An update of server frame `frame` was applied (its changes are `state.changes()`);
+  /// `verified` is whether it carried the server's hash (it matched).
+  update(frame: number, frameBytes: number, verified: boolean): void;
   /// The server's frame and scene time (seconds) with every update and scene-time message;
   /// `clientFrame` is the lockstep client frame answered, if any.
   sceneTime?(frame: number, clientFrame: number | null, seconds: number): void;
@@ -59,7 +51,7 @@ export interface SessionOptions {
 
 /// A live session.
 export class Session {
-  state: ClientState | null = null;
+  state: ViewerState | null = null;
   welcomeMsg: Welcome | null = null;
   bytes = 0;
   updates = 0;
@@ -67,7 +59,6 @@ export class Session {
   lastHash: bigint | null = null;
   /// Milliseconds spent decoding and applying updates (hash checks excluded).
   decodeMs = 0;
-  private decoder: CompactDecoder | null = null;
   private ws: WebSocket;
   private done = false;
   /// When the last frame went to the server (ms, `performance.now()`).
@@ -76,6 +67,7 @@ export class Session {
   private keepAlive: ReturnType<typeof setInterval> | null = null;
 
   constructor(
+    private codec: Codec,
     private opts: SessionOptions,
     private handler: SessionHandler,
   ) {
@@ -98,7 +90,8 @@ export class Session {
       try {
         this.handle(decodeFrame(bytes), bytes.length);
       } catch (e) {
-        this.fail(`bad frame from the server: ${(e as Error).message}`, true);
+        const what = e instanceof DecodeError ? "bad update" : "bad frame";
+        this.fail(`${what} from the server: ${(e as Error).message}`, true);
       }
     };
     this.ws.onclose = () => this.end("the connection closed", false);
@@ -114,25 +107,16 @@ export class Session {
         }
         if (w.codec !== "compact") return this.fail(`the server's codec \`${w.codec}\` is not supported`, true);
         this.welcomeMsg = w;
-        this.state = new ClientState(w.instances);
-        // The decoder's reference is the client state: updates are decoded into its grids.
-        this.decoder = new CompactDecoder(
-          decodeLimit(w.instances),
-          w.instances.map((e) => e.bucketCount),
-          this.state,
-        );
+        this.state?.free();
+        this.state = new ViewerState(this.codec, w.instances);
         this.handler.welcome(w);
         return;
       }
       case "delta":
       case "snapshot": {
-        if (!this.decoder || !this.state) return this.fail("update before the welcome", true);
+        if (!this.state) return this.fail("update before the welcome", true);
         const t0 = performance.now();
-        const u = this.decoder.decode(m.delta.payload);
-        if (u.snapshot !== (m.kind === "snapshot")) {
-          return this.fail("the update's snapshot flag does not match its message", true);
-        }
-        this.state.apply(u);
+        this.state.apply(m.delta.payload, m.kind === "snapshot");
         this.decodeMs += performance.now() - t0;
         this.updates++;
         let verified = false;
@@ -143,7 +127,7 @@ export class Session {
         }
         this.lastAck = m.delta.frame;
         this.send(ackFrame(m.delta.frame));
-        this.handler.update(u, size, verified);
+        this.handler.update(m.delta.frame, size, verified);
         this.handler.sceneTime?.(m.delta.frame, m.delta.clientFrame, m.delta.sceneTime);
         return;
       }
@@ -178,6 +162,12 @@ export class Session {
   private send(frame: Uint8Array<ArrayBuffer>) {
     this.lastSent = performance.now();
     this.ws.send(frame);
+  }
+
+  /// Frees the session's state in wasm memory (when a new session replaces this one).
+  release() {
+    this.state?.free();
+    this.state = null;
   }
 
   /// Ends the session with a bye.

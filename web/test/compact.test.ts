@@ -1,68 +1,81 @@
-// Decodes, in order, a session of `compact` payloads written by psao-delta's encoder
-// (crates/psao-net/tests/golden_compact.rs) and compares every update with what the Rust
-// decoder read; corrupted payloads and a too-small limit give a DeltaError, nothing else.
+// Applies, in order, a session of `compact` payloads written by psao-delta's encoder
+// (crates/psao-net/tests/golden_compact.rs) with the viewer's decoder, dist/psao.wasm (the
+// Rust decoder and client state): after every update the state hash is psao-client's, the
+// change records hold the update's buckets (used entries) and cells as the Rust decoder read
+// them, and the transforms are the update's; corrupted payloads and a table whose decode
+// limit is too small give a DecodeError, nothing else.
 import { test } from "node:test";
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
-import { CompactDecoder, DeltaError, type Update } from "../src/compact";
+import { Codec, DecodeError, ViewerState } from "../src/codec";
+import type { InstanceEntry } from "../src/wire";
 
-// Run from build/test/ (bundled by esbuild): the golden file is in test/golden/.
-const golden: { updates: { payload: string; expect: unknown }[] } = JSON.parse(
-  readFileSync(new URL("../../test/golden/compact.json", import.meta.url), "utf8"),
-);
+interface Expect {
+  snapshot: boolean;
+  transforms: [number, number[]][];
+  instances: { instance: number; buckets: [number, [string, number][]][]; cells: [number, number[]][] }[];
+}
+
+// Run from build/test/ (bundled by esbuild): the golden file is in test/golden/, the wasm in dist/.
+const golden: { table: InstanceEntry[]; updates: { payload: string; expect: Expect; state_hash: string }[] } =
+  JSON.parse(readFileSync(new URL("../../test/golden/compact.json", import.meta.url), "utf8"));
+const codec = await Codec.load(readFileSync(new URL("../../dist/psao.wasm", import.meta.url)));
 
 const bytes = (hex: string) => Uint8Array.from(hex.match(/../g) ?? [], (h) => parseInt(h, 16));
 
-/// An update in the golden file's JSON shape.
-function shape(u: Update): unknown {
-  return {
-    frame: Number(u.frame),
-    snapshot: u.snapshot,
-    transforms: u.transforms.map(([i, t]) => [i, Array.from(t)]),
-    instances: u.instances.map((d) => ({
-      instance: d.instance,
-      buckets: Array.from(d.bucketIds, (b, k) => [
-        b,
-        Array.from(d.slots.subarray(8 * k, 8 * k + 8), (slot, i) => [
-          ((BigInt(d.keyHi[8 * k + i]) << 32n) | BigInt(d.keyLo[8 * k + i])).toString(16).padStart(16, "0"),
-          slot,
-        ]),
-      ]),
-      cells: Array.from(d.cellSlots, (s, k) => [s, Array.from(d.points.subarray(7 * k, 7 * k + 7))]),
-    })),
-  };
-}
-
-/// Rounds the golden file's f32 numbers (printed shortest) back to f32.
-function f32ify(v: unknown): unknown {
-  if (typeof v === "number") return Math.fround(v);
-  if (Array.isArray(v)) return v.map(f32ify);
-  if (v && typeof v === "object") return Object.fromEntries(Object.entries(v).map(([k, x]) => [k, f32ify(x)]));
-  return v;
-}
-
-test("a session of compact payloads from the Rust encoder decodes like the Rust decoder", () => {
-  assert.equal(golden.updates.length, 7);
-  const d = new CompactDecoder();
-  for (const [k, { payload, expect }] of golden.updates.entries()) {
-    assert.deepEqual(f32ify(shape(d.decode(bytes(payload)))), f32ify(expect), `update ${k}`);
+/// The change records (crates/psao-wasm/src/changes.rs) of an update as the golden file has it.
+function records(u: Expect): number[] {
+  const out: number[] = u.snapshot ? [2] : [];
+  for (const d of u.instances) {
+    for (const [b, entries] of d.buckets) {
+      const used = entries.filter(([key]) => BigInt("0x" + key) !== 0n);
+      out.push(0, d.instance, b, used.length);
+      for (const [key, slot] of used) {
+        const k = BigInt("0x" + key);
+        out.push(Number(k & 0xffffffffn), Number(k >> 32n), slot);
+      }
+    }
+    for (const [s, points] of d.cells) out.push(1, d.instance, s, ...points);
   }
+  return out;
+}
+
+test("a session of compact payloads from the Rust encoder applies like psao-client", () => {
+  assert.equal(golden.updates.length, 7);
+  const state = new ViewerState(codec, golden.table);
+  for (const [k, { payload, expect, state_hash }] of golden.updates.entries()) {
+    state.apply(bytes(payload), expect.snapshot);
+    assert.equal(state.stateHash().toString(16).padStart(16, "0"), state_hash, `update ${k}`);
+    assert.deepEqual(Array.from(state.changes()), records(expect), `update ${k}`);
+    for (const [i, t] of expect.transforms) {
+      assert.deepEqual(Array.from(state.transforms[i]!), t.map(Math.fround), `update ${k}`);
+    }
+  }
+  state.free();
 });
 
-test("corrupted payloads and decompression bombs give a DeltaError", () => {
+test("corrupted payloads, wrong snapshot flags and too-small limits give a DecodeError", () => {
   const first = bytes(golden.updates[0].payload);
-  assert.throws(() => new CompactDecoder(1000).decode(first), /exceeds the limit/);
+  // One bucket per instance: a decode limit far below the snapshot's size.
+  const small = new ViewerState(codec, golden.table.map((e) => ({ ...e, bucketCount: 1 })));
+  assert.throws(() => small.apply(first, true), (e) => e instanceof DecodeError && e.code === 2 && /limit/.test(e.message));
+  small.free();
+  const flag = new ViewerState(codec, golden.table);
+  assert.throws(() => flag.apply(first, false), (e) => e instanceof DecodeError && e.code === 3);
+  flag.free();
   let errors = 0;
   for (let i = 0; i < first.length; i += 3) {
     for (const x of [0x01, 0xff]) {
       const c = first.slice();
       c[i] ^= x;
+      const state = new ViewerState(codec, golden.table);
       try {
-        new CompactDecoder().decode(c);
+        state.apply(c, true);
       } catch (e) {
-        assert.ok(e instanceof DeltaError, `byte ${i}: ${e}`);
+        assert.ok(e instanceof DecodeError, `byte ${i}: ${e}`);
         errors++;
       }
+      state.free();
     }
   }
   assert.ok(errors > 0);

@@ -8,10 +8,14 @@ import assert from "node:assert/strict";
 import { spawn, type ChildProcess } from "node:child_process";
 import { createInterface } from "node:readline";
 import { fileURLToPath } from "node:url";
+import { readFileSync } from "node:fs";
+import { Codec } from "../src/codec";
 import { Session } from "../src/session";
 
 // Bundled into build/test/: the workspace's target/ is three levels up.
 const BIN = process.env.PSAO_BIN ?? fileURLToPath(new URL("../../../target/release/psao", import.meta.url));
+// The decoder as the page loads it (web/dist/psao.wasm, two levels up from build/test/).
+const codec = await Codec.load(readFileSync(new URL("../../dist/psao.wasm", import.meta.url)));
 const SERVER = ["--points", "96", "--ray-budget", "40000", "--hz", "30"];
 
 async function serve(extra: string[]): Promise<{ child: ChildProcess; addr: string }> {
@@ -48,10 +52,11 @@ function open(addr: string, token: string | null): Outcome {
   const w = new Promise<void>((r) => (welcomed = r));
   const c = new Promise<{ reason: string; fatal: boolean }>((r) => (closed = r));
   const session = new Session(
+    codec,
     { url: `ws://${addr}/ws`, token, verify: true, name: "node test" },
     {
       welcome: () => welcomed(),
-      update: (_u, _size, verified) => {
+      update: (_frame, _size, verified) => {
         if (verified) verifiedCount++;
       },
       closed: (reason, fatal) => closed({ reason, fatal }),
@@ -84,8 +89,7 @@ test("the viewer's state hash equals the server's after every update", { timeout
     // loaded machine: the server coalesces what it cannot take in time, so the count varies.
     assert.ok(s.updates >= 3, `only ${s.updates} updates`);
     assert.equal(o.verified(), s.updates, "every update carried the server's hash and matched");
-    let points = 0;
-    for (const g of s.state!.grids) if (g) for (const p of g.points) if (p >>> 31) points++;
+    const points = s.state!.pointCount();
     assert.ok(points > 1000, `only ${points} points received`);
     s.close();
   } finally {

@@ -15,19 +15,26 @@
 
 #![warn(missing_docs)]
 
+#[cfg(feature = "render")]
 mod composite;
+#[cfg(feature = "render")]
 mod detail;
 mod error;
+#[cfg(feature = "render")]
 mod gather;
 mod hash;
+#[cfg(feature = "render")]
 mod reconstruct;
 mod state;
 
+#[cfg(feature = "render")]
 pub use composite::{
     composite, composite_lit, composite_srgb8, direct_light, encode_srgb, Shading, SKY_GREY,
 };
+#[cfg(feature = "render")]
 pub use detail::{apply_detail, DetailSettings};
 pub use error::ClientError;
 pub use hash::{lit_state_hash_of, state_hash_of};
+#[cfg(feature = "render")]
 pub use reconstruct::{reconstruct, reconstruct_into, reconstruct_lit_into, ReconstructSettings};
 pub use state::{layout_is_usable, CellLights, ClientState};

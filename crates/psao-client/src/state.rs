@@ -148,6 +148,7 @@ impl ClientState {
     }
 
     /// `instance`'s irradiance records by cell slot (`None` out of range).
+    #[cfg(feature = "render")]
     pub(crate) fn light_cells(&self, instance: usize) -> Option<&Paged<CellLights>> {
         self.lights.get(instance)
     }

@@ -10,6 +10,7 @@
 mod codec;
 mod compact;
 mod error;
+mod limits;
 mod model;
 mod paper;
 mod words;
@@ -18,6 +19,7 @@ pub mod zstd_io;
 pub use codec::{codec_by_name, Codec, CODEC_NAMES};
 pub use compact::{CompactCodec, COMPACT_LEVEL};
 pub use error::DeltaError;
+pub use limits::{decode_limit, total_buckets, MAX_TOTAL_BUCKETS};
 pub use model::{compact_bucket, compact_cell, InstanceDelta, InstanceInfo, Update};
 pub use paper::{PaperCodec, MAX_DECODED_BYTES, MAX_DECODE_LIMIT, PAPER_LEVEL};
 /// The grid layout type of [`InstanceInfo`], re-exported for building instance tables.

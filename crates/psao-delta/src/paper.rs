@@ -17,7 +17,6 @@
 
 use glam::Affine3A;
 use psao_points::{Bucket, BucketEntry, Cell, BUCKET_ENTRIES, CELL_POINTS};
-use zstd::zstd_safe::{CParameter, Strategy};
 
 use crate::model::{compact_bucket, compact_cell, InstanceDelta, Update};
 use crate::words::{WordReader, WordWriter};
@@ -253,9 +252,5 @@ fn read_cell(r: &mut WordReader<'_>) -> Result<(u32, Cell), DeltaError> {
 
 /// zstd level 15, strategy lazy, with content size and checksum recorded.
 fn compress(payload: &[u8]) -> Vec<u8> {
-    crate::zstd_io::compress_with(
-        payload,
-        PAPER_LEVEL,
-        &[CParameter::Strategy(Strategy::ZSTD_lazy)],
-    )
+    crate::zstd_io::compress_with(payload, PAPER_LEVEL, crate::zstd_io::Search::Lazy)
 }

@@ -8,11 +8,8 @@ use psao_wire::{CameraMsg, InstanceEntry};
 
 use crate::NetError;
 
-/// Most hash buckets over all instances a client accepts from a welcome (128 bytes each:
-/// 1 GiB of grid tables). The decode limit of the largest table accepted stays under the
-/// codecs' ceiling ([`psao_delta::MAX_DECODE_LIMIT`]; tested), so every accepted table gets
-/// the whole limit it needs.
-pub const MAX_TOTAL_BUCKETS: u64 = 1 << 23;
+use psao_delta::decode_limit;
+pub use psao_delta::MAX_TOTAL_BUCKETS;
 
 /// The wire form of an instance-table entry.
 pub fn entry_of(info: &InstanceInfo) -> InstanceEntry {
@@ -66,19 +63,6 @@ pub fn client_decoder(name: &str, table: &[InstanceInfo]) -> Result<Box<dyn Code
     );
     codec.set_decode_limit(limit);
     Ok(codec)
-}
-
-/// Most bytes one decoded update can legitimately take for this table (a snapshot of every
-/// bucket and every addressable cell, with generous per-record overhead).
-fn decode_limit(table: &[InstanceInfo]) -> u64 {
-    let per_instance: u64 = table
-        .iter()
-        .map(|i| {
-            let cells = i.layout.max_cells() as u64;
-            64 + u64::from(i.layout.bucket_count) * 110 + cells * 40
-        })
-        .sum();
-    4096 + per_instance
 }
 
 /// The camera message of client frame `frame`.

@@ -1,18 +1,18 @@
 //! HTTP on the serve port, through hyper: `/` the browser viewer (embedded in the binary),
-//! `/viewer.js` its script, `/scene.glb` the served scene as binary glTF,
-//! `/characters/N.prt` the relighting model of skinned character N (404 when there is
-//! none), `/health` a JSON status, and the WebSocket upgrade at `/ws`, after which the
-//! connection speaks frames. Only GET and HEAD are answered (405 otherwise); unknown paths
-//! get 404, a `/ws` request that is no valid upgrade 400; request heads are limited in size
-//! and time.
+//! `/viewer.js` its script, `/psao.wasm` its decoder (crates/psao-wasm), `/scene.glb` the
+//! served scene as binary glTF, `/characters/N.prt` the relighting model of skinned character
+//! N (404 when there is none), `/health` a JSON status, and the WebSocket upgrade at `/ws`,
+//! after which the connection speaks frames. Only GET and HEAD are answered (405 otherwise);
+//! unknown paths get 404, a `/ws` request that is no valid upgrade 400; request heads are
+//! limited in size and time.
 //!
 //! With a token ([`Access`]), `/scene.glb` and `/characters/N.prt` need
 //! `Authorization: Bearer TOKEN` (401 without) and `/health` tells only that the server is
-//! up; `/` and `/viewer.js` are the viewer program itself (the same bytes in every psao
-//! build, no scene data) and answer anyone, so that a page opened with `#token=…` can start.
-//! Every request's `Host` and every upgrade's `Origin` must be allowed (403 otherwise);
-//! `/health` is readable cross-origin by allowed origins only (a viewer loaded from another
-//! edge of a session asks it).
+//! up; `/`, `/viewer.js` and `/psao.wasm` are the viewer program itself (the same bytes in
+//! every psao build, no scene data) and answer anyone, so that a page opened with `#token=…`
+//! can start. Every request's `Host` and every upgrade's `Origin` must be allowed (403
+//! otherwise); `/health` is readable cross-origin by allowed origins only (a viewer loaded
+//! from another edge of a session asks it).
 
 use std::convert::Infallible;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -40,6 +40,8 @@ use crate::transport::{websocket_server, FrameReader, FrameWriter};
 const INDEX_HTML: &str = include_str!("../../../web/dist/index.html");
 /// The viewer's script bundle.
 const VIEWER_JS: &str = include_str!("../../../web/dist/viewer.js");
+/// The viewer's decoder (crates/psao-wasm, built by web/build-wasm.sh).
+const VIEWER_WASM: &[u8] = include_bytes!("../../../web/dist/psao.wasm");
 /// Largest request head (request line + headers) read, bytes (hyper's minimum is 8 KiB).
 const MAX_REQUEST_HEAD: usize = 16 << 10;
 /// Time a connection has to send a complete request head.
@@ -125,6 +127,7 @@ fn route(req: Request<Incoming>, ctx: &Arc<HttpContext>, permit: Permit) -> Resp
             "text/javascript; charset=utf-8",
             Bytes::from_static(VIEWER_JS.as_bytes()),
         ),
+        "/psao.wasm" => body("application/wasm", Bytes::from_static(VIEWER_WASM)),
         "/scene.glb" if !ctx.access.request_authorized(req.headers()) => {
             let mut r = text(
                 StatusCode::UNAUTHORIZED,

@@ -1,14 +1,55 @@
 //! Golden `compact` payloads for the browser viewer's decoder: a session of updates (a
 //! snapshot, then points moving, appearing and disappearing, cells and bucket entries coming
 //! and going, transforms changing) encoded by psao-delta's `CompactCodec`, with what its own
-//! decoder reads back, in `web/test/golden/compact.json` (decoded in order by
-//! `web/test/compact.test.ts`). Fails when the encoder's bytes change; `PSAO_BLESS=1`
-//! rewrites the file.
+//! decoder reads back and psao-client's state hash after applying each to the session's
+//! instance table, in `web/test/golden/compact.json` (decoded and applied in order by the
+//! viewer's wasm in `web/test/compact.test.ts`). Fails when the encoder's bytes change;
+//! `PSAO_BLESS=1` rewrites the file.
 
-use glam::{Affine3A, Quat, Vec3};
-use psao_delta::{Codec, CompactCodec, InstanceDelta, Update};
+use glam::{Affine3A, Quat, UVec3, Vec3};
+use psao_client::ClientState;
+use psao_delta::{Codec, CompactCodec, GridLayout, InstanceDelta, InstanceInfo, Update};
 use psao_points::pack::VALID_BIT;
 use psao_points::{Bucket, BucketEntry, Cell};
+
+/// Buckets per instance.
+const BUCKETS: u32 = 64;
+
+/// The session's two instances: cells up to 10⁵ per axis, so cell ids use the high words.
+fn table() -> Vec<InstanceInfo> {
+    let layout = GridLayout {
+        origin: Vec3::new(-1.0, 0.0, 2.0),
+        cell_size: 0.25,
+        dims: UVec3::new(100_000, 90_000, 80_000),
+        poisson_radius: 0.05,
+        bucket_count: BUCKETS,
+    };
+    vec![
+        InstanceInfo {
+            layout,
+            poisson_radius: 0.05,
+            point_count: 500,
+        };
+        2
+    ]
+}
+
+/// A cell id of the table's layout that hashes to bucket `b`.
+fn id_in_bucket(rng: &mut Rng, b: u32) -> u64 {
+    let layout = table()[0].layout;
+    loop {
+        let d = layout.dims;
+        let coord = UVec3::new(
+            rng.below(u64::from(d.x)) as u32,
+            rng.below(u64::from(d.y)) as u32,
+            rng.below(u64::from(d.z)) as u32,
+        );
+        let id = layout.cell_id(coord);
+        if layout.bucket_of(id) == b as usize {
+            return id;
+        }
+    }
+}
 use serde_json::{json, Value};
 
 fn hex(bytes: &[u8]) -> String {
@@ -31,18 +72,11 @@ impl Rng {
     }
 }
 
-/// Bucket `b` of a table of `count` buckets holding `n` entries whose keys (cell id + 1) hash
-/// to it, some with high bits set, at slots from `slot`.
-fn bucket(rng: &mut Rng, b: u32, count: u32, n: usize, slot: u32) -> Bucket {
+/// Bucket `b` holding `n` entries of cells that hash to it, at slots from `slot`.
+fn bucket(rng: &mut Rng, b: u32, n: usize, slot: u32) -> Bucket {
     let mut out = Bucket::default();
     for (i, e) in out.entries.iter_mut().take(n).enumerate() {
-        let high = if rng.below(3) == 0 {
-            rng.below(1 << 20) << 32
-        } else {
-            0
-        };
-        let id = ((high | rng.below(1 << 28)) & !u64::from(count - 1)) | u64::from(b);
-        *e = BucketEntry::new(id, slot + i as u32);
+        *e = BucketEntry::new(id_in_bucket(rng, b), slot + i as u32);
     }
     out
 }
@@ -57,13 +91,13 @@ fn cell(rng: &mut Rng, n: usize) -> Cell {
 
 fn session() -> Vec<Update> {
     let mut rng = Rng(7);
-    let count = 64u32;
+    let count = BUCKETS;
     let mut buckets: Vec<Vec<(u32, Bucket)>> = vec![Vec::new(), Vec::new()];
     let mut cells: Vec<Vec<(u32, Cell)>> = vec![Vec::new(), Vec::new()];
     for (inst, (bs, cs)) in buckets.iter_mut().zip(cells.iter_mut()).enumerate() {
         for k in 0..12u32 {
             let b = (k * 5 + inst as u32) % count;
-            bs.push((b, bucket(&mut rng, b, count, 1 + (k as usize % 8), k * 8)));
+            bs.push((b, bucket(&mut rng, b, 1 + (k as usize % 8), k * 8)));
         }
         for s in 0..40u32 {
             cs.push((s, cell(&mut rng, 1 + (s as usize % 7))));
@@ -132,8 +166,7 @@ fn session() -> Vec<Update> {
             bk.entries.rotate_left(1);
             let used = bk.entries.iter().filter(|e| e.key != 0).count();
             if used < 8 {
-                let id = (rng.below(1 << 30) & !u64::from(count - 1)) | u64::from(b);
-                bk.entries[7] = BucketEntry::new(id, slot);
+                bk.entries[7] = BucketEntry::new(id_in_bucket(&mut rng, b), slot);
             }
             buckets[i][k] = (b, bk);
             d.buckets.push((b, bk));
@@ -170,13 +203,31 @@ fn update_json(u: &Update) -> Value {
 fn golden_compact_payloads_match_the_committed_file() {
     let mut encoder = CompactCodec::new();
     let mut decoder = CompactCodec::new();
+    let mut state = ClientState::new(&table());
     let mut items = Vec::new();
     for u in session() {
         let payload = encoder.encode(&u);
         let decoded = decoder.decode(&payload).unwrap();
-        items.push(json!({"payload": hex(&payload), "expect": update_json(&decoded)}));
+        state.apply(&decoded).unwrap();
+        items.push(json!({
+            "payload": hex(&payload),
+            "expect": update_json(&decoded),
+            "state_hash": format!("{:016x}", state.state_hash()),
+        }));
     }
-    let text = serde_json::to_string_pretty(&json!({ "updates": items })).unwrap() + "\n";
+    let table: Vec<Value> = table()
+        .iter()
+        .map(|i| {
+            let l = &i.layout;
+            json!({
+                "origin": l.origin.to_array(), "cellSize": l.cell_size, "dims": l.dims.to_array(),
+                "layoutPoissonRadius": l.poisson_radius, "bucketCount": l.bucket_count,
+                "poissonRadius": i.poisson_radius, "pointCount": i.point_count,
+            })
+        })
+        .collect();
+    let text =
+        serde_json::to_string_pretty(&json!({ "table": table, "updates": items })).unwrap() + "\n";
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../web/test/golden/compact.json"
@@ -188,6 +239,6 @@ fn golden_compact_payloads_match_the_committed_file() {
     assert!(
         committed == text,
         "{path} differs from what the compact codec encodes now; rerun with PSAO_BLESS=1 and \
-         check the viewer's decoder (web/src/compact.ts)"
+         check the viewer's decoder (crates/psao-wasm, web/test/compact.test.ts)"
     );
 }

@@ -9,6 +9,7 @@
 use glam::{UVec3, Vec3};
 
 use crate::error::PointsError;
+#[cfg(feature = "generate")]
 use crate::generate::InstancePoints;
 use crate::layout::{DecodedPoint, GridLayout, BUCKET_ENTRIES, CELL_POINTS};
 use crate::pack::is_valid;
@@ -266,6 +267,7 @@ impl InstanceGrid {
     }
 
     /// [`Self::build`] with [`GridLayout::for_points`] and the same AO for every point.
+    #[cfg(feature = "generate")]
     pub fn from_points(
         points: &InstancePoints,
         ao: f32,

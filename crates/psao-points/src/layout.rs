@@ -4,6 +4,7 @@
 use glam::{IVec3, UVec3, Vec3};
 
 use crate::error::PointsError;
+#[cfg(feature = "generate")]
 use crate::generate::InstancePoints;
 use crate::pack::{pack_point, unpack_frac, unpack_point};
 
@@ -114,6 +115,7 @@ impl GridLayout {
     /// (padded by 1/1000 of a cell against rounding of interpolated positions), cell size =
     /// [`CELL_RADIUS_FACTOR`] × [`InstancePoints::grid_radius_local`], table sized from the local
     /// surface area. An instance without points gets a single-cell grid.
+    #[cfg(feature = "generate")]
     pub fn for_points(points: &InstancePoints) -> Result<Self, PointsError> {
         let (lo, hi) = points.local_bounds;
         let grid_radius = points.grid_radius_local();

@@ -9,8 +9,10 @@
 //! 3. the server writes AO with [`InstanceGrid::update`]; clients mirror buckets and cells
 //!    ([`InstanceGrid::set_bucket`], [`InstanceGrid::set_cell`]) and call [`reconstruct_ao`].
 
+#[cfg(feature = "generate")]
 mod elimination;
 mod error;
+#[cfg(feature = "generate")]
 mod generate;
 mod grid;
 pub mod irradiance;
@@ -22,8 +24,10 @@ mod paged;
 mod reconstruct;
 mod rng;
 
+#[cfg(feature = "generate")]
 pub use elimination::{eliminate, eliminate_scaled, max_poisson_radius};
 pub use error::PointsError;
+#[cfg(feature = "generate")]
 pub use generate::{
     generate_instance_points, generate_instance_points_adaptive, generate_scene_points,
     generate_scene_points_adaptive, instance_seed, Adaptive, AlphaTest, DensitySignal,

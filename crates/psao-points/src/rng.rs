@@ -10,14 +10,17 @@ pub(crate) fn mix64(mut z: u64) -> u64 {
 }
 
 /// Hash two words into one (order matters).
+#[cfg(feature = "generate")]
 #[inline]
 pub(crate) fn hash2(a: u64, b: u64) -> u64 {
     mix64(mix64(a ^ 0x9E37_79B9_7F4A_7C15).wrapping_add(b))
 }
 
 /// A tiny SplitMix64 stream seeded from a hash.
+#[cfg(feature = "generate")]
 pub(crate) struct Stream(u64);
 
+#[cfg(feature = "generate")]
 impl Stream {
     /// Stream number `counter` of generator `seed`.
     #[inline]
@@ -44,7 +47,7 @@ impl Stream {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "generate"))]
 mod tests {
     use super::*;
 

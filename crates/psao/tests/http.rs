@@ -77,6 +77,14 @@ fn http_endpoints_answer_and_bad_requests_get_4xx() {
     let (status, js) = request(addr, "GET", "/viewer.js", "");
     assert_eq!(status, 200);
     assert!(!js.is_empty());
+    // The decoder: a WebAssembly module, served without the token like the script.
+    let (status, wasm) = request(addr, "GET", "/psao.wasm", "");
+    assert_eq!(status, 200);
+    assert!(
+        wasm.starts_with(b"\0asm"),
+        "{:?}",
+        &wasm[..wasm.len().min(8)]
+    );
 
     // Without the token /health says only that the server is up, and /scene.glb is refused.
     let (status, health) = request(addr, "GET", "/health", "");

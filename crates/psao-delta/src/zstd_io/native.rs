@@ -1,13 +1,16 @@
-//! zstd framing shared by the codecs (and by psao-net's scale-out record batches): content
-//! size and checksum always recorded, bounded decompression.
+//! The C zstd (native builds).
 
-use zstd::zstd_safe::CParameter;
+use zstd::zstd_safe::{CParameter, Strategy};
 
+use super::Search;
 use crate::DeltaError;
 
-/// Compress `payload` at `level` plus `extra` parameters, recording the content size and a
-/// checksum.
-pub(crate) fn compress_with(payload: &[u8], level: i32, extra: &[CParameter]) -> Vec<u8> {
+/// Compress `payload` at `level` with `search`, recording the content size and a checksum.
+pub(super) fn compress_with(payload: &[u8], level: i32, search: Search) -> Vec<u8> {
+    let strategy = match search {
+        Search::Default => None,
+        Search::Lazy => Some(CParameter::Strategy(Strategy::ZSTD_lazy)),
+    };
     let params = [
         CParameter::CompressionLevel(level),
         CParameter::ContentSizeFlag(true),
@@ -16,7 +19,7 @@ pub(crate) fn compress_with(payload: &[u8], level: i32, extra: &[CParameter]) ->
     let result = zstd::bulk::Compressor::new(level).and_then(|mut c| {
         params
             .into_iter()
-            .chain(extra.iter().copied())
+            .chain(strategy)
             .try_for_each(|p| c.set_parameter(p))?;
         c.compress(payload)
     });
@@ -25,13 +28,8 @@ pub(crate) fn compress_with(payload: &[u8], level: i32, extra: &[CParameter]) ->
     result.expect("zstd compression with fixed valid parameters")
 }
 
-/// Compress `payload` at `level` (content size and checksum recorded).
-pub fn compress(payload: &[u8], level: i32) -> Vec<u8> {
-    compress_with(payload, level, &[])
-}
-
 /// Decompress at most `limit` bytes, allocating exactly the recorded size.
-pub fn decompress(bytes: &[u8], limit: u64) -> Result<Vec<u8>, DeltaError> {
+pub(super) fn decompress(bytes: &[u8], limit: u64) -> Result<Vec<u8>, DeltaError> {
     let size = zstd::bulk::Decompressor::upper_bound(bytes).ok_or(DeltaError::UnknownSize)?;
     if size as u64 > limit {
         return Err(DeltaError::TooLarge {
