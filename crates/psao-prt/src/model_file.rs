@@ -177,7 +177,11 @@ pub fn from_bytes(bytes: &[u8]) -> Result<PoseModel, PrtError> {
             .collect();
         let scale = r.f32s(axes, "ball units")?;
         let radius = r.f32s(1, "ball radius")?[0];
-        let ball = radius > 0.0;
+        if scale.iter().any(|&s| s < 0.0) {
+            return Err(PrtError::Model("negative pose-limit ball unit".into()));
+        }
+        // As written: a ball needs a positive radius and some positive unit.
+        let ball = radius > 0.0 && scale.iter().any(|&s| s > 0.0);
         PoseLimits {
             mean,
             axes: axis_values,
@@ -260,6 +264,24 @@ mod tests {
         let mut free = model();
         free.limits = PoseLimits::default();
         assert_eq!(from_bytes(&to_bytes(&free)).unwrap(), free);
+    }
+
+    #[test]
+    fn a_ball_reads_back_only_as_written() {
+        // Found by the `prt_model` fuzzer: a positive radius with no positive unit read as a
+        // ball but wrote back as none, so a read model did not round-trip.
+        let mut flat = model();
+        flat.limits.scale = vec![0.0];
+        let read = from_bytes(&to_bytes(&flat)).unwrap();
+        assert_eq!(read.limits, flat.limits.box_only());
+        assert_eq!(
+            to_bytes(&from_bytes(&to_bytes(&read)).unwrap()),
+            to_bytes(&read)
+        );
+        let mut negative = model();
+        negative.limits.scale = vec![-0.2];
+        let e = from_bytes(&to_bytes(&negative)).unwrap_err();
+        assert!(e.to_string().contains("negative"), "{e}");
     }
 
     #[test]
