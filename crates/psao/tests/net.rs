@@ -2,7 +2,7 @@
 //! hand-made hostile peers. A tiny OBJ scene keeps every server start well under a second.
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -11,8 +11,8 @@ mod common;
 
 use common::{free_port, json, stderr, BIN};
 use psao_wire::{
-    capabilities, decode_frame, encode_frame, frame_payload, CameraMsg, Delta, ErrorCode, Hello,
-    InstanceEntry, Message, Welcome, HEADER_LEN, MAGIC, PROTOCOL_VERSION,
+    capabilities, encode_frame, frame_payload, CameraMsg, Delta, ErrorCode, Hello, InstanceEntry,
+    Message, Welcome, HEADER_LEN, MAGIC, PROTOCOL_VERSION,
 };
 
 /// Server settings of every test: few points, small budget.
@@ -453,24 +453,9 @@ fn hello(version: u16, token: Option<&str>) -> Vec<u8> {
     .unwrap()
 }
 
-/// Send `bytes`, then read what the server answers until it closes: the decoded messages.
+/// [`common::exchange`] with the 8 s read deadline of these small sessions.
 fn exchange(addr: &str, bytes: &[u8]) -> Vec<Message> {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(8))).unwrap();
-    s.write_all(bytes).unwrap();
-    let _ = s.shutdown(std::net::Shutdown::Write);
-    let mut all = Vec::new();
-    s.read_to_end(&mut all)
-        .expect("the server closes the session");
-    let mut out = Vec::new();
-    let mut rest = &all[..];
-    while rest.len() >= HEADER_LEN {
-        let len = u32::from_le_bytes(rest[4..8].try_into().unwrap()) as usize;
-        let (frame, tail) = rest.split_at(HEADER_LEN + len);
-        out.push(decode_frame(frame, 1 << 28).unwrap());
-        rest = tail;
-    }
-    out
+    common::exchange(addr, bytes, Duration::from_secs(8))
 }
 
 fn error_code(messages: &[Message]) -> Option<ErrorCode> {

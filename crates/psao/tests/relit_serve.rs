@@ -11,10 +11,8 @@ use std::time::Duration;
 
 mod common;
 
-use common::{listening_addr, start_role, Proc};
-use psao_wire::{
-    capabilities, decode_frame, encode_frame, Hello, Message, HEADER_LEN, PROTOCOL_VERSION,
-};
+use common::{exchange, listening_addr, start_role, Proc};
+use psao_wire::{capabilities, encode_frame, Hello, Message, PROTOCOL_VERSION};
 
 const TOKEN: &str = "sesame";
 
@@ -85,22 +83,11 @@ fn session(addr: &str, caps: u32) -> Vec<Message> {
         token: Some(TOKEN.into()),
         name: "test".into(),
     });
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
-    s.write_all(&encode_frame(&hello).unwrap()).unwrap();
-    let _ = s.shutdown(std::net::Shutdown::Write);
-    let mut all = Vec::new();
-    s.read_to_end(&mut all)
-        .expect("the server closes the session");
-    let mut out = Vec::new();
-    let mut rest = &all[..];
-    while rest.len() >= HEADER_LEN {
-        let len = u32::from_le_bytes(rest[4..8].try_into().unwrap()) as usize;
-        let (frame, tail) = rest.split_at(HEADER_LEN + len);
-        out.push(decode_frame(frame, 1 << 28).unwrap());
-        rest = tail;
-    }
-    out
+    exchange(
+        addr,
+        &encode_frame(&hello).unwrap(),
+        Duration::from_secs(20),
+    )
 }
 
 fn cached_models(cache: &Path) -> Vec<PathBuf> {

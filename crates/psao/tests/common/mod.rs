@@ -2,10 +2,13 @@
 //! different subset, hence the `dead_code` allowance).
 #![allow(dead_code)]
 
-use std::io::{BufRead, BufReader};
-use std::net::TcpListener;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+use psao_wire::{decode_frame, Message, HEADER_LEN};
 
 /// Path of the `psao` binary under test.
 pub const BIN: &str = env!("CARGO_BIN_EXE_psao");
@@ -72,4 +75,25 @@ pub fn listening_addr(line: &str) -> String {
         .strip_prefix("listening on ")
         .unwrap_or_else(|| panic!("unexpected output {line:?}"))
         .to_string()
+}
+
+/// Sends `bytes` to the server at `addr`, closes the sending side, and reads what it answers
+/// until it closes (within `deadline` per read): the decoded messages.
+pub fn exchange(addr: &str, bytes: &[u8], deadline: Duration) -> Vec<Message> {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(deadline)).unwrap();
+    s.write_all(bytes).unwrap();
+    let _ = s.shutdown(std::net::Shutdown::Write);
+    let mut all = Vec::new();
+    s.read_to_end(&mut all)
+        .expect("the server closes the session");
+    let mut out = Vec::new();
+    let mut rest = &all[..];
+    while rest.len() >= HEADER_LEN {
+        let len = u32::from_le_bytes(rest[4..8].try_into().unwrap()) as usize;
+        let (frame, tail) = rest.split_at(HEADER_LEN + len);
+        out.push(decode_frame(frame, 1 << 28).unwrap());
+        rest = tail;
+    }
+    out
 }
