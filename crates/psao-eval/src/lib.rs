@@ -11,6 +11,7 @@ pub mod metrics;
 pub mod path_caster;
 pub mod reference;
 pub mod reference_gi;
+pub mod spread;
 pub mod ssao;
 
 pub use ao_image::AoImage;
@@ -18,4 +19,5 @@ pub use lpips::{Lpips, LpipsError};
 pub use metrics::{compare, Metrics, MetricsError};
 pub use reference::{reference_ao_in, ReferenceSettings};
 pub use reference_gi::{reference_gi, GiSettings, RgbImage};
+pub use spread::{spread, Spread};
 pub use ssao::{ssao, SsaoSettings};

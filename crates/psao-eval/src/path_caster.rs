@@ -3,9 +3,41 @@
 //! non-diffuse.
 
 use glam::Vec3;
-use psao_scene::{CastHit, Material, RayCaster, Scene};
+use psao_scene::{
+    generate_paths, CameraPath, CastHit, Material, PathGenConfig, PathGenError, RayCaster, Scene,
+};
 use psao_trace::surface::Surfaces;
-use psao_trace::{Ray, Tracer};
+use psao_trace::{Backend, GeometryMode, Ray, TraceError, Tracer};
+
+/// Why [`generate_traced_paths`] made no paths.
+#[derive(Debug, thiserror::Error)]
+pub enum TracedPathsError {
+    /// The tracer could not be built.
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    /// The generator failed.
+    #[error(transparent)]
+    Paths(#[from] PathGenError),
+}
+
+/// `count` camera paths through `scene` for `seed` ([`generate_paths`]), cast with a new
+/// primary-ray tracer of `backend`.
+pub fn generate_traced_paths(
+    scene: &Scene,
+    backend: Backend,
+    config: &PathGenConfig,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<CameraPath>, TracedPathsError> {
+    let tracer = Tracer::new(backend, scene, GeometryMode::Primary)?;
+    Ok(generate_paths(
+        scene,
+        &TracerCaster::new(scene, &tracer),
+        config,
+        count,
+        seed,
+    )?)
+}
 
 /// Casts the generator's rays with a [`Tracer`] of `scene` (any geometry mode).
 pub struct TracerCaster<'a> {

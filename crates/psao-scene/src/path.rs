@@ -179,6 +179,23 @@ impl CameraPath {
     pub fn camera_at_frame(&self, i: usize) -> Camera {
         self.sample(self.keys[0].time + i as f32 / PATH_HZ)
     }
+
+    /// The path as camera path file text, which [`CameraPath::parse`] reads back exactly
+    /// (every number is written in its shortest form that round-trips).
+    pub fn to_toml(&self) -> String {
+        let v = |v: Vec3| format!("[{:?}, {:?}, {:?}]", v.x, v.y, v.z);
+        let mut text = format!("name = {}\n", toml::Value::String(self.name.clone()));
+        for k in &self.keys {
+            text += &format!(
+                "\n[[key]]\ntime = {:?}\nposition = {}\nlook_at = {}\nfov_y_deg = {:?}\n",
+                k.time,
+                v(k.position),
+                v(k.look_at),
+                k.fov_y_deg
+            );
+        }
+        text
+    }
 }
 
 /// Centripetal Catmull-Rom between `p[1]` (u = 0) and `p[2]` (u = 1) in Hermite form.

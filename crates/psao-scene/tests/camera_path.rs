@@ -139,3 +139,14 @@ fn parse_errors_are_clear() {
         .to_string();
     assert!(e.contains("line"), "{e}");
 }
+
+#[test]
+fn written_paths_read_back_exactly() {
+    let mut path = CameraPath::parse(PATH).unwrap();
+    // Numbers without a short decimal form and a name that needs escaping.
+    path.keys[1].position = Vec3::new(0.1 + 0.2, -1.0 / 3.0, 1e-7);
+    path.keys[2].time = 1.0 + f32::EPSILON;
+    path.name = "a \"quoted\"\tname".into();
+    let text = path.to_toml();
+    assert_eq!(CameraPath::parse(&text).unwrap(), path, "{text}");
+}

@@ -21,6 +21,9 @@ use psao_scene::CameraPath;
 use psao_server::{Server, View};
 use serde::Serialize;
 
+use psao_eval::{spread, Spread};
+
+use crate::paths_cmd::generated_paths;
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
 
@@ -33,6 +36,11 @@ pub struct BenchScaleArgs {
     /// Camera path file (default: the scene's first path).
     #[arg(long)]
     pub path: Option<PathBuf>,
+    /// Seeds of generated camera paths, comma separated (as `psao paths` makes them): each
+    /// seed's path (as long as the run) is followed by every topology, and the report gives
+    /// the spread over the seeds. Without, the run follows `--path`.
+    #[arg(long, value_delimiter = ',', conflicts_with = "path")]
+    pub path_seeds: Vec<u64>,
     /// Points per unit area.
     #[arg(long, default_value_t = 1024.0)]
     pub points: f32,
@@ -116,6 +124,50 @@ pub struct ScaleReport {
     pub takeover_s: Option<f64>,
 }
 
+/// One generated path's run of `psao bench scale --path-seeds`.
+#[derive(Debug, Serialize)]
+pub struct SeedScale {
+    /// The path's seed and name.
+    pub seed: u64,
+    pub path: String,
+    /// Its report.
+    pub report: ScaleReport,
+}
+
+/// One trace-node count over the seeds.
+#[derive(Debug, Serialize)]
+pub struct NodesOverSeeds {
+    /// Trace nodes.
+    pub nodes: u32,
+    /// Seeds whose edge (and late edge) ended with the one-process server's grids.
+    pub same_state: usize,
+    pub late_same_state: usize,
+    /// The rows' figures over the seeds.
+    pub nats_bytes_per_frame: Spread,
+    pub nats_raw_bytes_per_frame: Spread,
+    pub viewer_bytes_per_frame: Spread,
+    pub node_over_serve: Spread,
+    /// The nodes' summed rays per second over the one-process server's.
+    pub sum_over_serve: Spread,
+}
+
+/// What `psao bench scale --path-seeds` reports.
+#[derive(Debug, Serialize)]
+pub struct SeedsScaleReport {
+    /// Scene, frames per run, ray budget.
+    pub scene: String,
+    pub frames: u64,
+    pub ray_budget: u64,
+    /// Seeds run.
+    pub seeds: usize,
+    /// Per trace-node count, over the seeds.
+    pub summary: Vec<NodesOverSeeds>,
+    /// Adoption seconds over the seeds (those where the partition was adopted).
+    pub takeover_s: Option<Spread>,
+    /// Each seed's run.
+    pub runs: Vec<SeedScale>,
+}
+
 /// A child process killed on drop.
 pub(crate) struct Proc(Child);
 
@@ -155,7 +207,94 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
         bail!("--frames and every --nodes count must be at least 1, --hz in 1..={CLIENT_HZ}");
     }
     let input = SceneInput::load(&args.scene)?;
-    let path = input.camera_path(args.path.as_ref())?;
+    if args.path_seeds.is_empty() {
+        let path = input.camera_path(args.path.as_ref())?;
+        let report = measure(args, &input, &path)?;
+        return print_and_write(args, &report);
+    }
+    // Long enough that the run never wraps around (at least 4 s, so a walk turns).
+    let duration_s = (args.frames as f32 / args.hz as f32).max(4.0);
+    let mut runs = Vec::new();
+    for &seed in &args.path_seeds {
+        let [path] = <[CameraPath; 1]>::try_from(generated_paths(
+            &input,
+            args.tuning.backend,
+            1,
+            seed,
+            duration_s,
+        )?)
+        .map_err(|_| anyhow::anyhow!("the generator made no path for seed {seed}"))?;
+        tracing::info!("seed {seed}: path {}", path.name);
+        let report = measure(args, &input, &path)?;
+        runs.push(SeedScale {
+            seed,
+            path: path.name,
+            report,
+        });
+    }
+    print_and_write(args, &over_seeds(runs))
+}
+
+/// Prints `report` as JSON and writes it to `--json`.
+fn print_and_write(args: &BenchScaleArgs, report: &impl Serialize) -> Result<()> {
+    println!("{}", serde_json::to_string_pretty(report)?);
+    if let Some(json) = &args.json {
+        write_json(json, report)?;
+    }
+    Ok(())
+}
+
+/// The runs' summary per trace-node count.
+fn over_seeds(runs: Vec<SeedScale>) -> SeedsScaleReport {
+    let first = &runs[0].report;
+    let over = |n: u32, value: &dyn Fn(&ScaleRow, &ScaleReport) -> f64| {
+        let values: Vec<f64> = runs
+            .iter()
+            .filter_map(|r| {
+                let row = r.report.runs.iter().find(|row| row.nodes == n)?;
+                Some(value(row, &r.report))
+            })
+            .collect();
+        spread(&values).expect("every seed runs every node count")
+    };
+    let count = |n: u32, test: &dyn Fn(&ScaleRow) -> bool| {
+        runs.iter()
+            .filter(|r| r.report.runs.iter().any(|row| row.nodes == n && test(row)))
+            .count()
+    };
+    let summary = first
+        .runs
+        .iter()
+        .map(|row| {
+            let n = row.nodes;
+            NodesOverSeeds {
+                nodes: n,
+                same_state: count(n, &|r| r.same_state),
+                late_same_state: count(n, &|r| r.late_same_state),
+                nats_bytes_per_frame: over(n, &|r, _| r.nats_bytes_per_frame),
+                nats_raw_bytes_per_frame: over(n, &|r, _| r.nats_raw_bytes_per_frame),
+                viewer_bytes_per_frame: over(n, &|r, _| r.viewer_bytes_per_frame),
+                node_over_serve: over(n, &|r, _| r.node_over_serve),
+                sum_over_serve: over(n, &|r, rep| {
+                    r.sum_rays_per_s / rep.serve_rays_per_s.max(1e-9)
+                }),
+            }
+        })
+        .collect();
+    let takeovers: Vec<f64> = runs.iter().filter_map(|r| r.report.takeover_s).collect();
+    SeedsScaleReport {
+        scene: first.scene.clone(),
+        frames: first.frames,
+        ray_budget: first.ray_budget,
+        seeds: runs.len(),
+        summary,
+        takeover_s: spread(&takeovers),
+        runs,
+    }
+}
+
+/// Every topology of `args` on `path`, against the one-process server on the same path.
+fn measure(args: &BenchScaleArgs, input: &SceneInput, path: &CameraPath) -> Result<ScaleReport> {
     let config = args.tuning.config(
         args.points,
         args.hz,
@@ -164,12 +303,12 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             height: 1,
         },
     )?;
-    let make = || crate::serve::scene_server(&input, &args.tuning, None, args.points, args.hz);
+    let make = || crate::serve::scene_server(input, &args.tuning, None, args.points, args.hz);
     let (serve_rays_per_s, serve_hash) = {
         let mut server = make()?;
         let (mut rays, mut ms) = (0u64, 0.0);
         for f in 1..=args.frames {
-            let step = server.step_at(&[view_at(&path, f, args.hz)], seconds(f, args.hz))?;
+            let step = server.step_at(&[view_at(path, f, args.hz)], seconds(f, args.hz))?;
             rays += step.rays;
             ms += step.ms;
         }
@@ -185,7 +324,7 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
             .collect::<Result<_>>()?;
         let mut replica = make()?;
         let (viewer_bytes, nats_bytes) =
-            follow(args, &url, &input.name, &path, n, &mut replica, None)?;
+            follow(args, &url, &input.name, path, n, &mut replica, None)?;
         let stats: Vec<TraceNodeStats> = (0..n)
             .map(|k| {
                 wait_stats(
@@ -230,8 +369,8 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
         tracing::info!("{n} nodes: {row:?}");
         runs.push(row);
     }
-    let takeover_s = takeover(args, &input.name, &path, make()?)?;
-    let report = ScaleReport {
+    let takeover_s = takeover(args, &input.name, path, make()?)?;
+    Ok(ScaleReport {
         scene: input.name.clone(),
         frames: args.frames,
         ray_budget: config.server.ray_budget,
@@ -239,12 +378,7 @@ pub fn run(args: &BenchScaleArgs) -> Result<()> {
         serve_state_hash: serve_hash,
         runs,
         takeover_s,
-    };
-    println!("{}", serde_json::to_string_pretty(&report)?);
-    if let Some(json) = &args.json {
-        write_json(json, &report)?;
-    }
-    Ok(())
+    })
 }
 
 /// Two nodes; the second is killed a third of the way; the first's adoption time.

@@ -15,6 +15,7 @@ mod demo;
 mod demo_relight;
 mod eval;
 mod lpips_weights;
+mod paths_cmd;
 mod png_io;
 mod progress;
 mod reference;
@@ -81,6 +82,9 @@ enum Command {
     /// Benchmarks.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Generate camera paths through a scene's free space (walks at eye height, per seed)
+    /// and write them as path files for `--path`.
+    Paths(paths_cmd::PathsArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -140,5 +144,6 @@ fn run(command: Command) -> Result<()> {
         Command::Volume(c) => volume_cmd::run(&c),
         Command::Relight(c) => relight_cmd::run(&c),
         Command::Corrective(c) => corrective::run(&c),
+        Command::Paths(a) => paths_cmd::run(&a),
     }
 }

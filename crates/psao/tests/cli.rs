@@ -404,3 +404,50 @@ fn bench_step_reports_the_phases_of_its_frames() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--clients"), "{}", stderr(&o));
 }
+
+#[test]
+fn paths_writes_generated_paths_that_read_back_and_follow_their_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |sub: &str, seeds: &str| {
+        let out = dir.path().join(sub);
+        let o = psao(&[
+            "paths",
+            "--count",
+            "2",
+            "--seeds",
+            seeds,
+            "--duration",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        out
+    };
+    let (a, again, other) = (write("a", "1,2"), write("again", "1"), write("other", "3"));
+    let text = |d: &std::path::Path, f: &str| std::fs::read_to_string(d.join(f)).unwrap();
+    for f in ["seed1_0.toml", "seed1_1.toml", "seed2_0.toml", "seed2_1.toml"] {
+        let path = psao_scene::CameraPath::load(&a.join(f)).unwrap();
+        assert_eq!(format!("{}.toml", path.name), f);
+        assert!(path.duration() >= 3.0, "{f}: {}", path.duration());
+    }
+    assert_eq!(text(&a, "seed1_0.toml"), text(&again, "seed1_0.toml"));
+    assert_ne!(text(&a, "seed1_0.toml"), text(&a, "seed2_0.toml"));
+    assert_ne!(text(&a, "seed1_0.toml"), text(&other, "seed3_0.toml"));
+    // A generated path drives the clients like a committed one.
+    let o = psao(&[
+        "run",
+        "--path",
+        a.join("seed2_1.toml").to_str().unwrap(),
+        "--frames",
+        "0..2",
+        "--res",
+        "32x18",
+        "--points",
+        "256",
+        "--no-points-cache",
+        "--out",
+        dir.path().join("run").to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}

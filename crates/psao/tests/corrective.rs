@@ -816,65 +816,91 @@ fn regions_of_missing_objects_cost_the_attackers_budget_and_no_one_elses() {
 
 /// The server frame rate of `scenes/corrective.toml` (default `psao serve --corrective`
 /// settings at 30 Hz) serving one 320×180 corrective viewer for 600 client frames beside an
-/// [`Attacker`] that sends no regions, then one that sends them; prints both frame rates and
-/// their ratio, twice (docs/SECURITY.md). A measurement, not a test: its figures depend on
-/// the machine and its load.
+/// [`Attacker`] that sends no regions, then one that sends them, twice, on a camera path
+/// generated for each of seeds 1–5 (`psao paths`); prints each seed's ratio and their mean
+/// and spread (docs/SECURITY.md). A measurement, not a test: its figures depend on the
+/// machine and its load.
 #[test]
 #[ignore = "measurement: run with --ignored --nocapture"]
 fn measure_the_frame_rate_under_the_corrections_attack() {
     let dir = tempfile::tempdir().unwrap();
-    let mut fps = Vec::new();
-    // Alternated twice, so a change in the machine's load weighs on both.
-    for (round, attacked) in [false, true, false, true].into_iter().enumerate() {
-        let stats = dir.path().join(format!("serve_{round}.json"));
-        let args = [
-            "--corrective",
-            "--hz",
-            "30",
-            "--once",
-            "--json",
-            stats.to_str().unwrap(),
-        ];
-        let (mut server, addr) = start_serve(SCENE, &args);
-        // The same second client either way: only its regions differ.
-        let attacker = Attacker::start(&addr, attacked);
-        let view_json = dir.path().join(format!("view_{round}.json"));
-        let o = psao(&[
-            "view",
-            "--connect",
-            &addr,
-            "--scene",
-            SCENE,
-            "--res",
-            "320x180",
-            "--frames",
-            "600",
-            "--corrective",
-            "--json",
-            view_json.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        drop(attacker);
-        assert!(server.0.wait().unwrap().success());
-        let serve = json(&stats);
-        let samples = json(&view_json)["samples"].as_u64().unwrap();
-        let number = |key: &str| serve[key].as_f64().unwrap();
+    let seeds = [1u64, 2, 3, 4, 5];
+    let seed_list = seeds.map(|s| s.to_string()).join(",");
+    let out = dir.path().to_str().unwrap();
+    let o = psao(&[
+        "paths", "--scene", SCENE, "--seeds", &seed_list, "--duration", "10", "--out", out,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut ratios = Vec::new();
+    for seed in seeds {
+        let path = dir.path().join(format!("seed{seed}_0.toml"));
+        let mut fps = Vec::new();
+        // Alternated twice, so a change in the machine's load weighs on both.
+        for (round, attacked) in [false, true, false, true].into_iter().enumerate() {
+            fps.push(frame_rate_beside(dir.path(), &path, round, attacked));
+        }
+        let ratio = (fps[1] + fps[3]) / (fps[0] + fps[2]);
         println!(
-            "attacked {attacked}: {:.2} server frames/s over {:.1} s, {} late, {:.2} ms mean, \
-             viewer received {samples} samples",
-            number("fps"),
-            number("seconds"),
-            number("late_frames"),
-            number("mean_ms")
+            "seed {seed}: frame rate under attack / without: {ratio:.3} (rounds: {:.3}, {:.3})",
+            fps[1] / fps[0],
+            fps[3] / fps[2]
         );
-        fps.push(number("fps"));
+        ratios.push(ratio);
     }
+    let s = psao_eval::spread(&ratios).unwrap();
     println!(
-        "frame rate under attack / without: {:.3} (rounds: {:.3}, {:.3})",
-        (fps[1] + fps[3]) / (fps[0] + fps[2]),
-        fps[1] / fps[0],
-        fps[3] / fps[2]
+        "over {} seeds: mean {:.3}, sd {:.3}, min {:.3}, max {:.3}",
+        s.n, s.mean, s.sd, s.min, s.max
     );
+}
+
+/// One round of [`measure_the_frame_rate_under_the_corrections_attack`]: the server's frame
+/// rate while a viewer follows `path` beside an [`Attacker`] (sending regions or not).
+fn frame_rate_beside(dir: &Path, path: &Path, round: usize, attacked: bool) -> f64 {
+    let stats = dir.join(format!("serve_{round}.json"));
+    let args = [
+        "--corrective",
+        "--hz",
+        "30",
+        "--once",
+        "--json",
+        stats.to_str().unwrap(),
+    ];
+    let (mut server, addr) = start_serve(SCENE, &args);
+    // The same second client either way: only its regions differ.
+    let attacker = Attacker::start(&addr, attacked);
+    let view_json = dir.join(format!("view_{round}.json"));
+    let o = psao(&[
+        "view",
+        "--connect",
+        &addr,
+        "--scene",
+        SCENE,
+        "--path",
+        path.to_str().unwrap(),
+        "--res",
+        "320x180",
+        "--frames",
+        "600",
+        "--corrective",
+        "--json",
+        view_json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    drop(attacker);
+    assert!(server.0.wait().unwrap().success());
+    let serve = json(&stats);
+    let samples = json(&view_json)["samples"].as_u64().unwrap();
+    let number = |key: &str| serve[key].as_f64().unwrap();
+    println!(
+        "attacked {attacked}: {:.2} server frames/s over {:.1} s, {} late, {:.2} ms mean, \
+         viewer received {samples} samples",
+        number("fps"),
+        number("seconds"),
+        number("late_frames"),
+        number("mean_ms")
+    );
+    number("fps")
 }
 
 fn error_code_of(m: &[Message]) -> Option<ErrorCode> {

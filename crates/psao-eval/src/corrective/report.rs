@@ -1,7 +1,8 @@
 //! Markdown tables of the corrective evaluation ([`super::run`], [`super::seeds`]).
 
 use super::run::{EvalConfig, PathEval, Row};
-use super::seeds::{Paired, SeedsReport, Spread, METRICS};
+use super::seeds::{Paired, SeedsReport, METRICS};
+use crate::spread::Spread;
 
 /// Column titles of the metrics, in the order of [`METRICS`].
 const TITLES: [&str; 6] = [
