@@ -26,11 +26,9 @@ const COUNT_BITS: u32 = 3;
 /// Most arena words a mirror addresses (the offset takes the remaining bits of a u32).
 const MAX_ARENA: usize = 1 << (32 - COUNT_BITS);
 /// Most probe-table entries per table position before it grows (linear probing stays short).
-const MAX_LOAD: f64 = 0.85;
+const MAX_LOAD: f64 = 0.8;
 /// Growth of the probe table when full: load falls to `MAX_LOAD / GROWTH`.
-const GROWTH: f64 = 1.2;
-/// Slots per page of the cell index.
-const INDEX_PAGE: usize = 16;
+const GROWTH: f64 = 1.3;
 
 /// Heap bytes of a [`MirrorGrid`] by what they hold ([`MirrorGrid::memory_parts`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -59,7 +57,7 @@ impl MirrorMemory {
                 "arena slack (freed blocks, spare capacity)",
                 self.arena_slack,
             ),
-            ("cell index (u32 per slot, pages of 16)", self.cell_index),
+            ("cell index (u32 per slot, pages of 64)", self.cell_index),
             ("bucket-entry table (cell key, slot)", self.entry_table),
         ]
     }
@@ -311,9 +309,8 @@ macro_rules! with_table {
 /// Cells by slot: valid points packed in an arena (see the module documentation).
 #[derive(Clone, Debug, Default)]
 struct CellStore {
-    /// Per slot: `offset << COUNT_BITS | count`; 0 for a slot without points. Small pages:
-    /// a client holds scattered slots.
-    index: Paged<u32, INDEX_PAGE>,
+    /// Per slot: `offset << COUNT_BITS | count`; 0 for a slot without points.
+    index: Paged<u32>,
     arena: Vec<u32>,
     /// Per block size, the first free block's offset + 1 (0: none); a free block's first
     /// word links to the next one the same way.
@@ -656,7 +653,7 @@ mod tests {
         let mut r = 7u64;
         for round in 0..3000 {
             r = mix64(r);
-            if r % 3 == 0 {
+            if r.is_multiple_of(3) {
                 let slot = (r >> 8) as u32 % l.max_cells() as u32;
                 let cell = random_cell(&mut r);
                 grid.set_cell(slot, cell).unwrap();

@@ -12,28 +12,19 @@ use crate::PointsError;
 /// Elements per page of a [`Paged`] vector.
 const PAGE: usize = 64;
 
-/// A vector of `len` elements stored in pages of `P` elements ([`PAGE`] unless given), each
-/// allocated when an element in it is first written; absent pages read as `T::default()`.
-#[derive(Clone, Debug)]
-pub struct Paged<T, const P: usize = PAGE> {
-    pages: Vec<Option<Box<[T; P]>>>,
+/// A vector of `len` elements stored in pages of [`PAGE`] elements, each allocated when an
+/// element in it is first written; absent pages read as `T::default()`.
+#[derive(Clone, Debug, Default)]
+pub struct Paged<T> {
+    pages: Vec<Option<Box<[T; PAGE]>>>,
     len: usize,
 }
 
-impl<T, const P: usize> Default for Paged<T, P> {
-    fn default() -> Self {
-        Self {
-            pages: Vec::new(),
-            len: 0,
-        }
-    }
-}
-
-impl<T: Copy + Default, const P: usize> Paged<T, P> {
+impl<T: Copy + Default> Paged<T> {
     /// `len` default elements, no page allocated.
     pub fn new(len: usize) -> Self {
         Self {
-            pages: vec![None; len.div_ceil(P)],
+            pages: vec![None; len.div_ceil(PAGE)],
             len,
         }
     }
@@ -51,7 +42,7 @@ impl<T: Copy + Default, const P: usize> Paged<T, P> {
     /// The element at `i` if its page exists (`None` when absent or past the end).
     #[inline]
     pub fn get(&self, i: usize) -> Option<&T> {
-        self.pages.get(i / P)?.as_ref().map(|p| &p[i % P])
+        self.pages.get(i / PAGE)?.as_ref().map(|p| &p[i % PAGE])
     }
 
     /// The element at `i`, `T::default()` when absent or past the end.
@@ -64,7 +55,7 @@ impl<T: Copy + Default, const P: usize> Paged<T, P> {
     pub fn grow(&mut self, len: usize) {
         if len > self.len {
             self.len = len;
-            self.pages.resize(len.div_ceil(P), None);
+            self.pages.resize(len.div_ceil(PAGE), None);
         }
     }
 
@@ -72,8 +63,8 @@ impl<T: Copy + Default, const P: usize> Paged<T, P> {
     #[inline]
     pub fn get_mut(&mut self, i: usize) -> &mut T {
         debug_assert!(i < self.len);
-        let page = self.pages[i / P].get_or_insert_with(|| Box::new([T::default(); P]));
-        &mut page[i % P]
+        let page = self.pages[i / PAGE].get_or_insert_with(|| Box::new([T::default(); PAGE]));
+        &mut page[i % PAGE]
     }
 
     /// Store `value` at `i < len`; writing the default into an absent page allocates nothing.
@@ -94,13 +85,13 @@ impl<T: Copy + Default, const P: usize> Paged<T, P> {
 
     /// Heap bytes of the page table (one pointer per page, allocated or not).
     pub fn page_table_bytes(&self) -> u64 {
-        (self.pages.capacity() * std::mem::size_of::<Option<Box<[T; P]>>>()) as u64
+        (self.pages.capacity() * std::mem::size_of::<Option<Box<[T; PAGE]>>>()) as u64
     }
 
     /// Heap bytes of the allocated pages.
     pub fn page_bytes(&self) -> u64 {
         let present = self.pages.iter().filter(|p| p.is_some()).count();
-        (present * P * std::mem::size_of::<T>()) as u64
+        (present * PAGE * std::mem::size_of::<T>()) as u64
     }
 }
 
