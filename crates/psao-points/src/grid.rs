@@ -150,9 +150,10 @@ static EMPTY_CELL: Cell = Cell {
     points: [0; CELL_POINTS],
 };
 
-/// The hash grid of one instance. The server builds and updates it; a client creates an empty
-/// one from the layout ([`InstanceGrid::new`]) and applies received buckets and cells with
-/// [`InstanceGrid::set_bucket`] / [`InstanceGrid::set_cell`].
+/// The hash grid of one instance. The server builds and updates it; tests and tools can also
+/// create an empty one from the layout ([`InstanceGrid::new`]) and write buckets and cells with
+/// [`InstanceGrid::set_bucket`] / [`InstanceGrid::set_cell`] (clients mirror into a
+/// [`crate::MirrorGrid`], which stores only what it holds).
 ///
 /// Storage is sparse (see [`crate::paged`]): bucket `i` and cell slot `s` are addressable for
 /// every `i < bucket_count()` and `s < max_cells()`, but only written entries and pages of
