@@ -35,7 +35,8 @@ pub enum ClientError {
         /// Number of buckets of the instance.
         count: u32,
     },
-    /// A bucket entry whose key names no cell of the grid, or a cell hashing to another bucket.
+    /// A bucket entry whose key names no cell of the grid, a cell hashing to another bucket,
+    /// or a key the bucket already holds.
     #[error("instance {instance}: bucket {bucket} has an entry with invalid cell key {key}")]
     InvalidBucketEntry {
         /// The instance index.

@@ -13,10 +13,12 @@
 //! nearest-point fallbacks give the fallback point's irradiance, and a pixel with no
 //! compatible point at all gets zero.
 
-use glam::{IVec3, UVec3, Vec3};
+use glam::{IVec3, Vec3};
 use psao_points::irradiance::unpack_rgb9e5;
 use psao_points::pack::{is_valid, normal_code, normal_table, unpack_ao};
-use psao_points::{InstanceGrid, LinearFit, NearestK, Paged, ReconstructParams, CELL_POINTS};
+use psao_points::{
+    CellLookup, LinearFit, MirrorGrid, NearestK, Paged, ReconstructParams, CELL_POINTS,
+};
 
 use crate::state::CellLights;
 
@@ -63,7 +65,7 @@ impl Neighbourhood {
     pub(crate) fn sample(
         &mut self,
         instance: u32,
-        (grid, lights): (&InstanceGrid, Lights<'_>),
+        (grid, lights): (&MirrorGrid, Lights<'_>),
         p: Vec3,
         n: Vec3,
         params: &ReconstructParams,
@@ -184,14 +186,14 @@ impl Neighbourhood {
 
     /// Decode the valid points of the allocated cells of the block at `base`, in the order
     /// `reconstruct_ao` visits them, with their irradiance when `lights` has records.
-    fn gather(&mut self, grid: &InstanceGrid, lights: Lights<'_>, base: IVec3) {
+    fn gather(&mut self, grid: &MirrorGrid, lights: Lights<'_>, base: IVec3) {
         let layout = grid.layout();
         let normals = normal_table();
         self.count = 0;
         self.lit = lights.is_some();
-        for (coord, cell) in grid.block_cells(base) {
-            let records = records_of(grid, lights, coord);
-            for (k, &bits) in cell.points.iter().enumerate().filter(|(_, &b)| is_valid(b)) {
+        for (coord, slot, words) in grid.block_cells(base) {
+            let records = lights.map(|l| l.value(slot as usize));
+            for (k, &bits) in words.iter().enumerate().filter(|(_, &b)| is_valid(b)) {
                 let i = self.count;
                 if let Some(records) = &records {
                     let e = unpack_rgb9e5(records[k]);
@@ -212,21 +214,12 @@ impl Neighbourhood {
     }
 }
 
-/// The irradiance records of the cell at `coord` (`None` without records).
-fn records_of(grid: &InstanceGrid, lights: Lights<'_>, coord: UVec3) -> Option<CellLights> {
-    let lights = lights?;
-    Some(
-        grid.find_cell(coord)
-            .map_or_else(CellLights::default, |slot| lights.value(slot as usize)),
-    )
-}
-
 /// The second fallback of `reconstruct_ao`, when the block has no compatible point: the AO
 /// (and irradiance, zero without records) of the nearest compatible point of the cells
-/// around it ([`InstanceGrid::ring_cells`]), decoded straight from the grid (this path is
+/// around it ([`CellLookup::ring_cells`]), decoded straight from the grid (this path is
 /// rare, so nothing is cached).
 fn ring_nearest(
-    (grid, lights): (&InstanceGrid, Lights<'_>),
+    (grid, lights): (&MirrorGrid, Lights<'_>),
     base: IVec3,
     p: Vec3,
     n: Vec3,
@@ -236,18 +229,18 @@ fn ring_nearest(
     let layout = grid.layout();
     let normals = normal_table();
     let (mut nearest_d2, mut nearest) = (f32::INFINITY, None);
-    for (coord, cell) in grid.ring_cells(base) {
-        for (k, &bits) in cell.points.iter().enumerate().filter(|(_, &b)| is_valid(b)) {
+    for (coord, slot, words) in grid.ring_cells(base) {
+        for (k, &bits) in words.iter().enumerate().filter(|(_, &b)| is_valid(b)) {
             let delta = layout.unpack_position(coord, bits) - p;
             let d2 = delta.length_squared();
             let ni = normals[normal_code(bits) as usize];
             if compatible(ni, n, delta, d2, plane, params) && d2 < nearest_d2 {
-                (nearest_d2, nearest) = (d2, Some((coord, k, unpack_ao(bits))));
+                (nearest_d2, nearest) = (d2, Some((slot, k, unpack_ao(bits))));
             }
         }
     }
-    let (coord, k, ao) = nearest?;
-    let e = records_of(grid, lights, coord).map_or(Vec3::ZERO, |r| unpack_rgb9e5(r[k]));
+    let (slot, k, ao) = nearest?;
+    let e = lights.map_or(Vec3::ZERO, |l| unpack_rgb9e5(l.value(slot as usize)[k]));
     Some((ao, e))
 }
 

@@ -11,7 +11,7 @@
 //! used cells is non-zero: an AO-only state hashes exactly as before lighting existed.
 
 use psao_delta::{compact_bucket, compact_cell};
-use psao_points::{InstanceGrid, CELL_POINTS};
+use psao_points::{Bucket, Cell, InstanceGrid, MirrorGrid, CELL_POINTS};
 
 const MULTIPLIER: u64 = 0x517c_c1b7_2722_0a95;
 /// Word folded in for an instance without a grid.
@@ -37,15 +37,59 @@ impl Hasher {
     }
 }
 
+/// What the state hash reads of a grid: a server's [`InstanceGrid`] and a client's
+/// [`MirrorGrid`] of it give the same words.
+pub trait HashedGrid {
+    /// Number of hash buckets.
+    fn bucket_count(&self) -> usize;
+    /// Every bucket in index order, compacted (used entries first, in order).
+    fn compact_buckets(&self) -> impl Iterator<Item = Bucket> + '_;
+    /// Number of cell slots written (cells past it read as empty).
+    fn slot_count(&self) -> usize;
+    /// The cell in `slot`, compacted (valid points first, in order).
+    fn compact_cell(&self, slot: u32) -> Cell;
+}
+
+impl HashedGrid for InstanceGrid {
+    fn bucket_count(&self) -> usize {
+        InstanceGrid::bucket_count(self)
+    }
+    fn compact_buckets(&self) -> impl Iterator<Item = Bucket> + '_ {
+        self.buckets().map(|b| compact_bucket(&b))
+    }
+    fn slot_count(&self) -> usize {
+        InstanceGrid::slot_count(self)
+    }
+    fn compact_cell(&self, slot: u32) -> Cell {
+        compact_cell(self.cell(slot))
+    }
+}
+
+impl HashedGrid for MirrorGrid {
+    fn bucket_count(&self) -> usize {
+        MirrorGrid::bucket_count(self)
+    }
+    fn compact_buckets(&self) -> impl Iterator<Item = Bucket> + '_ {
+        self.buckets()
+    }
+    fn slot_count(&self) -> usize {
+        MirrorGrid::slot_count(self)
+    }
+    fn compact_cell(&self, slot: u32) -> Cell {
+        self.cell(slot)
+    }
+}
+
 /// Hash of the buckets and cells of a sequence of grids (`None` = an instance without a grid),
 /// instance by instance, each bucket and cell compacted. Trailing cell slots without points are
 /// ignored, so a mirror that never received a freed trailing slot hashes like the server grid
 /// that still has it; so are counters, free lists and transforms. [`crate::ClientState::state_hash`]
 /// uses [`lit_state_hash_of`]; a server without lighting calls this on its own grids
 /// (`grids.iter().map(Some)`) to compare.
-pub fn state_hash_of<'a, I>(grids: I) -> u64
+pub fn state_hash_of<'a, G, I>(grids: I) -> u64
 where
-    I: IntoIterator<Item = Option<&'a InstanceGrid>>,
+    G: HashedGrid + 'a,
+    I: IntoIterator<Item = Option<&'a G>>,
 {
     lit_state_hash_of(grids, |_, _| [0; CELL_POINTS])
 }
@@ -54,9 +98,10 @@ where
 /// records of a cell slot (zeros where none). An instance's records (those of its used slots)
 /// are folded in after its cells, and only when one of them is non-zero, so without lighting
 /// the hash is [`state_hash_of`]'s.
-pub fn lit_state_hash_of<'a, I, L>(grids: I, lights: L) -> u64
+pub fn lit_state_hash_of<'a, G, I, L>(grids: I, lights: L) -> u64
 where
-    I: IntoIterator<Item = Option<&'a InstanceGrid>>,
+    G: HashedGrid + 'a,
+    I: IntoIterator<Item = Option<&'a G>>,
     L: Fn(usize, u32) -> [u32; CELL_POINTS],
 {
     let mut h = Hasher(0x243f_6a88_85a3_08d3);
@@ -68,20 +113,19 @@ where
             continue;
         };
         h.word(grid.bucket_count() as u64);
-        for bucket in grid.buckets() {
-            for e in &compact_bucket(&bucket).entries {
+        for bucket in grid.compact_buckets() {
+            for e in &bucket.entries {
                 h.word(e.key);
                 h.word(u64::from(e.slot));
             }
         }
         let used = (0..grid.slot_count() as u32)
             .rev()
-            .find(|&s| grid.cell(s).count() > 0)
+            .find(|&s| grid.compact_cell(s).count() > 0)
             .map_or(0, |last| last + 1);
         h.word(u64::from(used));
-        for cell in grid.cells().take(used as usize) {
-            let words = compact_cell(cell).points;
-            fold_pairs(&mut h, &words);
+        for slot in 0..used {
+            fold_pairs(&mut h, &grid.compact_cell(slot).points);
         }
         if (0..used).any(|s| lights(index, s) != [0; CELL_POINTS]) {
             h.word(LIGHTS);

@@ -34,7 +34,7 @@ pub use composite::{
 #[cfg(feature = "render")]
 pub use detail::{apply_detail, DetailSettings};
 pub use error::ClientError;
-pub use hash::{lit_state_hash_of, state_hash_of};
+pub use hash::{lit_state_hash_of, state_hash_of, HashedGrid};
 #[cfg(feature = "render")]
 pub use reconstruct::{reconstruct, reconstruct_into, reconstruct_lit_into, ReconstructSettings};
 pub use state::{layout_is_usable, CellLights, ClientState};

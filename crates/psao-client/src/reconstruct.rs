@@ -4,7 +4,7 @@
 
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use psao_points::{
-    InstanceGrid, ReconstructParams, DEFAULT_INTERPOLATION_FACTOR, DEFAULT_NORMAL_EXPONENT,
+    MirrorGrid, ReconstructParams, DEFAULT_INTERPOLATION_FACTOR, DEFAULT_NORMAL_EXPONENT,
     DEFAULT_PLANE_TOLERANCE,
 };
 use psao_raster::GBuffer;
@@ -49,7 +49,7 @@ impl Default for ReconstructSettings {
 
 /// What one instance needs per pixel, computed once per frame.
 struct InstanceView<'a> {
-    grid: &'a InstanceGrid,
+    grid: &'a MirrorGrid,
     /// The instance's irradiance records, when they are wanted and the state has some.
     lights: Lights<'a>,
     /// World → instance-local.

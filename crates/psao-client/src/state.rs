@@ -5,7 +5,7 @@
 
 use glam::{Affine3A, Vec3};
 use psao_delta::{InstanceDelta, InstanceInfo, Update};
-use psao_points::{GridLayout, InstanceGrid, Paged, CELL_POINTS, MAX_DIM};
+use psao_points::{GridLayout, MirrorGrid, MirrorMemory, Paged, CELL_POINTS, MAX_DIM};
 
 use crate::error::ClientError;
 use crate::hash::lit_state_hash_of;
@@ -14,12 +14,13 @@ use crate::hash::lit_state_hash_of;
 /// the order of the cell's point records; zeros where none were received.
 pub type CellLights = [u32; CELL_POINTS];
 
-/// What the client knows: per instance a grid mirror (or `None` when the table's layout was
+/// What the client knows: per instance a grid mirror ([`MirrorGrid`]: stored for what it
+/// holds, answering the wire's bucket and slot addresses; `None` when the table's layout was
 /// unusable), its irradiance records and the transform of the latest update that carried
 /// one.
 #[derive(Clone, Debug)]
 pub struct ClientState {
-    grids: Vec<Option<InstanceGrid>>,
+    grids: Vec<Option<MirrorGrid>>,
     /// Per instance, the irradiance records by cell slot: paged like the cells, so an AO-only
     /// mirror allocates no page for them.
     lights: Vec<Paged<CellLights>>,
@@ -37,7 +38,7 @@ impl ClientState {
         Self {
             grids: table
                 .iter()
-                .map(|info| layout_is_usable(&info.layout).then(|| InstanceGrid::new(info.layout)))
+                .map(|info| layout_is_usable(&info.layout).then(|| MirrorGrid::new(info.layout)))
                 .collect(),
             lights: vec![Paged::new(0); table.len()],
             transforms: vec![None; table.len()],
@@ -54,7 +55,7 @@ impl ClientState {
         self.validate(update)?;
         if update.snapshot {
             for grid in self.grids.iter_mut().flatten() {
-                *grid = InstanceGrid::new(*grid.layout());
+                *grid = MirrorGrid::new(*grid.layout());
             }
             self.lights.fill(Paged::new(0));
             self.transforms.fill(None);
@@ -117,6 +118,11 @@ impl ClientState {
                     instance: delta.instance,
                 })?;
             validate_delta(grid.layout(), delta)?;
+            grid.has_room_for(delta.cells.len())
+                .map_err(|source| ClientError::Grid {
+                    instance: delta.instance,
+                    source,
+                })?;
         }
         Ok(())
     }
@@ -165,7 +171,7 @@ impl ClientState {
     }
 
     /// The grid mirror of `instance` (`None` out of range or when its layout was unusable).
-    pub fn grid(&self, instance: usize) -> Option<&InstanceGrid> {
+    pub fn grid(&self, instance: usize) -> Option<&MirrorGrid> {
         self.grids.get(instance)?.as_ref()
     }
 
@@ -175,14 +181,14 @@ impl ClientState {
             .grids
             .iter()
             .flatten()
-            .map(InstanceGrid::heap_bytes)
+            .map(MirrorGrid::heap_bytes)
             .sum();
         grids + self.lights.iter().map(Paged::heap_bytes).sum::<u64>()
     }
 
     /// Where the mirror's heap bytes go, summed over its grids.
-    pub fn memory_parts(&self) -> psao_points::GridMemory {
-        let mut parts = psao_points::GridMemory::default();
+    pub fn memory_parts(&self) -> MirrorMemory {
+        let mut parts = MirrorMemory::default();
         for grid in self.grids.iter().flatten() {
             parts += grid.memory_parts();
         }
@@ -194,7 +200,7 @@ impl ClientState {
         self.grids
             .iter()
             .flatten()
-            .map(InstanceGrid::point_count)
+            .map(MirrorGrid::point_count)
             .sum()
     }
 }
@@ -223,7 +229,7 @@ fn transform_is_finite(t: &Affine3A) -> bool {
         .all(|c| Vec3::from(*c).is_finite())
 }
 
-/// The checks of [`InstanceGrid::set_bucket`] and [`InstanceGrid::set_cell`], up front.
+/// The checks of [`MirrorGrid::set_bucket`] and [`MirrorGrid::set_cell`], up front.
 fn validate_delta(layout: &GridLayout, delta: &InstanceDelta) -> Result<(), ClientError> {
     let instance = delta.instance;
     let max = layout.max_cells();
@@ -246,10 +252,15 @@ fn validate_delta(layout: &GridLayout, delta: &InstanceDelta) -> Result<(), Clie
                 count: layout.bucket_count,
             });
         }
-        for e in content.entries.iter().filter(|e| e.key != 0) {
+        let used = || content.entries.iter().filter(|e| e.key != 0);
+        for (k, e) in used().enumerate() {
             check_slot(e.slot)?;
             let id = e.key - 1;
-            if layout.coord_of_id(id).is_none() || layout.bucket_of(id) != *bucket as usize {
+            let duplicate = used().take(k).any(|d| d.key == e.key);
+            if duplicate
+                || layout.coord_of_id(id).is_none()
+                || layout.bucket_of(id) != *bucket as usize
+            {
                 return Err(ClientError::InvalidBucketEntry {
                     instance,
                     bucket: *bucket,

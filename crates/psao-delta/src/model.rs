@@ -7,7 +7,7 @@ use psao_points::{Bucket, Cell, GridLayout, CELL_POINTS};
 /// What a joining client needs to know about one instance (part of the welcome).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InstanceInfo {
-    /// Grid geometry and hash-table size; the client creates `InstanceGrid::new(layout)`.
+    /// Grid geometry and hash-table size; the client creates `MirrorGrid::new(layout)`.
     pub layout: GridLayout,
     /// Poisson radius in instance-local units; the reconstruction radius is based on it.
     pub poisson_radius: f32,

@@ -84,7 +84,8 @@ pub enum PointsError {
     /// The position lies outside the instance's grid.
     #[error("position {0} lies outside the grid")]
     OutsideGrid(Vec3),
-    /// A received bucket entry names a cell that does not exist or hashes elsewhere.
+    /// A received bucket entry names a cell that does not exist, hashes elsewhere, or is
+    /// already in the bucket.
     #[error("bucket {bucket} has an entry with invalid cell key {key}")]
     InvalidBucketEntry {
         /// Bucket index.
@@ -96,6 +97,12 @@ pub enum PointsError {
     #[error("bucket table full: at most {max} entries")]
     TooManyEntries {
         /// Most entries a table holds.
+        max: usize,
+    },
+    /// A mirror's point arena would hold more records than it can address.
+    #[error("point arena full: at most {max} records")]
+    ArenaFull {
+        /// Most records an arena holds.
         max: usize,
     },
     /// A point location that does not hold a point.

@@ -150,9 +150,10 @@ static EMPTY_CELL: Cell = Cell {
     points: [0; CELL_POINTS],
 };
 
-/// The hash grid of one instance. The server builds and updates it; a client creates an empty
-/// one from the layout ([`InstanceGrid::new`]) and applies received buckets and cells with
-/// [`InstanceGrid::set_bucket`] / [`InstanceGrid::set_cell`].
+/// The hash grid of one instance. The server builds and updates it; tests and tools can also
+/// create an empty one from the layout ([`InstanceGrid::new`]) and write buckets and cells with
+/// [`InstanceGrid::set_bucket`] / [`InstanceGrid::set_cell`] (clients mirror into a
+/// [`crate::MirrorGrid`], which stores only what it holds).
 ///
 /// Storage is sparse (see [`crate::paged`]): bucket `i` and cell slot `s` are addressable for
 /// every `i < bucket_count()` and `s < max_cells()`, but only written entries and pages of
@@ -180,6 +181,18 @@ impl PartialEq for InstanceGrid {
                 == (other.overflow_cells, other.overflow_points)
             && self.buckets().eq(other.buckets())
             && self.cells().eq(other.cells())
+    }
+}
+
+impl crate::CellLookup for InstanceGrid {
+    fn layout(&self) -> &GridLayout {
+        &self.layout
+    }
+
+    #[inline]
+    fn cell_words(&self, coord: UVec3) -> Option<(u32, &[u32])> {
+        let slot = self.find_cell(coord)?;
+        self.slot_cell(slot).map(|cell| (slot, &cell.points[..]))
     }
 }
 
@@ -365,33 +378,6 @@ impl InstanceGrid {
             let offset = glam::IVec3::new((k & 1) as i32, ((k >> 1) & 1) as i32, (k >> 2) as i32);
             let c = self.layout.checked_coord(base.saturating_add(offset))?;
             self.find_cell(c).map(|slot| (c, slot))
-        })
-    }
-
-    /// The allocated cells of the 2×2×2 block whose lowest cell is `base`, as
-    /// (cell coordinate, cell), x fastest, then y, then z; unallocated or out-of-grid cells are
-    /// skipped. This is the neighbourhood reconstruction visits.
-    pub fn block_cells(&self, base: glam::IVec3) -> impl Iterator<Item = (UVec3, &Cell)> + '_ {
-        (0..8).filter_map(move |k: i32| {
-            let offset = glam::IVec3::new(k & 1, (k >> 1) & 1, k >> 2);
-            let c = self.layout.checked_coord(base.saturating_add(offset))?;
-            let slot = self.find_cell(c)?;
-            self.slot_cell(slot).map(|cell| (c, cell))
-        })
-    }
-
-    /// The allocated cells around the block of [`Self::block_cells`]: the 4×4×4 block of
-    /// offsets −1..=2 from `base` without its inner 2×2×2, x fastest, then y, then z. This is
-    /// where reconstruction looks for a fallback point when the inner block has none.
-    pub fn ring_cells(&self, base: glam::IVec3) -> impl Iterator<Item = (UVec3, &Cell)> + '_ {
-        (0..64).filter_map(move |k: i32| {
-            let offset = glam::IVec3::new(k & 3, (k >> 2) & 3, k >> 4) - glam::IVec3::ONE;
-            if offset.cmpge(glam::IVec3::ZERO).all() && offset.cmple(glam::IVec3::ONE).all() {
-                return None;
-            }
-            let c = self.layout.checked_coord(base.saturating_add(offset))?;
-            let slot = self.find_cell(c)?;
-            self.slot_cell(slot).map(|cell| (c, cell))
         })
     }
 

@@ -7,7 +7,8 @@
 //! 1. [`generate_instance_points`] (or [`generate_scene_points`]) → [`InstancePoints`];
 //! 2. [`InstanceGrid::from_points`] → buckets + cells (server state, sent to clients);
 //! 3. the server writes AO with [`InstanceGrid::update`]; clients mirror buckets and cells
-//!    ([`InstanceGrid::set_bucket`], [`InstanceGrid::set_cell`]) and call [`reconstruct_ao`].
+//!    ([`MirrorGrid::set_bucket`], [`MirrorGrid::set_cell`]) and call [`reconstruct_ao`]
+//!    (on either, through [`CellLookup`]).
 
 #[cfg(feature = "generate")]
 mod elimination;
@@ -19,6 +20,8 @@ pub mod irradiance;
 mod key_map;
 mod layout;
 mod linear_fit;
+mod lookup;
+mod mirror;
 pub mod pack;
 mod paged;
 mod reconstruct;
@@ -40,6 +43,8 @@ pub use layout::{
     MAX_DIM, TABLE_OVERSIZE,
 };
 pub use linear_fit::LinearFit;
+pub use lookup::CellLookup;
+pub use mirror::{MirrorGrid, MirrorMemory};
 pub use paged::Paged;
 pub use reconstruct::{
     reconstruct_ao, NearestK, ReconstructParams, ADAPTIVE_NEIGHBOURS, DEFAULT_ADAPTIVE_RADIUS,

@@ -2,8 +2,8 @@
 
 use glam::Vec3;
 
-use crate::grid::InstanceGrid;
 use crate::linear_fit::LinearFit;
+use crate::lookup::CellLookup;
 use crate::pack::{is_valid, normal_code, normal_table, unpack_ao};
 
 /// Default interpolation factor: reconstruction radius r = 2√2 × the Poisson radius r_max.
@@ -151,13 +151,18 @@ impl Default for ReconstructParams {
 /// such as a groove bottom, holds too few points of its own), the AO of the nearest point of
 /// the visited cells that passes every test but the radius is used; when the 2×2×2 block has
 /// none, the nearest such point of the ring of cells around it
-/// ([`InstanceGrid::ring_cells`]); and 1 only when there is none: DESIGN's fallback 1 draws
+/// ([`CellLookup::ring_cells`]); and 1 only when there is none: DESIGN's fallback 1 draws
 /// such detail as white gaps (a dark groove breaks into dashes), while the nearest point on
 /// the same surface carries nearly the same occlusion. (4) With
 /// [`ReconstructParams::linear_ridge`] set (off by default) the result is not `Σ w·AO_i / Σ w` but
 /// the value at `p` of the plane fitted through the same weighted points ([`LinearFit`]),
 /// which keeps AO gradients steeper than the radius (the foot of a low wall).
-pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &ReconstructParams) -> f32 {
+pub fn reconstruct_ao<G: CellLookup + ?Sized>(
+    grid: &G,
+    p: Vec3,
+    n: Vec3,
+    params: &ReconstructParams,
+) -> f32 {
     let layout = grid.layout();
     let mut r = layout.poisson_radius * params.interpolation_factor;
     if !(r > 0.0 && r.is_finite() && p.is_finite()) {
@@ -182,8 +187,8 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
     };
     if let Some(factor) = params.adaptive_radius {
         let mut near = NearestK::default();
-        for (coord, cell) in grid.block_cells(base) {
-            for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+        for (coord, _, words) in grid.block_cells(base) {
+            for &bits in words.iter().filter(|&&b| is_valid(b)) {
                 let delta = layout.unpack_position(coord, bits) - p;
                 let d2 = delta.length_squared();
                 if d2 < r * r && passes(normals[normal_code(bits) as usize], delta, d2) {
@@ -197,8 +202,8 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
     let (mut w_sum, mut ao_sum) = (0.0f32, 0.0f32);
     let mut fit = LinearFit::new(n);
     let (mut nearest_d2, mut nearest_ao) = (f32::INFINITY, 1.0f32);
-    for (coord, cell) in grid.block_cells(base) {
-        for &bits in &cell.points {
+    for (coord, _, words) in grid.block_cells(base) {
+        for &bits in words {
             if !is_valid(bits) {
                 continue;
             }
@@ -223,8 +228,8 @@ pub fn reconstruct_ao(grid: &InstanceGrid, p: Vec3, n: Vec3, params: &Reconstruc
         }
     }
     if w_sum == 0.0 && params.nearest_fallback && nearest_d2 == f32::INFINITY {
-        for (coord, cell) in grid.ring_cells(base) {
-            for &bits in cell.points.iter().filter(|&&b| is_valid(b)) {
+        for (coord, _, words) in grid.ring_cells(base) {
+            for &bits in words.iter().filter(|&&b| is_valid(b)) {
                 let delta = layout.unpack_position(coord, bits) - p;
                 let d2 = delta.length_squared();
                 if passes(normals[normal_code(bits) as usize], delta, d2) && d2 < nearest_d2 {

@@ -5,11 +5,12 @@
 //!   bucket with entries and every cell slot with a non-zero word);
 //! * [`BUCKET`], instance, bucket, n, then n × (key low, key high, cell slot): a bucket's used
 //!   entries in order (n = 0: now empty);
-//! * [`CELL`], instance, slot, then the cell's [`CELL_POINTS`] point words as stored.
+//! * [`CELL`], instance, slot, then the cell's [`CELL_POINTS`] point words (its valid points
+//!   first, in order, as updates carry them).
 
 use psao_client::ClientState;
 use psao_delta::Update;
-use psao_points::{Bucket, Cell, InstanceGrid, CELL_POINTS};
+use psao_points::{Bucket, Cell, MirrorGrid, CELL_POINTS};
 
 /// Record tag: a bucket's entries.
 pub const BUCKET: u32 = 0;
@@ -38,13 +39,13 @@ pub fn write_changes(state: &ClientState, update: &Update, out: &mut Vec<u32>) {
             write_bucket(delta.instance, *bucket, &grid.bucket(*bucket as usize), out);
         }
         for (slot, _) in &delta.cells {
-            write_cell(delta.instance, *slot, grid.cell(*slot), out);
+            write_cell(delta.instance, *slot, &grid.cell(*slot), out);
         }
     }
 }
 
 /// Every bucket with entries and every cell slot with a non-zero word of `grid`.
-fn write_grid(instance: u32, grid: &InstanceGrid, out: &mut Vec<u32>) {
+fn write_grid(instance: u32, grid: &MirrorGrid, out: &mut Vec<u32>) {
     for (index, bucket) in grid.buckets().enumerate() {
         if bucket.entries.iter().any(|e| e.key != 0) {
             write_bucket(instance, index as u32, &bucket, out);
@@ -52,7 +53,7 @@ fn write_grid(instance: u32, grid: &InstanceGrid, out: &mut Vec<u32>) {
     }
     for (slot, cell) in grid.cells().enumerate() {
         if cell.points.iter().any(|&w| w != 0) {
-            write_cell(instance, slot as u32, cell, out);
+            write_cell(instance, slot as u32, &cell, out);
         }
     }
 }
