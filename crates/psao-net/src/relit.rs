@@ -155,11 +155,14 @@ impl RelitCharacters {
             source,
         };
         let index = msg.character as usize;
-        let group = skinned_groups(scene).into_iter().nth(index).ok_or_else(|| {
-            fail(PrtError::Parameter(
-                "the scene has no such skinned character".into(),
-            ))
-        })?;
+        let group = skinned_groups(scene)
+            .into_iter()
+            .nth(index)
+            .ok_or_else(|| {
+                fail(PrtError::Parameter(
+                    "the scene has no such skinned character".into(),
+                ))
+            })?;
         let character = Character::new(group.scene, None).map_err(fail)?;
         let model = model_file::from_bytes(&msg.model).map_err(fail)?;
         if model.vertices != character.vertex_count() || model.joints != character.joint_count() {
@@ -284,7 +287,8 @@ impl RelitCharacter {
                         .transform_point3(p.get(v).copied().unwrap_or(Vec3::ZERO)),
                 );
                 let normal = n.get(v).copied().unwrap_or(Vec3::Z);
-                self.normals.push((to_normal * normal).normalize_or(Vec3::Z));
+                self.normals
+                    .push((to_normal * normal).normalize_or(Vec3::Z));
             }
         }
     }
@@ -368,7 +372,10 @@ mod tests {
         for (v, n) in normals.iter().enumerate() {
             for (c, light) in lights.iter().enumerate() {
                 let (got, want) = (shades[v * 3 + c], unshadowed_diffuse(light, *n));
-                assert!((got - want).abs() < 2e-3 * want.abs().max(1.0), "{got} vs {want}");
+                assert!(
+                    (got - want).abs() < 2e-3 * want.abs().max(1.0),
+                    "{got} vs {want}"
+                );
             }
         }
         // A constant radiance of 1 is shaded 1 (albedo 1) at any normal.
@@ -397,7 +404,12 @@ mod tests {
         assert!((ao * pixel_factor(o, 0.7, ao) - o).abs().max_element() < 1e-6);
         // The scene occludes more: its share A / a on top of the model's self-shadowing.
         let ao = 0.35;
-        assert!((ao * pixel_factor(o, 0.7, ao) - o * 0.5).abs().max_element() < 1e-6);
+        assert!(
+            (ao * pixel_factor(o, 0.7, ao) - o * 0.5)
+                .abs()
+                .max_element()
+                < 1e-6
+        );
         // Nothing is divided by zero.
         assert!(pixel_factor(o, 0.0, 0.0).is_finite());
     }

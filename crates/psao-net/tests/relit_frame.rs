@@ -154,7 +154,12 @@ fn differences(a: &ClientFrame, b: &ClientFrame) -> (Vec<(usize, u32)>, u8) {
 fn relighting_changes_the_characters_pixels_only() {
     let plain = frame(None);
     // Visibility half of the sky's, less towards the horizon.
-    let relit = frame(Some([0.5 * 2.0 * std::f32::consts::PI.sqrt(), 0.8, 0.0, 0.0]));
+    let relit = frame(Some([
+        0.5 * 2.0 * std::f32::consts::PI.sqrt(),
+        0.8,
+        0.0,
+        0.0,
+    ]));
     assert_eq!(plain.ao.data, relit.ao.data, "the AO image is the points'");
     let square_pixels = (0..plain.gbuffer.instance.len())
         .filter(|&i| plain.gbuffer.instance[i] == SQUARE)
@@ -181,7 +186,11 @@ fn a_character_that_does_not_shadow_itself_keeps_the_points_shading() {
     let open = frame(Some([2.0 * std::f32::consts::PI.sqrt(), 0.0, 0.0, 0.0]));
     let (changed, most) = differences(&plain, &open);
     // The transfer table's interpolation may move a byte by one.
-    assert!(most <= 1, "{} pixels changed, by up to {most}", changed.len());
+    assert!(
+        most <= 1,
+        "{} pixels changed, by up to {most}",
+        changed.len()
+    );
 }
 
 #[test]
@@ -221,7 +230,8 @@ fn a_model_of_another_character_is_refused() {
             })
             .unwrap_err();
         assert!(
-            err.to_string().starts_with(&format!("relit character {character}")),
+            err.to_string()
+                .starts_with(&format!("relit character {character}")),
             "{err}"
         );
     }

@@ -240,7 +240,9 @@ impl Character {
     /// the character was made from and the mesh vertices it contributes (relit vertices are
     /// numbered through these lists one after the other).
     pub fn parts(&self) -> impl Iterator<Item = (usize, &[u32])> {
-        self.parts.iter().map(|p| (p.instance, p.vertices.as_slice()))
+        self.parts
+            .iter()
+            .map(|p| (p.instance, p.vertices.as_slice()))
     }
 
     /// Per skin joint (the model's order): its local transform (relative to its parent

@@ -49,7 +49,10 @@ pub fn skinned_groups(scene: &Scene) -> Vec<SkinnedGroup> {
                 .filter(|&i| root(&scene.instances[i]) == Some(r))
                 .collect();
             let mut sub = scene.clone();
-            sub.instances = instances.iter().map(|&i| scene.instances[i].clone()).collect();
+            sub.instances = instances
+                .iter()
+                .map(|&i| scene.instances[i].clone())
+                .collect();
             let clip = scene.playing.iter().copied().find(|&a| {
                 scene.animations.get(a).is_some_and(|a| {
                     a.channels

@@ -426,7 +426,12 @@ fn paths_writes_generated_paths_that_read_back_and_follow_their_seed() {
     };
     let (a, again, other) = (write("a", "1,2"), write("again", "1"), write("other", "3"));
     let text = |d: &std::path::Path, f: &str| std::fs::read_to_string(d.join(f)).unwrap();
-    for f in ["seed1_0.toml", "seed1_1.toml", "seed2_0.toml", "seed2_1.toml"] {
+    for f in [
+        "seed1_0.toml",
+        "seed1_1.toml",
+        "seed2_0.toml",
+        "seed2_1.toml",
+    ] {
         let path = psao_scene::CameraPath::load(&a.join(f)).unwrap();
         assert_eq!(format!("{}.toml", path.name), f);
         assert!(path.duration() >= 3.0, "{f}: {}", path.duration());

@@ -828,7 +828,15 @@ fn measure_the_frame_rate_under_the_corrections_attack() {
     let seed_list = seeds.map(|s| s.to_string()).join(",");
     let out = dir.path().to_str().unwrap();
     let o = psao(&[
-        "paths", "--scene", SCENE, "--seeds", &seed_list, "--duration", "10", "--out", out,
+        "paths",
+        "--scene",
+        SCENE,
+        "--seeds",
+        &seed_list,
+        "--duration",
+        "10",
+        "--out",
+        out,
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let mut ratios = Vec::new();

@@ -152,6 +152,22 @@ fn served_characters_go_over_http_and_tcp_and_their_models_are_cached() {
     assert_eq!(std::fs::metadata(&stored[0]).unwrap().ino(), inode);
 }
 
+/// A camera path in `dir` close to the character (the scene file places it at the floor's
+/// edge, near x = −2).
+fn close_path(dir: &Path) -> String {
+    let file = dir.join("close.toml");
+    let key = |t: f32, x: f32| {
+        format!("[[key]]\ntime = {t}\nposition = [{x}, 1.2, 3.3]\nlook_at = [-2.0, 0.7, 0.6]\n\n")
+    };
+    let text = format!(
+        "name = \"close\"\nfov_y_deg = 40.0\n\n{}{}",
+        key(0.0, -1.0),
+        key(1.0, -0.6)
+    );
+    std::fs::write(&file, text).unwrap();
+    file.display().to_string()
+}
+
 /// The settings `psao serve` and `psao run` share in the view test (besides the cache).
 const SHARED: [&str; 4] = ["--points", "48", "--ray-budget", "20000"];
 
@@ -164,7 +180,8 @@ fn view_of_a_relit_serve_shows_the_frames_of_run_relight() {
     let cache = dir.path().join("cache").display().to_string();
     let scene = scene(dir.path(), &character);
     let out = |name: &str| dir.path().join(name).display().to_string();
-    let frames = ["--res", "64x48"];
+    let path = close_path(dir.path());
+    let frames = ["--res", "64x48", "--path", &path];
     let server = [
         &["--listen", "127.0.0.1:0", "--hz", "30", "--lockstep"][..],
         &["--wait-clients", "1", "--once", "--relight"],
@@ -176,7 +193,13 @@ fn view_of_a_relit_serve_shows_the_frames_of_run_relight() {
     let view_json = out("view.json");
     let o = psao(
         &[
-            &["view", "--connect", &listening_addr(&line), "--scene", &scene][..],
+            &[
+                "view",
+                "--connect",
+                &listening_addr(&line),
+                "--scene",
+                &scene,
+            ][..],
             &["--frames", "4", "--out", &out("view"), "--json", &view_json],
             &frames,
         ]
@@ -185,9 +208,18 @@ fn view_of_a_relit_serve_shows_the_frames_of_run_relight() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(child.0.wait().unwrap().success());
     let run = |name: &str, relight: bool| {
+        let dir = out(name);
         let mut args = [
-            &["run", "--scene", &scene, "--server-hz", "30", "--frames", "0..4"][..],
-            &["--points-cache", &cache, "--out", &out(name)],
+            &[
+                "run",
+                "--scene",
+                &scene,
+                "--server-hz",
+                "30",
+                "--frames",
+                "0..4",
+            ][..],
+            &["--points-cache", &cache, "--out", &dir],
             &frames,
             &SHARED,
         ]
@@ -197,7 +229,7 @@ fn view_of_a_relit_serve_shows_the_frames_of_run_relight() {
         }
         let o = psao(&args);
         assert!(o.status.success(), "{}", stderr(&o));
-        json(&dir.path().join(name).join("stats.json"))
+        json(&Path::new(&dir).join("stats.json"))
     };
     let relit = run("run", true);
     let view = json(Path::new(&view_json));

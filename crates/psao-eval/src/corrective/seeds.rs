@@ -5,10 +5,10 @@ use psao_scene::{generate_paths, CameraPath, PathGenConfig, Scene};
 use serde::Serialize;
 
 use super::metrics::MeanError;
-use crate::spread::{spread, Spread};
 use super::run::{evaluate_path, Budget, EvalConfig, PathEval, Row, Tracers};
 use super::EvalError;
 use crate::path_caster::TracerCaster;
+use crate::spread::{spread, Spread};
 
 /// The camera paths a seed's runs follow.
 pub enum Paths<'a> {
