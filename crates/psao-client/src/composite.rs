@@ -42,11 +42,26 @@ impl Default for Shading {
 /// colour; a pixel without an AO value (short `ao`) uses AO 1, one missing from the G-buffer's
 /// attribute arrays counts as uncovered.
 pub fn composite(scene: &Scene, gbuffer: &GBuffer, ao: &[f32], shading: &Shading) -> Vec<[f32; 3]> {
+    composite_tinted(scene, gbuffer, ao, &[], shading)
+}
+
+/// [`composite`] with the ambient term of each pixel scaled per channel by `tint`:
+/// `base_colour × (ambient × AO × tint + light × max(0, n·l))` (relit characters' pixels
+/// carry their self-shadowing there, docs/RELIGHTING.md "Served characters"). A pixel
+/// missing from `tint` uses 1.
+pub fn composite_tinted(
+    scene: &Scene,
+    gbuffer: &GBuffer,
+    ao: &[f32],
+    tint: &[Vec3],
+    shading: &Shading,
+) -> Vec<[f32; 3]> {
     let light_dir = shading.light_dir.normalize_or_zero();
     shade(scene, gbuffer, |i, base, normal| {
         let occlusion = ao.get(i).copied().unwrap_or(1.0);
+        let tint = tint.get(i).copied().unwrap_or(Vec3::ONE);
         let direct = shading.light * normal.dot(light_dir).max(0.0);
-        base * (shading.ambient * occlusion + direct)
+        base * (shading.ambient * occlusion * tint + direct)
     })
 }
 

@@ -29,7 +29,8 @@ mod state;
 
 #[cfg(feature = "render")]
 pub use composite::{
-    composite, composite_lit, composite_srgb8, direct_light, encode_srgb, Shading, SKY_GREY,
+    composite, composite_lit, composite_srgb8, composite_tinted, direct_light, encode_srgb,
+    Shading, SKY_GREY,
 };
 #[cfg(feature = "render")]
 pub use detail::{apply_detail, DetailSettings};

@@ -49,6 +49,15 @@ pub enum NetError {
     /// A setting is out of range.
     #[error("{0}")]
     Config(String),
+    /// A served relighting model cannot relight the scene's character.
+    #[error("relit character {character}: {source}")]
+    Relight {
+        /// The character's index among the scene's skinned characters.
+        character: u32,
+        /// Why.
+        #[source]
+        source: psao_prt::PrtError,
+    },
     /// The server sent an error message (refusing the session or ending it).
     #[error("the server refused the session ({code:?}): {message}")]
     Refused {

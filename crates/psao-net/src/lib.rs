@@ -1,7 +1,7 @@
 //! psao networking: a server streaming AO updates to many clients over TCP, HTTP/WebSocket
 //! and TLS ([`serve`], [`http`], [`tls`]), a headless client following a camera path
 //! ([`view`]), the frame transports and wire conversions they share, the in-process split
-//! pipeline ([`pipeline`]), the served scene as binary glTF ([`glb`]), and the start points
+//! pipeline ([`pipeline`]), relit characters on a client ([`relit`]), the served scene as binary glTF ([`glb`]), and the start points
 //! kept on disk between runs ([`start_cache`]).
 //!
 //! Everything here is a library: the `psao` binary only parses arguments, loads scenes and
@@ -20,6 +20,7 @@ pub mod http;
 pub mod io;
 pub mod pipeline;
 pub mod priority;
+pub mod relit;
 mod resolution;
 pub mod scale;
 pub mod secret;

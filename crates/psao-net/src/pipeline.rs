@@ -12,6 +12,9 @@ use psao_raster::{GBuffer, InstancePose, RasterOptions, Rasterizer, ShadowMaps, 
 use psao_scene::{Animator, Camera, Motion, Scene, ScenePose};
 use psao_server::{ClientId, Server, ServerConfig, View};
 use psao_trace::ao::Medium;
+use psao_wire::RelightingMsg;
+
+use crate::relit::RelitCharacters;
 use serde::Serialize;
 use std::sync::Arc;
 use std::time::Instant;
@@ -99,6 +102,9 @@ pub struct ClientFrame {
     /// With lighting (the client state holds irradiance records): the lit composite, linear
     /// RGB radiance ([`psao_client::composite_lit`]).
     pub lit: Option<Vec<[f32; 3]>>,
+    /// With relit characters and without lighting: per pixel, the factor of the ambient
+    /// term ([`crate::relit::pixel_factor`]; with lighting it is applied to `lit` already).
+    pub ambient_tint: Option<Vec<Vec3>>,
 }
 
 /// A server and one client in one process.
@@ -172,6 +178,12 @@ impl<'a> Pipeline<'a> {
     /// The server (for point counts and overflow statistics).
     pub fn server(&self) -> &Server {
         &self.server
+    }
+
+    /// The client relights a character with a served model from now on, as a networked
+    /// client does with a relighting message ([`ClientRenderer::relight`]).
+    pub fn relight(&mut self, msg: &RelightingMsg) -> Result<(), NetError> {
+        self.renderer.relight(self.scene, msg)
     }
 
     /// The client's state.
@@ -309,6 +321,8 @@ pub struct ClientRenderer {
     reconstruct: ReconstructSettings,
     /// Shadow maps of the suns and point lights, made on the first lit frame.
     shadows: Option<ShadowMaps>,
+    /// The characters relit with served models (none until a model arrives).
+    relit: RelitCharacters,
 }
 
 impl ClientRenderer {
@@ -323,7 +337,14 @@ impl ClientRenderer {
             detail: None,
             reconstruct: ReconstructSettings::default(),
             shadows: None,
+            relit: RelitCharacters::default(),
         })
+    }
+
+    /// Relights a character of `scene` with a served model from now on
+    /// ([`RelitCharacters::insert`]).
+    pub fn relight(&mut self, scene: &Scene, msg: &RelightingMsg) -> Result<(), NetError> {
+        self.relit.insert(scene, msg)
     }
 
     /// The same renderer reconstructing with `settings`.
@@ -361,6 +382,11 @@ impl ClientRenderer {
             None => {
                 self.rasterizer
                     .rasterize(scene, camera, &opts, &mut gbuffer);
+                if !self.relit.is_empty() {
+                    let rest: Vec<_> = scene.instances.iter().map(InstancePose::rest).collect();
+                    let nodes = scene.pose_at(time)?.nodes;
+                    self.relit.relight(scene, &nodes, &rest, camera.position)?;
+                }
                 None
             }
             Some((animator, pose)) => {
@@ -368,6 +394,10 @@ impl ClientRenderer {
                 let poses = client_poses(scene, animator, pose, state);
                 self.rasterizer
                     .rasterize_posed(scene, &poses, camera, &opts, &mut gbuffer)?;
+                if !self.relit.is_empty() {
+                    self.relit
+                        .relight(scene, &pose.nodes, &poses, camera.position)?;
+                }
                 Some(poses)
             }
         };
@@ -386,6 +416,10 @@ impl ClientRenderer {
         }
         if let Some(detail) = &self.detail {
             psao_client::apply_detail(state, &gbuffer, camera, detail, &mut ao);
+        }
+        let factors = self.relit.pixel_factors(scene, &gbuffer, &ao);
+        if let (Some(f), true) = (&factors, has_lights) {
+            irradiance.iter_mut().zip(f).for_each(|(e, f)| *e *= *f);
         }
         let lit = if has_lights {
             let poses =
@@ -414,6 +448,7 @@ impl ClientRenderer {
             gbuffer,
             corrected: None,
             lit,
+            ambient_tint: factors.filter(|_| !has_lights),
         })
     }
 }
@@ -448,11 +483,18 @@ pub fn client_poses<'p>(
 }
 
 /// The client's composited image as 8-bit sRGB RGB: the lit composite when the frame has one,
-/// else base shading × AO ([`composite_rgb8`]).
+/// else base shading × AO ([`composite_rgb8`]), its ambient term tinted on relit characters.
 pub fn frame_rgb8(scene: &Scene, frame: &ClientFrame) -> Vec<u8> {
-    match &frame.lit {
-        Some(lit) => psao_client::composite_srgb8(lit),
-        None => composite_rgb8(scene, &frame.gbuffer, &frame.ao),
+    match (&frame.lit, &frame.ambient_tint) {
+        (Some(lit), _) => psao_client::composite_srgb8(lit),
+        (None, Some(tint)) => psao_client::composite_srgb8(&psao_client::composite_tinted(
+            scene,
+            &frame.gbuffer,
+            &frame.ao.data,
+            tint,
+            &Shading::default(),
+        )),
+        (None, None) => composite_rgb8(scene, &frame.gbuffer, &frame.ao),
     }
 }
 

@@ -14,8 +14,8 @@ use psao_delta::Codec;
 use psao_scene::path::CameraPath;
 use psao_scene::Scene;
 use psao_wire::{
-    capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, RegionsMsg, Welcome, WireError,
-    MAX_SERVER_FRAME, PROTOCOL_VERSION,
+    capabilities, encode_frame, Ack, Bye, Delta, Hello, Message, RegionsMsg, RelightingMsg,
+    Welcome, WireError, MAX_SERVER_FRAME, PROTOCOL_VERSION,
 };
 use serde::Serialize;
 use tokio::sync::mpsc;
@@ -168,6 +168,7 @@ pub fn view(
         record: args.record.clone(),
         corrective_config: args.corrective,
         res: args.res,
+        relight: args.render,
         ..Client::default()
     };
     if let Some(dir) = &args.record {
@@ -241,6 +242,9 @@ pub fn view(
                     lockstep = Some(l);
                 }
             }
+        }
+        for msg in client.relighting.drain(..) {
+            renderer.relight(scene, &msg)?;
         }
         if args.render || client.corrective.is_some() {
             // The client's clock: frame / 60 s (equal to the server's in lockstep).
@@ -345,6 +349,10 @@ struct Client {
     /// The last stall the server told of, and status messages received.
     stalled: Option<String>,
     status_messages: u32,
+    /// Whether relighting models were asked for ([`capabilities::RELIGHT`]: when rendering).
+    relight: bool,
+    /// Relighting models received and not yet handed to the renderer.
+    relighting: Vec<RelightingMsg>,
 }
 
 impl Default for Client {
@@ -373,6 +381,8 @@ impl Default for Client {
             samples: 0,
             stalled: None,
             status_messages: 0,
+            relight: false,
+            relighting: Vec::new(),
         }
     }
 }
@@ -436,6 +446,7 @@ impl Client {
                             tracing::info!("the server's updates flow again");
                         }
                     }
+                    Message::Relighting(r) if self.relight => self.relighting.push(r),
                     Message::Samples(samples) => {
                         let c = self.corrective.as_mut().ok_or_else(|| {
                             NetError::Protocol("samples from the server without asking".into())
@@ -598,11 +609,18 @@ async fn session(
             } else {
                 0
             };
+            // A client that renders relights the characters it is sent models of.
+            let relight = if args.render {
+                capabilities::RELIGHT
+            } else {
+                0
+            };
             capabilities::CODEC_PAPER
                 | capabilities::CODEC_COMPACT
                 | capabilities::STATUS
                 | verify
                 | corrective
+                | relight
         },
         token: args.token.clone(),
         name: format!("psao view {}", std::process::id()),

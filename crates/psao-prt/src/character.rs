@@ -236,6 +236,29 @@ impl Character {
         }
     }
 
+    /// The skinned instances relit, in character order: each instance's index in the scene
+    /// the character was made from and the mesh vertices it contributes (relit vertices are
+    /// numbered through these lists one after the other).
+    pub fn parts(&self) -> impl Iterator<Item = (usize, &[u32])> {
+        self.parts
+            .iter()
+            .map(|p| (p.instance, p.vertices.as_slice()))
+    }
+
+    /// Per skin joint (the model's order): its local transform (relative to its parent
+    /// node) in a pose whose node world transforms are `nodes` (one per node of the scene).
+    /// A node missing from `nodes` counts as at the origin.
+    pub fn joint_local(&self, nodes: &[Affine3A]) -> Vec<Affine3A> {
+        let world = |n: usize| nodes.get(n).copied().unwrap_or(Affine3A::IDENTITY);
+        self.joints
+            .iter()
+            .map(|&j| match self.parents[j] {
+                Some(p) => world(p).inverse() * world(j),
+                None => world(j),
+            })
+            .collect()
+    }
+
     /// The character at clip time `time` (seconds; the clip loops), in world space.
     pub fn pose(&self, time: f32) -> CharacterPose {
         let pose = self.animator.pose_at(time);
@@ -264,17 +287,7 @@ impl Character {
         let (positions, normals) = place(&self.parts, true);
         let (occluders, _) = place(&self.rigid, false);
         let frames = skin_frames(&positions, &normals, &self.neighbours);
-        let joint_local: Vec<Affine3A> = self
-            .joints
-            .iter()
-            .map(|&j| {
-                let world = pose.nodes[j];
-                match self.parents[j] {
-                    Some(p) => pose.nodes[p].inverse() * world,
-                    None => world,
-                }
-            })
-            .collect();
+        let joint_local = self.joint_local(&pose.nodes);
         let joint_rotations = self
             .rig()
             .joint_rotations(&joint_local)
@@ -337,7 +350,7 @@ fn merge(parts: &[Part], scene: &Scene) -> Mesh {
 
 /// The matrix that takes normals through `t` (inverse transpose of its linear part; the
 /// linear part itself when that is singular).
-fn normal_matrix(t: Affine3A) -> Mat3 {
+pub fn normal_matrix(t: Affine3A) -> Mat3 {
     let m = Mat3::from(t.matrix3);
     if m.determinant().abs() > 1e-20 {
         m.inverse().transpose()

@@ -16,6 +16,7 @@ pub mod compact;
 mod error;
 pub mod filter;
 pub mod fit;
+pub mod groups;
 pub mod lighting;
 pub mod limits;
 pub mod model;

@@ -44,6 +44,11 @@ pub struct BenchRelightArgs {
     /// Threads of the pool the frames run on (default: one per core).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Time a relit character's whole per-frame work in `psao run --relight` and `psao view`
+    /// (`psao_net::relit`): shading under the lighting and a white sky (4 channels) and the
+    /// per-vertex self-shadowing and self-visibility, instead of the RGB shading alone.
+    #[arg(long)]
+    pub client: bool,
     /// Write the result as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -55,9 +60,11 @@ struct BenchResult {
     vertices: usize,
     lobes: usize,
     mode: String,
+    client: bool,
     threads: usize,
     runs: usize,
-    /// Median wall-clock milliseconds for pose → lobes → shaded vertices (RGB).
+    /// Median wall-clock milliseconds for pose → lobes → shaded vertices (RGB; with
+    /// `client`, as a client of a relighting server: 4 channels and per-vertex values).
     ms_per_frame: f64,
     /// Median CPU milliseconds of the same work, summed over all threads of the process
     /// (`null` where the scheduler statistics are not available). Unlike wall time it does
@@ -101,6 +108,11 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
             [l; 3]
         }
     };
+    let lights = if args.client {
+        psao_net::relit::client_lights(lights.as_flattened())
+    } else {
+        lights.to_vec()
+    };
     let mode = args.shading.mode()?;
     let c = &loaded.character;
     let frames = clip_frames(c);
@@ -128,7 +140,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         .num_threads(args.threads.unwrap_or(0))
         .build()
         .context("cannot start the thread pool")?;
-    let (mut raw, mut shaded) = (Vec::new(), Vec::new());
+    let (mut raw, mut shaded, mut values) = (Vec::new(), Vec::new(), Vec::new());
     let mut total = Vec::with_capacity(args.runs);
     let mut synth = Vec::with_capacity(args.runs);
     let mut cpu = Vec::with_capacity(args.runs);
@@ -145,7 +157,14 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         };
         let cpu_start = fine_cpu_seconds();
         let start = Instant::now();
-        pool.install(|| relighter.shade_into(&frame, &lights, camera.position, &mut shaded))?;
+        pool.install(|| {
+            relighter.shade_into(&frame, &lights, camera.position, &mut shaded)?;
+            if args.client {
+                psao_net::relit::values_of_shades(&shaded, &pose.normals, &lights, &mut values);
+            }
+            anyhow::Ok(())
+        })?;
+        std::hint::black_box(&values);
         let wall = start.elapsed();
         let cpu_end = fine_cpu_seconds();
         std::hint::black_box(&shaded);
@@ -171,6 +190,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         vertices,
         lobes,
         mode: format!("{mode:?}"),
+        client: args.client,
         threads: pool.current_num_threads(),
         runs: args.runs,
         ms_per_frame: median(&mut total),

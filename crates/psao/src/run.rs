@@ -5,11 +5,13 @@ use crate::png_io::{write_ao_png, write_rgb_png};
 use crate::progress;
 use crate::reference::Lighting;
 use crate::scene_source::SceneArgs;
+use crate::served_characters::{served_characters, RelightArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use psao_net::pipeline::{frame_rgb8, FrameRecord, Pipeline, PipelineConfig};
 use psao_server::{Invalidation, LightingConfig, ServerConfig, MAX_BOUNCES};
 use psao_trace::Backend;
+use psao_wire::{capabilities, Message};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -168,6 +170,8 @@ pub struct RunArgs {
     pub json: Option<PathBuf>,
     #[command(flatten)]
     pub corrective: crate::corrective::split_args::CorrectiveArgs,
+    #[command(flatten)]
+    pub relight: RelightArgs,
 }
 
 /// What the server's points carry (`psao run`, `psao serve`).
@@ -262,6 +266,18 @@ pub fn run(args: &RunArgs) -> Result<()> {
     config.medium = input.medium();
     config.corrective = args.corrective.config()?;
     let mut pipeline = Pipeline::new(&input.scene, &config)?;
+    // The client gets the models `psao serve --relight` would send it.
+    let characters = served_characters(
+        &input.scene,
+        &args.relight,
+        config.server.seed,
+        config.points_cache.as_deref(),
+    )?;
+    for msg in characters.messages_for(capabilities::RELIGHT) {
+        if let Message::Relighting(r) = msg {
+            pipeline.relight(&r)?;
+        }
+    }
     tracing::info!(
         "{} points on {} instances",
         pipeline.server().point_count(),

@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 use psao_net::characters::{model_size_ok, ServedCharacters};
 use psao_net::start_cache::{keep_stored, read_stored};
 use psao_prt::character::Character;
+use psao_prt::groups::skinned_groups;
 use psao_prt::lighting::{EnvMap, ShLighting};
 use psao_prt::model_file;
 use psao_scene::{Environment, Scene};
@@ -57,10 +58,14 @@ pub fn served_characters(
         return Ok(ServedCharacters::default());
     }
     let mut models = Vec::new();
-    for (root, sub) in skinned_groups(scene) {
+    for group in skinned_groups(scene) {
         let n = models.len();
-        let character = Character::new(sub, None)
-            .with_context(|| format!("cannot relight the skinned character under node {root}"))?;
+        let character = Character::new(group.scene, None).with_context(|| {
+            format!(
+                "cannot relight the skinned character under node {}",
+                group.root
+            )
+        })?;
         models.push(model(n, &character, args, seed, cache)?);
     }
     Ok(ServedCharacters::new(
@@ -144,65 +149,6 @@ fn key(character: &Character, args: &RelightArgs, seed: u64) -> u64 {
     h.write_usize(args.relight_lobes);
     h.write_u64(seed);
     h.finish()
-}
-
-/// The scene split into its skinned node groups, in the order of their first skinned
-/// instance: each the scene with only the group's instances and its first playing clip.
-fn skinned_groups(scene: &Scene) -> Vec<(usize, Scene)> {
-    let root = |inst: &psao_scene::Instance| {
-        let node = inst.node.or_else(|| {
-            let skin = scene.skins.get(inst.skin?)?;
-            skin.joints.first().copied()
-        })?;
-        Some(root_of(scene, node))
-    };
-    let skinned = |inst: &psao_scene::Instance| {
-        inst.skin.is_some()
-            && scene
-                .meshes
-                .get(inst.mesh)
-                .is_some_and(|m| !m.joints.is_empty())
-    };
-    let mut roots: Vec<usize> = Vec::new();
-    for inst in scene.instances.iter().filter(|i| skinned(i)) {
-        if let Some(r) = root(inst) {
-            if !roots.contains(&r) {
-                roots.push(r);
-            }
-        }
-    }
-    roots
-        .into_iter()
-        .map(|r| {
-            let mut sub = scene.clone();
-            sub.instances.retain(|i| root(i) == Some(r));
-            let clip = scene.playing.iter().copied().find(|&a| {
-                scene.animations.get(a).is_some_and(|a| {
-                    a.channels
-                        .iter()
-                        .any(|c| c.node < scene.nodes.len() && root_of(scene, c.node) == r)
-                })
-            });
-            sub.animations = clip
-                .and_then(|a| scene.animations.get(a).cloned())
-                .into_iter()
-                .collect();
-            sub.playing = (0..sub.animations.len()).collect();
-            (r, sub)
-        })
-        .collect()
-}
-
-/// The root of `node`'s hierarchy (at most as many steps as there are nodes).
-fn root_of(scene: &Scene, node: usize) -> usize {
-    let mut n = node;
-    for _ in 0..scene.nodes.len() {
-        match scene.nodes.get(n).and_then(|x| x.parent) {
-            Some(p) => n = p,
-            None => break,
-        }
-    }
-    n
 }
 
 /// The environment as order-4 SH radiance, red then green then blue (16 numbers each).

@@ -1,7 +1,7 @@
 //! `psao serve --relight` on a scene with one skinned character (CesiumMan from the shared
 //! data, skipped when missing): `/characters/N.prt` (token-guarded, 404 out of range), the
-//! relighting message after the welcome only for clients announcing it, and the model cache
-//! reused on the next start.
+//! relighting message after the welcome only for clients announcing it, the model cache
+//! reused on the next start, and `psao view` of it showing the frames of `psao run --relight`.
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
@@ -11,7 +11,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{exchange, listening_addr, start_role, Proc};
+use common::{exchange, json, listening_addr, psao, start_role, stderr, Proc};
 use psao_wire::{capabilities, encode_frame, Hello, Message, PROTOCOL_VERSION};
 
 const TOKEN: &str = "sesame";
@@ -150,4 +150,101 @@ fn served_characters_go_over_http_and_tcp_and_their_models_are_cached() {
     assert_eq!(get(&addr, "/characters/0.prt", &bearer), (200, model));
     assert_eq!(cached_models(&cache), stored);
     assert_eq!(std::fs::metadata(&stored[0]).unwrap().ino(), inode);
+}
+
+/// A camera path in `dir` close to the character (the scene file places it at the floor's
+/// edge, near x = −2).
+fn close_path(dir: &Path) -> String {
+    let file = dir.join("close.toml");
+    let key = |t: f32, x: f32| {
+        format!("[[key]]\ntime = {t}\nposition = [{x}, 1.2, 3.3]\nlook_at = [-2.0, 0.7, 0.6]\n\n")
+    };
+    let text = format!(
+        "name = \"close\"\nfov_y_deg = 40.0\n\n{}{}",
+        key(0.0, -1.0),
+        key(1.0, -0.6)
+    );
+    std::fs::write(&file, text).unwrap();
+    file.display().to_string()
+}
+
+/// The settings `psao serve` and `psao run` share in the view test (besides the cache).
+const SHARED: [&str; 4] = ["--points", "48", "--ray-budget", "20000"];
+
+#[test]
+fn view_of_a_relit_serve_shows_the_frames_of_run_relight() {
+    let Some(character) = cesium_man() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache").display().to_string();
+    let scene = scene(dir.path(), &character);
+    let out = |name: &str| dir.path().join(name).display().to_string();
+    let path = close_path(dir.path());
+    let frames = ["--res", "64x48", "--path", &path];
+    let server = [
+        &["--listen", "127.0.0.1:0", "--hz", "30", "--lockstep"][..],
+        &["--wait-clients", "1", "--once", "--relight"],
+        &["--points-cache", &cache],
+        &SHARED,
+    ]
+    .concat();
+    let (mut child, line) = start_role("serve", &scene, &server, &[]);
+    let view_json = out("view.json");
+    let o = psao(
+        &[
+            &[
+                "view",
+                "--connect",
+                &listening_addr(&line),
+                "--scene",
+                &scene,
+            ][..],
+            &["--frames", "4", "--out", &out("view"), "--json", &view_json],
+            &frames,
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(child.0.wait().unwrap().success());
+    let run = |name: &str, relight: bool| {
+        let dir = out(name);
+        let mut args = [
+            &[
+                "run",
+                "--scene",
+                &scene,
+                "--server-hz",
+                "30",
+                "--frames",
+                "0..4",
+            ][..],
+            &["--points-cache", &cache, "--out", &dir],
+            &frames,
+            &SHARED,
+        ]
+        .concat();
+        if relight {
+            args.push("--relight");
+        }
+        let o = psao(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        json(&Path::new(&dir).join("stats.json"))
+    };
+    let relit = run("run", true);
+    let view = json(Path::new(&view_json));
+    assert_eq!(view["hash_mismatches"], 0, "{view}");
+    assert_eq!(view["state_hash"], relit["state_hash"]);
+    let png = |d: &str, name: &str| std::fs::read(dir.path().join(d).join(name)).unwrap();
+    for f in 0..4 {
+        for kind in ["frame", "ao"] {
+            let name = format!("{kind}_{f:05}.png");
+            assert!(png("run", &name) == png("view", &name), "{name}");
+        }
+    }
+    // Relighting shows: the same run without it has other frames (and the same AO).
+    let plain = run("plain", false);
+    assert_eq!(plain["state_hash"], relit["state_hash"]);
+    assert_eq!(png("plain", "ao_00003.png"), png("run", "ao_00003.png"));
+    assert!(png("plain", "frame_00003.png") != png("run", "frame_00003.png"));
 }
