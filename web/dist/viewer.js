@@ -1659,8 +1659,9 @@ float pow_k(float x) {
 
 // psao-points' RGB9E5 record: three 9-bit mantissas and a 5-bit exponent (bias 15).
 vec3 rgb9e5(uint r) {
-  int e = int(r >> 27) - 24;
-  return vec3(ldexp(float(r & 511u), e), ldexp(float((r >> 9) & 511u), e), ldexp(float((r >> 18) & 511u), e));
+  // 2^(exponent \u2212 15 \u2212 9), built from its bits (exact; GLSL ES 3.0 has no ldexp).
+  float step = uintBitsToFloat(((r >> 27) + 103u) << 23);
+  return vec3(float(r & 511u), float((r >> 9) & 511u), float((r >> 18) & 511u)) * step;
 }
 
 // One packed point of cell c with its irradiance record: the block pass weights it and
@@ -2476,6 +2477,7 @@ void main() {
   var canvas = document.getElementById("view");
   var gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
   var renderer = null;
+  var sceneError = null;
   var grids = gl ? new GridTextures(gl) : null;
   var path = null;
   var pathFrame = 0;
@@ -2710,7 +2712,7 @@ void main() {
       `psao viewer \u2014 ${status.connected ? `connected to ${status.edge}, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}${edges.length > 1 ? ` (server ${edgeIndex + 1} of ${edges.length})` : ""}`,
       `${status.fps} fps \xB7 ${status.mbitS.toFixed(2)} Mbit/s \xB7 server frame ${status.serverFrame} \xB7 round trip ${status.rttMs === null ? "-" : `${status.rttMs.toFixed(1)} ms`}`,
       `${status.updates} updates \xB7 ${status.points} points received \xB7 ${status.decodeMs ? status.decodeMs.toFixed(2) : "-"} ms decode per update`,
-      !renderer ? "WebGL2 unavailable: nothing drawn" : grids?.problem ? grids.problem : `view: ${modeName}, ${status.lit ? "lit (points' irradiance + shadow-mapped lights)" : "AO only"} (keys 1 2 3 4)${cost ? ` \xB7 AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " \xB7 C: shader cost"}`,
+      !renderer ? sceneError ?? (gl ? "loading the scene" : "WebGL2 unavailable: nothing drawn") : grids?.problem ? grids.problem : `view: ${modeName}, ${status.lit ? "lit (points' irradiance + shadow-mapped lights)" : "AO only"} (keys 1 2 3 4)${cost ? ` \xB7 AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " \xB7 C: shader cost"}`,
       status.path ? `camera path ${status.path}, frame ${status.pathFrame} (drag, wheel or W A S D Q E to take over)` : `camera: ${path ? "yours" : "orbit"} (drag, wheel, W A S D Q E; Space: ${path ? "back to the path" : "auto"})`,
       verify ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ` : "state hash not checked (add ?verify=1)"
     ].join("\n");
@@ -2738,7 +2740,9 @@ void main() {
       }
     }
   }).catch((e) => {
-    status.message = `cannot load /scene.glb: ${e}`;
+    sceneError = `cannot load /scene.glb: ${e}`;
+    status.message = sceneError;
+    console.error(sceneError);
   });
   Codec.load(fetch("/psao.wasm")).then((c) => {
     codec = c;

@@ -211,8 +211,9 @@ float pow_k(float x) {
 
 // psao-points' RGB9E5 record: three 9-bit mantissas and a 5-bit exponent (bias 15).
 vec3 rgb9e5(uint r) {
-  int e = int(r >> 27) - 24;
-  return vec3(ldexp(float(r & 511u), e), ldexp(float((r >> 9) & 511u), e), ldexp(float((r >> 18) & 511u), e));
+  // 2^(exponent − 15 − 9), built from its bits (exact; GLSL ES 3.0 has no ldexp).
+  float step = uintBitsToFloat(((r >> 27) + 103u) << 23);
+  return vec3(float(r & 511u), float((r >> 9) & 511u), float((r >> 18) & 511u)) * step;
 }
 
 // One packed point of cell c with its irradiance record: the block pass weights it and

@@ -219,6 +219,8 @@ const canvas = document.getElementById("view") as HTMLCanvasElement;
 // Kept after compositing so that tests (and screenshots) can read the frame back.
 const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
 let renderer: SceneRenderer | null = null;
+/// Why the scene could not be loaded or drawn, or null.
+let sceneError: string | null = null;
 const grids = gl ? new GridTextures(gl) : null;
 /// The followed path, its current frame, and (lockstep) the frames sent and answered.
 let path: CameraPathDoc | null = null;
@@ -493,7 +495,7 @@ function tick(now: number) {
       status.decodeMs ? status.decodeMs.toFixed(2) : "-"
     } ms decode per update`,
     !renderer
-      ? "WebGL2 unavailable: nothing drawn"
+      ? (sceneError ?? (gl ? "loading the scene" : "WebGL2 unavailable: nothing drawn"))
       : grids?.problem
         ? grids.problem
         : `view: ${modeName}, ${status.lit ? "lit (points' irradiance + shadow-mapped lights)" : "AO only"} (keys 1 2 3 4)${
@@ -541,7 +543,10 @@ fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${
     }
   })
   .catch((e) => {
-    status.message = `cannot load /scene.glb: ${e}`;
+    // Kept in the overlay: a session's welcome clears status.message.
+    sceneError = `cannot load /scene.glb: ${e}`;
+    status.message = sceneError;
+    console.error(sceneError);
   });
 Codec.load(fetch("/psao.wasm"))
   .then((c) => {

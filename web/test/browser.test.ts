@@ -313,12 +313,42 @@ async function saveMode(page: Page, key: "2" | "3", mode: number, file: string) 
   await savePng(page, file);
 }
 
+/// The committed open box (scenes/open_box.toml) lit by a sun turning along keys (at the
+/// compared frame it has turned a third of the way) and a point light in a corner: hard
+/// shadows of the block from both, sky light and bounces in the points. Returns the scene file.
+function writeLitScene(dir: string): string {
+  const scenes = fileURLToPath(new URL("../../../scenes/", import.meta.url));
+  writeFileSync(
+    join(dir, "lit.toml"),
+    `camera_paths = ["${scenes}open_box_path.toml"]
+sky = [0.35, 0.45, 0.6]
+
+[[asset]]
+file = "${scenes}open_box/open_box.obj"
+
+[[light]]
+kind = "sun"
+keys = { times = [0, 2], direction = [[0.45, 1.0, 0.35], [-0.5, 1.0, 0.6]] }
+color = [1.0, 0.95, 0.85]
+power = 3.0
+
+[[light]]
+kind = "point"
+position = [1.2, 1.6, 0.8]
+color = [1.0, 0.8, 0.6]
+power = 1.5
+`,
+  );
+  return join(dir, "lit.toml");
+}
+
 test("in chromium the lit composite of a lockstep run matches psao view's (≥ 40 dB, same state hash); its terms alone do not", { timeout: 240_000 }, async () => {
   const dir = mkdtempSync(join(tmpdir(), "psao-lit-"));
-  const lit = ["--lockstep", "--lighting", "gi"];
+  const scene = writeLitScene(dir);
+  const lit = ["--scene", scene, "--lockstep", "--lighting", "gi"];
   const cpu = await serve("127.0.0.1:0", lit);
   try {
-    const args = ["view", "--connect", cpu.addr, "--frames", `${AO_FRAMES}`, "--res", AO_RES, "--out", dir, "--json", join(dir, "view.json")];
+    const args = ["view", "--scene", scene, "--connect", cpu.addr, "--frames", `${AO_FRAMES}`, "--res", AO_RES, "--out", dir, "--json", join(dir, "view.json")];
     assert.equal(await run(args), 0);
   } finally {
     cpu.child.kill();
@@ -327,7 +357,7 @@ test("in chromium the lit composite of a lockstep run matches psao view's (≥ 4
   const gpu = await serve("127.0.0.1:0", lit);
   const page = await browser.newPage();
   try {
-    const query = `verify=1&path=${AO_PATH}&frames=${AO_FRAMES}&lockstep=1&res=${AO_RES}&mode=composited&scale=${AO_SCALE}&shadowscale=${SHADOW_SCALE}`;
+    const query = `verify=1&path=open_box&frames=${AO_FRAMES}&lockstep=1&res=${AO_RES}&mode=composited&scale=${AO_SCALE}&shadowscale=${SHADOW_SCALE}`;
     await page.goto(`http://${gpu.addr}/?${query}`);
     const s = await until(page, "the last lockstep frame", (s) => (s as Status & { done: boolean }).done, 180_000);
     assert.equal(s.mismatches, 0);

@@ -436,7 +436,10 @@ mod tests {
         let lights = json["extras"]["psao_lights"].as_array().unwrap();
         assert_eq!(lights.len(), 1);
         assert_eq!(lights[0]["kind"], "sun");
-        assert_eq!(lights[0]["power"].as_f64().unwrap() as f32, scene.lights[0].power);
+        assert_eq!(
+            lights[0]["power"].as_f64().unwrap() as f32,
+            scene.lights[0].power
+        );
         assert!(lights[0].get("keys").is_none());
     }
 

@@ -189,9 +189,27 @@ mod tests {
         plain
             .apply(&update(1, true, 1, 2, &[valid(7), valid(8)]))
             .unwrap();
-        assert_ne!(viewer.state().state_hash(), plain.state_hash(), "the hash covers the records");
+        assert_ne!(
+            viewer.state().state_hash(),
+            plain.state_hash(),
+            "the hash covers the records"
+        );
         let bucket = table()[1].layout.bucket_of(1) as u32;
-        let mut expected = vec![RESET, BUCKET, 1, bucket, 1, 2, 0, 2, CELL, 1, 2, valid(7), valid(8)];
+        let mut expected = vec![
+            RESET,
+            BUCKET,
+            1,
+            bucket,
+            1,
+            2,
+            0,
+            2,
+            CELL,
+            1,
+            2,
+            valid(7),
+            valid(8),
+        ];
         expected.extend([0; 5]);
         expected.extend([record, 7, 0, 0, 0, 0, 0]);
         assert_eq!(viewer.changes(), expected);
