@@ -13,11 +13,12 @@ import { join } from "node:path";
 import { fileURLToPath } from "node:url";
 import puppeteer from "puppeteer-core";
 
+// Bundled into build/bench/: the workspace is three levels up.
 const BIN = process.env.PSAO_BIN ?? fileURLToPath(new URL("../../../target/release/psao", import.meta.url));
 const CHROMIUM = process.env.CHROMIUM ?? "/usr/bin/chromium";
 const POINTS = process.env.POINTS ?? "1024";
 const SECONDS = Number(process.env.SECONDS ?? "20");
-const OUT = process.env.OUT ?? fileURLToPath(new URL("../../docs/img/viewer.png", import.meta.url));
+const OUT = process.env.OUT ?? fileURLToPath(new URL("../../../docs/img/viewer.png", import.meta.url));
 const [w, h] = (process.env.RES ?? "960x540").split("x").map(Number);
 
 interface Status {
