@@ -73,6 +73,10 @@
     stateHash() {
       return BigInt.asUintN(64, this.codec.exports.psao_state_hash(this.handle));
     }
+    /// Whether the state holds irradiance records (the server computes lighting).
+    hasLights() {
+      return this.codec.exports.psao_has_lights(this.handle) !== 0;
+    }
     /// What the last update changed, as crates/psao-wasm/src/changes.rs lays it out: a view of
     /// wasm memory, valid until the next call on this state.
     changes() {
@@ -366,11 +370,11 @@
       if (frame[i] !== MAGIC[i]) throw new WireError("bad magic: not a psao frame");
     }
     const view = new DataView(frame.buffer, frame.byteOffset, frame.byteLength);
-    const len = view.getUint32(4, true);
+    const len2 = view.getUint32(4, true);
     const crc = view.getUint32(8, true);
-    if (len > limit) throw new WireError(`payload of ${len} bytes exceeds the limit of ${limit}`);
-    if (frame.length - HEADER_LEN < len) throw new WireError("truncated frame");
-    if (frame.length - HEADER_LEN > len) throw new WireError("trailing bytes after the frame");
+    if (len2 > limit) throw new WireError(`payload of ${len2} bytes exceeds the limit of ${limit}`);
+    if (frame.length - HEADER_LEN < len2) throw new WireError("truncated frame");
+    if (frame.length - HEADER_LEN > len2) throw new WireError("trailing bytes after the frame");
     const payload = frame.subarray(HEADER_LEN);
     if (crc32(payload) !== crc) throw new WireError("checksum mismatch");
     return decodePayload(payload);
@@ -669,7 +673,7 @@
     /// Forgets every chunk.
     clear() {
       this.end = 0;
-      for (const f of this.free) f.length = 0;
+      for (const f2 of this.free) f2.length = 0;
     }
     /// A chunk of size class `c` (2^c texels); returns its first texel.
     alloc(c) {
@@ -702,10 +706,13 @@
       this.pool = new ChunkPool();
       /// Pages of cells allocated (0 until the grids hold points).
       this.cellPages = 0;
+      /// Whether an irradiance record arrived in this session (the irradiance pool exists).
+      this.lit = false;
       this.directory = new DataTexture(gl2, 1);
       this.entries = new DataTexture(gl2, 4);
       this.pageTable = new DataTexture(gl2, 1);
       this.cells = new DataTexture(gl2, 4);
+      this.lights = new DataTexture(gl2, 4);
     }
     /// Follows a new session's (empty) state: lays out its directory and page table.
     reset(state) {
@@ -729,6 +736,8 @@
       }
       this.directory.ensure(buckets);
       this.pageTable.ensure(pages, NO_PAGE);
+      this.lit = false;
+      this.lights.reset(0);
       this.clear();
     }
     /// Patches in the change records of one applied update (`state.changes()`).
@@ -748,8 +757,8 @@
           if (slot) this.setBucket(slot, index, changes.subarray(at + 4, at + 4 + 3 * count));
           at += 4 + 3 * count;
         } else if (tag === CELL) {
-          if (slot) this.setCell(slot, index, changes.subarray(at + 3, at + 3 + CELL_POINTS));
-          at += 3 + CELL_POINTS;
+          if (slot) this.setCell(slot, index, changes.subarray(at + 3, at + 3 + 2 * CELL_POINTS));
+          at += 3 + 2 * CELL_POINTS;
         } else {
           this.problem = `unknown change record ${tag}: AO not drawn`;
         }
@@ -758,11 +767,11 @@
     /// Uploads the texture rows changed since the last upload; binds nothing.
     upload() {
       if (this.problem) return;
-      this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload();
+      this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload() + this.lights.upload();
     }
     /// Bytes of texture storage in use.
     textureBytes() {
-      return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes();
+      return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes() + this.lights.bytes();
     }
     /// Bucket `b` of an instance: its used entries (key low, key high, cell slot each) into a
     /// chunk of the pool.
@@ -795,16 +804,16 @@
       dir[at] = count === 0 ? 0 : (first << 4 | count) >>> 0;
       this.directory.touch(at, 1);
     }
-    /// Cell slot `s` of an instance (its point words), into its page (allocated when it first
-    /// holds points).
-    setCell(slot, s, points) {
+    /// Cell slot `s` of an instance (its point words, then their irradiance records), into its
+    /// page (allocated when it first holds points or records).
+    setCell(slot, s, words) {
       if (s >= slot.maxCells) return;
       const at = slot.cellPageBase + Math.floor(s / CELL_PAGE);
       const table = this.pageTable.mirror;
       let page = table[at];
       if (page === NO_PAGE) {
         let any = false;
-        for (let i = 0; i < CELL_POINTS; i++) if (points[i] !== 0) any = true;
+        for (let i = 0; i < 2 * CELL_POINTS; i++) if (words[i] !== 0) any = true;
         if (!any) return;
         page = this.cellPages++;
         table[at] = page;
@@ -813,9 +822,16 @@
       }
       const texel = 2 * (page * CELL_PAGE + s % CELL_PAGE);
       const m = this.cells.mirror;
-      for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = points[i];
+      for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = words[i];
       m[texel * 4 + 7] = 0;
       this.cells.touch(texel, 2);
+      if (!this.lit) this.lit = words.subarray(CELL_POINTS).some((w) => w !== 0);
+      if (this.lit) {
+        this.lights.ensure(2 * CELL_PAGE * this.cellPages);
+        const l = this.lights.mirror;
+        for (let i = 0; i < CELL_POINTS; i++) l[texel * 4 + i] = words[CELL_POINTS + i];
+        this.lights.touch(texel, 2);
+      }
     }
     /// Empties the directory, page table and pools (a new state or a snapshot).
     clear() {
@@ -826,6 +842,406 @@
       this.pageTable.reset(NO_PAGE);
     }
   };
+
+  // src/lights.ts
+  var MAX_SUNS = 4;
+  var MAX_POINT_LIGHTS = 8;
+  var f = Math.fround;
+  function vec3(v, what) {
+    if (!Array.isArray(v) || v.length !== 3 || !v.every((x) => typeof x === "number" && Number.isFinite(x))) {
+      throw new Error(`${what} must be 3 finite numbers`);
+    }
+    return [v[0], v[1], v[2]];
+  }
+  function normalize(v, what) {
+    const l = Math.hypot(v[0], v[1], v[2]);
+    if (!(l * l >= 1e-12)) throw new Error(`${what} must be non-zero`);
+    return [f(v[0] / l), f(v[1] / l), f(v[2] / l)];
+  }
+  var dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  function slerp(a, b, s) {
+    const angle = Math.acos(Math.min(1, Math.max(-1, dot(a, b))));
+    if (angle < 1e-7) return a;
+    const sa = Math.sin((1 - s) * angle) / Math.sin(angle);
+    const sb = Math.sin(s * angle) / Math.sin(angle);
+    return normalize([sa * a[0] + sb * b[0], sa * a[1] + sb * b[1], sa * a[2] + sb * b[2]], "sun direction");
+  }
+  function directionAt(keys, t) {
+    const last = keys.times[keys.times.length - 1];
+    if (last > 0 && Number.isFinite(t)) t = (t % last + last) % last;
+    let k = 0;
+    while (k < keys.times.length && keys.times[k] <= t) k++;
+    if (k === 0) return keys.directions[0];
+    if (k === keys.times.length) return keys.directions[k - 1];
+    const [t0, t1] = [keys.times[k - 1], keys.times[k]];
+    return slerp(keys.directions[k - 1], keys.directions[k], t1 > t0 ? (t - t0) / (t1 - t0) : 1);
+  }
+  function keysOf(v, what) {
+    const k = v;
+    if (typeof k !== "object" || k === null || !Array.isArray(k.times) || !Array.isArray(k.directions)) {
+      throw new Error(`${what}: keys need times and directions`);
+    }
+    const times = k.times;
+    if (times.length === 0 || !times.every((t) => typeof t === "number" && Number.isFinite(t))) {
+      throw new Error(`${what}: key times must be a non-empty list of finite seconds`);
+    }
+    const ts = times;
+    if (ts.some((t, i) => i > 0 && t < ts[i - 1])) throw new Error(`${what}: key times must not decrease`);
+    if (k.directions.length !== ts.length) throw new Error(`${what}: ${k.directions.length} key directions for ${ts.length} times`);
+    const directions = k.directions.map((d, i) => normalize(vec3(d, `${what} key ${i}`), `${what} key ${i}`));
+    if (directions.some((d, i) => i > 0 && dot(d, directions[i - 1]) < -0.9999)) {
+      throw new Error(`${what}: consecutive key directions are opposite`);
+    }
+    return { times: ts, directions };
+  }
+  var SceneLights = class {
+    /// Parses `extras.psao_lights` (absent: no lights); throws on a malformed entry or more
+    /// lights than the shader takes.
+    constructor(doc) {
+      this.suns = [];
+      this.points = [];
+      if (doc === void 0) return;
+      if (!Array.isArray(doc)) throw new Error("extras.psao_lights must be a list");
+      doc.forEach((entry, i) => {
+        const what = `light ${i}`;
+        const l = entry;
+        if (typeof l !== "object" || l === null) throw new Error(`${what} is not an object`);
+        const colour = vec3(l.color, `${what} colour`);
+        if (colour.some((c) => c < 0 || c > 1)) throw new Error(`${what}: colour must be in [0, 1]`);
+        const power = l.power;
+        if (typeof power !== "number" || !Number.isFinite(power) || power < 0) throw new Error(`${what}: power must be a non-negative number`);
+        const strength = [f(colour[0] * power), f(colour[1] * power), f(colour[2] * power)];
+        if (l.kind === "sun") {
+          const direction = normalize(vec3(l.direction, `${what} direction`), `${what} direction`);
+          const keys = l.keys === void 0 ? null : keysOf(l.keys, what);
+          this.suns.push({ direction, irradiance: strength, keys });
+        } else if (l.kind === "point") {
+          this.points.push({ position: vec3(l.position, `${what} position`), intensity: strength });
+        } else {
+          throw new Error(`${what}: unknown kind ${JSON.stringify(l.kind)}`);
+        }
+      });
+      if (this.suns.length > MAX_SUNS) throw new Error(`${this.suns.length} suns: the viewer draws at most ${MAX_SUNS}`);
+      if (this.points.length > MAX_POINT_LIGHTS) {
+        throw new Error(`${this.points.length} point lights: the viewer draws at most ${MAX_POINT_LIGHTS}`);
+      }
+    }
+    /// The suns at scene time `t` seconds.
+    sunsAt(t) {
+      return this.suns.map((s) => ({ direction: s.keys ? directionAt(s.keys, t) : s.direction, irradiance: s.irradiance }));
+    }
+  };
+
+  // src/shadow.ts
+  function settingsForImage(width, height) {
+    const side = Math.max(width, height);
+    const clamp = (v, lo, hi) => Math.min(Math.max(v, lo), hi);
+    return { sunResolution: clamp(side, 256, 2048), cascades: 3, pointResolution: clamp(Math.floor(side / 2), 64, 512), pcf: 1 };
+  }
+  var SUN_DISTANCE = 256;
+  var LOG_SPLIT = 0.9;
+  var sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+  var add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+  var mul = (a, s) => [a[0] * s, a[1] * s, a[2] * s];
+  var len = (a) => Math.hypot(a[0], a[1], a[2]);
+  var cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  function normalizeOrZero(a) {
+    const l = len(a);
+    return l > 0 && Number.isFinite(l) ? mul(a, 1 / l) : [0, 0, 0];
+  }
+  function boxSphere(lo, hi) {
+    return { centre: mul(add(lo, hi), 0.5), radius: Math.max(len(sub(hi, lo)) * 0.5, 1e-3) };
+  }
+  function cascadeSpheres(camera, aspect, lo, hi, count) {
+    const scene = boxSphere(lo, hi);
+    const forward = normalizeOrZero(sub(camera.target, camera.position));
+    const right = normalizeOrZero(cross(forward, camera.up));
+    const up = cross(right, forward);
+    const near = Math.max(camera.near, 1e-3);
+    const reach = len(sub(scene.centre, camera.position)) + scene.radius;
+    const far = Math.max(Math.min(camera.far, reach), near * 1.001);
+    const tanY = Math.tan(camera.fovY * 0.5);
+    const tanX = tanY * aspect;
+    if (len(right) === 0 || !Number.isFinite(tanX) || !Number.isFinite(tanY)) return [scene];
+    const split = (k) => {
+      const f2 = k / count;
+      return (1 - LOG_SPLIT) * (near + (far - near) * f2) + LOG_SPLIT * near * Math.pow(far / near, f2);
+    };
+    const out = [];
+    for (let k = 0; k < count; k++) {
+      const corners = [];
+      for (const d of [split(k), split(k + 1)]) {
+        for (const [sx, sy] of [[-1, -1], [1, -1], [-1, 1], [1, 1]]) {
+          corners.push(add(camera.position, mul(add(forward, add(mul(right, sx * tanX), mul(up, sy * tanY))), d)));
+        }
+      }
+      const centre = mul(corners.reduce(add, [0, 0, 0]), 1 / corners.length);
+      const radius = Math.max(0, ...corners.map((c) => len(sub(c, centre))));
+      out.push(radius < scene.radius ? { centre, radius } : scene);
+    }
+    return out;
+  }
+  function sunCamera(direction, s, lo, hi) {
+    const scene = boxSphere(lo, hi);
+    const reach = Math.max(len(sub(scene.centre, s.centre)) + scene.radius, s.radius);
+    const distance = SUN_DISTANCE * reach;
+    return {
+      position: add(s.centre, mul(direction, distance)),
+      target: s.centre,
+      up: Math.abs(direction[1]) < 0.9 ? [0, 1, 0] : [1, 0, 0],
+      fovY: 2 * Math.asin(s.radius / distance),
+      near: distance - 1.01 * reach,
+      far: distance + 1.01 * reach
+    };
+  }
+  function faceCameras(position, lo, hi, res, pcf) {
+    const scene = boxSphere(lo, hi);
+    const far = (len(sub(scene.centre, position)) + scene.radius) * 1.01;
+    const near = Math.max(far * 1e-5, 1e-4);
+    const fovY = 2 * Math.atan(1 + 2 * (pcf + 1) / res);
+    const face = (axis, up) => ({ position, target: add(position, axis), up, fovY, near, far });
+    return [
+      face([1, 0, 0], [0, 1, 0]),
+      face([-1, 0, 0], [0, 1, 0]),
+      face([0, 1, 0], [0, 0, 1]),
+      face([0, -1, 0], [0, 0, 1]),
+      face([0, 0, 1], [0, 1, 0]),
+      face([0, 0, -1], [0, 1, 0])
+    ];
+  }
+  var MAP_TEXELS = 6;
+  var MapArray = class {
+    constructor(gl2) {
+      this.gl = gl2;
+      this.texture = null;
+      this.depth = null;
+      this.size = 0;
+      this.layers = 0;
+    }
+    ensure(size, layers) {
+      if (size === this.size && layers <= this.layers) return;
+      const gl2 = this.gl;
+      if (this.texture) gl2.deleteTexture(this.texture);
+      if (this.depth) gl2.deleteRenderbuffer(this.depth);
+      this.size = size;
+      this.layers = Math.max(layers, 1);
+      this.texture = gl2.createTexture();
+      gl2.bindTexture(gl2.TEXTURE_2D_ARRAY, this.texture);
+      gl2.texParameteri(gl2.TEXTURE_2D_ARRAY, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
+      gl2.texParameteri(gl2.TEXTURE_2D_ARRAY, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
+      gl2.texStorage3D(gl2.TEXTURE_2D_ARRAY, 1, gl2.R32F, size, size, this.layers);
+      this.depth = gl2.createRenderbuffer();
+      gl2.bindRenderbuffer(gl2.RENDERBUFFER, this.depth);
+      gl2.renderbufferStorage(gl2.RENDERBUFFER, gl2.DEPTH_COMPONENT24, size, size);
+    }
+  };
+  var ShadowMaps = class {
+    constructor(gl2) {
+      this.gl = gl2;
+      /// The lights drawn this frame.
+      this.sunLights = [];
+      this.pointLights = [];
+      this.settings = settingsForImage(1, 1);
+      /// Maps rendered at scale× (odd), the lookup reading each texel's centre sample.
+      this.scale = 1;
+      this.suns = new MapArray(gl2);
+      this.points = new MapArray(gl2);
+      this.table = gl2.createTexture();
+      gl2.bindTexture(gl2.TEXTURE_2D, this.table);
+      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MIN_FILTER, gl2.NEAREST);
+      gl2.texParameteri(gl2.TEXTURE_2D, gl2.TEXTURE_MAG_FILTER, gl2.NEAREST);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, MAP_TEXELS, 1, 0, gl2.RGBA, gl2.FLOAT, new Float32Array(MAP_TEXELS * 4));
+      this.fbo = gl2.createFramebuffer();
+    }
+    /// Renders the maps of `suns` and `points` for the scene within bounds (`lo`, `hi`), the
+    /// cascades fitted to `camera` at `aspect`; `viewProj` makes a map camera's matrix and
+    /// `draw` draws the scene with the depth program.
+    render(program2, draw, viewProj2, frame) {
+      const gl2 = this.gl;
+      const { settings, bounds } = frame;
+      this.settings = settings;
+      this.scale = Math.max(1, Math.floor(frame.scale) | 1);
+      this.sunLights = bounds ? frame.suns.filter((s) => len(s.direction) > 0).slice(0, MAX_SUNS) : [];
+      this.pointLights = bounds ? frame.points.slice(0, MAX_POINT_LIGHTS) : [];
+      if (!bounds) return;
+      const [lo, hi] = bounds;
+      const maps = [];
+      this.sunLights.forEach((s, i) => {
+        cascadeSpheres(frame.camera, frame.aspect, lo, hi, settings.cascades).forEach((sphere, k) => {
+          maps.push({ camera: sunCamera(s.direction, sphere, lo, hi), res: settings.sunResolution, array: this.suns, layer: i * settings.cascades + k });
+        });
+      });
+      this.pointLights.forEach((p, i) => {
+        faceCameras(p.position, lo, hi, settings.pointResolution, settings.pcf).forEach((camera, f2) => {
+          maps.push({ camera, res: settings.pointResolution, array: this.points, layer: i * 6 + f2 });
+        });
+      });
+      this.suns.ensure(settings.sunResolution * this.scale, this.sunLights.length * settings.cascades);
+      this.points.ensure(settings.pointResolution * this.scale, this.pointLights.length * 6);
+      const table = new Float32Array(Math.max(maps.length, 1) * MAP_TEXELS * 4);
+      gl2.useProgram(program2.p);
+      gl2.bindFramebuffer(gl2.FRAMEBUFFER, this.fbo);
+      gl2.enable(gl2.DEPTH_TEST);
+      gl2.depthFunc(gl2.LESS);
+      maps.forEach((m, i) => {
+        const vp = viewProj2(m.camera);
+        const forward = normalizeOrZero(sub(m.camera.target, m.camera.position));
+        table.set(vp, i * MAP_TEXELS * 4);
+        table.set([...m.camera.position, 2 * Math.tan(m.camera.fovY * 0.5) / m.res, ...forward, m.res], i * MAP_TEXELS * 4 + 16);
+        const size = m.res * this.scale;
+        gl2.framebufferTextureLayer(gl2.FRAMEBUFFER, gl2.COLOR_ATTACHMENT0, m.array.texture, 0, m.layer);
+        gl2.framebufferRenderbuffer(gl2.FRAMEBUFFER, gl2.DEPTH_ATTACHMENT, gl2.RENDERBUFFER, m.array.depth);
+        gl2.drawBuffers([gl2.COLOR_ATTACHMENT0]);
+        gl2.viewport(0, 0, size, size);
+        gl2.clearBufferfv(gl2.COLOR, 0, [3e38, 0, 0, 0]);
+        gl2.clearBufferfi(gl2.DEPTH_STENCIL, 0, 1, 0);
+        gl2.uniform3fv(program2.u.u_origin, m.camera.position);
+        gl2.uniform3fv(program2.u.u_forward, forward);
+        draw(program2, vp);
+      });
+      gl2.bindFramebuffer(gl2.FRAMEBUFFER, null);
+      gl2.disable(gl2.DEPTH_TEST);
+      gl2.bindTexture(gl2.TEXTURE_2D, this.table);
+      gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, MAP_TEXELS, Math.max(maps.length, 1), 0, gl2.RGBA, gl2.FLOAT, table);
+    }
+    /// The lookup's uniforms, set on the bound lit program.
+    setUniforms(u) {
+      const gl2 = this.gl;
+      const flat = (vs, n) => {
+        const a = new Float32Array(n * 3);
+        vs.forEach((v, i) => a.set(v, i * 3));
+        return a;
+      };
+      gl2.uniform1i(u.u_sun_count, this.sunLights.length);
+      gl2.uniform3fv(u["u_sun_dir[0]"], flat(this.sunLights.map((s) => s.direction), MAX_SUNS));
+      gl2.uniform3fv(u["u_sun_irr[0]"], flat(this.sunLights.map((s) => s.irradiance), MAX_SUNS));
+      gl2.uniform1i(u.u_point_count, this.pointLights.length);
+      gl2.uniform3fv(u["u_point_pos[0]"], flat(this.pointLights.map((p) => p.position), MAX_POINT_LIGHTS));
+      gl2.uniform3fv(u["u_point_int[0]"], flat(this.pointLights.map((p) => p.intensity), MAX_POINT_LIGHTS));
+      gl2.uniform1i(u.u_cascades, this.settings.cascades);
+      gl2.uniform1i(u.u_pcf, this.settings.pcf);
+      gl2.uniform1i(u.u_shadow_scale, this.scale);
+    }
+  };
+  var SHADOW_FRAGMENT = `#version 300 es
+precision highp float;
+in vec3 v_world;
+in vec3 v_normal;
+uniform vec3 u_origin;
+uniform vec3 u_forward;
+layout(location = 0) out float out_depth;
+void main() {
+  out_depth = dot(v_world - u_origin, u_forward);
+}`;
+  var SHADOW_GLSL = `
+uniform highp sampler2DArray u_sun_maps;
+uniform highp sampler2DArray u_point_maps;
+uniform highp sampler2D u_map_table;
+uniform int u_sun_count;
+uniform vec3 u_sun_dir[${MAX_SUNS}];
+uniform vec3 u_sun_irr[${MAX_SUNS}];
+uniform int u_point_count;
+uniform vec3 u_point_pos[${MAX_POINT_LIGHTS}];
+uniform vec3 u_point_int[${MAX_POINT_LIGHTS}];
+uniform int u_cascades;
+uniform int u_pcf;
+uniform int u_shadow_scale;
+
+struct ShadowMap { mat4 vp; vec3 origin; float texel_per_depth; vec3 forward; float res; };
+
+ShadowMap map_of(int m) {
+  ShadowMap s;
+  s.vp = mat4(texelFetch(u_map_table, ivec2(0, m), 0), texelFetch(u_map_table, ivec2(1, m), 0),
+              texelFetch(u_map_table, ivec2(2, m), 0), texelFetch(u_map_table, ivec2(3, m), 0));
+  vec4 a = texelFetch(u_map_table, ivec2(4, m), 0);
+  vec4 b = texelFetch(u_map_table, ivec2(5, m), 0);
+  s.origin = a.xyz;
+  s.texel_per_depth = a.w;
+  s.forward = b.xyz;
+  s.res = b.w;
+  return s;
+}
+
+// Continuous texel coordinates from the top-left corner, or false behind the view.
+bool project(ShadowMap s, vec3 p, out vec2 uv) {
+  vec4 clip = s.vp * vec4(p, 1.0);
+  if (!(clip.w > 0.0)) return false;
+  uv = vec2(clip.x / clip.w * 0.5 + 0.5, 0.5 - clip.y / clip.w * 0.5) * s.res;
+  return true;
+}
+
+bool covers(ShadowMap s, vec3 p) {
+  vec2 uv;
+  float reach = float(u_pcf) + 1.0;
+  return project(s, p, uv) && uv.x >= reach && uv.y >= reach && uv.x < s.res - reach && uv.y < s.res - reach;
+}
+
+float map_depth(bool sun, int layer, int x, int y, int res) {
+  ivec3 at = ivec3(x * u_shadow_scale + u_shadow_scale / 2, (res - 1 - y) * u_shadow_scale + u_shadow_scale / 2, layer);
+  return sun ? texelFetch(u_sun_maps, at, 0).x : texelFetch(u_point_maps, at, 0).x;
+}
+
+float visibility(ShadowMap s, bool sun, int layer, vec3 p, vec3 n, vec3 l) {
+  vec2 uv;
+  if (!project(s, p, uv)) return 1.0;
+  float texel = dot(p - s.origin, s.forward) * s.texel_per_depth;
+  float c = clamp(dot(n, l), 0.0, 1.0);
+  float sn = sqrt(1.0 - c * c);
+  vec3 moved = p + n * (texel * (float(u_pcf) + 1.5) * sn);
+  if (!project(s, moved, uv)) return 1.0;
+  float z = dot(moved - s.origin, s.forward);
+  float bias = texel;
+  int cx = int(floor(uv.x));
+  int cy = int(floor(uv.y));
+  int res = int(s.res);
+  int lit = 0;
+  for (int y = cy - u_pcf; y <= cy + u_pcf; y++) {
+    for (int x = cx - u_pcf; x <= cx + u_pcf; x++) {
+      bool inside = x >= 0 && x < res && y >= 0 && y < res;
+      if (!inside || z - bias <= map_depth(sun, layer, x, y, res)) lit++;
+    }
+  }
+  int side = 2 * u_pcf + 1;
+  return float(lit) / float(side * side);
+}
+
+int face_of(vec3 d) {
+  vec3 a = abs(d);
+  if (a.x >= a.y && a.x >= a.z) return d.x < 0.0 ? 1 : 0;
+  if (a.y >= a.z) return d.y < 0.0 ? 3 : 2;
+  return d.z < 0.0 ? 5 : 4;
+}
+
+vec3 direct_light(vec3 p, vec3 n) {
+  vec3 e = vec3(0.0);
+  for (int i = 0; i < u_sun_count; i++) {
+    vec3 d = u_sun_dir[i];
+    float c = dot(n, d);
+    if (c <= 0.0) continue;
+    float vis = 1.0;
+    for (int k = 0; k < u_cascades; k++) {
+      ShadowMap s = map_of(i * u_cascades + k);
+      if (covers(s, p)) {
+        vis = visibility(s, true, i * u_cascades + k, p, n, d);
+        break;
+      }
+    }
+    e += u_sun_irr[i] * (c * vis);
+  }
+  for (int i = 0; i < u_point_count; i++) {
+    vec3 d = u_point_pos[i] - p;
+    float dist2 = dot(d, d);
+    if (!(dist2 > 0.0)) continue;
+    vec3 l = d / sqrt(dist2);
+    float c = dot(n, l);
+    if (c <= 0.0) continue;
+    int face = i * 6 + face_of(-d);
+    float vis = visibility(map_of(u_sun_count * u_cascades + face), false, face, p, n, l);
+    e += u_point_int[i] * (c * vis / dist2);
+  }
+  return e;
+}
+`;
 
   // src/skin.ts
   var JOINT_TEXELS = 7;
@@ -891,7 +1307,7 @@
         const own = rig.node !== null && world[rig.node] ? world[rig.node] : rig.rest;
         const toLocal = invertOrIdentity(own);
         rig.joints.forEach((j, k) => {
-          const m = mul(mul(toLocal, world[j] ?? identity()), rig.inverseBind[k]);
+          const m = mul2(mul2(toLocal, world[j] ?? identity()), rig.inverseBind[k]);
           const at = (rig.base + k) * JOINT_TEXELS * 4;
           out.set(m, at);
           out.set(normalMatrix(m), at + 16);
@@ -917,7 +1333,7 @@
       for (const n of this.order) {
         const l = trs(local[n].t, local[n].r, local[n].s);
         const p = this.parents[n];
-        world[n] = p === null ? l : mul(world[p], l);
+        world[n] = p === null ? l : mul2(world[p], l);
       }
       return world;
     }
@@ -952,7 +1368,7 @@
       const s = (t - times[k]) / dt;
       if (ch.interpolation === "STEP") raw = valueAt(k);
       else if (ch.interpolation === "LINEAR") {
-        if (ch.path === "rotation") return normalize(slerp(normalize(valueAt(k)), normalize(valueAt(k + 1)), s));
+        if (ch.path === "rotation") return normalize2(slerp2(normalize2(valueAt(k)), normalize2(valueAt(k + 1)), s));
         const a = valueAt(k);
         const b = valueAt(k + 1);
         raw = a.map((x, i) => x + (b[i] - x) * s);
@@ -969,22 +1385,22 @@
       }
     }
     if (ch.path !== "rotation") return raw;
-    const len = Math.hypot(...raw);
-    return len > 0 && Number.isFinite(len) ? raw.map((x) => x / len) : [0, 0, 0, 1];
+    const len2 = Math.hypot(...raw);
+    return len2 > 0 && Number.isFinite(len2) ? raw.map((x) => x / len2) : [0, 0, 0, 1];
   }
-  function normalize(q) {
-    const len = Math.hypot(...q);
-    return q.map((x) => x / len);
+  function normalize2(q) {
+    const len2 = Math.hypot(...q);
+    return q.map((x) => x / len2);
   }
-  function slerp(a, b, s) {
-    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+  function slerp2(a, b, s) {
+    let dot2 = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
     let e = b;
-    if (dot < 0) {
+    if (dot2 < 0) {
       e = b.map((x) => -x);
-      dot = -dot;
+      dot2 = -dot2;
     }
-    if (dot > 1 - 2 ** -23) return normalize(a.map((x, i) => x * (1 - s) + e[i] * s));
-    const theta = acosApprox(dot);
+    if (dot2 > 1 - 2 ** -23) return normalize2(a.map((x, i) => x * (1 - s) + e[i] * s));
+    const theta = acosApprox(dot2);
     const s1 = Math.sin(theta * (1 - s));
     const s2 = Math.sin(theta * s);
     const inv = 1 / Math.sin(theta);
@@ -1015,7 +1431,7 @@
     m[14] = t[2];
     return m;
   }
-  function mul(a, b) {
+  function mul2(a, b) {
     const out = new Float64Array(16);
     for (let c = 0; c < 4; c++) {
       for (let r = 0; r < 4; r++) {
@@ -1032,14 +1448,14 @@
   function inverse3(m) {
     const det = det3(m);
     if (!(det !== 0 && Number.isFinite(det))) return null;
-    const [a, b, c, d, e, f, g, h, i] = [m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]];
+    const [a, b, c, d, e, f2, g, h, i] = [m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]];
     return [
-      (e * i - f * h) / det,
+      (e * i - f2 * h) / det,
       (c * h - b * i) / det,
-      (b * f - c * e) / det,
-      (f * g - d * i) / det,
+      (b * f2 - c * e) / det,
+      (f2 * g - d * i) / det,
       (a * i - c * g) / det,
-      (c * d - a * f) / det,
+      (c * d - a * f2) / det,
       (d * h - e * g) / det,
       (b * g - a * h) / det,
       (a * e - b * d) / det
@@ -1062,9 +1478,11 @@
 
   // src/aoshader.ts
   var MODE_COMPOSITED = 0;
-  var MODE_AO = 1;
-  var MODE_NO_AO = 2;
-  var MODE_COST = 3;
+  var MODE_IRRADIANCE = 1;
+  var MODE_DIRECT = 2;
+  var MODE_AO = 3;
+  var MODE_NO_AO = 4;
+  var MODE_COST = 5;
   var VERTEX = `#version 300 es
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
@@ -1153,6 +1571,10 @@ uniform vec3 u_sky;
 uniform vec3 u_light_dir;
 uniform float u_light;
 uniform float u_ambient;
+// A lit session: irradiance records beside the cells, direct light from the shadow maps.
+uniform bool u_lit;
+uniform usampler2D u_lights; // RGB9E5 records, laid out as u_cells
+${SHADOW_GLSL}
 
 // Per instance (one row each, see grids.ts' instanceRows): its view (has_view false: AO 1,
 // as psao-client without a grid or an invertible transform) and grid layout.
@@ -1210,6 +1632,7 @@ uvec2 mul64(uint s, uvec2 v) { return add64(mul32(s, v.x), uvec2(0u, s * v.y)); 
 vec3 P, N;
 float R, R2, INV_R, PLANE;
 float w_sum, ao_sum, nearest_d2, nearest_ao;
+vec3 e_sum, nearest_e, E;
 int cells_visited, points_visited;
 
 // The slot of allocated cell c (InstanceGrid::find_cell), or -1.
@@ -1234,9 +1657,16 @@ float pow_k(float x) {
   return y;
 }
 
-// One packed point of cell c: the block pass weights it and tracks the nearest compatible
-// point; the ring pass only tracks the nearest.
-void point(uint bits, vec3 cell_min, bool weigh) {
+// psao-points' RGB9E5 record: three 9-bit mantissas and a 5-bit exponent (bias 15).
+vec3 rgb9e5(uint r) {
+  // 2^(exponent \u2212 15 \u2212 9), built from its bits (exact; GLSL ES 3.0 has no ldexp).
+  float step = uintBitsToFloat(((r >> 27) + 103u) << 23);
+  return vec3(float(r & 511u), float((r >> 9) & 511u), float((r >> 18) & 511u)) * step;
+}
+
+// One packed point of cell c with its irradiance record: the block pass weights it and
+// tracks the nearest compatible point; the ring pass only tracks the nearest.
+void point(uint bits, uint record, vec3 cell_min, bool weigh) {
   if ((bits & 0x80000000u) == 0u) return;
   points_visited++;
   vec3 frac = (vec3((uvec3(bits >> 26, bits >> 21, bits >> 16)) & 31u) + 0.5) * (1.0 / 32.0);
@@ -1249,14 +1679,17 @@ void point(uint bits, vec3 cell_min, bool weigh) {
                     (d2 == 0.0 || c * c < u_direction_threshold);
   if (!compatible) return;
   float ao = float(bits & 255u) * (1.0 / 255.0);
+  vec3 e = u_lit ? rgb9e5(record) : vec3(0.0);
   if (weigh && d2 < R2) {
     float w = (R - sqrt(d2)) * INV_R * pow_k(nn);
     w_sum += w;
     ao_sum += w * ao;
+    e_sum += w * e;
   }
   if (d2 < nearest_d2) {
     nearest_d2 = d2;
     nearest_ao = ao;
+    nearest_e = e;
   }
 }
 
@@ -1269,9 +1702,12 @@ void cell(ivec3 c, bool weigh) {
   uint t = 2u * (page * CELL_PAGE + uint(slot) % CELL_PAGE);
   uvec4 a = texelFetch(u_cells, at(t), 0);
   uvec4 b = texelFetch(u_cells, at(t + 1u), 0);
+  uvec4 la = u_lit ? texelFetch(u_lights, at(t), 0) : uvec4(0u);
+  uvec4 lb = u_lit ? texelFetch(u_lights, at(t + 1u), 0) : uvec4(0u);
   vec3 m = vec3(c);
-  point(a.x, m, weigh); point(a.y, m, weigh); point(a.z, m, weigh); point(a.w, m, weigh);
-  point(b.x, m, weigh); point(b.y, m, weigh); point(b.z, m, weigh);
+  point(a.x, la.x, m, weigh); point(a.y, la.y, m, weigh); point(a.z, la.z, m, weigh);
+  point(a.w, la.w, m, weigh); point(b.x, lb.x, m, weigh); point(b.y, lb.y, m, weigh);
+  point(b.z, lb.z, m, weigh);
 }
 
 void load_instance(int i) {
@@ -1297,7 +1733,9 @@ void load_instance(int i) {
   u_slice = c.zw;
 }
 
+// AO at the pixel; the irradiance goes into E (0 where there is no compatible point).
 float reconstruct(vec3 world, vec3 normal) {
+  E = vec3(0.0);
   // Without cells psao-client finds no point in the block nor in the ring: AO 1, decided
   // here without the 64 lookups (which made every frame cost the most before any points).
   if (!u_has_view || !u_has_cells) return 1.0;
@@ -1314,17 +1752,27 @@ float reconstruct(vec3 world, vec3 normal) {
   ao_sum = 0.0;
   nearest_d2 = 3.4e38;
   nearest_ao = -1.0;
+  e_sum = vec3(0.0);
+  nearest_e = vec3(0.0);
   ivec3 base = ivec3(floor((P - u_origin) * u_inv_cell - 0.5));
   for (int k = 0; k < 8; k++) cell(base + ivec3(k & 1, (k >> 1) & 1, k >> 2), true);
-  if (w_sum > 0.0) return ao_sum / w_sum;
+  if (w_sum > 0.0) {
+    E = e_sum / w_sum;
+    return ao_sum / w_sum;
+  }
   if (!u_fallback) return 1.0;
-  if (nearest_ao >= 0.0) return nearest_ao;
+  if (nearest_ao >= 0.0) {
+    E = nearest_e;
+    return nearest_ao;
+  }
   for (int k = 0; k < 64; k++) {
     ivec3 o = ivec3(k & 3, (k >> 2) & 3, k >> 4) - 1;
     if (all(greaterThanEqual(o, ivec3(0))) && all(lessThanEqual(o, ivec3(1)))) continue;
     cell(base + o, false);
   }
-  return nearest_ao >= 0.0 ? nearest_ao : 1.0;
+  if (nearest_ao < 0.0) return 1.0;
+  E = nearest_e;
+  return nearest_ao;
 }
 
 float srgb(float linear) {
@@ -1346,14 +1794,27 @@ void main() {
   }
   vec3 n = gn.xyz;
   load_instance(int(gp.w));
-  float ao = u_mode == ${MODE_NO_AO} ? 1.0 : reconstruct(gp.xyz, n);
+  // The direct view of a lit session needs no points.
+  bool points = u_mode != ${MODE_NO_AO} && !(u_lit && u_mode == ${MODE_DIRECT});
+  E = vec3(0.0);
+  float ao = points ? reconstruct(gp.xyz, n) : 1.0;
   if (u_mode == ${MODE_AO}) {
     out_colour = vec4(vec3(ao), 1.0);
   } else if (u_mode == ${MODE_COST}) {
     out_colour = vec4(float(cells_visited), float(points_visited & 255), float(points_visited >> 8), 255.0) / 255.0;
   } else {
     vec3 colour = texelFetch(u_colours, ivec2(int(gn.w), 0), 0).rgb;
-    vec3 rgb = colour * (u_ambient * ao + u_light * max(0.0, dot(n, u_light_dir)));
+    vec3 rgb;
+    if (u_lit) {
+      // psao-client's composite_lit: base colour / \u03C0 \xD7 (direct + irradiance).
+      vec3 direct = u_mode == ${MODE_IRRADIANCE} ? vec3(0.0) : direct_light(gp.xyz, n);
+      vec3 e = u_mode == ${MODE_DIRECT} ? direct : u_mode == ${MODE_IRRADIANCE} ? E : direct + E;
+      rgb = colour * e / 3.14159265358979;
+    } else {
+      float ambient = u_mode == ${MODE_DIRECT} ? 0.0 : u_ambient * ao;
+      float light = u_mode == ${MODE_IRRADIANCE} ? 0.0 : u_light * max(0.0, dot(n, u_light_dir));
+      rgb = colour * (ambient + light);
+    }
     out_colour = vec4(srgb(rgb.r), srgb(rgb.g), srgb(rgb.b), 1.0);
   }
 }`;
@@ -1399,21 +1860,21 @@ void main() {
     return Math.round(s * 255);
   }
   function normalTable() {
-    const f = Math.fround;
-    const step = f(2 / 14);
-    const level = (q) => f(f(Math.min(q, 14) * step) - 1);
+    const f2 = Math.fround;
+    const step = f2(2 / 14);
+    const level = (q) => f2(f2(Math.min(q, 14) * step) - 1);
     const sign = (x) => x >= 0 ? 1 : -1;
     const out = new Float32Array(256 * 4);
     for (let code = 0; code < 256; code++) {
       const ox = level(code >> 4);
       const oy = level(code & 15);
-      const z = f(f(1 - Math.abs(ox)) - Math.abs(oy));
+      const z = f2(f2(1 - Math.abs(ox)) - Math.abs(oy));
       let v;
       if (z >= 0) v = [ox, oy, z];
-      else v = [f(f(1 - Math.abs(oy)) * sign(ox)), f(f(1 - Math.abs(ox)) * sign(oy)), z];
-      const len = f(Math.sqrt(f(f(f(v[0] * v[0]) + f(v[1] * v[1])) + f(v[2] * v[2]))));
-      const inv = f(1 / len);
-      out.set([f(v[0] * inv), f(v[1] * inv), f(v[2] * inv), 0], code * 4);
+      else v = [f2(f2(1 - Math.abs(oy)) * sign(ox)), f2(f2(1 - Math.abs(ox)) * sign(oy)), z];
+      const len2 = f2(Math.sqrt(f2(f2(f2(v[0] * v[0]) + f2(v[1] * v[1])) + f2(v[2] * v[2]))));
+      const inv = f2(1 / len2);
+      out.set([f2(v[0] * inv), f2(v[1] * inv), f2(v[2] * inv), 0], code * 4);
     }
     return out;
   }
@@ -1425,16 +1886,16 @@ void main() {
     return s;
   }
   function instanceView(t) {
-    const [a, b, c, d, e, f, g, h, i] = t;
-    const det = a * (e * i - f * h) - d * (b * i - c * h) + g * (b * f - c * e);
+    const [a, b, c, d, e, f2, g, h, i] = t;
+    const det = a * (e * i - f2 * h) - d * (b * i - c * h) + g * (b * f2 - c * e);
     if (!(Math.abs(det) > MIN_DETERMINANT)) return null;
     const inv = [
-      (e * i - f * h) / det,
+      (e * i - f2 * h) / det,
       (c * h - b * i) / det,
-      (b * f - c * e) / det,
-      (f * g - d * i) / det,
+      (b * f2 - c * e) / det,
+      (f2 * g - d * i) / det,
       (a * i - c * g) / det,
-      (c * d - a * f) / det,
+      (c * d - a * f2) / det,
       (d * h - e * g) / det,
       (b * g - a * h) / det,
       (a * e - b * d) / det
@@ -1445,7 +1906,7 @@ void main() {
     const iz = -(inv[2] * tx + inv[5] * ty + inv[8] * tz);
     const toLocal = new Float32Array([inv[0], inv[1], inv[2], 0, inv[3], inv[4], inv[5], 0, inv[6], inv[7], inv[8], 0, ix, iy, iz, 1]);
     if (!toLocal.every(Number.isFinite)) return null;
-    return { toLocal, normalToLocal: new Float32Array([a, d, g, b, e, h, c, f, i]) };
+    return { toLocal, normalToLocal: new Float32Array([a, d, g, b, e, h, c, f2, i]) };
   }
   var GBufferTargets = class {
     constructor(gl2) {
@@ -1513,15 +1974,24 @@ void main() {
   var SceneRenderer = class {
     constructor(gl2, glb) {
       this.gl = gl2;
+      /// Vertex positions of each mesh (all primitives), for the posed scene's bounds.
+      this.meshPositions = [];
+      this.boundsCache = [];
       this.meshes = [];
       this.instances = [];
       /// The scene's animation (skinned instances), when anything is skinned.
       this.animation = null;
       /// The scene's camera paths (from the glb's extras).
       this.paths = [];
+      /// The scene's suns and point lights (from the glb's extras).
+      this.lights = new SceneLights(void 0);
+      /// Milliseconds of the last frame's shadow maps (0 when none were drawn).
+      this.shadowMs = 0;
       if (!gl2.getExtension("EXT_color_buffer_float")) throw new Error("WebGL2 without EXT_color_buffer_float");
       this.gbuffer = program(gl2, VERTEX, GBUFFER);
       this.shade = program(gl2, FULLSCREEN, FRAGMENT);
+      this.depth = program(gl2, VERTEX, SHADOW_FRAGMENT);
+      this.shadows = new ShadowMaps(gl2);
       this.targets = new GBufferTargets(gl2);
       this.normals = dataTexture(gl2);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, 256, 1, 0, gl2.RGBA, gl2.FLOAT, normalTable());
@@ -1543,6 +2013,7 @@ void main() {
       const jsonLen = view.getUint32(12, true);
       const doc = JSON.parse(new TextDecoder().decode(glb.subarray(20, 20 + jsonLen)));
       this.paths = doc.extras?.psao_camera_paths ?? [];
+      this.lights = new SceneLights(doc.extras?.psao_lights);
       const binAt = 20 + jsonLen + 8;
       const bin = glb.subarray(binAt, binAt + view.getUint32(20 + jsonLen, true));
       const data = (index) => {
@@ -1558,8 +2029,11 @@ void main() {
       const colours = [];
       for (const mesh of doc.meshes ?? []) {
         const prims = [];
+        const positions = [];
+        this.meshPositions.push(positions);
         for (const prim of mesh.primitives) {
           if (prim.attributes.POSITION === void 0 || prim.attributes.NORMAL === void 0 || prim.indices === void 0) continue;
+          positions.push(readAccessor(doc, bin, prim.attributes.POSITION));
           const vao = gl2.createVertexArray();
           gl2.bindVertexArray(vao);
           for (const [loc, acc] of [
@@ -1634,34 +2108,33 @@ void main() {
         padded.set(texels);
         gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, TEX_WIDTH, rows2, 0, gl2.RGBA, gl2.FLOAT, padded);
       }
-      gl2.uniform1i(g.u_joints, 0);
-      gl2.uniformMatrix4fv(g.u_view_proj, false, viewProj(camera));
       gl2.uniform3fv(g.u_eye, camera.position);
-      const model = new Float32Array(16);
+      this.drawInstances(this.gbuffer, viewProj(camera), state);
       const instF = new Float32Array(this.instances.length * INST_F * 4);
       const instU = new Uint32Array(this.instances.length * INST_U * 4);
-      for (const [i, inst] of this.instances.entries()) {
-        const t = state?.transforms[i] ?? null;
-        if (t) {
-          model.set([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
-        } else {
-          model.set(inst.matrix);
-        }
-        gl2.uniformMatrix4fv(g.u_model, false, model);
-        gl2.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
-        gl2.uniform1f(g.u_instance, i);
-        const jointBase = animation ? animation.jointBase[i] : -1;
-        for (const p of this.meshes[inst.mesh] ?? []) {
-          gl2.uniform1f(g.u_colour_index, p.colour);
-          gl2.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
-          gl2.bindVertexArray(p.vao);
-          gl2.drawElements(gl2.TRIANGLES, p.count, gl2.UNSIGNED_INT, 0);
-        }
-        this.instanceRow(i, t, state, grids2, instF, instU);
+      for (let i = 0; i < this.instances.length; i++) {
+        this.instanceRow(i, state?.transforms[i] ?? null, state, grids2, instF, instU);
       }
-      gl2.bindVertexArray(null);
       gl2.bindFramebuffer(gl2.FRAMEBUFFER, null);
       gl2.disable(gl2.DEPTH_TEST);
+      const lit = state?.hasLights() ?? false;
+      const needsDirect = lit && opts.mode !== MODE_AO && opts.mode !== MODE_IRRADIANCE;
+      this.shadowMs = 0;
+      if (needsDirect) {
+        const t0 = performance.now();
+        const time = opts.time ?? 0;
+        const mapCamera = { ...camera };
+        this.shadows.render(this.depth, (prog, vp) => this.drawInstances(prog, vp, state), viewProj, {
+          suns: this.lights.sunsAt(time),
+          points: this.lights.points,
+          camera: mapCamera,
+          aspect: w / Math.max(h, 1),
+          bounds: this.posedBounds(state),
+          settings: settingsForImage(w, h),
+          scale: opts.shadowScale ?? 1
+        });
+        this.shadowMs = performance.now() - t0;
+      }
       const u = this.shade.u;
       gl2.viewport(0, 0, w, h);
       gl2.useProgram(this.shade.p);
@@ -1680,13 +2153,26 @@ void main() {
         ["u_gnormal", this.targets.normal],
         ["u_colours", this.colours],
         ["u_instf", this.instF],
-        ["u_instu", this.instU]
+        ["u_instu", this.instU],
+        ["u_lights", (lit ? grids2?.lights.texture : null) ?? this.emptyU],
+        ["u_map_table", this.shadows.table]
       ];
       textures.forEach(([name, t], unit) => {
         gl2.activeTexture(gl2.TEXTURE0 + unit);
         gl2.bindTexture(gl2.TEXTURE_2D, t);
         gl2.uniform1i(u[name], unit);
       });
+      const arrays = [
+        ["u_sun_maps", this.shadows.suns.texture],
+        ["u_point_maps", this.shadows.points.texture]
+      ];
+      arrays.forEach(([name, t], k) => {
+        gl2.activeTexture(gl2.TEXTURE0 + textures.length + k);
+        gl2.bindTexture(gl2.TEXTURE_2D_ARRAY, t);
+        gl2.uniform1i(u[name], textures.length + k);
+      });
+      gl2.uniform1i(u.u_lit, lit ? 1 : 0);
+      this.shadows.setUniforms(u);
       gl2.activeTexture(gl2.TEXTURE0);
       gl2.uniform1i(u.u_mode, opts.mode);
       gl2.uniform1i(u.u_scale, scale2);
@@ -1704,17 +2190,83 @@ void main() {
       gl2.uniform1i(u.u_fallback, SETTINGS.fallback ? 1 : 0);
       gl2.drawArrays(gl2.TRIANGLES, 0, 3);
     }
+    /// Draws every instance with `prog` (the G-buffer's vertex shader) from `vp`: at the
+    /// transform of the state's last update carrying one, else its rest matrix, skinned with
+    /// the joint texture bound to unit 0.
+    drawInstances(prog, vp, state) {
+      const gl2 = this.gl;
+      const g = prog.u;
+      gl2.useProgram(prog.p);
+      gl2.activeTexture(gl2.TEXTURE0);
+      gl2.bindTexture(gl2.TEXTURE_2D, this.joints);
+      gl2.uniform1i(g.u_joints, 0);
+      gl2.uniformMatrix4fv(g.u_view_proj, false, vp);
+      const animation = this.animation;
+      const model = new Float32Array(16);
+      for (const [i, inst] of this.instances.entries()) {
+        model.set(this.modelOf(i, state));
+        gl2.uniformMatrix4fv(g.u_model, false, model);
+        gl2.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
+        gl2.uniform1f(g.u_instance, i);
+        const jointBase = animation ? animation.jointBase[i] : -1;
+        for (const p of this.meshes[inst.mesh] ?? []) {
+          gl2.uniform1f(g.u_colour_index, p.colour);
+          gl2.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
+          gl2.bindVertexArray(p.vao);
+          gl2.drawElements(gl2.TRIANGLES, p.count, gl2.UNSIGNED_INT, 0);
+        }
+      }
+      gl2.bindVertexArray(null);
+    }
+    /// Instance i's model matrix (column-major 4×4): the state's transform, else its rest matrix.
+    modelOf(i, state) {
+      const t = state?.transforms[i] ?? null;
+      if (!t) return this.instances[i].matrix;
+      return new Float32Array([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
+    }
+    /// World bounds of every instance's (unskinned) mesh vertices at the drawn transforms, as
+    /// psao-raster's shadow maps take them (skinned instances: their rest vertices); null
+    /// without vertices. Each instance's bounds are kept until its transform changes.
+    posedBounds(state) {
+      const lo = [Infinity, Infinity, Infinity];
+      const hi = [-Infinity, -Infinity, -Infinity];
+      for (const [i, inst] of this.instances.entries()) {
+        const m = this.modelOf(i, state);
+        const key = m.join(",");
+        let b = this.boundsCache[i];
+        if (!b || b.key !== key) {
+          b = { key, lo: [Infinity, Infinity, Infinity], hi: [-Infinity, -Infinity, -Infinity] };
+          for (const positions of this.meshPositions[inst.mesh] ?? []) {
+            for (let v = 0; v + 3 <= positions.length; v += 3) {
+              const [x, y, z] = [positions[v], positions[v + 1], positions[v + 2]];
+              for (let r = 0; r < 3; r++) {
+                const w = Math.fround(m[r] * x + m[4 + r] * y + m[8 + r] * z + m[12 + r]);
+                if (!Number.isFinite(w)) continue;
+                b.lo[r] = Math.min(b.lo[r], w);
+                b.hi[r] = Math.max(b.hi[r], w);
+              }
+            }
+          }
+          this.boundsCache[i] = b;
+        }
+        for (let r = 0; r < 3; r++) {
+          lo[r] = Math.min(lo[r], b.lo[r]);
+          hi[r] = Math.max(hi[r], b.hi[r]);
+        }
+      }
+      return lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2] ? [lo, hi] : null;
+    }
     /// Instance i's row of the instance textures: its view and grid layout.
-    instanceRow(i, t, state, grids2, f, u) {
+    instanceRow(i, t, state, grids2, f2, u) {
       const slot = grids2?.slots[i] ?? null;
       const view = t && state && slot ? instanceView(t) : null;
       if (!view || !state || !slot) return;
       const e = state.table[i];
       const fo = i * INST_F * 4;
-      f.set(view.toLocal, fo);
+      f2.set(view.toLocal, fo);
       const n = view.normalToLocal;
-      f.set([n[0], n[1], n[2], 0, n[3], n[4], n[5], 0, n[6], n[7], n[8], 0], fo + 16);
-      f.set([e.origin[0], e.origin[1], e.origin[2], e.cellSize, Math.fround(1 / e.cellSize), e.layoutPoissonRadius, 1, 0], fo + 28);
+      f2.set([n[0], n[1], n[2], 0, n[3], n[4], n[5], 0, n[6], n[7], n[8], 0], fo + 16);
+      f2.set([e.origin[0], e.origin[1], e.origin[2], e.cellSize, Math.fround(1 / e.cellSize), e.layoutPoissonRadius, 1, 0], fo + 28);
       const row = BigInt(e.dims[0]) * 17n;
       const slice = BigInt(e.dims[0]) * BigInt(e.dims[1]) * 31n;
       u.set(
@@ -1738,18 +2290,18 @@ void main() {
   };
   function normalMatrixOf(m) {
     const [a, b, c] = [m[0], m[1], m[2]];
-    const [d, e, f] = [m[4], m[5], m[6]];
+    const [d, e, f2] = [m[4], m[5], m[6]];
     const [g, h, i] = [m[8], m[9], m[10]];
-    const det = a * (e * i - f * h) - d * (b * i - c * h) + g * (b * f - c * e) || 1;
+    const det = a * (e * i - f2 * h) - d * (b * i - c * h) + g * (b * f2 - c * e) || 1;
     return [
-      (e * i - f * h) / det,
-      (f * g - d * i) / det,
+      (e * i - f2 * h) / det,
+      (f2 * g - d * i) / det,
       (d * h - e * g) / det,
       (c * h - b * i) / det,
       (a * i - c * g) / det,
       (b * g - a * h) / det,
-      (b * f - c * e) / det,
-      (c * d - a * f) / det,
+      (b * f2 - c * e) / det,
+      (c * d - a * f2) / det,
       (a * e - b * d) / det
     ];
   }
@@ -1790,9 +2342,9 @@ void main() {
       fx * px + fy * py + fz * pz,
       1
     ];
-    const f = 1 / Math.tan(c.fovY / 2);
+    const f2 = 1 / Math.tan(c.fovY / 2);
     const { near: n, far: fr } = c;
-    const proj = [f / c.aspect, 0, 0, 0, 0, f, 0, 0, 0, 0, (fr + n) / (n - fr), -1, 0, 0, 2 * fr * n / (n - fr), 0];
+    const proj = [f2 / (c.aspect ?? 1), 0, 0, 0, 0, f2, 0, 0, 0, 0, (fr + n) / (n - fr), -1, 0, 0, 2 * fr * n / (n - fr), 0];
     const out = new Float32Array(16);
     for (let col = 0; col < 4; col++) {
       for (let row = 0; row < 4; row++) {
@@ -1823,6 +2375,9 @@ void main() {
     camera: null,
     autoOrbit: true,
     mode: MODE_COMPOSITED,
+    lit: false,
+    shadowMs: 0,
+    drawMs: 0,
     edge: location.host,
     rttEdge: null,
     rttMs: null,
@@ -1846,7 +2401,14 @@ void main() {
   var lockstep = params.get("lockstep") === "1";
   var fixedRes = /^(\d+)x(\d+)$/.exec(params.get("res") ?? "");
   var scale = Math.max(1, Math.floor(Number(params.get("scale") ?? "1")) | 1);
-  var MODES = { composited: MODE_COMPOSITED, ao: MODE_AO, noao: MODE_NO_AO };
+  var shadowScale = Math.max(1, Math.floor(Number(params.get("shadowscale") ?? "1")) | 1);
+  var MODES = {
+    composited: MODE_COMPOSITED,
+    irradiance: MODE_IRRADIANCE,
+    direct: MODE_DIRECT,
+    ao: MODE_AO,
+    noao: MODE_NO_AO
+  };
   status.mode = MODES[params.get("mode") ?? ""] ?? MODE_COMPOSITED;
   var edges = [location.host];
   for (const e of (params.get("edges") ?? "").split(",").map((e2) => e2.trim())) {
@@ -1915,6 +2477,7 @@ void main() {
   var canvas = document.getElementById("view");
   var gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
   var renderer = null;
+  var sceneError = null;
   var grids = gl ? new GridTextures(gl) : null;
   var path = null;
   var pathFrame = 0;
@@ -1928,8 +2491,9 @@ void main() {
   }
   for (const [id, mode] of [
     ["mode-composited", MODE_COMPOSITED],
-    ["mode-ao", MODE_AO],
-    ["mode-noao", MODE_NO_AO]
+    ["mode-irradiance", MODE_IRRADIANCE],
+    ["mode-direct", MODE_DIRECT],
+    ["mode-ao", MODE_AO]
   ]) {
     document.getElementById(id)?.addEventListener("click", () => status.mode = mode);
   }
@@ -1960,8 +2524,9 @@ void main() {
   );
   window.addEventListener("keydown", (e) => {
     if (e.key === "1") status.mode = MODE_COMPOSITED;
-    else if (e.key === "2") status.mode = MODE_AO;
-    else if (e.key === "3") status.mode = MODE_NO_AO;
+    else if (e.key === "2") status.mode = MODE_IRRADIANCE;
+    else if (e.key === "3") status.mode = MODE_DIRECT;
+    else if (e.key === "4") status.mode = MODE_AO;
     else if (e.key === " ") control.auto = true;
     else control.keys.add(e.key.toLowerCase());
   });
@@ -2000,15 +2565,15 @@ void main() {
     };
   }
   function pathCamera(p, frame, index) {
-    const f = p.frames[index % p.frames.length];
+    const f2 = p.frames[index % p.frames.length];
     return {
       frame,
-      position: [f[0], f[1], f[2]],
-      target: [f[3], f[4], f[5]],
-      up: [f[6], f[7], f[8]],
-      fovY: f[9],
-      near: f[10],
-      far: f[11],
+      position: [f2[0], f2[1], f2[2]],
+      target: [f2[3], f2[4], f2[5]],
+      up: [f2[6], f2[7], f2[8]],
+      fovY: f2[9],
+      near: f2[10],
+      far: f2[11],
       aspect: canvas.width / Math.max(canvas.height, 1)
     };
   }
@@ -2047,7 +2612,7 @@ void main() {
     const cam = status.camera;
     if (!gl || !renderer || !cam) return null;
     const time = sceneTime(performance.now());
-    renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale, time });
+    renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale, shadowScale, time });
     const w = gl.drawingBufferWidth;
     const h = gl.drawingBufferHeight;
     const px = new Uint8Array(w * h * 4);
@@ -2066,7 +2631,7 @@ void main() {
       maxCells = Math.max(maxCells, px[i]);
       maxPoints = Math.max(maxPoints, p);
     }
-    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time });
+    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, shadowScale, time });
     return {
       width: w,
       height: h,
@@ -2122,7 +2687,11 @@ void main() {
     const drawNow = !(lockstep && testFrames !== null) || answered === testFrames - 1;
     if (cam && renderer && drawNow) {
       grids?.upload();
-      renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time: sceneTime(now) });
+      const t0 = performance.now();
+      renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, shadowScale, time: sceneTime(now) });
+      status.drawMs = performance.now() - t0;
+      status.shadowMs = renderer.shadowMs;
+      status.lit = session?.state?.hasLights() ?? false;
       status.drawn++;
       if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
         status.milestones.ao = performance.now();
@@ -2138,12 +2707,12 @@ void main() {
     status.rebuilds = grids?.rebuilds ?? 0;
     status.textureBytes = grids ? grids.textureBytes() : 0;
     const w = session?.welcomeMsg;
-    const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
+    const modeName = ["composited", "irradiance", "direct light", "AO only", "no AO"][status.mode] ?? "";
     overlay.textContent = [
       `psao viewer \u2014 ${status.connected ? `connected to ${status.edge}, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"}${edges.length > 1 ? ` (server ${edgeIndex + 1} of ${edges.length})` : ""}`,
       `${status.fps} fps \xB7 ${status.mbitS.toFixed(2)} Mbit/s \xB7 server frame ${status.serverFrame} \xB7 round trip ${status.rttMs === null ? "-" : `${status.rttMs.toFixed(1)} ms`}`,
       `${status.updates} updates \xB7 ${status.points} points received \xB7 ${status.decodeMs ? status.decodeMs.toFixed(2) : "-"} ms decode per update`,
-      !renderer ? "WebGL2 unavailable: nothing drawn" : grids?.problem ? grids.problem : `view: ${modeName} (keys 1 2 3)${cost ? ` \xB7 AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " \xB7 C: shader cost"}`,
+      !renderer ? sceneError ?? (gl ? "loading the scene" : "WebGL2 unavailable: nothing drawn") : grids?.problem ? grids.problem : `view: ${modeName}, ${status.lit ? "lit (points' irradiance + shadow-mapped lights)" : "AO only"} (keys 1 2 3 4)${cost ? ` \xB7 AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " \xB7 C: shader cost"}`,
       status.path ? `camera path ${status.path}, frame ${status.pathFrame} (drag, wheel or W A S D Q E to take over)` : `camera: ${path ? "yours" : "orbit"} (drag, wheel, W A S D Q E; Space: ${path ? "back to the path" : "auto"})`,
       verify ? `state hash ${status.hash ?? "-"}: ${status.verified} updates match the server, ${status.mismatches} differ` : "state hash not checked (add ?verify=1)"
     ].join("\n");
@@ -2171,7 +2740,9 @@ void main() {
       }
     }
   }).catch((e) => {
-    status.message = `cannot load /scene.glb: ${e}`;
+    sceneError = `cannot load /scene.glb: ${e}`;
+    status.message = sceneError;
+    console.error(sceneError);
   });
   Codec.load(fetch("/psao.wasm")).then((c) => {
     codec = c;

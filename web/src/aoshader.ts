@@ -6,18 +6,28 @@
 // passes the normal, tangent-plane and direction tests and lies within r = Poisson radius ×
 // interpolation factor is weighted by (r − d)/r · (n·nᵢ)^k. Without any weight, the AO of the
 // nearest compatible point of the block, else of the ring of cells around it, else 1.
-// Then it composites as psao-client does: base colour × (ambient × AO + light × max(0, n·l)),
-// sRGB-encoded; or writes AO only, the composite without AO, or the cost (cells and points
-// visited) as exact integers in the red, green and blue bytes.
+// In a lit session (the server sends irradiance records, `psao serve --lighting gi`) the same
+// points and weights interpolate the points' irradiance (psao-client's `reconstruct_lit_into`:
+// Σ w·Eᵢ / Σ w, the fallback point's record, else 0), the shadow maps add the direct light of
+// the suns and point lights (`shadow.ts`), and the pixel is psao-client's `composite_lit`:
+// base colour / π × (direct + irradiance). Without records it composites as psao-client's
+// `composite`: base colour × (ambient × AO + light × max(0, n·l)). Both sRGB-encoded. The
+// other views show one term of the composite (irradiance: the points' part, ambient × AO
+// without records; direct: the shadow-mapped part, the unshadowed light without records),
+// AO only, the composite without AO, or the cost (cells and points visited) as exact
+// integers in the red, green and blue bytes.
 
 import { CELL_PAGE, NO_PAGE, TEX_WIDTH } from "./grids";
+import { SHADOW_GLSL } from "./shadow";
 import { JOINT_TEXELS } from "./skin";
 
-/// Output modes (`u_mode`).
+/// Output modes (`u_mode`); keys 1–4 select the first four.
 export const MODE_COMPOSITED = 0;
-export const MODE_AO = 1;
-export const MODE_NO_AO = 2;
-export const MODE_COST = 3;
+export const MODE_IRRADIANCE = 1;
+export const MODE_DIRECT = 2;
+export const MODE_AO = 3;
+export const MODE_NO_AO = 4;
+export const MODE_COST = 5;
 
 /// The G-buffer pass: world position and instance, camera-facing shading normal and
 /// material colour index, per pixel of a framebuffer `scale` times the canvas size.
@@ -113,6 +123,10 @@ uniform vec3 u_sky;
 uniform vec3 u_light_dir;
 uniform float u_light;
 uniform float u_ambient;
+// A lit session: irradiance records beside the cells, direct light from the shadow maps.
+uniform bool u_lit;
+uniform usampler2D u_lights; // RGB9E5 records, laid out as u_cells
+${SHADOW_GLSL}
 
 // Per instance (one row each, see grids.ts' instanceRows): its view (has_view false: AO 1,
 // as psao-client without a grid or an invertible transform) and grid layout.
@@ -170,6 +184,7 @@ uvec2 mul64(uint s, uvec2 v) { return add64(mul32(s, v.x), uvec2(0u, s * v.y)); 
 vec3 P, N;
 float R, R2, INV_R, PLANE;
 float w_sum, ao_sum, nearest_d2, nearest_ao;
+vec3 e_sum, nearest_e, E;
 int cells_visited, points_visited;
 
 // The slot of allocated cell c (InstanceGrid::find_cell), or -1.
@@ -194,9 +209,16 @@ float pow_k(float x) {
   return y;
 }
 
-// One packed point of cell c: the block pass weights it and tracks the nearest compatible
-// point; the ring pass only tracks the nearest.
-void point(uint bits, vec3 cell_min, bool weigh) {
+// psao-points' RGB9E5 record: three 9-bit mantissas and a 5-bit exponent (bias 15).
+vec3 rgb9e5(uint r) {
+  // 2^(exponent − 15 − 9), built from its bits (exact; GLSL ES 3.0 has no ldexp).
+  float step = uintBitsToFloat(((r >> 27) + 103u) << 23);
+  return vec3(float(r & 511u), float((r >> 9) & 511u), float((r >> 18) & 511u)) * step;
+}
+
+// One packed point of cell c with its irradiance record: the block pass weights it and
+// tracks the nearest compatible point; the ring pass only tracks the nearest.
+void point(uint bits, uint record, vec3 cell_min, bool weigh) {
   if ((bits & 0x80000000u) == 0u) return;
   points_visited++;
   vec3 frac = (vec3((uvec3(bits >> 26, bits >> 21, bits >> 16)) & 31u) + 0.5) * (1.0 / 32.0);
@@ -209,14 +231,17 @@ void point(uint bits, vec3 cell_min, bool weigh) {
                     (d2 == 0.0 || c * c < u_direction_threshold);
   if (!compatible) return;
   float ao = float(bits & 255u) * (1.0 / 255.0);
+  vec3 e = u_lit ? rgb9e5(record) : vec3(0.0);
   if (weigh && d2 < R2) {
     float w = (R - sqrt(d2)) * INV_R * pow_k(nn);
     w_sum += w;
     ao_sum += w * ao;
+    e_sum += w * e;
   }
   if (d2 < nearest_d2) {
     nearest_d2 = d2;
     nearest_ao = ao;
+    nearest_e = e;
   }
 }
 
@@ -229,9 +254,12 @@ void cell(ivec3 c, bool weigh) {
   uint t = 2u * (page * CELL_PAGE + uint(slot) % CELL_PAGE);
   uvec4 a = texelFetch(u_cells, at(t), 0);
   uvec4 b = texelFetch(u_cells, at(t + 1u), 0);
+  uvec4 la = u_lit ? texelFetch(u_lights, at(t), 0) : uvec4(0u);
+  uvec4 lb = u_lit ? texelFetch(u_lights, at(t + 1u), 0) : uvec4(0u);
   vec3 m = vec3(c);
-  point(a.x, m, weigh); point(a.y, m, weigh); point(a.z, m, weigh); point(a.w, m, weigh);
-  point(b.x, m, weigh); point(b.y, m, weigh); point(b.z, m, weigh);
+  point(a.x, la.x, m, weigh); point(a.y, la.y, m, weigh); point(a.z, la.z, m, weigh);
+  point(a.w, la.w, m, weigh); point(b.x, lb.x, m, weigh); point(b.y, lb.y, m, weigh);
+  point(b.z, lb.z, m, weigh);
 }
 
 void load_instance(int i) {
@@ -257,7 +285,9 @@ void load_instance(int i) {
   u_slice = c.zw;
 }
 
+// AO at the pixel; the irradiance goes into E (0 where there is no compatible point).
 float reconstruct(vec3 world, vec3 normal) {
+  E = vec3(0.0);
   // Without cells psao-client finds no point in the block nor in the ring: AO 1, decided
   // here without the 64 lookups (which made every frame cost the most before any points).
   if (!u_has_view || !u_has_cells) return 1.0;
@@ -274,17 +304,27 @@ float reconstruct(vec3 world, vec3 normal) {
   ao_sum = 0.0;
   nearest_d2 = 3.4e38;
   nearest_ao = -1.0;
+  e_sum = vec3(0.0);
+  nearest_e = vec3(0.0);
   ivec3 base = ivec3(floor((P - u_origin) * u_inv_cell - 0.5));
   for (int k = 0; k < 8; k++) cell(base + ivec3(k & 1, (k >> 1) & 1, k >> 2), true);
-  if (w_sum > 0.0) return ao_sum / w_sum;
+  if (w_sum > 0.0) {
+    E = e_sum / w_sum;
+    return ao_sum / w_sum;
+  }
   if (!u_fallback) return 1.0;
-  if (nearest_ao >= 0.0) return nearest_ao;
+  if (nearest_ao >= 0.0) {
+    E = nearest_e;
+    return nearest_ao;
+  }
   for (int k = 0; k < 64; k++) {
     ivec3 o = ivec3(k & 3, (k >> 2) & 3, k >> 4) - 1;
     if (all(greaterThanEqual(o, ivec3(0))) && all(lessThanEqual(o, ivec3(1)))) continue;
     cell(base + o, false);
   }
-  return nearest_ao >= 0.0 ? nearest_ao : 1.0;
+  if (nearest_ao < 0.0) return 1.0;
+  E = nearest_e;
+  return nearest_ao;
 }
 
 float srgb(float linear) {
@@ -306,14 +346,27 @@ void main() {
   }
   vec3 n = gn.xyz;
   load_instance(int(gp.w));
-  float ao = u_mode == ${MODE_NO_AO} ? 1.0 : reconstruct(gp.xyz, n);
+  // The direct view of a lit session needs no points.
+  bool points = u_mode != ${MODE_NO_AO} && !(u_lit && u_mode == ${MODE_DIRECT});
+  E = vec3(0.0);
+  float ao = points ? reconstruct(gp.xyz, n) : 1.0;
   if (u_mode == ${MODE_AO}) {
     out_colour = vec4(vec3(ao), 1.0);
   } else if (u_mode == ${MODE_COST}) {
     out_colour = vec4(float(cells_visited), float(points_visited & 255), float(points_visited >> 8), 255.0) / 255.0;
   } else {
     vec3 colour = texelFetch(u_colours, ivec2(int(gn.w), 0), 0).rgb;
-    vec3 rgb = colour * (u_ambient * ao + u_light * max(0.0, dot(n, u_light_dir)));
+    vec3 rgb;
+    if (u_lit) {
+      // psao-client's composite_lit: base colour / π × (direct + irradiance).
+      vec3 direct = u_mode == ${MODE_IRRADIANCE} ? vec3(0.0) : direct_light(gp.xyz, n);
+      vec3 e = u_mode == ${MODE_DIRECT} ? direct : u_mode == ${MODE_IRRADIANCE} ? E : direct + E;
+      rgb = colour * e / 3.14159265358979;
+    } else {
+      float ambient = u_mode == ${MODE_DIRECT} ? 0.0 : u_ambient * ao;
+      float light = u_mode == ${MODE_IRRADIANCE} ? 0.0 : u_light * max(0.0, dot(n, u_light_dir));
+      rgb = colour * (ambient + light);
+    }
     out_colour = vec4(srgb(rgb.r), srgb(rgb.g), srgb(rgb.b), 1.0);
   }
 }`;

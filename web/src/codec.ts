@@ -19,6 +19,7 @@ interface Exports {
   psao_error_ptr(handle: number): number;
   psao_error_len(handle: number): number;
   psao_state_hash(handle: number): bigint;
+  psao_has_lights(handle: number): number;
   psao_changes_ptr(handle: number): number;
   psao_changes_len(handle: number): number;
   psao_instance_count(handle: number): number;
@@ -116,6 +117,11 @@ export class ViewerState {
   /// psao-client's state hash (compared with the server's).
   stateHash(): bigint {
     return BigInt.asUintN(64, this.codec.exports.psao_state_hash(this.handle));
+  }
+
+  /// Whether the state holds irradiance records (the server computes lighting).
+  hasLights(): boolean {
+    return this.codec.exports.psao_has_lights(this.handle) !== 0;
   }
 
   /// What the last update changed, as crates/psao-wasm/src/changes.rs lays it out: a view of

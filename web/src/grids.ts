@@ -16,6 +16,8 @@
 //   `NO_PAGE` (no points there yet).
 // * cell pool (RGBA32UI): two texels per cell slot of each allocated page, points 0–3 and
 //   4–6 (the eighth word is 0): slot s of page q is texels `2·(CELL_PAGE·q + s % CELL_PAGE)`.
+// * irradiance pool (RGBA32UI), laid out as the cell pool: the RGB9E5 records of the cell's
+//   points; allocated once a record arrives (lit sessions), zeros where none.
 // A snapshot's records start with a reset: the pools empty, then every bucket and cell.
 
 import type { ViewerState } from "./codec";
@@ -178,6 +180,7 @@ export class GridTextures {
   readonly entries: DataTexture;
   readonly pageTable: DataTexture;
   readonly cells: DataTexture;
+  readonly lights: DataTexture;
   slots: (GridSlot | null)[] = [];
   /// Why AO cannot be drawn (textures too large), or null.
   problem: string | null = null;
@@ -187,12 +190,15 @@ export class GridTextures {
   private pool = new ChunkPool();
   /// Pages of cells allocated (0 until the grids hold points).
   cellPages = 0;
+  /// Whether an irradiance record arrived in this session (the irradiance pool exists).
+  lit = false;
 
   constructor(private gl: WebGL2RenderingContext) {
     this.directory = new DataTexture(gl, 1);
     this.entries = new DataTexture(gl, 4);
     this.pageTable = new DataTexture(gl, 1);
     this.cells = new DataTexture(gl, 4);
+    this.lights = new DataTexture(gl, 4);
   }
 
   /// Follows a new session's (empty) state: lays out its directory and page table.
@@ -217,6 +223,8 @@ export class GridTextures {
     }
     this.directory.ensure(buckets);
     this.pageTable.ensure(pages, NO_PAGE);
+    this.lit = false;
+    this.lights.reset(0);
     this.clear();
   }
 
@@ -237,8 +245,8 @@ export class GridTextures {
         if (slot) this.setBucket(slot, index, changes.subarray(at + 4, at + 4 + 3 * count));
         at += 4 + 3 * count;
       } else if (tag === CELL) {
-        if (slot) this.setCell(slot, index, changes.subarray(at + 3, at + 3 + CELL_POINTS));
-        at += 3 + CELL_POINTS;
+        if (slot) this.setCell(slot, index, changes.subarray(at + 3, at + 3 + 2 * CELL_POINTS));
+        at += 3 + 2 * CELL_POINTS;
       } else {
         this.problem = `unknown change record ${tag}: AO not drawn`;
       }
@@ -248,12 +256,13 @@ export class GridTextures {
   /// Uploads the texture rows changed since the last upload; binds nothing.
   upload() {
     if (this.problem) return;
-    this.uploadedBytes += this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload();
+    this.uploadedBytes +=
+      this.directory.upload() + this.entries.upload() + this.pageTable.upload() + this.cells.upload() + this.lights.upload();
   }
 
   /// Bytes of texture storage in use.
   textureBytes(): number {
-    return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes();
+    return this.directory.bytes() + this.entries.bytes() + this.pageTable.bytes() + this.cells.bytes() + this.lights.bytes();
   }
 
   /// Bucket `b` of an instance: its used entries (key low, key high, cell slot each) into a
@@ -288,16 +297,16 @@ export class GridTextures {
     this.directory.touch(at, 1);
   }
 
-  /// Cell slot `s` of an instance (its point words), into its page (allocated when it first
-  /// holds points).
-  private setCell(slot: GridSlot, s: number, points: Uint32Array) {
+  /// Cell slot `s` of an instance (its point words, then their irradiance records), into its
+  /// page (allocated when it first holds points or records).
+  private setCell(slot: GridSlot, s: number, words: Uint32Array) {
     if (s >= slot.maxCells) return;
     const at = slot.cellPageBase + Math.floor(s / CELL_PAGE);
     const table = this.pageTable.mirror;
     let page = table[at];
     if (page === NO_PAGE) {
       let any = false;
-      for (let i = 0; i < CELL_POINTS; i++) if (points[i] !== 0) any = true;
+      for (let i = 0; i < 2 * CELL_POINTS; i++) if (words[i] !== 0) any = true;
       if (!any) return;
       page = this.cellPages++;
       table[at] = page;
@@ -306,9 +315,16 @@ export class GridTextures {
     }
     const texel = 2 * (page * CELL_PAGE + (s % CELL_PAGE));
     const m = this.cells.mirror;
-    for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = points[i];
+    for (let i = 0; i < CELL_POINTS; i++) m[texel * 4 + i] = words[i];
     m[texel * 4 + 7] = 0;
     this.cells.touch(texel, 2);
+    if (!this.lit) this.lit = words.subarray(CELL_POINTS).some((w) => w !== 0);
+    if (this.lit) {
+      this.lights.ensure(2 * CELL_PAGE * this.cellPages);
+      const l = this.lights.mirror;
+      for (let i = 0; i < CELL_POINTS; i++) l[texel * 4 + i] = words[CELL_POINTS + i];
+      this.lights.touch(texel, 2);
+    }
   }
 
   /// Empties the directory, page table and pools (a new state or a snapshot).

@@ -2,7 +2,9 @@
 // URL fragment, `#token=…`, which the browser never sends to a server, and goes in the hello
 // and as `Authorization: Bearer` for `/scene.glb`),
 // keeps the client state current and its grids in GPU textures, draws the scene with
-// per-pixel AO (keys 1/2/3 or the overlay's buttons: composited, AO only, no AO), follows a
+// per-pixel AO and, when the server sends irradiance (`psao serve --lighting gi`), lit: the
+// points' irradiance plus shadow-mapped suns and point lights (keys 1/2/3/4 or the buttons:
+// composited, irradiance, direct, AO), follows a
 // camera path of the scene (the first one, or `?path=NAME`) so the server traces what it
 // would show, or orbits the scene (bounds from `/scene.glb`) when it has no path or with
 // `?orbit=1`; the user takes over from wherever the camera is; reconnects with backoff,
@@ -10,11 +12,13 @@
 // every 2 s), updates, points, decode ms, state-hash checks (`?verify=1` asks the server for
 // its hash with every update), and a clear message for a wrong token or protocol version.
 //
-// Test mode (`?path=NAME&frames=N&lockstep=1&res=WxH&mode=ao`): the canvas is WxH, camera
+// Test mode (`?path=NAME&frames=N&lockstep=1&res=WxH&mode=ao`; modes composited,
+// irradiance, direct, ao, noao): the canvas is WxH, camera
 // frame f of the path is sent only after the server answered frame f − 1 (the server runs
 // with `--lockstep`), the view after the answer to frame N − 1 stays on screen and
 // `window.psao.done` turns true: the same frames `psao view --frames N` renders;
-// `&scale=K` rasterizes the G-buffer at K× (see `scale` below).
+// `&scale=K` rasterizes the G-buffer at K× (see `scale` below), `&shadowscale=K` the shadow
+// maps.
 // `?edges=HOST:PORT,…` lists further servers (edges of a scaled-out session, docs/SCALE-OUT.md)
 // to use in turn, after the page's own, when a connection ends: a viewer whose edge dies
 // moves to the next one.
@@ -24,7 +28,7 @@ import { Codec } from "./codec";
 import { Session } from "./session";
 import { sceneBounds } from "./bounds";
 import { GridTextures } from "./grids";
-import { MODE_AO, MODE_COMPOSITED, MODE_COST, MODE_NO_AO } from "./aoshader";
+import { MODE_AO, MODE_COMPOSITED, MODE_COST, MODE_DIRECT, MODE_IRRADIANCE, MODE_NO_AO } from "./aoshader";
 import { SceneRenderer, type CameraPathDoc } from "./render";
 import type { Camera } from "./wire";
 
@@ -49,8 +53,15 @@ interface Status {
   camera: Camera | null;
   /// Whether the camera orbits by itself (until the user moves it).
   autoOrbit: boolean;
-  /// The drawn view: 0 composited, 1 AO only, 2 no AO.
+  /// The drawn view (aoshader.ts' MODE_*): 0 composited, 1 irradiance, 2 direct, 3 AO
+  /// only, 4 no AO.
   mode: number;
+  /// Whether the session is lit (its state holds irradiance records).
+  lit: boolean;
+  /// Milliseconds of the last drawn frame's shadow maps (CPU side of the calls) and of
+  /// the whole draw call.
+  shadowMs: number;
+  drawMs: number;
   /// The server (HOST:PORT) of the current or last session, and of the last answered
   /// GET /health with its round-trip time, ms.
   edge: string;
@@ -91,6 +102,9 @@ const status: Status = {
   camera: null,
   autoOrbit: true,
   mode: MODE_COMPOSITED,
+  lit: false,
+  shadowMs: 0,
+  drawMs: 0,
   edge: location.host,
   rttEdge: null,
   rttMs: null,
@@ -121,7 +135,15 @@ const fixedRes = /^(\d+)x(\d+)$/.exec(params.get("res") ?? "");
 /// 4-bit sub-pixel snapping (SwiftShader's) moves edges by 1/(16·K) pixel instead of 1/16, so
 /// which surface covers a pixel centre agrees with psao-raster's 12-bit edges far more often.
 const scale = Math.max(1, Math.floor(Number(params.get("scale") ?? "1")) | 1);
-const MODES: Record<string, number> = { composited: MODE_COMPOSITED, ao: MODE_AO, noao: MODE_NO_AO };
+/// Shadow-map samples per texel and axis (`?shadowscale=K`, odd), for the same reason.
+const shadowScale = Math.max(1, Math.floor(Number(params.get("shadowscale") ?? "1")) | 1);
+const MODES: Record<string, number> = {
+  composited: MODE_COMPOSITED,
+  irradiance: MODE_IRRADIANCE,
+  direct: MODE_DIRECT,
+  ao: MODE_AO,
+  noao: MODE_NO_AO,
+};
 status.mode = MODES[params.get("mode") ?? ""] ?? MODE_COMPOSITED;
 /// The page's own server, then those of `?edges=` (HOST:PORT, malformed ones left out).
 const edges = [location.host];
@@ -197,6 +219,8 @@ const canvas = document.getElementById("view") as HTMLCanvasElement;
 // Kept after compositing so that tests (and screenshots) can read the frame back.
 const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
 let renderer: SceneRenderer | null = null;
+/// Why the scene could not be loaded or drawn, or null.
+let sceneError: string | null = null;
 const grids = gl ? new GridTextures(gl) : null;
 /// The followed path, its current frame, and (lockstep) the frames sent and answered.
 let path: CameraPathDoc | null = null;
@@ -217,8 +241,9 @@ function sceneTime(now: number): number {
 
 for (const [id, mode] of [
   ["mode-composited", MODE_COMPOSITED],
+  ["mode-irradiance", MODE_IRRADIANCE],
+  ["mode-direct", MODE_DIRECT],
   ["mode-ao", MODE_AO],
-  ["mode-noao", MODE_NO_AO],
 ] as const) {
   document.getElementById(id)?.addEventListener("click", () => (status.mode = mode));
 }
@@ -254,8 +279,9 @@ canvas.addEventListener(
 );
 window.addEventListener("keydown", (e) => {
   if (e.key === "1") status.mode = MODE_COMPOSITED;
-  else if (e.key === "2") status.mode = MODE_AO;
-  else if (e.key === "3") status.mode = MODE_NO_AO;
+  else if (e.key === "2") status.mode = MODE_IRRADIANCE;
+  else if (e.key === "3") status.mode = MODE_DIRECT;
+  else if (e.key === "4") status.mode = MODE_AO;
   else if (e.key === " ") control.auto = true;
   else control.keys.add(e.key.toLowerCase());
 });
@@ -355,7 +381,7 @@ function measureCost() {
   const cam = status.camera;
   if (!gl || !renderer || !cam) return null;
   const time = sceneTime(performance.now());
-  renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale, time });
+  renderer.draw(cam, { mode: MODE_COST, state: session?.state ?? null, grids, scale, shadowScale, time });
   const w = gl.drawingBufferWidth;
   const h = gl.drawingBufferHeight;
   const px = new Uint8Array(w * h * 4);
@@ -374,7 +400,7 @@ function measureCost() {
     maxCells = Math.max(maxCells, px[i]);
     maxPoints = Math.max(maxPoints, p);
   }
-  renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time });
+  renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, shadowScale, time });
   return {
     width: w,
     height: h,
@@ -437,7 +463,11 @@ function tick(now: number) {
   const drawNow = !(lockstep && testFrames !== null) || answered === testFrames - 1;
   if (cam && renderer && drawNow) {
     grids?.upload();
-    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, time: sceneTime(now) });
+    const t0 = performance.now();
+    renderer.draw(cam, { mode: status.mode, state: session?.state ?? null, grids, scale, shadowScale, time: sceneTime(now) });
+    status.drawMs = performance.now() - t0;
+    status.shadowMs = renderer.shadowMs;
+    status.lit = session?.state?.hasLights() ?? false;
     status.drawn++;
     if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
       status.milestones.ao = performance.now();
@@ -453,7 +483,7 @@ function tick(now: number) {
   status.rebuilds = grids?.rebuilds ?? 0;
   status.textureBytes = grids ? grids.textureBytes() : 0;
   const w = session?.welcomeMsg;
-  const modeName = ["composited", "AO only", "no AO"][status.mode] ?? "";
+  const modeName = ["composited", "irradiance", "direct light", "AO only", "no AO"][status.mode] ?? "";
   overlay.textContent = [
     `psao viewer — ${
       status.connected ? `connected to ${status.edge}, scene ${w?.scene}, ${w?.instances.length} instances` : "not connected"
@@ -465,10 +495,10 @@ function tick(now: number) {
       status.decodeMs ? status.decodeMs.toFixed(2) : "-"
     } ms decode per update`,
     !renderer
-      ? "WebGL2 unavailable: nothing drawn"
+      ? (sceneError ?? (gl ? "loading the scene" : "WebGL2 unavailable: nothing drawn"))
       : grids?.problem
         ? grids.problem
-        : `view: ${modeName} (keys 1 2 3)${
+        : `view: ${modeName}, ${status.lit ? "lit (points' irradiance + shadow-mapped lights)" : "AO only"} (keys 1 2 3 4)${
             cost ? ` · AO shader ${cost.cellsPerPixel.toFixed(1)} cells, ${cost.pointsPerPixel.toFixed(1)} points per pixel (C)` : " · C: shader cost"
           }`,
     status.path
@@ -513,7 +543,10 @@ fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${
     }
   })
   .catch((e) => {
-    status.message = `cannot load /scene.glb: ${e}`;
+    // Kept in the overlay: a session's welcome clears status.message.
+    sceneError = `cannot load /scene.glb: ${e}`;
+    status.message = sceneError;
+    console.error(sceneError);
   });
 Codec.load(fetch("/psao.wasm"))
   .then((c) => {

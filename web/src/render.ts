@@ -3,9 +3,14 @@
 // update that carried one (its rest matrix until then), goes into a G-buffer (world
 // position, instance, shading normal, base colour); a full-screen pass then reconstructs AO
 // from the grids in GPU textures (`grids.ts`) once per pixel and composites as psao-client
-// does (`aoshader.ts`).
+// does (`aoshader.ts`). In a lit session (the state holds irradiance records) the pass also
+// reconstructs the irradiance and adds the direct light of the scene's suns and point lights
+// (`/scene.glb`'s `extras.psao_lights`, `lights.ts`) from shadow maps rendered first in the
+// same pose (`shadow.ts`).
 
-import { FRAGMENT, FULLSCREEN, GBUFFER, VERTEX } from "./aoshader";
+import { FRAGMENT, FULLSCREEN, GBUFFER, MODE_AO, MODE_IRRADIANCE, VERTEX } from "./aoshader";
+import { SceneLights } from "./lights";
+import { SHADOW_FRAGMENT, ShadowMaps, settingsForImage, type MapCamera } from "./shadow";
 import { TEX_WIDTH, type GridTextures } from "./grids";
 import { Animation, JOINT_TEXELS, type AnimationDoc } from "./skin";
 import type { ViewerState } from "./codec";
@@ -31,7 +36,7 @@ type GltfDoc = AnimationDoc & {
   materials?: { pbrMetallicRoughness?: { baseColorFactor?: number[] } }[];
   accessors?: { bufferView?: number; byteOffset?: number; count: number; componentType: number; type: string }[];
   bufferViews?: { byteOffset?: number; byteLength: number }[];
-  extras?: { psao_camera_paths?: CameraPathDoc[] };
+  extras?: { psao_camera_paths?: CameraPathDoc[]; psao_lights?: unknown };
 };
 
 const COMPONENTS: Record<string, number> = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
@@ -164,8 +169,19 @@ export interface DrawOptions {
   grids: GridTextures | null;
   /// G-buffer samples per canvas pixel and axis (odd; default 1).
   scale?: number;
-  /// Scene time (seconds) at which skinned instances are posed (default 0).
+  /// Scene time (seconds) at which skinned instances are posed and suns turned (default 0).
   time?: number;
+  /// Shadow-map samples per texel and axis (odd; default 1), as `scale` for the G-buffer.
+  shadowScale?: number;
+}
+
+type Program = ReturnType<typeof program>;
+
+/// World bounds of an instance's mesh vertices at one transform.
+interface InstanceBounds {
+  key: string;
+  lo: [number, number, number];
+  hi: [number, number, number];
 }
 
 /// A G-buffer: world position + instance, shading normal + colour index (RGBA32F each) and
@@ -244,8 +260,13 @@ const INST_U = 3;
 /// instance (at `scale` × the canvas size), the full-screen pass reconstructs AO and
 /// composites each canvas pixel from its centre sample.
 export class SceneRenderer {
-  private gbuffer: ReturnType<typeof program>;
-  private shade: ReturnType<typeof program>;
+  private gbuffer: Program;
+  private shade: Program;
+  private depth: Program;
+  private shadows: ShadowMaps;
+  /// Vertex positions of each mesh (all primitives), for the posed scene's bounds.
+  private meshPositions: Float32Array[][] = [];
+  private boundsCache: (InstanceBounds | null)[] = [];
   private targets: GBufferTargets;
   private meshes: Primitive[][] = [];
   private instances: { mesh: number; matrix: Float32Array }[] = [];
@@ -259,6 +280,10 @@ export class SceneRenderer {
   animation: Animation | null = null;
   /// The scene's camera paths (from the glb's extras).
   paths: CameraPathDoc[] = [];
+  /// The scene's suns and point lights (from the glb's extras).
+  lights: SceneLights = new SceneLights(undefined);
+  /// Milliseconds of the last frame's shadow maps (0 when none were drawn).
+  shadowMs = 0;
 
   constructor(
     private gl: WebGL2RenderingContext,
@@ -267,6 +292,8 @@ export class SceneRenderer {
     if (!gl.getExtension("EXT_color_buffer_float")) throw new Error("WebGL2 without EXT_color_buffer_float");
     this.gbuffer = program(gl, VERTEX, GBUFFER);
     this.shade = program(gl, FULLSCREEN, FRAGMENT);
+    this.depth = program(gl, VERTEX, SHADOW_FRAGMENT);
+    this.shadows = new ShadowMaps(gl);
     this.targets = new GBufferTargets(gl);
     this.normals = dataTexture(gl);
     gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, 256, 1, 0, gl.RGBA, gl.FLOAT, normalTable());
@@ -291,6 +318,7 @@ export class SceneRenderer {
     const jsonLen = view.getUint32(12, true);
     const doc: GltfDoc = JSON.parse(new TextDecoder().decode(glb.subarray(20, 20 + jsonLen)));
     this.paths = doc.extras?.psao_camera_paths ?? [];
+    this.lights = new SceneLights(doc.extras?.psao_lights);
     const binAt = 20 + jsonLen + 8;
     const bin = glb.subarray(binAt, binAt + view.getUint32(20 + jsonLen, true));
     const data = (index: number): { bytes: Uint8Array; count: number } => {
@@ -306,8 +334,11 @@ export class SceneRenderer {
     const colours: number[] = [];
     for (const mesh of doc.meshes ?? []) {
       const prims: Primitive[] = [];
+      const positions: Float32Array[] = [];
+      this.meshPositions.push(positions);
       for (const prim of mesh.primitives) {
         if (prim.attributes.POSITION === undefined || prim.attributes.NORMAL === undefined || prim.indices === undefined) continue;
+        positions.push(readAccessor(doc, bin, prim.attributes.POSITION) as Float32Array);
         const vao = gl.createVertexArray()!;
         gl.bindVertexArray(vao);
         for (const [loc, acc] of [
@@ -387,34 +418,35 @@ export class SceneRenderer {
       padded.set(texels);
       gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, TEX_WIDTH, rows, 0, gl.RGBA, gl.FLOAT, padded);
     }
-    gl.uniform1i(g.u_joints, 0);
-    gl.uniformMatrix4fv(g.u_view_proj, false, viewProj(camera));
     gl.uniform3fv(g.u_eye, camera.position);
-    const model = new Float32Array(16);
+    this.drawInstances(this.gbuffer, viewProj(camera), state);
     const instF = new Float32Array(this.instances.length * INST_F * 4);
     const instU = new Uint32Array(this.instances.length * INST_U * 4);
-    for (const [i, inst] of this.instances.entries()) {
-      const t = state?.transforms[i] ?? null;
-      if (t) {
-        model.set([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
-      } else {
-        model.set(inst.matrix);
-      }
-      gl.uniformMatrix4fv(g.u_model, false, model);
-      gl.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
-      gl.uniform1f(g.u_instance, i);
-      const jointBase = animation ? animation.jointBase[i] : -1;
-      for (const p of this.meshes[inst.mesh] ?? []) {
-        gl.uniform1f(g.u_colour_index, p.colour);
-        gl.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
-        gl.bindVertexArray(p.vao);
-        gl.drawElements(gl.TRIANGLES, p.count, gl.UNSIGNED_INT, 0);
-      }
-      this.instanceRow(i, t, state, grids, instF, instU);
+    for (let i = 0; i < this.instances.length; i++) {
+      this.instanceRow(i, state?.transforms[i] ?? null, state, grids, instF, instU);
     }
-    gl.bindVertexArray(null);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     gl.disable(gl.DEPTH_TEST);
+
+    // Shadow maps, when the session is lit and the view shows direct light.
+    const lit = state?.hasLights() ?? false;
+    const needsDirect = lit && opts.mode !== MODE_AO && opts.mode !== MODE_IRRADIANCE;
+    this.shadowMs = 0;
+    if (needsDirect) {
+      const t0 = performance.now();
+      const time = opts.time ?? 0;
+      const mapCamera: MapCamera = { ...camera };
+      this.shadows.render(this.depth, (prog, vp) => this.drawInstances(prog, vp, state), viewProj, {
+        suns: this.lights.sunsAt(time),
+        points: this.lights.points,
+        camera: mapCamera,
+        aspect: w / Math.max(h, 1),
+        bounds: this.posedBounds(state),
+        settings: settingsForImage(w, h),
+        scale: opts.shadowScale ?? 1,
+      });
+      this.shadowMs = performance.now() - t0;
+    }
 
     // Full-screen pass.
     const u = this.shade.u;
@@ -436,12 +468,25 @@ export class SceneRenderer {
       ["u_colours", this.colours],
       ["u_instf", this.instF],
       ["u_instu", this.instU],
+      ["u_lights", (lit ? grids?.lights.texture : null) ?? this.emptyU],
+      ["u_map_table", this.shadows.table],
     ];
     textures.forEach(([name, t], unit) => {
       gl.activeTexture(gl.TEXTURE0 + unit);
       gl.bindTexture(gl.TEXTURE_2D, t);
       gl.uniform1i(u[name], unit);
     });
+    const arrays: [string, WebGLTexture | null][] = [
+      ["u_sun_maps", this.shadows.suns.texture],
+      ["u_point_maps", this.shadows.points.texture],
+    ];
+    arrays.forEach(([name, t], k) => {
+      gl.activeTexture(gl.TEXTURE0 + textures.length + k);
+      gl.bindTexture(gl.TEXTURE_2D_ARRAY, t);
+      gl.uniform1i(u[name], textures.length + k);
+    });
+    gl.uniform1i(u.u_lit, lit ? 1 : 0);
+    this.shadows.setUniforms(u);
     gl.activeTexture(gl.TEXTURE0);
     gl.uniform1i(u.u_mode, opts.mode);
     gl.uniform1i(u.u_scale, scale);
@@ -458,6 +503,75 @@ export class SceneRenderer {
     gl.uniform1i(u.u_exponent, SETTINGS.exponent);
     gl.uniform1i(u.u_fallback, SETTINGS.fallback ? 1 : 0);
     gl.drawArrays(gl.TRIANGLES, 0, 3);
+  }
+
+  /// Draws every instance with `prog` (the G-buffer's vertex shader) from `vp`: at the
+  /// transform of the state's last update carrying one, else its rest matrix, skinned with
+  /// the joint texture bound to unit 0.
+  private drawInstances(prog: Program, vp: Float32Array, state: ViewerState | null) {
+    const gl = this.gl;
+    const g = prog.u;
+    gl.useProgram(prog.p);
+    gl.activeTexture(gl.TEXTURE0);
+    gl.bindTexture(gl.TEXTURE_2D, this.joints);
+    gl.uniform1i(g.u_joints, 0);
+    gl.uniformMatrix4fv(g.u_view_proj, false, vp);
+    const animation = this.animation;
+    const model = new Float32Array(16);
+    for (const [i, inst] of this.instances.entries()) {
+      model.set(this.modelOf(i, state));
+      gl.uniformMatrix4fv(g.u_model, false, model);
+      gl.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
+      gl.uniform1f(g.u_instance, i);
+      const jointBase = animation ? animation.jointBase[i] : -1;
+      for (const p of this.meshes[inst.mesh] ?? []) {
+        gl.uniform1f(g.u_colour_index, p.colour);
+        gl.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
+        gl.bindVertexArray(p.vao);
+        gl.drawElements(gl.TRIANGLES, p.count, gl.UNSIGNED_INT, 0);
+      }
+    }
+    gl.bindVertexArray(null);
+  }
+
+  /// Instance i's model matrix (column-major 4×4): the state's transform, else its rest matrix.
+  private modelOf(i: number, state: ViewerState | null): Float32Array {
+    const t = state?.transforms[i] ?? null;
+    if (!t) return this.instances[i].matrix;
+    return new Float32Array([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
+  }
+
+  /// World bounds of every instance's (unskinned) mesh vertices at the drawn transforms, as
+  /// psao-raster's shadow maps take them (skinned instances: their rest vertices); null
+  /// without vertices. Each instance's bounds are kept until its transform changes.
+  private posedBounds(state: ViewerState | null): [[number, number, number], [number, number, number]] | null {
+    const lo: [number, number, number] = [Infinity, Infinity, Infinity];
+    const hi: [number, number, number] = [-Infinity, -Infinity, -Infinity];
+    for (const [i, inst] of this.instances.entries()) {
+      const m = this.modelOf(i, state);
+      const key = m.join(",");
+      let b = this.boundsCache[i];
+      if (!b || b.key !== key) {
+        b = { key, lo: [Infinity, Infinity, Infinity], hi: [-Infinity, -Infinity, -Infinity] };
+        for (const positions of this.meshPositions[inst.mesh] ?? []) {
+          for (let v = 0; v + 3 <= positions.length; v += 3) {
+            const [x, y, z] = [positions[v], positions[v + 1], positions[v + 2]];
+            for (let r = 0; r < 3; r++) {
+              const w = Math.fround(m[r] * x + m[4 + r] * y + m[8 + r] * z + m[12 + r]);
+              if (!Number.isFinite(w)) continue;
+              b.lo[r] = Math.min(b.lo[r], w);
+              b.hi[r] = Math.max(b.hi[r], w);
+            }
+          }
+        }
+        this.boundsCache[i] = b;
+      }
+      for (let r = 0; r < 3; r++) {
+        lo[r] = Math.min(lo[r], b.lo[r]);
+        hi[r] = Math.max(hi[r], b.hi[r]);
+      }
+    }
+    return lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2] ? [lo, hi] : null;
   }
 
   /// Instance i's row of the instance textures: its view and grid layout.
@@ -511,8 +625,8 @@ function normalMatrixOf(m: Float32Array): number[] {
   ];
 }
 
-/// Perspective (OpenGL clip space) × look-at of `c`, column-major.
-function viewProj(c: Camera): Float32Array {
+/// Perspective (OpenGL clip space) × look-at of `c` (aspect 1 when it has none), column-major.
+function viewProj(c: MapCamera & { aspect?: number }): Float32Array {
   const [px, py, pz] = c.position;
   let fx = c.target[0] - px;
   let fy = c.target[1] - py;
@@ -539,7 +653,7 @@ function viewProj(c: Camera): Float32Array {
   ];
   const f = 1 / Math.tan(c.fovY / 2);
   const { near: n, far: fr } = c;
-  const proj = [f / c.aspect, 0, 0, 0, 0, f, 0, 0, 0, 0, (fr + n) / (n - fr), -1, 0, 0, (2 * fr * n) / (n - fr), 0];
+  const proj = [f / (c.aspect ?? 1), 0, 0, 0, 0, f, 0, 0, 0, 0, (fr + n) / (n - fr), -1, 0, 0, (2 * fr * n) / (n - fr), 0];
   const out = new Float32Array(16);
   for (let col = 0; col < 4; col++) {
     for (let row = 0; row < 4; row++) {

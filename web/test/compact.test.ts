@@ -35,7 +35,8 @@ function records(u: Expect): number[] {
         out.push(Number(k & 0xffffffffn), Number(k >> 32n), slot);
       }
     }
-    for (const [s, points] of d.cells) out.push(1, d.instance, s, ...points);
+    // Each cell's 7 irradiance records follow its points: zeros in this AO-only session.
+    for (const [s, points] of d.cells) out.push(1, d.instance, s, ...points, 0, 0, 0, 0, 0, 0, 0);
   }
   return out;
 }

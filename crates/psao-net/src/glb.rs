@@ -19,6 +19,11 @@
 //! FOV, near, far), so the browser follows a path by name with exactly the cameras the CPU
 //! client uses.
 //!
+//! The lights the client shadow-maps ride in `extras.psao_lights` (see [`lights_json`]): the
+//! scene's suns (with their time keys) and point lights, as `Scene::lights_at` turns them;
+//! rectangle lights are left out, their soft light reaches clients through the points'
+//! irradiance.
+//!
 //! The JSON document is built with `serde_json` rather than `gltf-json`, whose typed structs
 //! need every optional field spelled out (and change with the workspace's `gltf` features);
 //! the container is written by `gltf::binary::Glb`, and the tests read the result back with
@@ -312,7 +317,7 @@ pub fn scene_glb(scene: &Scene, paths: &[CameraPath]) -> Result<Vec<u8>, NetErro
     if !animations.is_empty() {
         doc["animations"] = json!(animations);
     }
-    doc["extras"] = json!({ "psao_playing": scene.playing });
+    doc["extras"] = json!({ "psao_playing": scene.playing, "psao_lights": lights_json(scene) });
     if !paths.is_empty() {
         doc["extras"]["psao_camera_paths"] = json!(paths.iter().map(path_json).collect::<Vec<_>>());
     }
@@ -328,6 +333,39 @@ pub fn scene_glb(scene: &Scene, paths: &[CameraPath]) -> Result<Vec<u8>, NetErro
     };
     glb.to_vec()
         .map_err(|e| NetError::Protocol(format!("cannot write the scene as glTF: {e}")))
+}
+
+/// The scene's suns and point lights, in the order of `Scene::lights` (rectangles skipped):
+/// `{ "kind": "sun", "direction", "color", "power", "keys"? }` with `keys` =
+/// `{ "times": [s, …], "directions": [[x, y, z], …] }` for a sun that turns
+/// (`psao_scene::SunKeys`: slerp between keys, looping over the last key time), and
+/// `{ "kind": "point", "position", "color", "power" }`.
+fn lights_json(scene: &Scene) -> Vec<Value> {
+    use psao_scene::LightShape;
+    scene
+        .lights
+        .iter()
+        .enumerate()
+        .filter_map(|(k, light)| {
+            let mut v = match light.shape {
+                LightShape::Sun { direction } => {
+                    json!({ "kind": "sun", "direction": direction.to_array() })
+                }
+                LightShape::Point { position } => {
+                    json!({ "kind": "point", "position": position.to_array() })
+                }
+                LightShape::Rect { .. } => return None,
+            };
+            v["color"] = json!(light.color.to_array());
+            v["power"] = json!(light.power);
+            if let Some(keys) = scene.sun_keys.iter().find(|keys| keys.light == k) {
+                let directions: Vec<[f32; 3]> =
+                    keys.directions.iter().map(|d| d.to_array()).collect();
+                v["keys"] = json!({ "times": keys.times, "directions": directions });
+            }
+            Some(v)
+        })
+        .collect()
 }
 
 /// A camera path as `{ "name", "frames": [[position, target, up, fov_y, near, far], …] }`
@@ -394,5 +432,50 @@ mod tests {
         assert_eq!(got[..3], c.position.to_array());
         assert_eq!(got[3..6], c.target.to_array());
         assert_eq!(got[9], c.fov_y);
+        // The sun (the hall's rectangles are left out).
+        let lights = json["extras"]["psao_lights"].as_array().unwrap();
+        assert_eq!(lights.len(), 1);
+        assert_eq!(lights[0]["kind"], "sun");
+        assert_eq!(
+            lights[0]["power"].as_f64().unwrap() as f32,
+            scene.lights[0].power
+        );
+        assert!(lights[0].get("keys").is_none());
+    }
+
+    #[test]
+    fn point_lights_and_sun_keys_ride_in_the_extras() {
+        use glam::Vec3;
+        use psao_scene::{Light, LightShape, SunKeys};
+        let mut scene = psao_scene::builtin::shape_asset("box").unwrap();
+        scene.lights = vec![
+            Light {
+                shape: LightShape::Point {
+                    position: Vec3::new(1.0, 2.0, 3.0),
+                },
+                color: Vec3::new(1.0, 0.5, 0.25),
+                power: 4.0,
+            },
+            Light {
+                shape: LightShape::Sun { direction: Vec3::Y },
+                color: Vec3::ONE,
+                power: 2.0,
+            },
+        ];
+        let keys = SunKeys::new(1, vec![0.0, 10.0], vec![Vec3::Y, Vec3::X]).unwrap();
+        scene.sun_keys = vec![keys];
+        let bytes = scene_glb(&scene, &[]).unwrap();
+        let glb = gltf::binary::Glb::from_slice(&bytes).unwrap();
+        let json: Value = serde_json::from_slice(&glb.json).unwrap();
+        let lights = &json["extras"]["psao_lights"];
+        assert_eq!(
+            lights[0],
+            json!({ "kind": "point", "position": [1.0, 2.0, 3.0], "color": [1.0, 0.5, 0.25], "power": 4.0 })
+        );
+        assert_eq!(lights[1]["kind"], "sun");
+        assert_eq!(
+            lights[1]["keys"],
+            json!({ "times": [0.0, 10.0], "directions": [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] })
+        );
     }
 }

@@ -132,6 +132,16 @@ pub unsafe extern "C" fn psao_state_hash(handle: *const Handle) -> u64 {
     viewer(handle).map_or(0, |v| v.state().state_hash())
 }
 
+/// 1 when the session's state holds irradiance records (the server computes lighting: its
+/// frames are composited lit), else 0.
+///
+/// # Safety
+/// `handle` is null or a live session.
+#[no_mangle]
+pub unsafe extern "C" fn psao_has_lights(handle: *const Handle) -> u32 {
+    viewer(handle).map_or(0, |v| u32::from(v.state().has_lights()))
+}
+
 /// The change records of the last applied update ([`crate::changes`]), [`psao_changes_len`]
 /// u32 words, valid until the next call on this session.
 ///

@@ -157,7 +157,7 @@ mod tests {
         );
         let bucket = table()[1].layout.bucket_of(2) as u32;
         let mut expected = vec![BUCKET, 1, bucket, 1, 3, 0, 1, CELL, 1, 1, valid(3)];
-        expected.extend([0; 6]);
+        expected.extend([0; 6 + 7]);
         assert_eq!(viewer.changes(), expected);
     }
 
@@ -169,7 +169,58 @@ mod tests {
         viewer.apply(&encoder.encode(&u), true).unwrap();
         let bucket = table()[1].layout.bucket_of(1) as u32;
         let mut expected = vec![RESET, BUCKET, 1, bucket, 1, 2, 0, 2, CELL, 1, 2, valid(7)];
-        expected.extend([0; 6]);
+        expected.extend([0; 6 + 7]);
+        assert_eq!(viewer.changes(), expected);
+    }
+
+    #[test]
+    fn lit_updates_keep_their_records_and_list_them_with_the_cells() {
+        let mut encoder = CompactCodec::new();
+        let mut viewer = Viewer::new(&table()).unwrap();
+        let mut reference = ClientState::new(&table());
+        let record = psao_points::irradiance::pack_rgb9e5(Vec3::new(0.5, 1.0, 2.0));
+        let mut lit = update(1, true, 1, 2, &[valid(7), valid(8)]);
+        lit.instances[0].lights = vec![[record, 7, 0, 0, 0, 0, 0]];
+        viewer.apply(&encoder.encode(&lit), true).unwrap();
+        reference.apply(&lit).unwrap();
+        assert!(viewer.state().has_lights());
+        assert_eq!(viewer.state().state_hash(), reference.state_hash());
+        let mut plain = ClientState::new(&table());
+        plain
+            .apply(&update(1, true, 1, 2, &[valid(7), valid(8)]))
+            .unwrap();
+        assert_ne!(
+            viewer.state().state_hash(),
+            plain.state_hash(),
+            "the hash covers the records"
+        );
+        let bucket = table()[1].layout.bucket_of(1) as u32;
+        let mut expected = vec![
+            RESET,
+            BUCKET,
+            1,
+            bucket,
+            1,
+            2,
+            0,
+            2,
+            CELL,
+            1,
+            2,
+            valid(7),
+            valid(8),
+        ];
+        expected.extend([0; 5]);
+        expected.extend([record, 7, 0, 0, 0, 0, 0]);
+        assert_eq!(viewer.changes(), expected);
+        // A delta changing the cell without records clears them, as the client state does.
+        let mut next = update(2, false, 1, 2, &[valid(9)]);
+        next.instances[0].buckets.clear();
+        viewer.apply(&encoder.encode(&next), false).unwrap();
+        reference.apply(&next).unwrap();
+        assert_eq!(viewer.state().state_hash(), reference.state_hash());
+        let mut expected = vec![CELL, 1, 2, valid(9)];
+        expected.extend([0; 6 + 7]);
         assert_eq!(viewer.changes(), expected);
     }
 
