@@ -279,7 +279,9 @@ fn frame_loop(args: &BenchArgs, scene: &Scene, path: &CameraPath) -> Result<Fram
         }
     })?;
     let mut client = CorrectiveClient::new(w, h, config)?;
-    let shown = client.correct(scene, 0, &frames[0].1, BaseFrame::Ao(&ao)).analysis();
+    let shown = client
+        .correct(scene, 0, &frames[0].1, BaseFrame::Ao(&ao))
+        .analysis();
     let analysis_ms = median_ms(args.repeat, || {
         std::hint::black_box(shown.regions());
     });
