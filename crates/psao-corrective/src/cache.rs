@@ -295,12 +295,7 @@ mod tests {
                 };
             }
         }
-        Setup {
-            cam,
-            view,
-            ids,
-            g,
-        }
+        Setup { cam, view, ids, g }
     }
 
     /// A colour per pixel, never black (so a splatted pixel differs from the black base).

@@ -365,7 +365,10 @@ mod tests {
             for (x, y) in [(23, 15), (25, 15), (24, 14), (25, 16), (24, 17)] {
                 let d2 = ((x - 24) * (x - 24) + (y - 15) * (y - 15)) as f32;
                 let fine_alone = 0.5 - 0.2 * weight(d2, 5.0);
-                assert!((at(&img, x as u32, y as u32) - fine_alone).abs() < 1e-6, "({x}, {y})");
+                assert!(
+                    (at(&img, x as u32, y as u32) - fine_alone).abs() < 1e-6,
+                    "({x}, {y})"
+                );
             }
             assert_eq!(at(&img, 24, 15), 0.3);
             // Beyond the fine reach the coarse one fills, thinner with distance.
@@ -411,10 +414,18 @@ mod tests {
         let near = 0.5 + 0.4 * weight(4.0, 25.0);
         for y in 10..20 {
             for x in 14..18 {
-                assert_eq!(at(&img, x, y), 0.5, "bled across the depth edge at ({x}, {y})");
+                assert_eq!(
+                    at(&img, x, y),
+                    0.5,
+                    "bled across the depth edge at ({x}, {y})"
+                );
             }
             for x in 23..27 {
-                assert_eq!(at(&img, x, y), 0.5, "bled across the normal edge at ({x}, {y})");
+                assert_eq!(
+                    at(&img, x, y),
+                    0.5,
+                    "bled across the normal edge at ({x}, {y})"
+                );
             }
         }
         assert!((at(&img, 18, 15) - near).abs() < 1e-6);
@@ -469,7 +480,10 @@ mod tests {
             let d2 = ((px as i32 - x as i32).pow(2) + (py as i32 - y as i32).pow(2)) as f32;
             for c in 0..3 {
                 let added = img[i][c] - diffuse[i][c];
-                assert!((added - 0.25 * weight(d2, 25.0)).abs() < 1e-5, "({px}, {py})");
+                assert!(
+                    (added - 0.25 * weight(d2, 25.0)).abs() < 1e-5,
+                    "({px}, {py})"
+                );
             }
         }
         // A lit frame shown over the diffuse value: the correction adds to what is shown.
