@@ -1,5 +1,5 @@
 //! The sample cache (paper §4.5): samples of earlier frames, kept per level, reprojected and
-//! splatted coarse level first, and aged by how much `n·v` changed since they were traced.
+//! splatted (finer levels over coarser ones), and aged by how much `n·v` changed since they were traced.
 //!
 //! Aging runs when the camera changed: the camera age goes up by one; for every object the
 //! first level `ℓ₀` holding at least `N_min` of its samples is tested — a level-`ℓ₀` sample is
@@ -241,8 +241,8 @@ impl SampleCache {
         stats
     }
 
-    /// Reproject the cached samples to `view` and splat them coarse level first; returns how
-    /// many were drawn.
+    /// Reproject the cached samples to `view` and splat them ([`crate::splat`]: finer levels
+    /// take precedence, newer samples win ties); returns how many were drawn.
     pub fn splat(&self, view: &ScreenView, target: &mut SplatTarget<'_>) -> usize {
         let batches: Vec<&[Sample]> = self.levels.iter().map(Vec::as_slice).collect();
         splat(&batches, &self.hierarchy, view, target)
@@ -253,6 +253,7 @@ impl SampleCache {
 mod tests {
     use super::*;
     use glam::Vec3;
+    use psao_raster::GBuffer;
     use psao_scene::Camera;
 
     const W: u32 = 80;
@@ -263,8 +264,8 @@ mod tests {
         cam: Camera,
         view: ScreenView,
         ids: Vec<u32>,
-        depth: Vec<f32>,
-        position: Vec<Vec3>,
+        /// Depth, position and normal (+z) of the plane.
+        g: GBuffer,
     }
 
     fn setup(eye: Vec3) -> Setup {
@@ -272,8 +273,7 @@ mod tests {
         let view = ScreenView::new(&cam, W, H);
         let forward = (cam.target - cam.position).normalize();
         let mut ids = vec![0; (W * H) as usize];
-        let mut depth = vec![f32::INFINITY; (W * H) as usize];
-        let mut position = vec![Vec3::ZERO; (W * H) as usize];
+        let mut g = GBuffer::empty(W, H);
         for y in 0..H {
             for x in 0..W {
                 let d = cam.ray_direction(x as f32 + 0.5, y as f32 + 0.5, W, H);
@@ -283,8 +283,9 @@ mod tests {
                 let t = -cam.position.z / d.z;
                 let p = cam.position + t * d;
                 let i = (y * W + x) as usize;
-                position[i] = p;
-                depth[i] = (p - cam.position).dot(forward);
+                g.position[i] = p;
+                g.normal[i] = Vec3::Z;
+                g.depth[i] = (p - cam.position).dot(forward);
                 ids[i] = if p.truncate().length() < 1.2 {
                     1
                 } else if (p.x - 1.9).abs() < 0.4 && p.y.abs() < 0.4 {
@@ -294,19 +295,14 @@ mod tests {
                 };
             }
         }
-        Setup {
-            cam,
-            view,
-            ids,
-            depth,
-            position,
-        }
+        Setup { cam, view, ids, g }
     }
 
+    /// A colour per pixel, never black (so a splatted pixel differs from the black base).
     fn colour_of(i: usize) -> [f32; 3] {
         let v = (i as u32).wrapping_mul(2_654_435_761);
         [
-            (v & 0xff) as f32,
+            1.0 + (v & 0xff) as f32,
             ((v >> 8) & 0xff) as f32,
             ((v >> 16) & 0xff) as f32,
         ]
@@ -328,9 +324,9 @@ mod tests {
                     continue;
                 }
                 let n = Vec3::Z;
-                let v = (s.cam.position - s.position[i]).normalize();
+                let v = (s.cam.position - s.g.position[i]).normalize();
                 out.push(Sample {
-                    position: s.position[i],
+                    position: s.g.position[i],
                     normal: n,
                     ndotv: n.dot(v),
                     color: colour_of(i),
@@ -343,19 +339,21 @@ mod tests {
         out
     }
 
+    /// The cache splatted over a black base; also which pixels changed.
     fn render(cache: &SampleCache, s: &Setup) -> (Vec<[f32; 3]>, Vec<bool>) {
         let n = (W * H) as usize;
-        let mut color = vec![[0.0; 3]; n];
-        let mut written = vec![false; n];
+        let black = vec![[0.0; 3]; n];
+        let mut color = black.clone();
         cache.splat(
             &s.view,
             &mut SplatTarget {
                 color: &mut color,
-                written: &mut written,
+                diffuse: &black,
                 ids: &s.ids,
-                depth: &s.depth,
+                gbuffer: &s.g,
             },
         );
+        let written = color.iter().map(|c| *c != [0.0; 3]).collect();
         (color, written)
     }
 
@@ -478,7 +476,7 @@ mod tests {
         let mut cache = SampleCache::new(CacheConfig::default(), h).unwrap();
         let i = s.ids.iter().position(|&o| o == 1).unwrap();
         let base = Sample {
-            position: s.position[i],
+            position: s.g.position[i],
             normal: Vec3::Z,
             ndotv: 1.0,
             color: [1.0; 3],
@@ -487,7 +485,7 @@ mod tests {
             age: 0,
         };
         let hidden = Sample {
-            position: s.position[i] - Vec3::Z * 0.5,
+            position: s.g.position[i] - Vec3::Z * 0.5,
             ..base
         };
         let wrong = Sample { object: 2, ..base };

@@ -210,7 +210,7 @@ impl Corrector {
         self.cache.insert(samples)
     }
 
-    /// Splat the cache onto `target` (coarse levels first); returns the samples drawn.
+    /// Splat the cache onto `target` ([`crate::splat`]); returns the samples drawn.
     pub fn splat(&self, view: &ScreenView, target: &mut SplatTarget<'_>) -> usize {
         self.cache.splat(view, target)
     }

@@ -564,10 +564,17 @@ mod tests {
 
     #[test]
     fn grants_stop_at_the_outstanding_limit_until_drained() {
-        let (_pool, p) = pool(2, 50);
+        // No view yet, so no worker can start a job between the two grants (a job finished
+        // in between would free the allowance of its misses and let the second grant give
+        // more: the test used to race the workers there).
+        let pool = WorkerPool::new(Stripes, 2);
+        let p = pool.lane(planner(), 50);
+        p.analyze(&[region()], 0);
         assert_eq!(p.grant(40), 40);
         assert_eq!(p.grant(40), 10);
+        p.set_view(7);
         assert!(p.wait_idle(WAIT));
+        assert_eq!(p.stats().examined, 50);
         // The spent allowance is free again; the queued samples still count.
         let queued = p.queued() as u64;
         assert!(queued > 0 && queued < 50, "{queued}");

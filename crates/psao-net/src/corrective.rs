@@ -401,6 +401,35 @@ impl Default for CorrectiveClientConfig {
     }
 }
 
+/// The client's frame that corrections are added to.
+///
+/// The correction tracer shades the diffuse surfaces its rays reach as the AO composite does
+/// (`base colour × (ambient × AO + sun)`), so a sample's correction is its radiance minus the
+/// AO composite at its pixel (what the tracer's radiance holds of the diffuse shading there)
+/// whatever frame is shown; the correction is then added to the frame shown.
+#[derive(Clone, Copy, Debug)]
+pub enum BaseFrame<'a> {
+    /// The AO composite of the reconstructed AO per pixel, shown as it is.
+    Ao(&'a [f32]),
+    /// A lit composite (linear RGB, [`psao_client::composite_lit`]) is shown; `ao` is the
+    /// reconstructed AO of the same frame.
+    Lit {
+        /// Reconstructed AO per pixel.
+        ao: &'a [f32],
+        /// The lit composite per pixel.
+        lit: &'a [[f32; 3]],
+    },
+}
+
+impl<'a> BaseFrame<'a> {
+    /// The reconstructed AO per pixel.
+    pub fn ao(&self) -> &'a [f32] {
+        match *self {
+            Self::Ao(ao) | Self::Lit { ao, .. } => ao,
+        }
+    }
+}
+
 /// One corrected client frame.
 pub struct CorrectedFrame {
     /// Linear RGB: the client's frame with the cached samples splatted over it.
@@ -633,9 +662,9 @@ impl CorrectiveClient {
         scene: &Scene,
         frame: u32,
         gbuffer: &GBuffer,
-        ao: &[f32],
+        base: BaseFrame<'_>,
     ) -> CorrectedFrame {
-        let mut corrected = self.correct(scene, frame, gbuffer, ao);
+        let mut corrected = self.correct(scene, frame, gbuffer, base);
         if frame.is_multiple_of(self.config.analyze_every) {
             corrected.regions = Some(analysis_of(&corrected.image, &corrected.shown));
         }
@@ -649,7 +678,7 @@ impl CorrectiveClient {
         scene: &Scene,
         frame: u32,
         gbuffer: &GBuffer,
-        ao: &[f32],
+        base: BaseFrame<'_>,
     ) -> CorrectedFrame {
         let motion = self.motion.get_or_insert_with(|| MotionWatch::new(scene));
         let mut dropped = 0;
@@ -663,17 +692,20 @@ impl CorrectiveClient {
             .as_ref()
             .map(|m| m.moving.clone())
             .unwrap_or_default();
-        let mut image = psao_client::composite(scene, gbuffer, ao, &Shading::default());
+        let diffuse = psao_client::composite(scene, gbuffer, base.ao(), &Shading::default());
+        let mut image = match base {
+            BaseFrame::Ao(_) => diffuse.clone(),
+            BaseFrame::Lit { lit, .. } => lit.to_vec(),
+        };
         let ids = object_ids(scene, gbuffer);
-        let mut written = vec![false; image.len()];
         let drawn = match self.camera {
             Some(camera) => self.cache.splat(
                 &ScreenView::new(&camera, gbuffer.width, gbuffer.height),
                 &mut SplatTarget {
                     color: &mut image,
-                    written: &mut written,
+                    diffuse: &diffuse,
                     ids: &ids,
-                    depth: &gbuffer.depth,
+                    gbuffer,
                 },
             ),
             None => 0,
@@ -836,9 +868,9 @@ impl InProcessCorrections {
         scene: &Scene,
         frame: u32,
         gbuffer: &GBuffer,
-        ao: &[f32],
+        base: BaseFrame<'_>,
     ) -> CorrectedFrame {
-        let mut corrected = self.client.frame(scene, frame, gbuffer, ao);
+        let mut corrected = self.client.frame(scene, frame, gbuffer, base);
         if let Some(r) = corrected.regions.take() {
             self.pending = Some(r.clone());
             corrected.regions = Some(r);
@@ -997,7 +1029,7 @@ mod tests {
         };
         let frame = |client: &mut CorrectiveClient, f: u32| {
             client.camera(&crate::convert::camera_msg(f, &camera, w as f32 / h as f32));
-            let c = client.frame(&scene, f, &gbuffer, &ao);
+            let c = client.frame(&scene, f, &gbuffer, BaseFrame::Ao(&ao));
             // The objects asked for (each in one region per tile it covers).
             let mut asked: Vec<u32> = c
                 .regions

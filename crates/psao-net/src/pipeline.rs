@@ -2,7 +2,7 @@
 //!
 //! Nothing goes around the codec: the client's state is built only from decoded updates.
 
-use crate::corrective::{CorrectiveClient, CorrectiveConfig, InProcessCorrections};
+use crate::corrective::{BaseFrame, CorrectiveClient, CorrectiveConfig, InProcessCorrections};
 use crate::{NetError, Resolution};
 use glam::Vec3;
 use psao_client::{ClientState, DetailSettings, ReconstructSettings, Shading};
@@ -97,7 +97,8 @@ pub struct ClientFrame {
     pub gbuffer: GBuffer,
     /// Reconstructed AO.
     pub ao: AoImage,
-    /// With corrections: the client's frame (linear RGB) with the cached samples splatted.
+    /// With corrections: the client's frame (linear RGB, [`Self::base`]) with the cached
+    /// samples' corrections added.
     pub corrected: Option<Vec<[f32; 3]>>,
     /// With lighting (the client state holds irradiance records): the lit composite, linear
     /// RGB radiance ([`psao_client::composite_lit`]).
@@ -105,6 +106,20 @@ pub struct ClientFrame {
     /// With relit characters and without lighting: per pixel, the factor of the ambient
     /// term ([`crate::relit::pixel_factor`]; with lighting it is applied to `lit` already).
     pub ambient_tint: Option<Vec<Vec3>>,
+}
+
+impl ClientFrame {
+    /// The frame corrections are added to: the lit composite when there is one, else the
+    /// AO composite.
+    pub fn base(&self) -> BaseFrame<'_> {
+        match &self.lit {
+            Some(lit) => BaseFrame::Lit {
+                ao: &self.ao.data,
+                lit,
+            },
+            None => BaseFrame::Ao(&self.ao.data),
+        }
+    }
 }
 
 /// A server and one client in one process.
@@ -300,7 +315,7 @@ impl<'a> Pipeline<'a> {
                 .renderer
                 .render(self.scene, &self.client, camera, self.res, time)?;
             if let Some(c) = &mut self.corrective {
-                let corrected = c.correct(self.scene, frame, &img.gbuffer, &img.ao.data);
+                let corrected = c.correct(self.scene, frame, &img.gbuffer, img.base());
                 img.corrected = Some(corrected.image);
             }
             out = render.then_some(img);

@@ -254,12 +254,12 @@ pub fn view(
                 let corrected = match (&mut analyzer, lockstep) {
                     // Threaded: the analyzer thread takes the frame when it is due.
                     (Some(a), Some(false)) => {
-                        let corrected = c.correct(scene, frame, &img.gbuffer, &img.ao.data);
+                        let corrected = c.correct(scene, frame, &img.gbuffer, img.base());
                         a.offer(client.sessions, &corrected);
                         corrected
                     }
                     _ => {
-                        let mut corrected = c.frame(scene, frame, &img.gbuffer, &img.ao.data);
+                        let mut corrected = c.frame(scene, frame, &img.gbuffer, img.base());
                         client.regions = corrected.regions.take();
                         corrected
                     }

@@ -104,7 +104,7 @@ impl Drop for Analyzer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::corrective::{CorrectiveClient, CorrectiveClientConfig};
+    use crate::corrective::{BaseFrame, CorrectiveClient, CorrectiveClientConfig};
     use glam::Vec3;
     use psao_scene::Camera;
 
@@ -142,9 +142,12 @@ mod tests {
         let mut client = CorrectiveClient::new(w, h, CorrectiveClientConfig::default()).unwrap();
         client.camera(&crate::convert::camera_msg(0, &camera, w as f32 / h as f32));
         // The frame loop's own analysis of frame 0 is the reference.
-        let expected = client.frame(&scene, 0, &gbuffer, &ao).regions.unwrap();
+        let expected = client
+            .frame(&scene, 0, &gbuffer, BaseFrame::Ao(&ao))
+            .regions
+            .unwrap();
         assert!(!expected.regions.is_empty());
-        let shown = client.correct(&scene, 0, &gbuffer, &ao);
+        let shown = client.correct(&scene, 0, &gbuffer, BaseFrame::Ao(&ao));
         assert!(shown.regions.is_none());
 
         let period = Duration::from_millis(200);

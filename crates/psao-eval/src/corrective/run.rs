@@ -403,14 +403,13 @@ fn priorities(
 /// The frame as `corrector`'s viewer sees it: the base frame with the cache splatted.
 fn splatted(corrector: &Corrector, f: &FrameImages) -> Vec<[f32; 3]> {
     let mut color = f.base.clone();
-    let mut written = vec![false; color.len()];
     corrector.splat(
         &f.view,
         &mut SplatTarget {
             color: &mut color,
-            written: &mut written,
+            diffuse: &f.base,
             ids: &f.ids,
-            depth: &f.gbuffer.depth,
+            gbuffer: &f.gbuffer,
         },
     );
     color

@@ -20,7 +20,7 @@ use psao_corrective::screen::ScreenView;
 use psao_corrective::splat::{Sample, SplatTarget};
 use psao_corrective::sqrt5::{Hierarchy, PixelRect};
 use psao_net::convert::camera_msg;
-use psao_net::corrective::{CorrectiveClient, CorrectiveClientConfig};
+use psao_net::corrective::{BaseFrame, CorrectiveClient, CorrectiveClientConfig};
 use psao_raster::{rasterize, GBuffer, RasterOptions};
 use psao_scene::{CameraPath, Scene};
 use psao_wire::CameraMsg;
@@ -183,17 +183,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         .map(|&i| if i == GBuffer::NONE { 0 } else { i + 1 })
         .collect();
     let n = (w * h) as usize;
-    let mut color = vec![[0.0f32; 3]; n];
-    let mut written = vec![false; n];
+    let black = vec![[0.0f32; 3]; n];
+    let mut color = black.clone();
     let mut drawn = 0;
     let splat_ms = median_ms(args.repeat, || {
         drawn = cache.splat(
             &view_b,
             &mut SplatTarget {
                 color: &mut color,
-                written: &mut written,
+                diffuse: &black,
                 ids: &ids,
-                depth: &g_b.depth,
+                gbuffer: &g_b,
             },
         );
     });
@@ -270,16 +270,18 @@ fn frame_loop(args: &BenchArgs, scene: &Scene, path: &CameraPath) -> Result<Fram
             .collect())
     };
     let inline = timed(&|c, f, g| {
-        std::hint::black_box(c.frame(scene, f, g, &ao));
+        std::hint::black_box(c.frame(scene, f, g, BaseFrame::Ao(&ao)));
     })?;
     let threaded = timed(&|c, f, g| {
-        let corrected = c.correct(scene, f, g, &ao);
+        let corrected = c.correct(scene, f, g, BaseFrame::Ao(&ao));
         if f.is_multiple_of(args.analyze_every) {
             std::hint::black_box(corrected.analysis());
         }
     })?;
     let mut client = CorrectiveClient::new(w, h, config)?;
-    let shown = client.correct(scene, 0, &frames[0].1, &ao).analysis();
+    let shown = client
+        .correct(scene, 0, &frames[0].1, BaseFrame::Ao(&ao))
+        .analysis();
     let analysis_ms = median_ms(args.repeat, || {
         std::hint::black_box(shown.regions());
     });
