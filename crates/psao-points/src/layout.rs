@@ -221,10 +221,11 @@ impl GridLayout {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn layout() -> GridLayout {
+    /// 21 × 6 × 11 cells, 16 buckets (128 slots): the layout the crate's unit tests share.
+    pub(crate) fn layout() -> GridLayout {
         GridLayout::new(
             (Vec3::new(-1.0, 0.0, 2.0), Vec3::new(1.0, 0.5, 3.0)),
             0.025,

@@ -591,19 +591,9 @@ mod tests {
 
     use super::*;
     use crate::grid::InstanceGrid;
+    use crate::layout::tests::layout;
     use crate::pack::VALID_BIT;
     use crate::rng::mix64;
-
-    /// 21 × 6 × 11 cells, 16 buckets (128 slots).
-    fn layout() -> GridLayout {
-        GridLayout::new(
-            (Vec3::new(-1.0, 0.0, 2.0), Vec3::new(1.0, 0.5, 3.0)),
-            0.025,
-            0.1,
-            3.0,
-        )
-        .unwrap()
-    }
 
     /// A bucket of `index` with up to 8 distinct cells of it, in random slots.
     fn random_bucket(l: &GridLayout, index: usize, r: &mut u64) -> Bucket {
