@@ -7,8 +7,9 @@
 //! `(a + b·i)·gᵏ = a·u + b·v` with `u = gᵏ` and `v = i·u`; it also belongs to level `ℓ − 1`
 //! exactly when `a + b·i` is divisible by `g`, which (as `i ≡ 2` modulo `g`) is the paper's rule
 //! `(a + 2b) mod 5 = 0`. Such positions are omitted on every level but the first, so over all
-//! levels every pixel is sampled exactly once. The square splat footprint of level `ℓ` has the
-//! side `s_ℓ = max(|u.x|, |u.y|)`, which is the paper's `√5ᵏ·max(|cos kα|, |sin kα|)`.
+//! levels every pixel is sampled exactly once. The paper's square splat footprint of level `ℓ`
+//! has the side `s_ℓ = max(|u.x|, |u.y|)`, its `√5ᵏ·max(|cos kα|, |sin kα|)` (the tests check
+//! the lattice against it; `crate::splat` reaches a level's spacing instead).
 //!
 //! Iteration is non-recursive: the lattice rows `b` crossing a rectangle, then for each row the
 //! range of `a` clipped to the rectangle (parametric line clipping).
@@ -121,12 +122,6 @@ impl Hierarchy {
     /// The lattice vector `u` of a level (the other is `u` turned by 90°).
     pub fn basis(&self, level: u8) -> Result<(i64, i64), SamplingError> {
         Ok(g_power(self.check(level)?))
-    }
-
-    /// Side in pixels of the square splat footprint of a level (1 on the finest level).
-    pub fn footprint(&self, level: u8) -> Result<u32, SamplingError> {
-        let (ux, uy) = self.basis(level)?;
-        Ok(ux.unsigned_abs().max(uy.unsigned_abs()) as u32)
     }
 
     /// The level at which pixel (`x`, `y`) is sampled.
@@ -315,23 +310,30 @@ impl Iterator for LevelIter<'_> {
     }
 }
 
-/// The pixels a splat of side `side` centred on pixel (`x`, `y`) covers, as a rectangle
-/// (for an even side the extra column and row are on the low side).
-pub fn footprint_rect(x: i32, y: i32, side: u32) -> PixelRect {
-    let side = side.max(1) as i32;
-    let lo = side / 2;
-    let hi = side - lo;
-    PixelRect {
-        x0: x - lo,
-        y0: y - lo,
-        x1: x + hi,
-        y1: y + hi,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Side in pixels of the paper's square splat footprint of a level (1 on the finest
+    /// level): the larger component of the level's lattice vector.
+    fn footprint(h: &Hierarchy, level: u8) -> Result<u32, SamplingError> {
+        let (ux, uy) = h.basis(level)?;
+        Ok(ux.unsigned_abs().max(uy.unsigned_abs()) as u32)
+    }
+
+    /// The pixels a splat of side `side` centred on pixel (`x`, `y`) covers, as a rectangle
+    /// (for an even side the extra column and row are on the low side).
+    fn footprint_rect(x: i32, y: i32, side: u32) -> PixelRect {
+        let side = side.max(1) as i32;
+        let lo = side / 2;
+        let hi = side - lo;
+        PixelRect {
+            x0: x - lo,
+            y0: y - lo,
+            x1: x + hi,
+            y1: y + hi,
+        }
+    }
 
     fn disc_mask(w: i32, h: i32) -> Vec<bool> {
         let (cx, cy, r) = (w as f32 * 0.45, h as f32 * 0.55, h as f32 * 0.4);
@@ -350,7 +352,7 @@ mod tests {
         assert_eq!(Hierarchy::new(0), Err(SamplingError::Levels(0)));
         assert_eq!(Hierarchy::new(13), Err(SamplingError::Levels(13)));
         let h = Hierarchy::new(5).unwrap();
-        assert!(h.footprint(6).is_err());
+        assert!(footprint(&h, 6).is_err());
         assert!(h
             .level_samples(
                 0,
@@ -376,11 +378,11 @@ mod tests {
                     .abs()
                     .max((k as f64 * alpha).sin().abs());
             assert!(
-                (h.footprint(level).unwrap() as f64 - s).abs() < 1e-6,
+                (footprint(&h, level).unwrap() as f64 - s).abs() < 1e-6,
                 "level {level}"
             );
         }
-        assert_eq!(h.footprint(7).unwrap(), 1);
+        assert_eq!(footprint(&h, 7).unwrap(), 1);
     }
 
     #[test]
@@ -441,7 +443,7 @@ mod tests {
         };
         let mut image = vec![0u32; (w * hgt) as usize];
         for level in 1..=h.levels() {
-            let side = h.footprint(level).unwrap();
+            let side = footprint(h, level).unwrap();
             for (x, y) in h.level_samples(level, rect).unwrap().iter_from(0) {
                 if !mask[(y * w + x) as usize] {
                     continue;
@@ -502,7 +504,7 @@ mod tests {
             }
         }
         for level in 1..=6u8 {
-            let side = h.footprint(level).unwrap();
+            let side = footprint(&h, level).unwrap();
             for (x, y) in h.level_samples(level, inner).unwrap().iter_from(0) {
                 let f = footprint_rect(x, y, side);
                 for py in f.y0..f.y1 {
@@ -529,7 +531,7 @@ mod tests {
         for level in 1..=5u8 {
             let mut covered = vec![false; (w * hgt) as usize];
             for l in 1..=level {
-                let side = h.footprint(l).unwrap();
+                let side = footprint(&h, l).unwrap();
                 let grow = PixelRect {
                     x0: -200,
                     y0: -200,
