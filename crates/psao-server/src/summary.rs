@@ -146,7 +146,7 @@ impl BlockSummaries {
             self.rebuild(blocks, points);
             return;
         }
-        let mut ks: Vec<u32> = changed.iter().map(|&i| blocks.order.rank(i)).collect();
+        let mut ks: Vec<u32> = changed.par_iter().map(|&i| blocks.order.rank(i)).collect();
         ks.par_sort_unstable();
         ks.dedup();
         // (block, first change, end of its changes) for each block with changes.
@@ -159,7 +159,7 @@ impl BlockSummaries {
             }
         }
         let states: Vec<u16> = ks
-            .iter()
+            .par_iter()
             .map(|&k| {
                 let k = k as usize;
                 self.state(blocks, points, blocks.order.at(k) as usize, k)

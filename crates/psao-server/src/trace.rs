@@ -35,7 +35,7 @@ impl Candidate {
 }
 
 /// Samples traced for one point in one frame.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Traced {
     pub instance: u32,
     pub index: u32,
@@ -455,44 +455,68 @@ pub(crate) fn trace(
         .collect();
     // Group nearby points (and similar normals) into the same batches.
     let probes: Vec<Ray> = jobs
-        .iter()
+        .par_iter()
         .map(|j| Ray::new(j.origin, j.normal, 1.0))
         .collect();
     let order = sort_rays_spatially(&probes);
     let per_batch = (BATCH_RAYS / rays_per_point.max(1) as usize).max(1);
-    let mut traced: Vec<(u32, Traced)> = order
+    // In `order`: the results of `jobs[order[0]]`, `jobs[order[1]]`, …
+    let sorted: Vec<Traced> = order
         .par_chunks(per_batch)
         .map_init(
-            || medium.map(|m| m.sampler()),
-            |sampler, batch| {
-                trace_batch(tracer, sampler.as_deref_mut(), &jobs, batch, radius, seed)
+            || (medium.map(|m| m.sampler()), Scratch::default()),
+            |(sampler, scratch), batch| {
+                trace_batch(
+                    tracer,
+                    sampler.as_deref_mut(),
+                    scratch,
+                    &jobs,
+                    batch,
+                    radius,
+                    seed,
+                )
             },
         )
         .flatten_iter()
         .collect();
-    traced.sort_unstable_by_key(|t| t.0);
-    traced.into_iter().map(|t| t.1).collect()
+    // Back to the order of `selected`: `order` is a permutation of its indices.
+    let mut traced = vec![Traced::default(); jobs.len()];
+    for (&j, t) in order.iter().zip(sorted) {
+        traced[j as usize] = t;
+    }
+    traced
 }
 
-/// Trace the jobs `batch` (indices into `jobs`); returns (job index, result) pairs.
+/// A work item's buffers, reused from batch to batch.
+#[derive(Default)]
+struct Scratch {
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+}
+
+/// Trace the jobs `batch` (indices into `jobs`) with the buffers `scratch`; returns their
+/// results in the order of `batch`.
 fn trace_batch(
     tracer: &Tracer,
     mut medium: Option<&mut (dyn MediumSampler + '_)>,
+    scratch: &mut Scratch,
     jobs: &[Job],
     batch: &[u32],
     radius: f32,
     seed: u64,
-) -> Vec<(u32, Traced)> {
-    let mut rays = Vec::new();
+) -> Vec<Traced> {
+    let Scratch { rays, hits } = scratch;
+    rays.clear();
     for &j in batch {
         let job = &jobs[j as usize];
         let key = sample_key(job.instance, job.index);
         ao_rays_range(
-            job.origin, job.normal, radius, job.first, job.rays, seed, key, &mut rays,
+            job.origin, job.normal, radius, job.first, job.rays, seed, key, rays,
         );
     }
-    let mut hits: Vec<Option<Hit>> = vec![None; rays.len()];
-    tracer.intersect(&rays, &mut hits);
+    hits.clear();
+    hits.resize(rays.len(), None);
+    tracer.intersect(rays, hits);
     let mut at = 0;
     batch
         .iter()
@@ -515,14 +539,13 @@ fn trace_batch(
                 })
                 .sum();
             at += n;
-            let result = Traced {
+            Traced {
                 instance: job.instance,
                 index: job.index,
                 sum,
                 rays: job.rays,
                 light: LightSample::default(),
-            };
-            (j, result)
+            }
         })
         .collect()
 }

@@ -11,11 +11,16 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 pub use medium::{Medium, MediumSampler};
+use sampling::azimuth;
 pub use sampling::{
-    cosine_hemisphere, hash64, medium_stream, orthonormal_basis, ray_offset, sample_2d,
+    cosine_hemisphere, hash64, medium_stream, orthonormal_basis, ray_offset, sample_2d, Hemisphere,
+    Sequence2d,
 };
 
 use crate::{sort_rays_spatially, Hit, Ray, Tracer};
+
+/// Samples of one point generated together by [`ao_rays_range`].
+const SAMPLE_GROUP: usize = 16;
 
 /// Rays traced together per parallel work item in [`ambient_occlusion_batch`].
 const RAYS_PER_CHUNK: usize = 4096;
@@ -39,10 +44,26 @@ pub fn ao_rays_range(
     out: &mut Vec<Ray>,
 ) {
     let origin = ray_offset(x, n);
-    out.extend((0..count).map(|i| {
-        let (u1, u2) = sample_2d(seed, key, first.wrapping_add(i));
-        Ray::new(origin, cosine_hemisphere(n, u1, u2), radius)
-    }));
+    // The point's sequence and frame once, then only per-sample work: in groups, the
+    // azimuths' sines first (library calls), then the rest (vectorised).
+    let (sequence, hemisphere) = (Sequence2d::new(seed, key), Hemisphere::new(n));
+    out.reserve(count as usize);
+    let (mut u1, mut sin, mut cos) = (
+        [0.0; SAMPLE_GROUP],
+        [0.0; SAMPLE_GROUP],
+        [0.0; SAMPLE_GROUP],
+    );
+    let mut dirs = [Vec3::ZERO; SAMPLE_GROUP];
+    for start in (0..count).step_by(SAMPLE_GROUP) {
+        let len = (count - start).min(SAMPLE_GROUP as u32) as usize;
+        for k in 0..len {
+            let (a, b) = sequence.at(first.wrapping_add(start + k as u32));
+            u1[k] = a;
+            (sin[k], cos[k]) = azimuth(b);
+        }
+        hemisphere.cosine_lanes(&u1, &sin, &cos, &mut dirs);
+        out.extend(dirs[..len].iter().map(|&d| Ray::new(origin, d, radius)));
+    }
 }
 
 /// The value of one AO sample: D / R, where L = min(t, R) is the distance to the closest

@@ -37,13 +37,36 @@ fn unit_float(x: u32) -> f32 {
 /// different keys get independent rotations; consecutive indices of one key stay well
 /// stratified.
 pub fn sample_2d(seed: u64, key: u64, index: u32) -> (f32, f32) {
-    let h = hash_pair(seed, key);
-    // Fixed-point arithmetic keeps the sequence exact for any index (wrapping is mod 1).
-    let x = index.wrapping_mul(R2_STEP[0]).wrapping_add(h as u32);
-    let y = index
-        .wrapping_mul(R2_STEP[1])
-        .wrapping_add((h >> 32) as u32);
-    (unit_float(x), unit_float(y))
+    Sequence2d::new(seed, key).at(index)
+}
+
+/// The 2-D sequence of one (seed, key): [`sample_2d`] with the hash of the pair computed once,
+/// for drawing many samples of one point.
+#[derive(Clone, Copy, Debug)]
+pub struct Sequence2d {
+    /// The rotation, x in the low and y in the high half (0.32 fixed point each).
+    shift: u64,
+}
+
+impl Sequence2d {
+    /// The sequence of `key` under `seed`.
+    pub fn new(seed: u64, key: u64) -> Self {
+        Self {
+            shift: hash_pair(seed, key),
+        }
+    }
+
+    /// Sample `index`: equal to [`sample_2d`]`(seed, key, index)`.
+    #[inline]
+    pub fn at(&self, index: u32) -> (f32, f32) {
+        let h = self.shift;
+        // Fixed-point arithmetic keeps the sequence exact for any index (wrapping is mod 1).
+        let x = index.wrapping_mul(R2_STEP[0]).wrapping_add(h as u32);
+        let y = index
+            .wrapping_mul(R2_STEP[1])
+            .wrapping_add((h >> 32) as u32);
+        (unit_float(x), unit_float(y))
+    }
 }
 
 /// The random stream of the medium sampling of AO sample `index` of point `key`: hashed
@@ -69,12 +92,82 @@ pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
 /// A unit direction in the hemisphere around `n` with pdf cos θ / π, from two uniform numbers
 /// in [0, 1). `n` need not be exactly unit (it is normalised; a zero normal means +z).
 pub fn cosine_hemisphere(n: Vec3, u1: f32, u2: f32) -> Vec3 {
-    let n = n.normalize_or(Vec3::Z);
-    let (t, b) = orthonormal_basis(n);
-    let r = u1.clamp(0.0, 1.0).sqrt();
-    let (sin, cos) = (std::f32::consts::TAU * u2).sin_cos();
-    let z = (1.0 - u1).max(0.0).sqrt();
-    (t * (r * cos) + b * (r * sin) + n * z).normalize_or(n)
+    Hemisphere::new(n).cosine(u1, u2)
+}
+
+/// The frame of one normal: [`cosine_hemisphere`] with the normalisation and the basis
+/// computed once, for drawing many directions around one normal.
+#[derive(Clone, Copy, Debug)]
+pub struct Hemisphere {
+    n: Vec3,
+    t: Vec3,
+    b: Vec3,
+}
+
+impl Hemisphere {
+    /// The hemisphere around `n` (normalised; a zero normal means +z).
+    pub fn new(n: Vec3) -> Self {
+        let n = n.normalize_or(Vec3::Z);
+        let (t, b) = orthonormal_basis(n);
+        Self { n, t, b }
+    }
+
+    /// A cosine-distributed direction: equal to [`cosine_hemisphere`]`(n, u1, u2)`.
+    #[inline]
+    pub fn cosine(&self, u1: f32, u2: f32) -> Vec3 {
+        self.cosine_at(u1, azimuth(u2))
+    }
+
+    /// [`Hemisphere::cosine`] with the azimuth's sine and cosine given ([`azimuth`] of
+    /// `u2`).
+    #[inline]
+    fn cosine_at(&self, u1: f32, (sin, cos): (f32, f32)) -> Vec3 {
+        let r = u1.clamp(0.0, 1.0).sqrt();
+        let z = (1.0 - u1).max(0.0).sqrt();
+        (self.t * (r * cos) + self.b * (r * sin) + self.n * z).normalize_or(self.n)
+    }
+
+    /// [`Hemisphere::cosine`] of `G` samples at once, from their `u1` and the sines and
+    /// cosines of their azimuths ([`azimuth`] of their `u2`), into `out`: the same
+    /// arithmetic as [`Hemisphere::cosine`] lane by lane (so the same bits), written as
+    /// loops over arrays without branches, which the compiler vectorises.
+    #[inline]
+    pub fn cosine_lanes<const G: usize>(
+        &self,
+        u1: &[f32; G],
+        sin: &[f32; G],
+        cos: &[f32; G],
+        out: &mut [Vec3; G],
+    ) {
+        let (mut x, mut y, mut z) = ([0.0f32; G], [0.0f32; G], [0.0f32; G]);
+        for k in 0..G {
+            let r = u1[k].clamp(0.0, 1.0).sqrt();
+            let h = (1.0 - u1[k]).max(0.0).sqrt();
+            let (rc, rs) = (r * cos[k], r * sin[k]);
+            // As glam: (t·rc + b·rs) + n·h per component.
+            x[k] = self.t.x * rc + self.b.x * rs + self.n.x * h;
+            y[k] = self.t.y * rc + self.b.y * rs + self.n.y * h;
+            z[k] = self.t.z * rc + self.b.z * rs + self.n.z * h;
+        }
+        for k in 0..G {
+            // `Vec3::normalize_or(n)`: 1 / sqrt(x·x + y·y + z·z), the fallback unless that is
+            // finite and positive.
+            let rcp = 1.0 / (x[k] * x[k] + y[k] * y[k] + z[k] * z[k]).sqrt();
+            let ok = rcp.is_finite() && rcp > 0.0;
+            x[k] = if ok { x[k] * rcp } else { self.n.x };
+            y[k] = if ok { y[k] * rcp } else { self.n.y };
+            z[k] = if ok { z[k] * rcp } else { self.n.z };
+        }
+        for k in 0..G {
+            out[k] = Vec3::new(x[k], y[k], z[k]);
+        }
+    }
+}
+
+/// Sine and cosine of the azimuth 2π·`u2` of a hemisphere sample.
+#[inline]
+pub fn azimuth(u2: f32) -> (f32, f32) {
+    (std::f32::consts::TAU * u2).sin_cos()
 }
 
 /// Offset that does not shrink below this many scene units (metres), for points near the
@@ -134,6 +227,37 @@ mod tests {
         }
         assert!((m1 / count as f32 - 2.0 / 3.0).abs() < 0.01);
         assert!((m2 / count as f32 - 0.5).abs() < 0.01);
+    }
+
+    #[test]
+    fn lanes_give_the_bits_of_one_direction_at_a_time() {
+        let mut normals = vec![Vec3::Z, -Vec3::Z, Vec3::ZERO, Vec3::new(0.0, 1e-8, -1.0)];
+        normals.extend((0..200u64).map(|i| {
+            let h = hash64(i);
+            let c = |s: u32| ((h >> s) & 0xffff) as f32 / 32768.0 - 1.0;
+            Vec3::new(c(0), c(16), c(32))
+        }));
+        for (i, &n) in normals.iter().enumerate() {
+            let (sequence, hemisphere) = (Sequence2d::new(3, i as u64), Hemisphere::new(n));
+            let mut u = [[0.0f32; 16]; 3];
+            for k in 0..16 {
+                let (u1, u2) = sample_2d(3, i as u64, k as u32 * 7);
+                assert_eq!(sequence.at(k as u32 * 7), (u1, u2));
+                // The ends of [0, 1] as well as sequence values.
+                u[0][k] = [0.0, 1.0 - f32::EPSILON / 2.0, u1][k % 3];
+                (u[1][k], u[2][k]) = azimuth(u2);
+            }
+            let mut lanes = [Vec3::ZERO; 16];
+            hemisphere.cosine_lanes(&u[0], &u[1], &u[2], &mut lanes);
+            for (k, lane) in lanes.iter().enumerate() {
+                let u2 = sample_2d(3, i as u64, k as u32 * 7).1;
+                let one = cosine_hemisphere(n, u[0][k], u2);
+                assert_eq!(
+                    lane.to_array().map(f32::to_bits),
+                    one.to_array().map(f32::to_bits)
+                );
+            }
+        }
     }
 
     #[test]
