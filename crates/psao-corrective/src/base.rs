@@ -8,7 +8,6 @@
 
 use crate::cache::view_tolerance;
 use crate::trace::DiffuseShade;
-use std::collections::HashMap;
 use glam::Vec3;
 use psao_client::Shading;
 use psao_raster::GBuffer;
@@ -16,6 +15,7 @@ use psao_scene::{Material, Scene};
 use psao_trace::ao::{ambient_occlusion, hash64};
 use psao_trace::gi::DiffuseLighting;
 use psao_trace::Tracer;
+use std::collections::HashMap;
 
 /// Client shading with AO traced at the shaded point.
 pub struct TracedAoShade<'a> {

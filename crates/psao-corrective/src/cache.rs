@@ -251,8 +251,7 @@ impl SampleCache {
         self.camera_age = self.camera_age.wrapping_add(1);
         let age = self.camera_age;
         let max_age = self.config.max_age;
-        self.eyes
-            .retain(|&a, _| age.wrapping_sub(a) <= max_age);
+        self.eyes.retain(|&a, _| age.wrapping_sub(a) <= max_age);
         self.set_view(view);
         let slots = max_age as usize + 1;
         // Per object: samples per level, to find its test level ℓ₀.
@@ -378,13 +377,14 @@ mod tests {
         Setup { cam, view, ids, g }
     }
 
-    /// A colour per pixel, never black (so a splatted pixel differs from the black base).
+    /// A colour per pixel, never black (so a splatted pixel differs from the black base) and
+    /// never brighter than white.
     fn colour_of(i: usize) -> [f32; 3] {
         let v = (i as u32).wrapping_mul(2_654_435_761);
         [
-            1.0 + (v & 0xff) as f32,
-            ((v >> 8) & 0xff) as f32,
-            ((v >> 16) & 0xff) as f32,
+            (1.0 + (v & 0xff) as f32) / 256.0,
+            ((v >> 8) & 0xff) as f32 / 256.0,
+            ((v >> 16) & 0xff) as f32 / 256.0,
         ]
     }
 
@@ -522,7 +522,10 @@ mod tests {
             (small, large, cache)
         };
         let (small, large, cache) = run(HashMap::new());
-        assert_eq!((small, large), (AgingStats::default(), AgingStats::default()));
+        assert_eq!(
+            (small, large),
+            (AgingStats::default(), AgingStats::default())
+        );
         assert_eq!(cache.len(), samples.len());
         // Object 1 turns 1° (kept, within 5°) and then 25° (dropped); object 2 has no
         // tolerance and stays.
@@ -531,6 +534,24 @@ mod tests {
         assert_eq!(large.turned, ones);
         assert_eq!(cache.len(), samples.len() - ones);
         assert!((1..=5).all(|l| cache.level(l).iter().all(|x| x.object == 2)));
+    }
+
+    #[test]
+    fn highlights_are_dropped_at_the_first_camera_change() {
+        let s = setup(Vec3::new(0.0, -3.0, 3.0));
+        let h = Hierarchy::new(5).unwrap();
+        let mut samples = all_samples(&s, &h, 0);
+        for x in samples.iter_mut().step_by(7) {
+            x.color = [2.0, 0.5, 0.5];
+        }
+        let highlights = samples.iter().filter(|x| is_highlight(x)).count();
+        let mut cache = SampleCache::new(CacheConfig::default(), h).unwrap();
+        cache.insert(&samples).unwrap();
+        // The same eye, a new camera age (e.g. a turn in place): only the highlights go.
+        let st = cache.camera_changed(&s.view);
+        assert_eq!(st.turned, highlights);
+        assert_eq!(cache.len(), samples.len() - highlights);
+        assert!((1..=5).all(|l| cache.level(l).iter().all(|x| !is_highlight(x))));
     }
 
     #[test]

@@ -410,15 +410,32 @@ mod tests {
         // from each, 1.28 in all) gets their mean; a pixel only one reaches, with weight 0.64
         // below one sample's, gets 0.64 of its correction.
         let s = [
-            sample_at(&f, 10, 10, 1, [1.0; 3]),
-            sample_at(&f, 12, 10, 1, [3.0; 3]),
+            sample_at(&f, 10, 10, 1, [0.25; 3]),
+            sample_at(&f, 12, 10, 1, [0.75; 3]),
         ];
         let img = run(&f, &h, &base, &[&s]);
-        assert!((at(&img, 11, 10) - 2.0).abs() < 1e-6);
-        assert_eq!(at(&img, 10, 10), 1.0);
-        assert_eq!(at(&img, 12, 10), 3.0);
-        assert!((at(&img, 9, 10) - 0.64).abs() < 1e-6);
-        assert!((at(&img, 13, 10) - 3.0 * 0.64).abs() < 1e-6);
+        assert!((at(&img, 11, 10) - 0.5).abs() < 1e-6);
+        assert_eq!(at(&img, 10, 10), 0.25);
+        assert_eq!(at(&img, 12, 10), 0.75);
+        assert!((at(&img, 9, 10) - 0.25 * 0.64).abs() < 1e-6);
+        assert!((at(&img, 13, 10) - 0.75 * 0.64).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_highlight_reaches_its_own_pixel_only() {
+        let f = frame(0, 0.0, W);
+        let h = Hierarchy::new(3).unwrap();
+        let base = grey(0.5);
+        // Level 1 of 3 reaches 5 px; brighter than white it reaches none of them.
+        let dim = sample_at(&f, 20, 15, 1, [0.9; 3]);
+        let bright = sample_at(&f, 20, 15, 1, [0.9, 4.0, 0.9]);
+        assert!(!is_highlight(&dim) && is_highlight(&bright));
+        assert!(at(&run(&f, &h, &base, &[&[dim]]), 21, 15) > 0.5);
+        let img = run(&f, &h, &base, &[&[bright]]);
+        assert_eq!(img[(15 * W + 20) as usize], [0.9, 4.0, 0.9]);
+        for (x, y) in [(21, 15), (19, 15), (20, 16), (22, 17)] {
+            assert_eq!(at(&img, x, y), 0.5, "({x}, {y})");
+        }
     }
 
     #[test]

@@ -73,7 +73,10 @@ fn base_psnr(scene: &Scene, lighting: Option<GiEval>) -> f64 {
 #[test]
 fn the_lit_base_has_an_error_on_diffuse_pixels_where_the_ao_base_has_none() {
     let scene = floor(true);
-    assert_eq!(base_psnr(&scene, None), psao_eval::corrective::metrics::PSNR_CAP);
+    assert_eq!(
+        base_psnr(&scene, None),
+        psao_eval::corrective::metrics::PSNR_CAP
+    );
     let lit = base_psnr(&scene, Some(LIT));
     assert!(lit < 60.0, "lit base PSNR {lit}");
 }

@@ -358,12 +358,8 @@ impl Context<'_> {
             mirror_turn: self.config.mirror_turn,
             ..CacheConfig::default()
         };
-        let mut corrector = Corrector::new(
-            self.hierarchy,
-            cache,
-            DEFAULT_JOB_SIZE,
-            self.config.decay,
-        )?;
+        let mut corrector =
+            Corrector::new(self.hierarchy, cache, DEFAULT_JOB_SIZE, self.config.decay)?;
         corrector.set_view_tolerances(view_tolerances(self.scene, cache.mirror_turn));
         Ok(Sim {
             order,
