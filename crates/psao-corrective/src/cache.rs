@@ -119,7 +119,7 @@ impl SampleCache {
         if config.capacity == 0 {
             return Err(CacheError::Capacity);
         }
-        if !(config.mirror_turn >= 0.0) {
+        if config.mirror_turn.is_nan() || config.mirror_turn < 0.0 {
             return Err(CacheError::MirrorTurn(config.mirror_turn));
         }
         Ok(Self {

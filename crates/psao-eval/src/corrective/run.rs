@@ -160,7 +160,7 @@ impl EvalConfig {
         if self.analyze_every == 0 {
             return bad("the analysis period must be at least 1 frame");
         }
-        if !(self.mirror_turn >= 0.0) {
+        if self.mirror_turn.is_nan() || self.mirror_turn < 0.0 {
             return bad("the mirror turn must be a non-negative angle");
         }
         if self
