@@ -7,10 +7,21 @@
 //! `j` are deleted when more than half of that object's level-`ℓ₀` samples of age difference
 //! `j` are invalid, and every sample with `j > MAX_AGE` is deleted. An object without a level
 //! of `N_min` samples is only aged by `MAX_AGE`.
+//!
+//! On top of the paper's rule each sample is aged by how far its view direction turned: the
+//! cache keeps the eye of every camera age ([`SampleCache::set_view`]), and a sample whose
+//! direction to the eye now differs from its direction to the eye it was traced from by more
+//! than its object's tolerance ([`SampleCache::set_view_tolerances`], from the material's
+//! roughness: [`view_tolerance`]) is deleted, since what it reflects or refracts has moved by
+//! about that angle. A highlight sample (brighter than white, [`is_highlight`]) shows a light
+//! reflected in a direction that only its own view has, and slides over a curved surface as
+//! the eye moves: it is deleted at the first camera change. The paper's test only sees the part of the turn that changes `n·v`; a
+//! sideways walk past a mirror keeps `n·v` and changes the reflection entirely.
 
 use crate::screen::ScreenView;
-use crate::splat::{splat, Sample, SplatTarget};
+use crate::splat::{is_highlight, splat, Sample, SplatTarget};
 use crate::sqrt5::Hierarchy;
+use glam::Vec3;
 use std::collections::HashMap;
 use thiserror::Error;
 
@@ -23,6 +34,9 @@ pub enum CacheError {
     /// A capacity of zero samples.
     #[error("the sample cache needs a capacity of at least one sample")]
     Capacity,
+    /// A negative or NaN mirror turn.
+    #[error("the mirror turn must be a non-negative angle, got {0}")]
+    MirrorTurn(f32),
     /// A sample of a level the hierarchy does not have.
     #[error("sample of level {level} for a hierarchy of {levels} levels")]
     Level {
@@ -44,16 +58,27 @@ pub struct CacheConfig {
     pub max_age: u32,
     /// Most samples kept; beyond it the oldest camera ages are evicted first.
     pub capacity: usize,
+    /// Largest turn of a mirror sample's view direction, in radians (see [`view_tolerance`]).
+    pub mirror_turn: f32,
+}
+
+/// The largest turn (radians) of a sample's view direction before what it shows has moved:
+/// `mirror_turn` plus the GGX width `α = roughness²` of the surface's reflection lobe (a view
+/// turn well inside the lobe leaves the glossy average nearly unchanged).
+pub fn view_tolerance(mirror_turn: f32, roughness: f32) -> f32 {
+    mirror_turn + roughness.clamp(0.0, 1.0).powi(2)
 }
 
 impl Default for CacheConfig {
-    /// δ = 0.1, `N_min` = 10, `MAX_AGE` = 60 camera changes, 500 000 samples.
+    /// δ = 0.1, `N_min` = 10, `MAX_AGE` = 60 camera changes, 500 000 samples, a mirror
+    /// turn of 1° (about a pixel at 160×90 and a 60° field of view).
     fn default() -> Self {
         Self {
             delta: 0.1,
             n_min: 10,
             max_age: 60,
             capacity: 500_000,
+            mirror_turn: 1f32.to_radians(),
         }
     }
 }
@@ -66,6 +91,11 @@ pub struct SampleCache {
     /// `levels[ℓ − 1]`: the samples of level ℓ in insertion order.
     levels: Vec<Vec<Sample>>,
     camera_age: u32,
+    /// The eye of each camera age within `MAX_AGE` of the current one.
+    eyes: HashMap<u32, Vec3>,
+    /// Per object, the largest turn of a sample's view direction (radians); objects not
+    /// listed are aged by the paper's rule only.
+    tolerances: HashMap<u32, f32>,
 }
 
 /// Samples removed by one aging pass.
@@ -75,6 +105,9 @@ pub struct AgingStats {
     pub invalid: usize,
     /// Deleted because they were older than `MAX_AGE`.
     pub too_old: usize,
+    /// Deleted because their view direction turned past their object's tolerance, or
+    /// because they were highlights ([`is_highlight`]) of an earlier view.
+    pub turned: usize,
 }
 
 impl SampleCache {
@@ -86,12 +119,44 @@ impl SampleCache {
         if config.capacity == 0 {
             return Err(CacheError::Capacity);
         }
+        if config.mirror_turn.is_nan() || config.mirror_turn < 0.0 {
+            return Err(CacheError::MirrorTurn(config.mirror_turn));
+        }
         Ok(Self {
             config,
             hierarchy,
             levels: vec![Vec::new(); hierarchy.levels() as usize],
             camera_age: 0,
+            eyes: HashMap::new(),
+            tolerances: HashMap::new(),
         })
+    }
+
+    /// The view of the current camera age (its eye is what later ages compare samples of
+    /// this age with); the first view of an age counts.
+    pub fn set_view(&mut self, view: &ScreenView) {
+        self.eyes.entry(self.camera_age).or_insert(view.eye);
+    }
+
+    /// The largest turn of the view direction (radians) per object's samples, e.g. from
+    /// [`view_tolerance`] of its material; replaces the previous ones.
+    pub fn set_view_tolerances(&mut self, tolerances: HashMap<u32, f32>) {
+        self.tolerances = tolerances;
+    }
+
+    /// Whether `s`'s direction to `eye` turned past its object's tolerance since it was traced.
+    fn turned(&self, s: &Sample, eye: Vec3) -> bool {
+        if is_highlight(s) {
+            return true;
+        }
+        let (Some(&tolerance), Some(&then)) =
+            (self.tolerances.get(&s.object), self.eyes.get(&s.age))
+        else {
+            return false;
+        };
+        let a = (then - s.position).normalize_or_zero();
+        let b = (eye - s.position).normalize_or_zero();
+        a.dot(b).clamp(-1.0, 1.0).acos() > tolerance
     }
 
     /// The configuration.
@@ -180,11 +245,14 @@ impl SampleCache {
         before - self.len()
     }
 
-    /// The camera changed: advance the camera age and age the samples against `view`.
+    /// The camera changed: advance the camera age, record `view` as its view and age the
+    /// samples against it.
     pub fn camera_changed(&mut self, view: &ScreenView) -> AgingStats {
         self.camera_age = self.camera_age.wrapping_add(1);
         let age = self.camera_age;
         let max_age = self.config.max_age;
+        self.eyes.retain(|&a, _| age.wrapping_sub(a) <= max_age);
+        self.set_view(view);
         let slots = max_age as usize + 1;
         // Per object: samples per level, to find its test level ℓ₀.
         let mut counts: HashMap<u32, Vec<usize>> = HashMap::new();
@@ -221,11 +289,22 @@ impl SampleCache {
             }
         }
         let mut stats = AgingStats::default();
-        for level in &mut self.levels {
+        let turned: Vec<Vec<bool>> = self
+            .levels
+            .iter()
+            .map(|level| level.iter().map(|s| self.turned(s, view.eye)).collect())
+            .collect();
+        for (level, turned) in self.levels.iter_mut().zip(turned) {
+            let mut turned = turned.into_iter();
             level.retain(|s| {
                 let j = age.wrapping_sub(s.age);
+                let turned = turned.next().unwrap_or(false);
                 if j > max_age {
                     stats.too_old += 1;
+                    return false;
+                }
+                if turned {
+                    stats.turned += 1;
                     return false;
                 }
                 let mostly_invalid = tally
@@ -298,13 +377,14 @@ mod tests {
         Setup { cam, view, ids, g }
     }
 
-    /// A colour per pixel, never black (so a splatted pixel differs from the black base).
+    /// A colour per pixel, never black (so a splatted pixel differs from the black base) and
+    /// never brighter than white.
     fn colour_of(i: usize) -> [f32; 3] {
         let v = (i as u32).wrapping_mul(2_654_435_761);
         [
-            1.0 + (v & 0xff) as f32,
-            ((v >> 8) & 0xff) as f32,
-            ((v >> 16) & 0xff) as f32,
+            (1.0 + (v & 0xff) as f32) / 256.0,
+            ((v >> 8) & 0xff) as f32 / 256.0,
+            ((v >> 16) & 0xff) as f32 / 256.0,
         ]
     }
 
@@ -418,6 +498,68 @@ mod tests {
         let st = cache.camera_changed(&above.view);
         assert_eq!(st.invalid, n);
         assert!(cache.is_empty());
+    }
+
+    #[test]
+    fn a_view_that_turns_past_the_tolerance_drops_samples_the_paper_rule_keeps() {
+        // The eye circles the disc at the same distance and height: n·v stays the same, so
+        // the paper's rule keeps every sample, though a mirror's reflection has changed.
+        let eye = |deg: f32| {
+            let a = deg.to_radians();
+            Vec3::new(3.0 * a.sin(), -3.0 * a.cos(), 3.0)
+        };
+        let s = setup(eye(0.0));
+        let h = Hierarchy::new(5).unwrap();
+        let samples = all_samples(&s, &h, 0);
+        let ones = samples.iter().filter(|x| x.object == 1).count();
+        let run = |tolerances: HashMap<u32, f32>| {
+            let mut cache = SampleCache::new(CacheConfig::default(), h).unwrap();
+            cache.set_view_tolerances(tolerances);
+            cache.set_view(&s.view);
+            cache.insert(&samples).unwrap();
+            let small = cache.camera_changed(&setup(eye(1.0)).view);
+            let large = cache.camera_changed(&setup(eye(25.0)).view);
+            (small, large, cache)
+        };
+        let (small, large, cache) = run(HashMap::new());
+        assert_eq!(
+            (small, large),
+            (AgingStats::default(), AgingStats::default())
+        );
+        assert_eq!(cache.len(), samples.len());
+        // Object 1 turns 1° (kept, within 5°) and then 25° (dropped); object 2 has no
+        // tolerance and stays.
+        let (small, large, cache) = run(HashMap::from([(1, 5f32.to_radians())]));
+        assert_eq!(small, AgingStats::default());
+        assert_eq!(large.turned, ones);
+        assert_eq!(cache.len(), samples.len() - ones);
+        assert!((1..=5).all(|l| cache.level(l).iter().all(|x| x.object == 2)));
+    }
+
+    #[test]
+    fn highlights_are_dropped_at_the_first_camera_change() {
+        let s = setup(Vec3::new(0.0, -3.0, 3.0));
+        let h = Hierarchy::new(5).unwrap();
+        let mut samples = all_samples(&s, &h, 0);
+        for x in samples.iter_mut().step_by(7) {
+            x.color = [2.0, 0.5, 0.5];
+        }
+        let highlights = samples.iter().filter(|x| is_highlight(x)).count();
+        let mut cache = SampleCache::new(CacheConfig::default(), h).unwrap();
+        cache.insert(&samples).unwrap();
+        // The same eye, a new camera age (e.g. a turn in place): only the highlights go.
+        let st = cache.camera_changed(&s.view);
+        assert_eq!(st.turned, highlights);
+        assert_eq!(cache.len(), samples.len() - highlights);
+        assert!((1..=5).all(|l| cache.level(l).iter().all(|x| !is_highlight(x))));
+    }
+
+    #[test]
+    fn the_tolerance_grows_with_roughness() {
+        let turn = 1f32.to_radians();
+        assert_eq!(view_tolerance(turn, 0.0), turn);
+        assert!(view_tolerance(turn, 0.2) > view_tolerance(turn, 0.1));
+        assert!((view_tolerance(turn, 0.3) - (turn + 0.09)).abs() < 1e-6);
     }
 
     #[test]
@@ -539,6 +681,14 @@ mod tests {
             ..CacheConfig::default()
         };
         assert!(SampleCache::new(nan, h).is_err());
+        let turn = CacheConfig {
+            mirror_turn: -0.1,
+            ..CacheConfig::default()
+        };
+        assert_eq!(
+            SampleCache::new(turn, h).unwrap_err(),
+            CacheError::MirrorTurn(-0.1)
+        );
         let empty = CacheConfig {
             capacity: 0,
             ..CacheConfig::default()

@@ -185,6 +185,17 @@ impl Corrector {
         stats
     }
 
+    /// The view of the current camera age (see [`SampleCache::set_view`]).
+    pub fn set_view(&mut self, view: &ScreenView) {
+        self.cache.set_view(view);
+    }
+
+    /// Per object, the largest turn of its samples' view direction (see
+    /// [`SampleCache::set_view_tolerances`]).
+    pub fn set_view_tolerances(&mut self, tolerances: std::collections::HashMap<u32, f32>) {
+        self.cache.set_view_tolerances(tolerances);
+    }
+
     /// Drop the cached samples of moving objects.
     pub fn drop_objects(&mut self, moving: impl Fn(u32) -> bool) -> usize {
         self.cache.drop_objects(moving)

@@ -20,7 +20,8 @@
 //!   at its own pixel (the rim of a lone sample's reach) the correction fades towards the
 //!   base in proportion, so a sample's confidence falls with the distance from it in units of
 //!   its level's coarseness;
-//! - a pixel no sample reaches keeps the base.
+//! - a pixel no sample reaches keeps the base;
+//! - a highlight ([`is_highlight`]) reaches its own pixel only.
 //!
 //! The frame is cut into bands of rows written in parallel; every band visits the samples in
 //! the same order, so the result does not depend on the number of threads.
@@ -72,6 +73,17 @@ pub const PLANE_TOLERANCE: f32 = 0.01;
 /// Smallest cosine between a pixel's normal and a sample's normal for the sample to reach it.
 pub const NORMAL_COS: f32 = 0.9;
 
+/// Radiance above which a sample channel is a highlight: brighter than the display's white.
+pub const HIGHLIGHT: f32 = 1.0;
+
+/// Whether `s` is a highlight: some channel brighter than [`HIGHLIGHT`], a light (or a
+/// bright reflection of one) seen in a glossy or mirror surface. Such a peak is narrower
+/// than a pixel's neighbours and moves with the eye, so it is splatted to its own pixel only
+/// and kept for its own view only ([`crate::cache`]).
+pub fn is_highlight(s: &Sample) -> bool {
+    s.color.iter().any(|&c| c > HIGHLIGHT)
+}
+
 /// A sample placed on screen.
 #[derive(Clone, Copy)]
 struct Placed {
@@ -114,11 +126,19 @@ fn place(
 ) -> Option<Placed> {
     let (x, y, z) = view.project(s.position)?;
     let i = y as usize * view.width as usize + x as usize;
-    if ids[i] != s.object || (g.depth[i] - z).abs() > DEPTH_TOLERANCE * z {
+    // The pixel must show the sample's surface: its object, at its depth, facing as it does
+    // (a sample reprojected onto another face of its object, e.g. around a corner of a box
+    // the eye walked past, corrects light it did not trace).
+    if ids[i] != s.object
+        || (g.depth[i] - z).abs() > DEPTH_TOLERANCE * z
+        || g.normal[i].dot(s.normal) < NORMAL_COS
+    {
         return None;
     }
     let (ux, uy) = hierarchy.basis(s.level).ok()?;
-    let reach = ((ux * ux + uy * uy) as f32).sqrt();
+    let spacing = ((ux * ux + uy * uy) as f32).sqrt();
+    // A highlight is narrower than any footprint: only its own pixel shows it.
+    let reach = if is_highlight(s) { 1.0 } else { spacing };
     // Pixels strictly closer than `reach`: |dx|, |dy| ≤ ⌈reach⌉ − 1.
     let r = reach.ceil() as i32 - 1;
     let base = diffuse[i];
@@ -390,15 +410,60 @@ mod tests {
         // from each, 1.28 in all) gets their mean; a pixel only one reaches, with weight 0.64
         // below one sample's, gets 0.64 of its correction.
         let s = [
-            sample_at(&f, 10, 10, 1, [1.0; 3]),
-            sample_at(&f, 12, 10, 1, [3.0; 3]),
+            sample_at(&f, 10, 10, 1, [0.25; 3]),
+            sample_at(&f, 12, 10, 1, [0.75; 3]),
         ];
         let img = run(&f, &h, &base, &[&s]);
-        assert!((at(&img, 11, 10) - 2.0).abs() < 1e-6);
-        assert_eq!(at(&img, 10, 10), 1.0);
-        assert_eq!(at(&img, 12, 10), 3.0);
-        assert!((at(&img, 9, 10) - 0.64).abs() < 1e-6);
-        assert!((at(&img, 13, 10) - 3.0 * 0.64).abs() < 1e-6);
+        assert!((at(&img, 11, 10) - 0.5).abs() < 1e-6);
+        assert_eq!(at(&img, 10, 10), 0.25);
+        assert_eq!(at(&img, 12, 10), 0.75);
+        assert!((at(&img, 9, 10) - 0.25 * 0.64).abs() < 1e-6);
+        assert!((at(&img, 13, 10) - 0.75 * 0.64).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_highlight_reaches_its_own_pixel_only() {
+        let f = frame(0, 0.0, W);
+        let h = Hierarchy::new(3).unwrap();
+        let base = grey(0.5);
+        // Level 1 of 3 reaches 5 px; brighter than white it reaches none of them.
+        let dim = sample_at(&f, 20, 15, 1, [0.9; 3]);
+        let bright = sample_at(&f, 20, 15, 1, [0.9, 4.0, 0.9]);
+        assert!(!is_highlight(&dim) && is_highlight(&bright));
+        assert!(at(&run(&f, &h, &base, &[&[dim]]), 21, 15) > 0.5);
+        let img = run(&f, &h, &base, &[&[bright]]);
+        assert_eq!(img[(15 * W + 20) as usize], [0.9, 4.0, 0.9]);
+        for (x, y) in [(21, 15), (19, 15), (20, 16), (22, 17)] {
+            assert_eq!(at(&img, x, y), 0.5, "({x}, {y})");
+        }
+    }
+
+    #[test]
+    fn a_sample_whose_pixel_faces_another_way_is_not_drawn() {
+        // Columns ≥ 20 are tilted; the sample claims the flat part's normal at a tilted pixel
+        // (the object's other face at its position and depth, as after a walk around a corner).
+        let f = frame(0, 0.0, 20);
+        let h = Hierarchy::new(3).unwrap();
+        let base = grey(0.5);
+        let mut s = sample_at(&f, 25, 15, 3, [0.9; 3]);
+        s.normal = Vec3::Z;
+        let mut color = base.clone();
+        let drawn = splat(
+            &[&[s]],
+            &h,
+            &f.view,
+            &mut SplatTarget {
+                color: &mut color,
+                diffuse: &base,
+                ids: &f.ids,
+                gbuffer: &f.g,
+            },
+        );
+        assert_eq!(drawn, 0);
+        assert_eq!(color, base);
+        // Where the pixel faces as the sample does, it is drawn.
+        let flat = sample_at(&f, 10, 15, 3, [0.9; 3]);
+        assert_eq!(at(&run(&f, &h, &base, &[&[flat]]), 10, 15), 0.9);
     }
 
     #[test]

@@ -14,7 +14,7 @@ use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard};
 use glam::{Affine3A, Vec3};
 use psao_client::Shading;
 use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
-use psao_corrective::base::{is_object, object_ids, TracedAoShade};
+use psao_corrective::base::{is_object, object_ids, view_tolerances, TracedAoShade};
 use psao_corrective::cache::{CacheConfig, SampleCache};
 use psao_corrective::saliency::{saliency, RgbImage};
 use psao_corrective::schedule::{DEFAULT_DECAY, DEFAULT_JOB_SIZE};
@@ -615,10 +615,11 @@ impl CorrectiveClient {
     /// The camera of the next frame (as sent): a change ages the cache.
     pub fn camera(&mut self, msg: &CameraMsg) {
         let camera = view_of(msg).camera;
+        let view = ScreenView::new(&camera, self.width, self.height);
         if self.camera.is_some_and(|c| c != camera) {
-            self.cache
-                .camera_changed(&ScreenView::new(&camera, self.width, self.height));
+            self.cache.camera_changed(&view);
         }
+        self.cache.set_view(&view);
         self.camera = Some(camera);
     }
 
@@ -680,6 +681,10 @@ impl CorrectiveClient {
         gbuffer: &GBuffer,
         base: BaseFrame<'_>,
     ) -> CorrectedFrame {
+        if self.motion.is_none() {
+            let turn = self.cache.config().mirror_turn;
+            self.cache.set_view_tolerances(view_tolerances(scene, turn));
+        }
         let motion = self.motion.get_or_insert_with(|| MotionWatch::new(scene));
         let mut dropped = 0;
         if let Some(m) = motion {

@@ -1,15 +1,15 @@
 //! The images of one evaluated frame that every ordering and budget shares: the G-buffer,
-//! object ids, the base frame (the client's shading with traced AO), the reference (the base
-//! frame on diffuse pixels, the correction tracer on every non-diffuse pixel) and the
-//! reference's saliency map.
+//! object ids, the base frame (the client's shading: with traced AO, or lit), the reference
+//! (on diffuse pixels the base frame, or with lighting the path-traced diffuse lighting; the
+//! reference's correction tracer on every non-diffuse pixel) and the reference's saliency map.
 
 use glam::Vec3;
-use psao_corrective::base::{object_ids, TracedAoShade};
+use psao_corrective::base::object_ids;
 use psao_corrective::saliency::{saliency, Map, RgbImage};
 use psao_corrective::screen::ScreenView;
 use psao_corrective::session::Planned;
 use psao_corrective::splat::Sample;
-use psao_corrective::trace::CorrectionTracer;
+use psao_corrective::trace::{CorrectionTracer, DiffuseShade};
 use psao_raster::{rasterize, GBuffer, RasterOptions};
 use psao_scene::{Camera, Material, Scene};
 use rayon::prelude::*;
@@ -67,39 +67,49 @@ pub fn trace_sample(tracer: &CorrectionTracer<'_>, f: &FrameImages, p: &Planned)
     }
 }
 
-/// Renders the shared images of a frame.
+/// How the reference of a frame is rendered.
+pub struct ReferenceShading<'a> {
+    /// The correction tracer of the non-diffuse pixels.
+    pub tracer: &'a CorrectionTracer<'a>,
+    /// The shading of the diffuse pixels; `None`: the base frame's.
+    pub diffuse: Option<&'a dyn DiffuseShade>,
+}
+
+/// Renders the shared images of a frame: the base frame with `base` at every covered pixel,
+/// the reference with `reference`.
 pub fn frame_images(
     scene: &Scene,
     camera: Camera,
     camera_age: u32,
-    width: u32,
-    height: u32,
-    shade: &TracedAoShade<'_>,
-    tracer: &CorrectionTracer<'_>,
+    (width, height): (u32, u32),
+    base: &dyn DiffuseShade,
+    reference: &ReferenceShading<'_>,
 ) -> FrameImages {
     let gbuffer = rasterize(scene, &camera, &RasterOptions::new(width, height));
     let ids = object_ids(scene, &gbuffer);
     let fallback = Material::default();
     let sky = psao_client::SKY_GREY;
-    let base: Vec<[f32; 3]> = (0..gbuffer.len())
+    let shade = |shade: &dyn DiffuseShade, i: usize| {
+        if !gbuffer.covered(i) {
+            return sky;
+        }
+        let m = gbuffer
+            .material(scene, i)
+            .and_then(|m| scene.materials.get(m))
+            .unwrap_or(&fallback);
+        let (p, n) = (gbuffer.position[i], gbuffer.normal[i]);
+        shade.shade(p, n, gbuffer.instance[i], m).to_array()
+    };
+    let base_frame: Vec<[f32; 3]> = (0..gbuffer.len())
         .into_par_iter()
-        .map(|i| {
-            if !gbuffer.covered(i) {
-                return sky;
-            }
-            let m = gbuffer
-                .material(scene, i)
-                .and_then(|m| scene.materials.get(m))
-                .unwrap_or(&fallback);
-            let (p, n) = (gbuffer.position[i], gbuffer.normal[i]);
-            shade.shade_with_ao(n, m, shade.ao(p, n)).to_array()
-        })
+        .map(|i| shade(base, i))
         .collect();
+    let tracer = reference.tracer;
     let reference: Vec<[f32; 3]> = (0..gbuffer.len())
         .into_par_iter()
         .map(|i| {
             if ids[i] == 0 {
-                return base[i];
+                return reference.diffuse.map_or(base_frame[i], |d| shade(d, i));
             }
             let (x, y) = (i as u32 % width, i as u32 / width);
             let dir = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, width, height);
@@ -115,7 +125,7 @@ pub fn frame_images(
         camera,
         gbuffer,
         ids,
-        base,
+        base: base_frame,
         reference,
         reference_srgb,
         reference_saliency,

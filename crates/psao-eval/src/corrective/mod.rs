@@ -8,7 +8,7 @@ pub mod report;
 pub mod run;
 pub mod seeds;
 
-pub use run::{evaluate_path, Budget, EvalConfig, Order, PathEval, Tracers};
+pub use run::{evaluate_path, Budget, EvalConfig, GiEval, Order, PathEval, Tracers};
 
 /// Why an evaluation could not run.
 #[derive(Debug, thiserror::Error)]

@@ -89,12 +89,26 @@ pub fn paired_table(pairs: &[Paired]) -> String {
     s
 }
 
+/// What the base frame and the reference are.
+fn base_description(config: &EvalConfig) -> String {
+    match config.lighting {
+        None => format!(
+            "base: the AO composite with {} AO rays per point (the reference shades diffuse pixels the same way)",
+            config.ao_spp
+        ),
+        Some(g) => format!(
+            "base: the lit composite with {} paths per point and {} bounces; reference: path-traced diffuse lighting with {} paths per point plus the reflected and refracted paths",
+            g.base_paths, g.bounces, g.reference_paths
+        ),
+    }
+}
+
 /// The report of one run along one path.
 pub fn path_markdown(scene: &str, config: &EvalConfig, eval: &PathEval) -> String {
     let mut s = format!(
-        "# Corrective splatting evaluation\n\nScene `{scene}`, path `{}`, {}×{}, frames {}..{}, {} √5 levels, analysis every {} frames, {} AO rays per point of the base shading, seed {}.\n\n",
+        "# Corrective splatting evaluation\n\nScene `{scene}`, path `{}`, {}×{}, frames {}..{}, {} √5 levels, analysis every {} frames, {}, seed {}.\n\n",
         eval.path, config.width, config.height, eval.frames.start, eval.frames.end, eval.levels,
-        config.analyze_every, config.ao_spp, config.seed
+        config.analyze_every, base_description(config), config.seed
     );
     s += "## Averages over the frames (against the reference)\n\n";
     s += &rows_table(&eval.rows);
@@ -127,8 +141,8 @@ pub fn seeds_markdown(
 ) -> String {
     let seeds: Vec<String> = report.runs.iter().map(|r| r.seed.to_string()).collect();
     let mut s = format!(
-        "# Corrective splatting evaluation over seeds\n\nScene `{scene}`, {paths}, {}×{}, seeds {}, analysis every {} frames, {} AO rays per point of the base shading. Each seed's rows are averaged over its paths' frames; the table gives their mean ± sample standard deviation over the seeds.\n\n",
-        config.width, config.height, seeds.join(", "), config.analyze_every, config.ao_spp
+        "# Corrective splatting evaluation over seeds\n\nScene `{scene}`, {paths}, {}×{}, seeds {}, analysis every {} frames, {}. Each seed's rows are averaged over its paths' frames; the table gives their mean ± sample standard deviation over the seeds.\n\n",
+        config.width, config.height, seeds.join(", "), config.analyze_every, base_description(config)
     );
     s += &summary_table(report);
     if !report.saliency_vs_uniform.is_empty() {

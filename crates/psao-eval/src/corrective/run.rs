@@ -14,23 +14,27 @@ use std::str::FromStr;
 use std::time::Instant;
 
 use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
-use psao_corrective::base::TracedAoShade;
+use psao_corrective::base::{view_tolerances, GiShade, TracedAoShade};
 use psao_corrective::cache::CacheConfig;
 use psao_corrective::saliency::{saliency, Map};
 use psao_corrective::schedule::DEFAULT_JOB_SIZE;
 use psao_corrective::session::Corrector;
 use psao_corrective::splat::{Sample, SplatTarget};
 use psao_corrective::sqrt5::Hierarchy;
-use psao_corrective::trace::{CorrectionTracer, TraceSettings};
+use psao_corrective::trace::{CorrectionTracer, DiffuseShade, TraceSettings};
 use psao_scene::{CameraPath, Scene};
 use psao_trace::ao::hash64;
+use psao_trace::gi::DiffuseLighting;
 use psao_trace::{Backend, GeometryMode, Tracer};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::frame::{frame_images, rgb_image, trace_sample, FrameImages};
+use super::frame::{frame_images, rgb_image, trace_sample, FrameImages, ReferenceShading};
 use super::metrics::{centre_bias, frame_error, ErrorSums, FrameError, MeanError, Truth};
 use super::EvalError;
+
+/// Mixed into the seed of the reference's paths, so they are independent of the base's.
+const REFERENCE_SEED: u64 = 0x5245_4645_5245_4e43;
 
 /// How regions are ordered.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -111,6 +115,30 @@ pub struct EvalConfig {
     pub static_frames: u32,
     /// Seed of every random choice.
     pub seed: u64,
+    /// Largest turn of a mirror sample's view direction before it is dropped, in radians
+    /// ([`psao_corrective::cache::view_tolerance`]; infinite: the paper's aging only).
+    pub mirror_turn: f32,
+    /// The lit session's base and the full reference (`None`: the AO composite, whose
+    /// shading the reference shares on diffuse pixels).
+    pub lighting: Option<GiEval>,
+}
+
+/// A lit evaluation (`psao corrective eval --lighting gi`): the base frame is the lit
+/// composite `base colour / π × E` with E path-traced per pixel with `base_paths` paths
+/// (standing in for the client's shadow-mapped direct light plus the points' irradiance),
+/// and the correction tracer shades the diffuse surfaces it reaches the same way; the
+/// reference is `psao reference --lighting gi`'s diffuse lighting with `reference_paths`
+/// paths (an independent seed) on diffuse pixels, and the correction tracer shading the
+/// diffuse surfaces it reaches with that lighting on non-diffuse pixels (the reflected and
+/// refracted paths), so diffuse pixels have an error of their own.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GiEval {
+    /// Indirect diffuse bounces (a fixed depth, as `psao_trace::gi`).
+    pub bounces: u32,
+    /// Paths per point of the base frame and of the samples' diffuse shading.
+    pub base_paths: u32,
+    /// Paths per point of the reference.
+    pub reference_paths: u32,
 }
 
 impl EvalConfig {
@@ -131,6 +159,15 @@ impl EvalConfig {
         }
         if self.analyze_every == 0 {
             return bad("the analysis period must be at least 1 frame");
+        }
+        if self.mirror_turn.is_nan() || self.mirror_turn < 0.0 {
+            return bad("the mirror turn must be a non-negative angle");
+        }
+        if self
+            .lighting
+            .is_some_and(|g| g.base_paths == 0 || g.reference_paths == 0)
+        {
+            return bad("the lit base and reference need at least one path per point");
         }
         if !(0.0..1.0).contains(&self.decay) {
             return Err(EvalError::Config(format!(
@@ -308,23 +345,26 @@ fn mean(v: &[f64]) -> f64 {
 struct Context<'a> {
     config: &'a EvalConfig,
     scene: &'a Scene,
-    shade: &'a TracedAoShade<'a>,
+    base: &'a dyn DiffuseShade,
     tracer: &'a CorrectionTracer<'a>,
+    reference: ReferenceShading<'a>,
     hierarchy: Hierarchy,
     centre: Vec<f32>,
 }
 
 impl Context<'_> {
     fn sim(&self, order: Order, budget: Budget) -> Result<Sim, EvalError> {
+        let cache = CacheConfig {
+            mirror_turn: self.config.mirror_turn,
+            ..CacheConfig::default()
+        };
+        let mut corrector =
+            Corrector::new(self.hierarchy, cache, DEFAULT_JOB_SIZE, self.config.decay)?;
+        corrector.set_view_tolerances(view_tolerances(self.scene, cache.mirror_turn));
         Ok(Sim {
             order,
             budget,
-            corrector: Corrector::new(
-                self.hierarchy,
-                CacheConfig::default(),
-                DEFAULT_JOB_SIZE,
-                self.config.decay,
-            )?,
+            corrector,
             sums: ErrorSums::default(),
             traced: 0,
             worse_psnr: 0,
@@ -338,10 +378,9 @@ impl Context<'_> {
             self.scene,
             camera,
             camera_age,
-            c.width,
-            c.height,
-            self.shade,
-            self.tracer,
+            (c.width, c.height),
+            self.base,
+            &self.reference,
         )
     }
 
@@ -477,24 +516,49 @@ pub fn evaluate_path(
 ) -> Result<PathEval, EvalError> {
     config.check()?;
     let range = config.frame_range(path.frame_count() as u32)?;
-    let shade = TracedAoShade {
+    let ao = TracedAoShade {
         tracer: &tracers.occlusion,
         shading: psao_client::Shading::default(),
         radius: scene.ao_radius,
         spp: config.ao_spp,
         seed: config.seed,
     };
+    // The lit base and the reference's lighting: the same lights and bounces, independent
+    // paths.
+    let lit = config.lighting.map(|g| {
+        let shade = |paths, seed| GiShade {
+            tracer: &tracers.occlusion,
+            lighting: DiffuseLighting::new(scene, 0.0, g.bounces),
+            paths,
+            seed,
+        };
+        (
+            shade(g.base_paths, config.seed),
+            shade(g.reference_paths, hash64(config.seed ^ REFERENCE_SEED)),
+        )
+    });
+    let base: &dyn DiffuseShade = match &lit {
+        Some((b, _)) => b,
+        None => &ao,
+    };
     let settings = TraceSettings {
         sky: glam::Vec3::from_array(psao_client::SKY_GREY),
         seed: config.seed,
         ..TraceSettings::default()
     };
-    let tracer = CorrectionTracer::new(scene, &tracers.primary, &shade, settings);
+    let tracer = CorrectionTracer::new(scene, &tracers.primary, base, settings);
+    let reference_tracer = lit
+        .as_ref()
+        .map(|(_, r)| CorrectionTracer::new(scene, &tracers.primary, r, settings));
     let cx = Context {
         config,
         scene,
-        shade: &shade,
+        base,
         tracer: &tracer,
+        reference: ReferenceShading {
+            tracer: reference_tracer.as_ref().unwrap_or(&tracer),
+            diffuse: lit.as_ref().map(|(_, r)| r as &dyn DiffuseShade),
+        },
         hierarchy: Hierarchy::for_spacing(config.width.min(config.height) as f32 / 4.0),
         centre: centre_bias(config.width, config.height),
     };
@@ -542,6 +606,7 @@ pub fn evaluate_path(
                 sim.corrector.camera_changed(&f.view);
                 clock.aging_ms.push(t.elapsed().as_secs_f64() * 1e3);
             }
+            sim.corrector.set_view(&f.view);
             if analyze_now {
                 let now = splatted(&sim.corrector, &f);
                 let regions = priorities(sim.order, &f, &now, config.seed, frame, &mut clock);
@@ -629,6 +694,7 @@ fn static_convergence(
         let mut curve = Vec::new();
         let mut traced = 0;
         let mut last = f.base.clone();
+        sim.corrector.set_view(&f.view);
         for i in 0..config.static_frames {
             if i % config.analyze_every == 0 {
                 let now = splatted(&sim.corrector, &f);

@@ -5,13 +5,14 @@ use super::plot::{convergence_plot, Curve};
 use crate::args::{FrameRange, Resolution};
 use crate::png_io::write_rgb_png;
 use crate::progress;
+use crate::reference::Lighting;
 use crate::scene_source::SceneArgs;
 use anyhow::{Context, Result};
 use clap::Args;
 use psao_corrective::schedule::DEFAULT_DECAY;
 use psao_eval::corrective::report::{path_markdown, rows_table, seeds_markdown, summary_table};
 use psao_eval::corrective::seeds::{evaluate_seeds, Paths};
-use psao_eval::corrective::{Budget, EvalConfig, Order, PathEval, Tracers};
+use psao_eval::corrective::{Budget, EvalConfig, GiEval, Order, PathEval, Tracers};
 use psao_scene::{PathGenConfig, PATH_HZ};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -54,6 +55,25 @@ pub struct EvalArgs {
     /// Seed of every random choice.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Largest turn in degrees of a mirror sample's view direction before the cache drops
+    /// it (the GGX lobe width roughness² is added for glossy surfaces; `inf`: the paper's
+    /// aging only).
+    #[arg(long, default_value_t = 1.0)]
+    pub mirror_turn: f32,
+    /// The session's lighting: `ao` (the base is the AO composite, the reference shades
+    /// diffuse pixels the same way) or `gi` (the base is the lit composite, the reference is
+    /// the path-traced diffuse lighting plus the reflected and refracted paths).
+    #[arg(long, value_enum, default_value_t = Lighting::Ao)]
+    pub lighting: Lighting,
+    /// Indirect diffuse bounces with `--lighting gi`.
+    #[arg(long, default_value_t = 1)]
+    pub bounces: u32,
+    /// Paths per point of the lit base frame and of the samples' diffuse shading.
+    #[arg(long, default_value_t = 16)]
+    pub base_paths: u32,
+    /// Paths per point of the lit reference.
+    #[arg(long, default_value_t = 64)]
+    pub reference_paths: u32,
     /// Seeds, comma-separated: one run per seed (replaces `--seed`), reported as mean and
     /// spread over the seeds.
     #[arg(long, value_delimiter = ',')]
@@ -97,6 +117,12 @@ struct PathFile<'a> {
 
 /// Runs `psao corrective eval`.
 pub fn run(args: &EvalArgs) -> Result<()> {
+    anyhow::ensure!(
+        args.bounces <= psao_server::MAX_BOUNCES,
+        "--bounces must be at most {}, got {}",
+        psao_server::MAX_BOUNCES,
+        args.bounces
+    );
     let (mut input, path) = args.input.load()?;
     input.scene.freeze();
     let scene = &input.scene;
@@ -113,6 +139,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         ao_spp: args.ao_spp,
         static_frames: args.static_frames,
         seed: args.seed,
+        mirror_turn: args.mirror_turn.to_radians(),
+        lighting: (args.lighting == Lighting::Gi).then_some(GiEval {
+            bounces: args.bounces,
+            base_paths: args.base_paths,
+            reference_paths: args.reference_paths,
+        }),
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
