@@ -16,6 +16,16 @@
 //! are. Each selected point is charged [`charge`] rays: its AO rays plus the most rays its
 //! paths can trace.
 //!
+//! # Pooling
+//!
+//! A point's published irradiance is the mean of the paths of the points of its cell that
+//! lie in its tangent plane ([`InstanceState::pooled_irradiance`]), weighted by their
+//! paths: diffuse irradiance varies little across a cell (a few point spacings; the sharp
+//! shadows of suns and point lights are the clients'), while one point's few paths are
+//! noisy, so a cell's coplanar points (up to 7) share their samples. Points on another
+//! plane of the cell (a crease, a step) keep theirs apart. Each point still takes its own
+//! paths and converges as before; what it accumulates (`Server::irradiance`) is its own.
+//!
 //! # Invalidation
 //!
 //! Moving geometry restarts a point's irradiance exactly as its AO (the proximity rule of
@@ -33,7 +43,7 @@ use psao_trace::gi::DiffuseLighting;
 use psao_trace::Tracer;
 use rayon::prelude::*;
 
-use crate::instance::InstanceState;
+use crate::instance::{InstanceState, NONE};
 use crate::trace::{sample_key, Candidate};
 use crate::LightingConfig;
 
@@ -43,6 +53,14 @@ use crate::LightingConfig;
 /// occluder 2 m away moves by 3.5 cm, about the spacing of the points at the default
 /// density: finer turns would change what the points can show by less than they resolve.
 pub const SUN_TOLERANCE_DEG: f32 = 1.0;
+
+/// Cosine of the largest angle between the normals of two points of a cell whose paths pool
+/// (about 26°).
+pub const POOL_COS: f32 = 0.9;
+
+/// Largest offset, in cell sizes, of a point of a cell from another's tangent plane for
+/// their paths to pool.
+pub const POOL_PLANE: f32 = 0.25;
 
 /// Irradiance accumulators of one instance's points.
 pub(crate) struct LightSums {
@@ -89,18 +107,6 @@ impl LightSums {
         (self.count[i] > 0).then(|| self.sum[i] / self.count[i] as f32)
     }
 
-    /// The record point `i` would be published with now: its mean, or what was published
-    /// while it has no paths (restarted).
-    pub fn record(&self, i: usize) -> u32 {
-        self.mean(i).map_or(self.published[i], pack_rgb9e5)
-    }
-
-    /// Whether point `i`'s irradiance moved perceptibly from its published record.
-    pub fn changed(&self, i: usize, threshold: f32) -> bool {
-        self.mean(i)
-            .is_some_and(|e| irradiance_changed(unpack_rgb9e5(self.published[i]), e, threshold))
-    }
-
     /// Keep as many of point `i`'s paths (their mean unchanged) as its AO kept of its
     /// samples, `ao_kept`, counted in paths and rounded up: the same fraction of both, and a
     /// light progress never below the AO's, so that AO and irradiance that advanced together
@@ -134,6 +140,58 @@ impl LightSums {
         psao_points::vec_bytes(&self.sum)
             + psao_points::vec_bytes(&self.count)
             + psao_points::vec_bytes(&self.published)
+    }
+}
+
+impl InstanceState {
+    /// Point `i`'s irradiance as it is published (module docs, "Pooling"): the mean of the
+    /// paths of every point of its cell that lies in its tangent plane (normals within
+    /// [`POOL_COS`], offsets along its normal within [`POOL_PLANE`] cell sizes), its own
+    /// included, each point weighted by its paths. `None` while `i` has no paths or without
+    /// lighting.
+    pub(crate) fn pooled_irradiance(&self, i: usize) -> Option<Vec3> {
+        let light = self.points.light.as_ref()?;
+        if light.count[i] == 0 {
+            return None;
+        }
+        let Some(slot) = self.slot_of(i) else {
+            return light.mean(i);
+        };
+        let (x, n) = (self.points.position[i], self.points.normal[i]);
+        let plane = POOL_PLANE * self.layout().cell_size;
+        let (mut sum, mut count) = (Vec3::ZERO, 0u64);
+        for &m in self.alloc.members(slot) {
+            let j = m as usize;
+            if m == NONE || light.count[j] == 0 {
+                continue;
+            }
+            let coplanar = self.points.normal[j].dot(n) >= POOL_COS
+                && (self.points.position[j] - x).dot(n).abs() <= plane;
+            if j == i || coplanar {
+                sum += light.sum[j];
+                count += u64::from(light.count[j]);
+            }
+        }
+        Some(sum / count as f32)
+    }
+
+    /// The irradiance record point `i` would be published with now: its pooled irradiance,
+    /// or what was published while it has no paths (restarted); `None` without lighting.
+    pub(crate) fn light_record(&self, i: usize) -> Option<u32> {
+        let light = self.points.light.as_ref()?;
+        Some(
+            self.pooled_irradiance(i)
+                .map_or(light.published[i], pack_rgb9e5),
+        )
+    }
+
+    /// Whether point `i`'s pooled irradiance moved perceptibly from its published record.
+    pub(crate) fn light_changed(&self, i: usize, threshold: f32) -> bool {
+        let Some(light) = self.points.light.as_ref() else {
+            return false;
+        };
+        self.pooled_irradiance(i)
+            .is_some_and(|e| irradiance_changed(unpack_rgb9e5(light.published[i]), e, threshold))
     }
 }
 

@@ -188,6 +188,11 @@ pub struct LightingArgs {
     /// depth).
     #[arg(long, default_value_t = LightingConfig::default().bounces)]
     pub bounces: u32,
+    /// Light paths a selected point takes per server frame with `--lighting gi`, beside its
+    /// `--rays-per-point` AO rays (a point's irradiance converges at `--max-samples` ×
+    /// this / `--rays-per-point` paths; docs/LIGHTING.md, "One selection, one budget").
+    #[arg(long, default_value_t = LightingConfig::default().paths_per_point)]
+    pub paths_per_point: u32,
 }
 
 /// The lighting of `psao run`, `psao serve` and `psao demo` when `--lighting` is not given:
@@ -203,9 +208,13 @@ impl LightingArgs {
                 self.bounces
             );
         }
+        if self.paths_per_point == 0 {
+            bail!("--paths-per-point must be at least 1");
+        }
         Ok(
             (self.lighting.unwrap_or(default) == Lighting::Gi).then(|| LightingConfig {
                 bounces: self.bounces,
+                paths_per_point: self.paths_per_point,
                 ..LightingConfig::default()
             }),
         )
