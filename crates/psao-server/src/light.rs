@@ -18,13 +18,14 @@
 //!
 //! # Pooling
 //!
-//! A point's published irradiance is the mean of the paths of the points of its cell that
-//! lie in its tangent plane ([`InstanceState::pooled_irradiance`]), weighted by their
-//! paths: diffuse irradiance varies little across a cell (a few point spacings; the sharp
-//! shadows of suns and point lights are the clients'), while one point's few paths are
-//! noisy, so a cell's coplanar points (up to 7) share their samples. Points on another
-//! plane of the cell (a crease, a step) keep theirs apart. Each point still takes its own
-//! paths and converges as before; what it accumulates (`Server::irradiance`) is its own.
+//! A point's published irradiance is the mean of the paths of the points around it, within
+//! the clients' reconstruction radius, that lie in its tangent plane
+//! ([`InstanceState::pooled_irradiance`]), weighted by their paths: diffuse irradiance
+//! varies little over that distance (a few point spacings; the sharp shadows of suns and
+//! point lights are the clients'), while one point's few paths are noisy, so neighbouring
+//! coplanar points share their samples. Points on another plane (a crease, a step, the
+//! other side of a thin wall) keep theirs apart. Each point still takes its own paths and
+//! converges as before; what it accumulates (`Server::irradiance`) is its own.
 //!
 //! # Invalidation
 //!
@@ -36,8 +37,9 @@
 //! point (its bounce may reach any of them). Paths are always
 //! traced with the lights of the last relighting, so the samples of a point agree.
 
-use glam::Vec3;
+use glam::{UVec3, Vec3};
 use psao_points::irradiance::{irradiance_changed, pack_rgb9e5, unpack_rgb9e5};
+use psao_points::DEFAULT_INTERPOLATION_FACTOR;
 use psao_scene::{Light, LightShape, Scene, ScenePose};
 use psao_trace::gi::DiffuseLighting;
 use psao_trace::Tracer;
@@ -58,9 +60,9 @@ pub const SUN_TOLERANCE_DEG: f32 = 1.0;
 /// (about 26°).
 pub const POOL_COS: f32 = 0.9;
 
-/// Largest offset, in cell sizes, of a point of a cell from another's tangent plane for
-/// their paths to pool.
-pub const POOL_PLANE: f32 = 0.25;
+/// Largest offset, in Poisson radii, of a point from another's tangent plane for their
+/// paths to pool.
+pub const POOL_PLANE: f32 = 0.5;
 
 /// Irradiance accumulators of one instance's points.
 pub(crate) struct LightSums {
@@ -102,11 +104,6 @@ impl LightSums {
         u32::try_from(paths).unwrap_or(u32::MAX)
     }
 
-    /// Point `i`'s mean irradiance, when it has paths.
-    pub fn mean(&self, i: usize) -> Option<Vec3> {
-        (self.count[i] > 0).then(|| self.sum[i] / self.count[i] as f32)
-    }
-
     /// Keep as many of point `i`'s paths (their mean unchanged) as its AO kept of its
     /// samples, `ao_kept`, counted in paths and rounded up: the same fraction of both, and a
     /// light progress never below the AO's, so that AO and irradiance that advanced together
@@ -145,31 +142,47 @@ impl LightSums {
 
 impl InstanceState {
     /// Point `i`'s irradiance as it is published (module docs, "Pooling"): the mean of the
-    /// paths of every point of its cell that lies in its tangent plane (normals within
-    /// [`POOL_COS`], offsets along its normal within [`POOL_PLANE`] cell sizes), its own
-    /// included, each point weighted by its paths. `None` while `i` has no paths or without
-    /// lighting.
+    /// paths of every point within the reconstruction radius of it (the clients' kernel
+    /// reach: Poisson radius × interpolation factor, local units) that lies in its tangent plane
+    /// (normals within [`POOL_COS`], offsets along its normal within [`POOL_PLANE`] Poisson
+    /// radii), its own included, each point weighted by its paths. `None` while `i` has no
+    /// paths or without lighting.
     pub(crate) fn pooled_irradiance(&self, i: usize) -> Option<Vec3> {
         let light = self.points.light.as_ref()?;
         if light.count[i] == 0 {
             return None;
         }
-        let Some(slot) = self.slot_of(i) else {
-            return light.mean(i);
-        };
+        let layout = self.layout();
         let (x, n) = (self.points.position[i], self.points.normal[i]);
-        let plane = POOL_PLANE * self.layout().cell_size;
-        let (mut sum, mut count) = (Vec3::ZERO, 0u64);
-        for &m in self.alloc.members(slot) {
-            let j = m as usize;
-            if m == NONE || light.count[j] == 0 {
-                continue;
-            }
-            let coplanar = self.points.normal[j].dot(n) >= POOL_COS
-                && (self.points.position[j] - x).dot(n).abs() <= plane;
-            if j == i || coplanar {
-                sum += light.sum[j];
-                count += u64::from(light.count[j]);
+        let reach = self.poisson_radius * DEFAULT_INTERPOLATION_FACTOR;
+        let plane = POOL_PLANE * self.poisson_radius;
+        let cell = |p: Vec3| {
+            let c = ((p - layout.origin) / layout.cell_size).floor();
+            c.clamp(Vec3::ZERO, (layout.dims - 1).as_vec3()).as_uvec3()
+        };
+        let (lo, hi) = (cell(x - Vec3::splat(reach)), cell(x + Vec3::splat(reach)));
+        let (mut sum, mut count) = (light.sum[i], u64::from(light.count[i]));
+        for z in lo.z..=hi.z {
+            for y in lo.y..=hi.y {
+                for cx in lo.x..=hi.x {
+                    let Some(slot) = self.alloc.find_cell(UVec3::new(cx, y, z)) else {
+                        continue;
+                    };
+                    for &m in self.alloc.members(slot) {
+                        let j = m as usize;
+                        if m == NONE || j == i || light.count[j] == 0 {
+                            continue;
+                        }
+                        let d = self.points.position[j] - x;
+                        if self.points.normal[j].dot(n) >= POOL_COS
+                            && d.dot(n).abs() <= plane
+                            && d.length_squared() <= reach * reach
+                        {
+                            sum += light.sum[j];
+                            count += u64::from(light.count[j]);
+                        }
+                    }
+                }
             }
         }
         Some(sum / count as f32)
