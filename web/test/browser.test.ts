@@ -263,7 +263,7 @@ async function savePng(page: Page, file: string) {
 
 test("in chromium the AO-only view of a lockstep run matches psao view's (≥ 40 dB, same state hash)", { timeout: 180_000 }, async () => {
   const dir = mkdtempSync(join(tmpdir(), "psao-ao-"));
-  const lockstep = ["--lockstep"];
+  const lockstep = ["--lockstep", "--lighting", "ao"];
   // psao view's frames against one server…
   const cpu = await serve("127.0.0.1:0", lockstep);
   try {
@@ -503,7 +503,7 @@ const SKIN_FRAMES = 30;
 test("in chromium a skinned character moves as in psao view (AO-only ≥ 40 dB where the rest pose is not)", { timeout: 180_000 }, async () => {
   const dir = mkdtempSync(join(tmpdir(), "psao-skin-"));
   const scene = writeSkinnedScene(dir);
-  const server = ["--scene", scene, "--lockstep"];
+  const server = ["--scene", scene, "--lockstep", "--lighting", "ao"];
   const frame = `ao_${String(SKIN_FRAMES - 1).padStart(5, "0")}.png`;
   try {
     // psao view's frames, posed (the reference) and in the rest pose (what a viewer that does

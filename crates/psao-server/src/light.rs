@@ -16,6 +16,17 @@
 //! are. Each selected point is charged [`charge`] rays: its AO rays plus the most rays its
 //! paths can trace.
 //!
+//! # Pooling
+//!
+//! A point's published irradiance is the mean of the paths of the points around it, within
+//! the clients' reconstruction radius, that lie in its tangent plane
+//! ([`InstanceState::pooled_irradiance`]), weighted by their paths: diffuse irradiance
+//! varies little over that distance (a few point spacings; the sharp shadows of suns and
+//! point lights are the clients'), while one point's few paths are noisy, so neighbouring
+//! coplanar points share their samples. Points on another plane (a crease, a step, the
+//! other side of a thin wall) keep theirs apart. Each point still takes its own paths and
+//! converges as before; what it accumulates (`Server::irradiance`) is its own.
+//!
 //! # Invalidation
 //!
 //! Moving geometry restarts a point's irradiance exactly as its AO (the proximity rule of
@@ -26,14 +37,15 @@
 //! point (its bounce may reach any of them). Paths are always
 //! traced with the lights of the last relighting, so the samples of a point agree.
 
-use glam::Vec3;
+use glam::{UVec3, Vec3};
 use psao_points::irradiance::{irradiance_changed, pack_rgb9e5, unpack_rgb9e5};
+use psao_points::DEFAULT_INTERPOLATION_FACTOR;
 use psao_scene::{Light, LightShape, Scene, ScenePose};
 use psao_trace::gi::DiffuseLighting;
 use psao_trace::Tracer;
 use rayon::prelude::*;
 
-use crate::instance::InstanceState;
+use crate::instance::{InstanceState, NONE};
 use crate::trace::{sample_key, Candidate};
 use crate::LightingConfig;
 
@@ -43,6 +55,14 @@ use crate::LightingConfig;
 /// occluder 2 m away moves by 3.5 cm, about the spacing of the points at the default
 /// density: finer turns would change what the points can show by less than they resolve.
 pub const SUN_TOLERANCE_DEG: f32 = 1.0;
+
+/// Cosine of the largest angle between the normals of two points of a cell whose paths pool
+/// (about 26°).
+pub const POOL_COS: f32 = 0.9;
+
+/// Largest offset, in Poisson radii, of a point from another's tangent plane for their
+/// paths to pool.
+pub const POOL_PLANE: f32 = 0.5;
 
 /// Irradiance accumulators of one instance's points.
 pub(crate) struct LightSums {
@@ -84,23 +104,6 @@ impl LightSums {
         u32::try_from(paths).unwrap_or(u32::MAX)
     }
 
-    /// Point `i`'s mean irradiance, when it has paths.
-    pub fn mean(&self, i: usize) -> Option<Vec3> {
-        (self.count[i] > 0).then(|| self.sum[i] / self.count[i] as f32)
-    }
-
-    /// The record point `i` would be published with now: its mean, or what was published
-    /// while it has no paths (restarted).
-    pub fn record(&self, i: usize) -> u32 {
-        self.mean(i).map_or(self.published[i], pack_rgb9e5)
-    }
-
-    /// Whether point `i`'s irradiance moved perceptibly from its published record.
-    pub fn changed(&self, i: usize, threshold: f32) -> bool {
-        self.mean(i)
-            .is_some_and(|e| irradiance_changed(unpack_rgb9e5(self.published[i]), e, threshold))
-    }
-
     /// Keep as many of point `i`'s paths (their mean unchanged) as its AO kept of its
     /// samples, `ao_kept`, counted in paths and rounded up: the same fraction of both, and a
     /// light progress never below the AO's, so that AO and irradiance that advanced together
@@ -134,6 +137,74 @@ impl LightSums {
         psao_points::vec_bytes(&self.sum)
             + psao_points::vec_bytes(&self.count)
             + psao_points::vec_bytes(&self.published)
+    }
+}
+
+impl InstanceState {
+    /// Point `i`'s irradiance as it is published (module docs, "Pooling"): the mean of the
+    /// paths of every point within the reconstruction radius of it (the clients' kernel
+    /// reach: Poisson radius × interpolation factor, local units) that lies in its tangent plane
+    /// (normals within [`POOL_COS`], offsets along its normal within [`POOL_PLANE`] Poisson
+    /// radii), its own included, each point weighted by its paths. `None` while `i` has no
+    /// paths or without lighting.
+    pub(crate) fn pooled_irradiance(&self, i: usize) -> Option<Vec3> {
+        let light = self.points.light.as_ref()?;
+        if light.count[i] == 0 {
+            return None;
+        }
+        let layout = self.layout();
+        let (x, n) = (self.points.position[i], self.points.normal[i]);
+        let reach = self.poisson_radius * DEFAULT_INTERPOLATION_FACTOR;
+        let plane = POOL_PLANE * self.poisson_radius;
+        let cell = |p: Vec3| {
+            let c = ((p - layout.origin) / layout.cell_size).floor();
+            c.clamp(Vec3::ZERO, (layout.dims - 1).as_vec3()).as_uvec3()
+        };
+        let (lo, hi) = (cell(x - Vec3::splat(reach)), cell(x + Vec3::splat(reach)));
+        let (mut sum, mut count) = (light.sum[i], u64::from(light.count[i]));
+        for z in lo.z..=hi.z {
+            for y in lo.y..=hi.y {
+                for cx in lo.x..=hi.x {
+                    let Some(slot) = self.alloc.find_cell(UVec3::new(cx, y, z)) else {
+                        continue;
+                    };
+                    for &m in self.alloc.members(slot) {
+                        let j = m as usize;
+                        if m == NONE || j == i || light.count[j] == 0 {
+                            continue;
+                        }
+                        let d = self.points.position[j] - x;
+                        if self.points.normal[j].dot(n) >= POOL_COS
+                            && d.dot(n).abs() <= plane
+                            && d.length_squared() <= reach * reach
+                        {
+                            sum += light.sum[j];
+                            count += u64::from(light.count[j]);
+                        }
+                    }
+                }
+            }
+        }
+        Some(sum / count as f32)
+    }
+
+    /// The irradiance record point `i` would be published with now: its pooled irradiance,
+    /// or what was published while it has no paths (restarted); `None` without lighting.
+    pub(crate) fn light_record(&self, i: usize) -> Option<u32> {
+        let light = self.points.light.as_ref()?;
+        Some(
+            self.pooled_irradiance(i)
+                .map_or(light.published[i], pack_rgb9e5),
+        )
+    }
+
+    /// Whether point `i`'s pooled irradiance moved perceptibly from its published record.
+    pub(crate) fn light_changed(&self, i: usize, threshold: f32) -> bool {
+        let Some(light) = self.points.light.as_ref() else {
+            return false;
+        };
+        self.pooled_irradiance(i)
+            .is_some_and(|e| irradiance_changed(unpack_rgb9e5(light.published[i]), e, threshold))
     }
 }
 

@@ -43,9 +43,7 @@ pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Optio
         return Some(bits);
     }
     // Only the irradiance moved: the AO record stays as published.
-    (p.light.as_ref())
-        .is_some_and(|l| l.changed(i, t.irradiance))
-        .then_some(old)
+    inst.light_changed(i, t.irradiance).then_some(old)
 }
 
 /// Record new published values and refresh the affected cells and buckets of the published
@@ -57,12 +55,13 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
         let i = i as usize;
         // Only stored points are republished.
         dirty_cells.extend(inst.slot_of(i));
+        let light_record = inst.light_record(i);
         let p = &mut inst.points;
         // A point that changed cell had its flag cleared and its old cell queued (rehome).
         p.published_here.set(i, true);
         p.published[i] = bits;
-        if let Some(light) = &mut p.light {
-            light.published[i] = light.record(i);
+        if let (Some(light), Some(record)) = (&mut p.light, light_record) {
+            light.published[i] = record;
         }
     }
     dirty_cells.par_sort_unstable();

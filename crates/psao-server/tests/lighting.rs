@@ -648,3 +648,71 @@ fn at_equal_points_per_frame_lighting_leaves_the_ao_of_a_moving_scene_unchanged(
         );
     }
 }
+
+/// Published irradiance pools the paths of a cell's coplanar points (docs/LIGHTING.md,
+/// "Pooling within a cell"): on one mesh of a floor before a sunlit wall, the floor's
+/// published records vary less than its points' own means after one frame of 4 paths, and
+/// at the crease, where cells hold floor and wall points, neither takes the other's light.
+#[test]
+fn published_irradiance_pools_coplanar_points_of_a_cell_only() {
+    use psao_points::irradiance::unpack_rgb9e5;
+    use psao_points::pack::unpack_normal;
+    let wall = quad(
+        Vec3::new(-2.0, 0.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(2.0, 2.0, 0.0),
+        Vec3::new(-2.0, 2.0, 0.0),
+    );
+    let ground = floor(-2.0, 2.0, 0.0, 2.0);
+    let mut corner = wall.clone();
+    corner.positions.extend(&ground.positions);
+    corner.normals.extend(&ground.normals);
+    corner
+        .indices
+        .extend(ground.indices.iter().map(|t| t.map(|i| i + 4)));
+    // A horizontal sun lights the wall (E = power) and not the floor (sky only, ≤ π·0.1).
+    let (sky, power) = (Vec3::splat(0.1), 2.0);
+    let scene = scene_of(vec![corner], 0.8, sky, vec![sun(Vec3::Z, Vec3::ONE, power)]);
+    let mut server = Server::new(&scene, lit_sharp(0, 4)).unwrap();
+    let client = server.add_client();
+    let views = [view(
+        Vec3::new(0.0, 2.5, 3.5),
+        Vec3::new(0.0, 0.3, 0.0),
+        80.0,
+    )];
+    server.step(&views);
+    let update = server.update_for(client);
+    let is_floor = |n: Vec3| n.y > 0.9;
+    let (mut floor_records, mut wall_records, mut crease_cells) = (Vec::new(), 0, 0);
+    for d in &update.instances {
+        for ((_, cell), lights) in d.cells.iter().zip(&d.lights) {
+            let points = cell.points.iter().zip(lights).filter(|(p, _)| **p != 0);
+            let (mut floors, mut walls) = (0, 0);
+            for (p, e) in points {
+                let (n, e) = (unpack_normal(*p), unpack_rgb9e5(*e));
+                if is_floor(n) {
+                    assert!(e.x < 0.5, "a floor record took the wall's sun: {e}");
+                    floor_records.push(e.x);
+                    floors += 1;
+                } else {
+                    assert!(e.x >= 0.99 * power, "a wall record lost its sun: {e}");
+                    wall_records += 1;
+                    walls += 1;
+                }
+            }
+            crease_cells += usize::from(floors > 0 && walls > 0);
+        }
+    }
+    assert!(floor_records.len() > 100 && wall_records > 100 && crease_cells > 0);
+    let own: Vec<f32> = lit_points(&server, 0)
+        .iter()
+        .filter(|(_, _, n, _, _)| is_floor(*n))
+        .map(|(_, _, _, e, _)| e.x)
+        .collect();
+    let variance = |v: &[f32]| {
+        let mean = v.iter().sum::<f32>() / v.len() as f32;
+        v.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / v.len() as f32
+    };
+    let (pooled, alone) = (variance(&floor_records), variance(&own));
+    assert!(pooled < 0.6 * alone, "pooled variance {pooled} vs {alone}");
+}

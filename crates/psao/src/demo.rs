@@ -7,7 +7,7 @@
 use crate::args::Resolution;
 use crate::progress;
 use crate::reference::ReferenceRenderer;
-use crate::run::{write_frame_images, write_json, ServerTuning};
+use crate::run::{write_frame_images, write_json, LightingArgs, ServerTuning, SESSION_LIGHTING};
 use crate::scene_source::{SceneInput, BUILTIN_SCENE};
 use crate::video::encode_video;
 use anyhow::{bail, Context, Result};
@@ -44,6 +44,8 @@ pub struct DemoArgs {
     pub spp: u32,
     #[command(flatten)]
     pub tuning: ServerTuning,
+    #[command(flatten)]
+    pub lighting: LightingArgs,
 }
 
 /// Frames compared with the reference in the report.
@@ -60,7 +62,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let frames = ((args.seconds * CLIENT_HZ as f32) as u32).clamp(1, path.frame_count() as u32);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let config = args.tuning.config(args.points, args.server_hz, args.res)?;
+    let mut config = args.tuning.config(args.points, args.server_hz, args.res)?;
+    config.server.lighting = args.lighting.config(SESSION_LIGHTING)?;
     let mut pipeline = Pipeline::new(&input.scene, &config)?;
     let compared: Vec<u32> = (1..=COMPARED_FRAMES)
         .map(|k| (k * frames / (COMPARED_FRAMES + 1)) / args.every * args.every)
@@ -118,6 +121,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
          | server | {} Hz, mean {:.1} ms per server frame, {:.2} Mrays per server frame |\n\
          | client | mean {:.1} ms per rendered frame (decode, raster, reconstruct) |\n\
          | bandwidth | {:.2} Mbit/s ({} bytes in total) |\n\
+         | lighting | {} |\n\
          | backend | `{}` |\n\
          | video | {} |\n\
          | wall time | {:.1} s |\n\n\
@@ -145,6 +149,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         mean(&mut rendered.iter().map(|r| r.client_ms), rendered.len()),
         pipeline.total_bytes as f64 * 8.0 / seconds / 1e6,
         pipeline.total_bytes,
+        match config.server.lighting {
+            Some(l) => format!(
+                "`gi`: irradiance with {} bounce(s) at the points, shadow-mapped direct light on \
+                 the client, `frame_NNNNN.png` = base colour / π × (direct + irradiance)",
+                l.bounces
+            ),
+            None => "`ao`: `frame_NNNNN.png` is the AO composite".to_string(),
+        },
         config.server.backend.name(),
         video,
         start.elapsed().as_secs_f64(),

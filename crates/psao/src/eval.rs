@@ -12,7 +12,7 @@ use crate::args::{FrameRange, Resolution};
 use crate::lpips_weights::{LpipsArgs, LpipsChoice};
 use crate::png_io::{read_ao_png, write_ao_png};
 use crate::progress;
-use crate::reference::ReferenceRenderer;
+use crate::reference::{Lighting, ReferenceRenderer};
 use crate::report::{self, Report, Row, Series, ServerWork};
 use crate::run::{LightingArgs, ServerTuning};
 use crate::scene_source::{SceneArgs, SceneInput};
@@ -94,7 +94,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         );
     }
     // Checked before any work.
-    args.lighting.config()?;
+    args.lighting.config(Lighting::Ao)?;
     let (input, path) = args.input.load()?;
     let count = path.frame_count() as u32;
     let range = FrameRange::within_path(args.frames, count)?;
@@ -179,7 +179,7 @@ fn prepare_frames(
     )?
     .with_medium(input.medium());
     let pixels = args.res.width as u64 * args.res.height as u64;
-    let lighting = args.lighting.config()?;
+    let lighting = args.lighting.config(Lighting::Ao)?;
     let per_frame = pixels * if lighting.is_some() { 2 } else { 1 };
     let bar = progress::bar(per_frame * eval_frames.len() as u64, "references", "px");
     let gi_dir = match &lighting {
@@ -399,7 +399,7 @@ fn eval_psao(
     let scene = &input.scene;
     let mut config = args.tuning.config(points, hz, args.res)?;
     config.medium = input.medium();
-    config.server.lighting = args.lighting.config()?;
+    config.server.lighting = args.lighting.config(Lighting::Ao)?;
     let lit = config.server.lighting.is_some();
     let mut pipeline = Pipeline::new(scene, &config)?;
     if args.warm_up > 0 {

@@ -174,34 +174,50 @@ pub struct RunArgs {
     pub relight: RelightArgs,
 }
 
-/// What the server's points carry (`psao run`, `psao serve`).
+/// What the server's points carry (`psao run`, `psao serve`, `psao demo`, `psao eval`).
 #[derive(Args, Debug, Clone)]
 pub struct LightingArgs {
-    /// What the points carry: `ao` (ambient occlusion only) or `gi` (also diffuse irradiance
-    /// from the scene's environment and lights with `--bounces` bounces, traced on the server
-    /// and streamed as 32-bit records beside the AO; clients then show
-    /// base colour / π × (shadow-mapped direct light + irradiance); docs/LIGHTING.md).
-    #[arg(long, value_enum, default_value_t = Lighting::Ao)]
-    pub lighting: Lighting,
+    /// What the points carry: `gi` (AO and diffuse irradiance from the scene's environment
+    /// and lights with `--bounces` bounces, traced on the server and streamed as 32-bit
+    /// records beside the AO; clients then show base colour / π × (shadow-mapped direct
+    /// light + irradiance); docs/LIGHTING.md) or `ao` (ambient occlusion only, the AO
+    /// composite). Default: `gi` for `run`, `serve` and `demo`, `ao` for `eval`.
+    #[arg(long, value_enum)]
+    pub lighting: Option<Lighting>,
     /// Indirect diffuse bounces of the points' light paths with `--lighting gi` (a fixed
     /// depth).
     #[arg(long, default_value_t = LightingConfig::default().bounces)]
     pub bounces: u32,
+    /// Light paths a selected point takes per server frame with `--lighting gi`, beside its
+    /// `--rays-per-point` AO rays (a point's irradiance converges at `--max-samples` ×
+    /// this / `--rays-per-point` paths; docs/LIGHTING.md, "One selection, one budget").
+    #[arg(long, default_value_t = LightingConfig::default().paths_per_point)]
+    pub paths_per_point: u32,
 }
 
+/// The lighting of `psao run`, `psao serve` and `psao demo` when `--lighting` is not given:
+/// what a person watching them should see is the lit composite.
+pub const SESSION_LIGHTING: Lighting = Lighting::Gi;
+
 impl LightingArgs {
-    /// The server's lighting: `None` for `--lighting ao`.
-    pub fn config(&self) -> Result<Option<LightingConfig>> {
+    /// The server's lighting, `default` when `--lighting` is not given: `None` for `ao`.
+    pub fn config(&self, default: Lighting) -> Result<Option<LightingConfig>> {
         if self.bounces > MAX_BOUNCES {
             bail!(
                 "--bounces must be at most {MAX_BOUNCES}, got {}",
                 self.bounces
             );
         }
-        Ok((self.lighting == Lighting::Gi).then(|| LightingConfig {
-            bounces: self.bounces,
-            ..LightingConfig::default()
-        }))
+        if self.paths_per_point == 0 {
+            bail!("--paths-per-point must be at least 1");
+        }
+        Ok(
+            (self.lighting.unwrap_or(default) == Lighting::Gi).then(|| LightingConfig {
+                bounces: self.bounces,
+                paths_per_point: self.paths_per_point,
+                ..LightingConfig::default()
+            }),
+        )
     }
 }
 
@@ -262,7 +278,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut config = args.tuning.config(args.points, args.server_hz, args.res)?;
-    config.server.lighting = args.lighting.config()?;
+    config.server.lighting = args.lighting.config(SESSION_LIGHTING)?;
     config.medium = input.medium();
     config.corrective = args.corrective.config()?;
     let mut pipeline = Pipeline::new(&input.scene, &config)?;

@@ -9,7 +9,7 @@ use psao_net::start_cache::start_server;
 use psao_net::Resolution;
 
 use crate::access_args::ExposureArgs;
-use crate::run::{write_json, LightingArgs, ServerTuning};
+use crate::run::{write_json, LightingArgs, ServerTuning, SESSION_LIGHTING};
 use crate::scene_source::SceneInput;
 use crate::served_characters::{served_characters, RelightArgs};
 
@@ -60,7 +60,7 @@ pub fn run(args: &ServeArgs) -> Result<()> {
     let tls = args.exposure.tls()?;
     let token = args.exposure.token.token()?;
     let input = SceneInput::load(&args.scene)?;
-    let lighting = args.lighting.config()?;
+    let lighting = args.lighting.config(SESSION_LIGHTING)?;
     let server = scene_server(&input, &args.tuning, lighting, args.points, args.hz)?;
     tracing::info!(
         "{} points on {} instances; codec {}",

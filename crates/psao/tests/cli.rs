@@ -190,10 +190,12 @@ fn run_is_deterministic_and_counts_bytes() {
 #[test]
 fn run_with_lighting_traces_light_paths_and_sends_their_records() {
     let dir = tempfile::tempdir().unwrap();
-    let run = |lighting: &str, bounces: &str| {
-        let out = dir.path().join(format!("{lighting}{bounces}"));
-        let summary = dir.path().join(format!("{lighting}{bounces}.json"));
-        let o = psao(&[
+    // `lighting` None: the default (`gi`).
+    let run = |lighting: Option<&str>, bounces: &str| {
+        let name = format!("{}{bounces}", lighting.unwrap_or("default"));
+        let out = dir.path().join(&name);
+        let summary = dir.path().join(format!("{name}.json"));
+        let mut args = vec![
             "run",
             "--frames",
             "0..4",
@@ -203,22 +205,23 @@ fn run_with_lighting_traces_light_paths_and_sends_their_records() {
             "64x36",
             "--ray-budget",
             "50000",
-            "--lighting",
-            lighting,
             "--bounces",
             bounces,
             "--out",
             out.to_str().unwrap(),
             "--json",
             summary.to_str().unwrap(),
-        ]);
-        (o, summary)
+        ];
+        if let Some(lighting) = lighting {
+            args.extend(["--lighting", lighting]);
+        }
+        (psao(&args), summary)
     };
-    let (o, ao) = run("ao", "1");
+    let (o, ao) = run(Some("ao"), "1");
     assert!(o.status.success(), "{}", stderr(&o));
     let ao = json(&ao);
     assert!(ao["bounces"].is_null() && ao["light_paths"].as_u64() == Some(0));
-    let (o, gi) = run("gi", "2");
+    let (o, gi) = run(Some("gi"), "2");
     assert!(o.status.success(), "{}", stderr(&o));
     let gi = json(&gi);
     assert_eq!(gi["bounces"].as_u64(), Some(2));
@@ -239,7 +242,14 @@ fn run_with_lighting_traces_light_paths_and_sends_their_records() {
         per_cell(&gi),
         per_cell(&ao)
     );
-    let (o, _) = run("gi", "99");
+    // Without `--lighting` the run is lit: the same session as `--lighting gi`.
+    let (o, default) = run(None, "2");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let default = json(&default);
+    assert_eq!(default["bounces"].as_u64(), Some(2));
+    assert_eq!(default["state_hash"], gi["state_hash"]);
+    assert_ne!(default["state_hash"], ao["state_hash"]);
+    let (o, _) = run(Some("gi"), "99");
     assert!(!o.status.success() && stderr(&o).contains("--bounces"));
 }
 

@@ -22,6 +22,9 @@ fn run(codec: &str, dir: &std::path::Path) -> serde_json::Value {
         "1000",
         "--codec",
         codec,
+        // The AO codecs' claim: the irradiance records are not part of it.
+        "--lighting",
+        "ao",
         "--out",
         out.to_str().unwrap(),
         "--json",

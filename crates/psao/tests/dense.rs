@@ -14,7 +14,15 @@ use common::{json, listening_addr, start_role, stderr, BIN};
 const SCENE: &str = "../../scenes/sponza.toml";
 const PATH: &str = "../../paths/sponza_a.toml";
 /// Server settings shared by both runs: the densest evaluated density, a small ray budget.
-const SERVER: &[&str] = &["--points", "2048", "--ray-budget", "40000"];
+/// AO only: the dense point set is the subject, not the lighting.
+const SERVER: &[&str] = &[
+    "--points",
+    "2048",
+    "--ray-budget",
+    "40000",
+    "--lighting",
+    "ao",
+];
 const FRAMES: u32 = 2;
 
 fn sponza_present() -> bool {

@@ -329,7 +329,7 @@ fn lit_lockstep_view_matches_run_and_the_server_state() {
     assert_eq!(stats["state_hash"], json(&json_a)["state_hash"]);
     assert_same_frames(&r, &a, 5, "lit view");
     // The same session without lighting hashes and looks otherwise.
-    run_in_process(&fx, 5, &ao, &[]);
+    run_in_process(&fx, 5, &ao, &["--lighting", "ao"]);
     assert_ne!(
         json(&ao.join("stats.json"))["state_hash"],
         stats["state_hash"]

@@ -160,6 +160,7 @@ fn serve_alone(
     server_args: &[&str],
 ) -> Vec<String> {
     let clients = viewers.to_string();
+    // Scale-out carries no irradiance: the single server it is compared with is AO-only too.
     let mut args = vec![
         "--listen",
         "127.0.0.1:0",
@@ -167,6 +168,8 @@ fn serve_alone(
         "--wait-clients",
         &clients,
         "--once",
+        "--lighting",
+        "ao",
     ];
     args.extend(server_args);
     let (mut serve, line) = start("serve", scene, &args);
@@ -792,7 +795,13 @@ fn at_defaults(
         }
     };
     let lockstep = ["--listen", "127.0.0.1:0", "--lockstep", "--once"];
-    let (mut serve, line) = start_role("serve", scene, server, &lockstep);
+    // The edge serves no irradiance: compared with the AO-only server.
+    let (mut serve, line) = start_role(
+        "serve",
+        scene,
+        server,
+        &[&lockstep[..], &["--lighting", "ao"]].concat(),
+    );
     finished(view(
         &listening_addr(&line),
         scene,
