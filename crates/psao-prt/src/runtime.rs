@@ -352,6 +352,8 @@ struct Frame<'a> {
     eye: Vec3,
 }
 
+// The lane loops index several arrays per lane, which is what the compiler vectorises.
+#[allow(clippy::needless_range_loop)]
 impl Frame<'_> {
     /// Shades block `block` into `slots` (`per` entries per vertex, as many vertices as the
     /// slots hold), with the processor's wider vector instructions where it has them.
