@@ -104,7 +104,7 @@ pub struct ClientFrame {
     /// RGB radiance ([`psao_client::composite_lit`]).
     pub lit: Option<Vec<[f32; 3]>>,
     /// With relit characters and without lighting: per pixel, the factor of the ambient
-    /// term ([`crate::relit::pixel_factor`]; with lighting it is applied to `lit` already).
+    /// term ([`psao_prt::served::pixel_factor`]; with lighting it is applied to `lit` already).
     pub ambient_tint: Option<Vec<Vec3>>,
 }
 

@@ -2,16 +2,9 @@
 //! characters of the scene shaded with the relighting models the server sends
 //! ([`psao_wire::RelightingMsg`]), frame by frame from the client's own pose.
 //!
-//! Per frame and character, [`psao_prt::runtime::Relighter`] synthesises every vertex's lobes
-//! from the pose and shades it (diffuse) under the served SH lighting and under a white
-//! constant sky. Per vertex that gives
-//!
-//! * `o_c = S_c / U_c`, the character's self-shadowing under the environment in channel c
-//!   (`S_c` the shadowed diffuse shade, `U_c` the unshadowed one at the skinned normal,
-//!   [`unshadowed_diffuse`]), clamped to [0, 1];
-//! * `a = S_white`, its cosine-weighted self-visibility (the character's own ambient
-//!   occlusion, to infinity), clamped to [0, 1].
-//!
+//! Per frame and character, a [`ServedRelighter`] synthesises every vertex's lobes from the
+//! pose and gives its self-shadowing `o_c` per colour channel under the served lighting and
+//! its self-visibility `a` ([`psao_prt::served`], the computation the browser shares).
 //! Both are interpolated over the rasterized triangles. The points the server traces on the
 //! character's surfaces see the scene *and* the character, so their AO `A` (and their
 //! irradiance) already count the character's own occlusion. A relit pixel's AO or irradiance
@@ -25,9 +18,9 @@ use glam::{Affine3A, Vec3};
 use psao_prt::character::{normal_matrix, Character};
 use psao_prt::groups::skinned_groups;
 use psao_prt::model_file;
-use psao_prt::runtime::{FramePose, Relighter};
-use psao_prt::sh::{self, ShVec, COEFFS};
-use psao_prt::shade::{unit_visibility, Mode, Shader};
+use psao_prt::runtime::FramePose;
+use psao_prt::served::{pixel_factor, ServedRelighter, VertexValues, NOT_RELIT};
+use psao_prt::shade::Mode;
 use psao_prt::PrtError;
 use psao_raster::{GBuffer, InstancePose};
 use psao_scene::Scene;
@@ -36,96 +29,15 @@ use rayon::prelude::*;
 
 use crate::NetError;
 
-/// Per band, the clamped-cosine convolution divided by π (`A_l / π`): what turns SH radiance
-/// into the unshadowed diffuse shade of a Lambertian surface of albedo 1.
-const DIFFUSE_BANDS: [f32; 4] = [1.0, 2.0 / 3.0, 0.25, 0.0];
-
-/// Below this unshadowed shade a channel counts as unlit (its self-shadowing is 1).
-const UNLIT: f32 = 1e-6;
-
-/// The least occlusion a pixel's factor divides by.
-const MIN_OCCLUSION: f32 = 1e-3;
-
-/// Values per vertex: self-shadowing per colour channel, then self-visibility.
-pub type VertexValues = [f32; 4];
-
-/// Per vertex of a relit instance's mesh, the values of a vertex that is not relit.
-const NOT_RELIT: VertexValues = [1.0; 4];
-
-/// The unshadowed diffuse shade at unit normal `n` of SH radiance `light` (albedo 1:
-/// irradiance / π).
-pub fn unshadowed_diffuse(light: &ShVec, n: Vec3) -> f32 {
-    let y = sh::eval(n);
-    (0..COEFFS)
-        .map(|i| DIFFUSE_BANDS[sh::band_of(i)] * light[i] * y[i])
-        .sum()
-}
-
-/// A vertex's values from its shades (`shade`: R, G, B under the environment, then under a
-/// white constant sky) and its unshadowed shades per channel: `[o_r, o_g, o_b, a]` (module
-/// documentation).
-pub fn vertex_values(shade: [f32; 4], unshadowed: [f32; 3]) -> VertexValues {
-    let o = |c: usize| {
-        if unshadowed[c] > UNLIT {
-            (shade[c] / unshadowed[c]).clamp(0.0, 1.0)
-        } else {
-            1.0
-        }
-    };
-    [o(0), o(1), o(2), shade[3].clamp(0.0, 1.0)]
-}
-
-/// The lighting a client relights with: the served channels (`SH_COEFFS` numbers each, one
-/// channel repeated as grey, a fourth dropped), then a white constant sky (whose shade is
-/// the self-visibility).
-pub fn client_lights(served: &[f32]) -> Vec<ShVec> {
-    let mut lights: Vec<ShVec> = served
-        .chunks_exact(COEFFS)
-        .take(3)
-        .map(|c| c.try_into().expect("16 numbers"))
-        .collect();
-    let grey = lights.first().copied().unwrap_or_else(unit_visibility);
-    lights.resize(3, grey);
-    lights.push(unit_visibility());
-    lights
-}
-
-/// Per relit vertex, its [`VertexValues`] (into `out`, resized) from its shades under the
-/// [`client_lights`] (4 per vertex) and its world normal.
-pub fn values_of_shades(
-    shades: &[f32],
-    normals: &[Vec3],
-    lights: &[ShVec],
-    out: &mut Vec<VertexValues>,
-) {
-    out.resize(normals.len(), NOT_RELIT);
-    out.par_iter_mut()
-        .zip(normals.par_iter().zip(shades.par_chunks_exact(4)))
-        .for_each(|(o, (n, s))| {
-            let unshadowed = std::array::from_fn(|c| unshadowed_diffuse(&lights[c], *n));
-            *o = vertex_values([s[0], s[1], s[2], s[3]], unshadowed);
-        });
-}
-
-/// The factor of a relit pixel's AO or irradiance from the points, per channel:
-/// `o / max(ao, a)` with the pixel's interpolated self-shadowing `o` and self-visibility
-/// `a` and the points' AO `ao` (module documentation).
-pub fn pixel_factor(o: Vec3, a: f32, ao: f32) -> Vec3 {
-    o / ao.max(a).max(MIN_OCCLUSION)
-}
-
 /// One served character, ready to relight.
 struct RelitCharacter {
     character: Character,
     /// Per instance of the character's group: its index in the scene.
     instances: Vec<usize>,
-    relighter: Relighter,
-    /// The served lighting (one vector per colour channel), then a white constant sky.
-    lights: Vec<ShVec>,
-    /// Scratch: world positions and normals of the relit vertices, and their shades.
+    relighter: ServedRelighter,
+    /// Scratch: world positions and normals of the relit vertices.
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
-    shades: Vec<f32>,
     /// The relit vertices' values in character order.
     values: Vec<VertexValues>,
 }
@@ -175,9 +87,8 @@ impl RelitCharacters {
                 joints: character.joint_count(),
             }));
         }
-        let shader = Shader::new(Mode::Diffuse).map_err(fail)?;
-        let relighter = Relighter::new(model, shader, character.rig()).map_err(fail)?;
-        let lights = client_lights(&msg.lighting);
+        let relighter = ServedRelighter::new(model, character.rig(), Mode::Diffuse, &msg.lighting)
+            .map_err(fail)?;
         if self.characters.len() <= index {
             self.characters.resize_with(index + 1, || None);
         }
@@ -185,10 +96,8 @@ impl RelitCharacters {
             character,
             instances: group.instances,
             relighter,
-            lights,
             positions: Vec::new(),
             normals: Vec::new(),
-            shades: Vec::new(),
             values: Vec::new(),
         });
         Ok(())
@@ -215,12 +124,11 @@ impl RelitCharacters {
                 transform: Affine3A::IDENTITY,
             };
             c.relighter
-                .shade_into(&pose, &c.lights, eye, &mut c.shades)
+                .relight(&pose, eye, &mut c.values)
                 .map_err(|source| NetError::Relight {
                     character: index as u32,
                     source,
                 })?;
-            values_of_shades(&c.shades, &c.normals, &c.lights, &mut c.values);
             c.scatter(scene, &mut self.values);
         }
         Ok(())
@@ -306,111 +214,5 @@ impl RelitCharacter {
                 out[v as usize] = *x;
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use glam::Quat;
-    use psao_prt::model::{PoseModel, LOBE_DIM};
-    use psao_prt::runtime::Rig;
-
-    /// Some SH radiance per channel: a sky brighter above, with a coloured band-2 part.
-    fn sky() -> [ShVec; 3] {
-        std::array::from_fn(|c| {
-            let mut l = unit_visibility().map(|x| x * (0.8 + 0.1 * c as f32));
-            l[1] = 0.5;
-            l[3] = -0.2 * c as f32;
-            l[6] = 0.15;
-            l
-        })
-    }
-
-    #[test]
-    fn an_all_visible_character_is_shaded_as_plain_sh_diffuse() {
-        // Three vertices with different normals, one lobe of visibility 1, no pose effect.
-        let n = 3 * LOBE_DIM;
-        let mut weights = vec![0.0f32; 4 * n];
-        for v in 0..3 {
-            weights[v * LOBE_DIM + 2] = 1.0;
-            weights[v * LOBE_DIM + 3] = unit_visibility()[0];
-        }
-        let model = PoseModel {
-            character: "t".into(),
-            vertices: 3,
-            joints: 1,
-            lobes: 1,
-            active: vec![0],
-            weights,
-            limits: Default::default(),
-        };
-        let rig = Rig {
-            rest: vec![Quat::IDENTITY],
-            neighbours: vec![1, 2, 0],
-        };
-        let mut r = Relighter::new(model, Shader::new(Mode::Diffuse).unwrap(), rig).unwrap();
-        let normals = [
-            Vec3::Z,
-            Vec3::new(0.3, 0.9, -0.2).normalize(),
-            Vec3::new(-0.6, -0.5, 0.4).normalize(),
-        ];
-        let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
-        let lights = sky();
-        let shades = r
-            .shade(
-                &FramePose {
-                    joint_local: &[Affine3A::IDENTITY],
-                    positions: &positions,
-                    normals: &normals,
-                    transform: Affine3A::IDENTITY,
-                },
-                &lights,
-                Vec3::Z,
-            )
-            .unwrap();
-        for (v, n) in normals.iter().enumerate() {
-            for (c, light) in lights.iter().enumerate() {
-                let (got, want) = (shades[v * 3 + c], unshadowed_diffuse(light, *n));
-                assert!(
-                    (got - want).abs() < 2e-3 * want.abs().max(1.0),
-                    "{got} vs {want}"
-                );
-            }
-        }
-        // A constant radiance of 1 is shaded 1 (albedo 1) at any normal.
-        assert!((unshadowed_diffuse(&unit_visibility(), normals[2]) - 1.0).abs() < 1e-6);
-    }
-
-    #[test]
-    fn vertex_values_are_self_shadowing_and_self_visibility_in_0_1() {
-        let v = vertex_values([0.4, 0.0, 0.9, 0.7], [0.8, 0.0, 0.6]);
-        // Half of red, an unlit green counts as unshadowed, ringing above 1 is clamped.
-        assert_eq!(v, [0.5, 1.0, 1.0, 0.7]);
-        assert_eq!(vertex_values([-0.1, 0.2, 0.2, 1.3], [1.0; 3])[0], 0.0);
-        assert_eq!(vertex_values([0.2; 4], [1.0; 3])[3], 0.2);
-        assert_eq!(vertex_values([0.2, 0.2, 0.2, 1.3], [1.0; 3])[3], 1.0);
-    }
-
-    #[test]
-    fn pixels_keep_what_the_scene_casts_and_take_the_models_self_shadowing() {
-        let o = Vec3::new(0.8, 0.6, 0.4);
-        // No self-shadowing: the points' AO is kept whatever it is.
-        for ao in [0.2, 0.7, 1.0] {
-            assert_eq!(pixel_factor(Vec3::ONE, 1.0, ao), Vec3::ONE);
-        }
-        // The points see no more occlusion than the character's own: the model's alone.
-        let ao = 0.8;
-        assert!((ao * pixel_factor(o, 0.7, ao) - o).abs().max_element() < 1e-6);
-        // The scene occludes more: its share A / a on top of the model's self-shadowing.
-        let ao = 0.35;
-        assert!(
-            (ao * pixel_factor(o, 0.7, ao) - o * 0.5)
-                .abs()
-                .max_element()
-                < 1e-6
-        );
-        // Nothing is divided by zero.
-        assert!(pixel_factor(o, 0.0, 0.0).is_finite());
     }
 }

@@ -11,9 +11,11 @@
 //! `σⱼ·√k·max|qⱼ|`. The smallest components are dropped while the sum of these bounds stays
 //! within a tolerance (a model without limits has no box and keeps every component).
 //!
-//! The rows left (base and components) are stored vertex by vertex, each vertex's
-//! `lobes·7` numbers per row, as 16-bit integers with one factor per row:
-//! a frame reads a vertex's numbers once, in order, right before shading it.
+//! The rows left (base and components) are stored as 16-bit integers with one factor per
+//! row, in blocks of [`LANES`] vertices: per block, per row, per output number, the block's
+//! vertices side by side. A frame synthesises a block's lobes ([`CompactModel::synthesise_block`])
+//! by reading its numbers once, in order, into one array per output number (a structure of
+//! arrays that the shading's lane loops read directly), right before shading it.
 
 use crate::model::{PoseModel, LOBE_DIM};
 use crate::PrtError;
@@ -28,6 +30,12 @@ pub const DEFAULT_TOLERANCE: f32 = 1e-3;
 /// Largest stored integer.
 const I16_MAX: f32 = i16::MAX as f32;
 
+/// Vertices per block of the stored rows (and lanes of the run time's structure of arrays).
+pub const LANES: usize = 64;
+
+/// One output number of a block of vertices, one lane per vertex.
+pub type Lanes = [f32; LANES];
+
 /// A pose model re-expressed for fast synthesis (see the module's doc).
 #[derive(Clone, Debug)]
 pub struct CompactModel {
@@ -41,7 +49,8 @@ pub struct CompactModel {
     projection: Vec<f32>,
     /// Per row: the factor of its stored integers.
     scale: Vec<f32>,
-    /// Vertex-major `vertices × rows × per_vertex` integers.
+    /// Block-major `blocks × rows × per_vertex × LANES` integers (the last block padded with
+    /// zeros).
     values: Vec<i16>,
     /// Largest change the dropped components and the rounding to integers can make to an
     /// output, for poses within the box.
@@ -167,15 +176,22 @@ impl CompactModel {
         let stride = per_vertex.max(1);
         let rows = rows_data.len();
         let scale: Vec<f32> = rows_data.iter().map(|r| max_abs(r) / I16_MAX).collect();
-        let mut values = vec![0i16; model.vertices * rows * stride];
+        let blocks = model.vertices.div_ceil(LANES);
+        let block_len = rows * stride * LANES;
+        let mut values = vec![0i16; blocks * block_len];
         values
-            .par_chunks_mut(rows * stride)
+            .par_chunks_mut(block_len)
             .enumerate()
-            .for_each(|(v, out)| {
+            .for_each(|(b, out)| {
                 for (row, (data, &s)) in rows_data.iter().zip(&scale).enumerate() {
-                    let src = &data[v * per_vertex..(v + 1) * per_vertex];
-                    for (o, x) in out[row * stride..].iter_mut().zip(src) {
-                        *o = if s > 0.0 { (x / s).round() as i16 } else { 0 };
+                    let out = &mut out[row * stride * LANES..(row + 1) * stride * LANES];
+                    for lane in 0..LANES.min(model.vertices - b * LANES) {
+                        let v = b * LANES + lane;
+                        let src = &data[v * per_vertex..(v + 1) * per_vertex];
+                        for (k, x) in src.iter().enumerate() {
+                            out[k * LANES + lane] =
+                                if s > 0.0 { (x / s).round() as i16 } else { 0 };
+                        }
                     }
                 }
             });
@@ -245,16 +261,38 @@ impl CompactModel {
             .collect()
     }
 
-    /// The outputs of vertex `v` (`lobes·7` numbers) for the factors of
+    /// The outputs (`lobes·7` numbers) of vertex `v` for the factors of
     /// [`Self::row_factors`] into `out` (at least that long).
-    #[inline(always)]
     pub fn vertex_outputs(&self, factors: &[f32], v: usize, out: &mut [f32]) {
         let stride = self.per_vertex.max(1);
         let out = &mut out[..self.per_vertex];
         out.fill(0.0);
-        let rows = &self.values[v * self.rows * stride..(v + 1) * self.rows * stride];
+        let (block, lane) = (v / LANES, v % LANES);
+        let rows = &self.values[block * self.rows * stride * LANES..][..self.rows * stride * LANES];
+        for (row, &f) in rows.chunks_exact(stride * LANES).zip(factors) {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o += f * row[k * LANES + lane] as f32;
+            }
+        }
+    }
+
+    /// Blocks of [`LANES`] vertices (the last one possibly partial).
+    pub fn blocks(&self) -> usize {
+        self.vertices().div_ceil(LANES)
+    }
+
+    /// The outputs of the vertices of block `block` for the factors of
+    /// [`Self::row_factors`] into `out` (`lobes·7` arrays, one per output number, one lane per
+    /// vertex; lanes past the last vertex are 0).
+    #[inline(always)]
+    pub fn synthesise_block(&self, factors: &[f32], block: usize, out: &mut [Lanes]) {
+        let len = self.per_vertex * LANES;
+        let out = &mut out.as_flattened_mut()[..len];
+        out.fill(0.0);
+        let stride = self.per_vertex.max(1) * LANES;
+        let rows = &self.values[block * self.rows * stride..][..self.rows * stride];
         for (row, &f) in rows.chunks_exact(stride).zip(factors) {
-            for (o, &x) in out.iter_mut().zip(row) {
+            for (o, &x) in out.iter_mut().zip(&row[..len]) {
                 *o += f * x as f32;
             }
         }
@@ -264,14 +302,19 @@ impl CompactModel {
     /// pose of these joint rotations into `out`, on the calling rayon pool.
     pub fn predict(&self, joint_rotations: &[Vec3], out: &mut Vec<f32>) {
         let factors = self.row_factors(joint_rotations);
-        let per = self.per_vertex.max(1);
-        out.resize(self.vertices() * self.per_vertex, 0.0);
-        out.par_chunks_mut(per * 256).enumerate().for_each_init(
-            || vec![0.0f32; per],
-            |buf, (c, chunk)| {
-                for (k, o) in chunk.chunks_mut(per).enumerate() {
-                    self.vertex_outputs(&factors, c * 256 + k, buf);
-                    o.copy_from_slice(&buf[..o.len()]);
+        let per = self.per_vertex;
+        out.resize(self.vertices() * per, 0.0);
+        if per == 0 {
+            return;
+        }
+        out.par_chunks_mut(per * LANES).enumerate().for_each_init(
+            || vec![[0.0f32; LANES]; per],
+            |lanes, (b, chunk)| {
+                self.synthesise_block(&factors, b, lanes);
+                for (lane, o) in chunk.chunks_mut(per).enumerate() {
+                    for (k, o) in o.iter_mut().enumerate() {
+                        *o = lanes[k][lane];
+                    }
                 }
             },
         );

@@ -26,6 +26,7 @@ pub mod quadrature;
 pub mod reference;
 pub mod rotation;
 pub mod runtime;
+pub mod served;
 pub mod sh;
 pub mod shade;
 pub mod shrink;

@@ -229,6 +229,30 @@ impl Shader {
         }
     }
 
+    /// What the shade of a zonal lobe is under the constant radiance 1: `(u, back)` such that
+    /// a lobe of zonal coefficients `c_l` about the unit axis `s` shades
+    /// `above · Σ_l c_l·u_l·P_l(s·axis) + back` for the BRDF axis `axis` (`P_l` the Legendre
+    /// polynomials, `above` as in [`Self::axis_transfer`]). The operator turns the constant
+    /// into a function symmetric about the axis with zonal coefficients `u_l`, and the
+    /// product of two zonal functions integrates to `Σ_l (4π/(2l+1))·a_l·b_l·P_l` of their
+    /// axes' cosine (the lobe's expansion, eq. 1, and the addition theorem). Visibility 1 is
+    /// the lobe `c = (2√π, 0, 0, 0)`, so the unshadowed shade is `above · 2√π·u_0 + back`.
+    pub fn constant_transfer(&self) -> ([f32; crate::sh::BANDS], f32) {
+        let unit = unit_visibility();
+        let g = self.op.apply(&unit);
+        let (front, back) = match self.mode {
+            Mode::Translucent { transmission } => (
+                1.0 - transmission,
+                transmission * crate::sh::dot(&self.back, &unit),
+            ),
+            _ => (1.0, 0.0),
+        };
+        (
+            std::array::from_fn(|l| front * g[crate::sh::index(l, 0)]),
+            back,
+        )
+    }
+
     /// Shades every vertex under `lights` (SH radiance in world space, one vector per
     /// channel) seen from `eye` (world; used by Phong). Returns `channels` values per vertex,
     /// interleaved. Runs on all rayon threads. Errors when the visibility, frames and

@@ -49,53 +49,70 @@ impl SphereTable {
     }
 
     /// The interpolated values at the unit direction `d` into `out` (`width` values).
-    #[inline(always)]
     pub fn lookup(&self, d: Vec3, out: &mut [f32]) {
-        let res = self.res as f32;
-        let uv = (encode(d) + Vec2::ONE) * (0.5 * res);
-        let i = (uv.x.max(0.0) as usize).min(self.res - 1);
-        let j = (uv.y.max(0.0) as usize).min(self.res - 1);
-        let (fx, fy) = (uv.x - i as f32, uv.y - j as f32);
-        let side = self.res + 1;
-        let w = self.width;
-        let at = |i: usize, j: usize| &self.values[(j * side + i) * w..(j * side + i + 1) * w];
-        // The cell's triangle: split along the diagonal parallel to the fold of its
-        // quadrant (|u| + |v| = 1), so that the map's kink lies on triangle edges.
-        let half = self.res / 2;
-        let corners = if (i < half) == (j < half) {
-            if fx + fy <= 1.0 {
-                [
-                    (at(i, j), 1.0 - fx - fy),
-                    (at(i + 1, j), fx),
-                    (at(i, j + 1), fy),
-                ]
-            } else {
-                [
-                    (at(i + 1, j + 1), fx + fy - 1.0),
-                    (at(i, j + 1), 1.0 - fx),
-                    (at(i + 1, j), 1.0 - fy),
-                ]
-            }
-        } else if fx >= fy {
-            [
-                (at(i, j), 1.0 - fx),
-                (at(i + 1, j), fx - fy),
-                (at(i + 1, j + 1), fy),
-            ]
-        } else {
-            [
-                (at(i, j), 1.0 - fy),
-                (at(i, j + 1), fy - fx),
-                (at(i + 1, j + 1), fx),
-            ]
-        };
-        let out = &mut out[..w];
+        let (offsets, weights) = self.corners(d);
+        let out = &mut out[..self.width];
         out.fill(0.0);
-        for (values, weight) in corners {
-            for (o, v) in out.iter_mut().zip(values) {
+        for (offset, weight) in offsets.into_iter().zip(weights) {
+            for (o, v) in out.iter_mut().zip(self.point(offset)) {
                 *o += weight * v;
             }
         }
+    }
+
+    /// The grid points whose values are interpolated at the unit direction `d`: the
+    /// offsets of their values (for [`Self::point`]) and their weights (summing to 1).
+    /// Branch-free, so that a loop over directions vectorises.
+    #[inline(always)]
+    pub fn corners(&self, d: Vec3) -> ([u32; 3], [f32; 3]) {
+        let res = self.res as f32;
+        let uv = (encode(d) + Vec2::ONE) * (0.5 * res);
+        let last = self.res as f32 - 1.0;
+        let (fi, fj) = (
+            uv.x.max(0.0).floor().min(last),
+            uv.y.max(0.0).floor().min(last),
+        );
+        let (fx, fy) = (uv.x - fi, uv.y - fj);
+        let (i, j) = (fi as u32, fj as u32);
+        // The cell's triangle: split along the diagonal parallel to the fold of its
+        // quadrant (|u| + |v| = 1), so that the map's kink lies on triangle edges. Corners
+        // as (di, dj, weight).
+        let half = (self.res / 2) as u32;
+        let corners = if (i < half) == (j < half) {
+            let low = fx + fy <= 1.0;
+            [
+                (
+                    if low { 0 } else { 1 },
+                    if low { 0 } else { 1 },
+                    if low { 1.0 - fx - fy } else { fx + fy - 1.0 },
+                ),
+                (1, 0, if low { fx } else { 1.0 - fy }),
+                (0, 1, if low { fy } else { 1.0 - fx }),
+            ]
+        } else {
+            let right = fx >= fy;
+            [
+                (0, 0, if right { 1.0 - fx } else { 1.0 - fy }),
+                (
+                    if right { 1 } else { 0 },
+                    if right { 0 } else { 1 },
+                    if right { fx - fy } else { fy - fx },
+                ),
+                (1, 1, if right { fy } else { fx }),
+            ]
+        };
+        let side = self.res as u32 + 1;
+        let w = self.width as u32;
+        (
+            corners.map(|(di, dj, _)| ((j + dj) * side + i + di) * w),
+            corners.map(|(_, _, weight)| weight),
+        )
+    }
+
+    /// The values of the grid point at `offset` (from [`Self::corners`]).
+    #[inline(always)]
+    pub fn point(&self, offset: u32) -> &[f32] {
+        &self.values[offset as usize..offset as usize + self.width]
     }
 }
 

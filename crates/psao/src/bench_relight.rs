@@ -8,8 +8,12 @@ use clap::Args;
 use serde::Serialize;
 
 use psao_net::cpu_time::fine_cpu_seconds;
+use psao_prt::compact::CompactModel;
+use psao_prt::filter::Filter;
 use psao_prt::model::PoseModel;
 use psao_prt::runtime::{FramePose, Relighter, Rig};
+use psao_prt::served::ServedRelighter;
+use psao_prt::sh::ShVec;
 
 use crate::relight_cmd::{
     character_and_model, frame_range, gather, split, train_model, ShadingArgs,
@@ -44,9 +48,11 @@ pub struct BenchRelightArgs {
     /// Threads of the pool the frames run on (default: one per core).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Time a relit character's whole per-frame work in `psao run --relight` and `psao view`
-    /// (`psao_net::relit`): shading under the lighting and a white sky (4 channels) and the
-    /// per-vertex self-shadowing and self-visibility, instead of the RGB shading alone.
+    /// Time a relit character's whole per-frame work in `psao run --relight`, `psao view`
+    /// and the browser (`psao_prt::served::ServedRelighter::relight`): shading under the
+    /// lighting and a white sky, with and without shadowing, and the per-vertex
+    /// self-shadowing and self-visibility, instead of the RGB shading alone (no visibility
+    /// filter: the clients have none).
     #[arg(long)]
     pub client: bool,
     /// Write the result as JSON here.
@@ -82,6 +88,23 @@ struct BenchResult {
     compact_bound: f32,
 }
 
+/// What the bench times per frame.
+enum Frames {
+    /// [`Relighter::shade_into`] under these lights.
+    Plain(Relighter, Vec<ShVec>),
+    /// [`ServedRelighter::relight`].
+    Served(ServedRelighter),
+}
+
+impl Frames {
+    fn compact(&self) -> &CompactModel {
+        match self {
+            Frames::Plain(r, _) => r.compact(),
+            Frames::Served(r) => r.relighter().compact(),
+        }
+    }
+}
+
 /// Runs `psao bench relight`.
 pub fn run(args: &BenchRelightArgs) -> Result<()> {
     if args.runs == 0 {
@@ -108,11 +131,6 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
             [l; 3]
         }
     };
-    let lights = if args.client {
-        psao_net::relit::client_lights(lights.as_flattened())
-    } else {
-        lights.to_vec()
-    };
     let mode = args.shading.mode()?;
     let c = &loaded.character;
     let frames = clip_frames(c);
@@ -135,7 +153,22 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
     };
     let vertices = model.vertices;
     let (lobes, model_mb) = (model.lobes, model.megabytes());
-    let mut relighter = Relighter::new(model, args.shading.shader()?, rig)?;
+    let mut relighter = if args.client {
+        if args.shading.filter != Filter::default() {
+            bail!("--client shades as the clients do, without a visibility filter");
+        }
+        Frames::Served(ServedRelighter::new(
+            model,
+            rig,
+            mode,
+            lights.as_flattened(),
+        )?)
+    } else {
+        Frames::Plain(
+            Relighter::new(model, args.shading.shader()?, rig)?,
+            lights.to_vec(),
+        )
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.threads.unwrap_or(0))
         .build()
@@ -157,12 +190,9 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         };
         let cpu_start = fine_cpu_seconds();
         let start = Instant::now();
-        pool.install(|| {
-            relighter.shade_into(&frame, &lights, camera.position, &mut shaded)?;
-            if args.client {
-                psao_net::relit::values_of_shades(&shaded, &pose.normals, &lights, &mut values);
-            }
-            anyhow::Ok(())
+        pool.install(|| match &mut relighter {
+            Frames::Plain(r, lights) => r.shade_into(&frame, lights, camera.position, &mut shaded),
+            Frames::Served(r) => r.relight(&frame, camera.position, &mut values),
         })?;
         std::hint::black_box(&values);
         let wall = start.elapsed();
