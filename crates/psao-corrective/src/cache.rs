@@ -144,21 +144,6 @@ impl SampleCache {
         self.tolerances = tolerances;
     }
 
-    /// Whether `s`'s direction to `eye` turned past its object's tolerance since it was traced.
-    fn turned(&self, s: &Sample, eye: Vec3) -> bool {
-        if is_highlight(s) {
-            return true;
-        }
-        let (Some(&tolerance), Some(&then)) =
-            (self.tolerances.get(&s.object), self.eyes.get(&s.age))
-        else {
-            return false;
-        };
-        let a = (then - s.position).normalize_or_zero();
-        let b = (eye - s.position).normalize_or_zero();
-        a.dot(b).clamp(-1.0, 1.0).acos() > tolerance
-    }
-
     /// The configuration.
     pub fn config(&self) -> &CacheConfig {
         &self.config
@@ -289,21 +274,15 @@ impl SampleCache {
             }
         }
         let mut stats = AgingStats::default();
-        let turned: Vec<Vec<bool>> = self
-            .levels
-            .iter()
-            .map(|level| level.iter().map(|s| self.turned(s, view.eye)).collect())
-            .collect();
-        for (level, turned) in self.levels.iter_mut().zip(turned) {
-            let mut turned = turned.into_iter();
+        let (eyes, tolerances) = (&self.eyes, &self.tolerances);
+        for level in &mut self.levels {
             level.retain(|s| {
                 let j = age.wrapping_sub(s.age);
-                let turned = turned.next().unwrap_or(false);
                 if j > max_age {
                     stats.too_old += 1;
                     return false;
                 }
-                if turned {
+                if turned(s, view.eye, eyes, tolerances) {
                     stats.turned += 1;
                     return false;
                 }
@@ -326,6 +305,25 @@ impl SampleCache {
         let batches: Vec<&[Sample]> = self.levels.iter().map(Vec::as_slice).collect();
         splat(&batches, &self.hierarchy, view, target)
     }
+}
+
+/// Whether `s`'s direction to `eye` turned past its object's tolerance since it was traced
+/// (from the eye of its camera age in `eyes`), or `s` is a highlight of an earlier view.
+fn turned(
+    s: &Sample,
+    eye: Vec3,
+    eyes: &HashMap<u32, Vec3>,
+    tolerances: &HashMap<u32, f32>,
+) -> bool {
+    if is_highlight(s) {
+        return true;
+    }
+    let (Some(&tolerance), Some(&then)) = (tolerances.get(&s.object), eyes.get(&s.age)) else {
+        return false;
+    };
+    let a = (then - s.position).normalize_or_zero();
+    let b = (eye - s.position).normalize_or_zero();
+    a.dot(b).clamp(-1.0, 1.0).acos() > tolerance
 }
 
 #[cfg(test)]
