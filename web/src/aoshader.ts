@@ -8,7 +8,11 @@
 // nearest compatible point of the block, else of the ring of cells around it, else 1.
 // In a lit session (the server sends irradiance records, `psao serve --lighting gi`) the same
 // points and weights interpolate the points' irradiance (psao-client's `reconstruct_lit_into`:
-// Σ w·Eᵢ / Σ w, the fallback point's record, else 0), the shadow maps add the direct light of
+// Σ w·Eᵢ / Σ w, the fallback point's record; a pixel without any compatible point, or on an
+// instance without view or cells, takes psao-client's fill (crates/psao-client/src/fill.rs:
+// the ((1 + n·nⱼ)/2)⁸-weighted mean irradiance of the pixels at distances 1, 2, 4, …, 128 in
+// eight directions that found points in their own block, stopping after the first ring whose
+// weight reaches 1; else 0), the shadow maps add the direct light of
 // the suns and point lights (`shadow.ts`), and the pixel is psao-client's `composite_lit`:
 // base colour / π × (direct + irradiance). Without records it composites as psao-client's
 // `composite`: base colour × (ambient × AO + light × max(0, n·l)). Both sRGB-encoded. The
@@ -285,18 +289,20 @@ void load_instance(int i) {
   u_slice = c.zw;
 }
 
-// AO at the pixel; the irradiance goes into E (0 where there is no compatible point).
-float reconstruct(vec3 world, vec3 normal) {
-  E = vec3(0.0);
+// The block pass of the loaded instance at a world position and normal: the sums over the
+// 2×2×2 block of cells around it and its nearest compatible point. Returns the block's base
+// cell, or false in ok when the instance has no view or cells or a degenerate radius.
+ivec3 block_pass(vec3 world, vec3 normal, out bool ok) {
+  ok = false;
   // Without cells psao-client finds no point in the block nor in the ring: AO 1, decided
   // here without the 64 lookups (which made every frame cost the most before any points).
-  if (!u_has_view || !u_has_cells) return 1.0;
+  if (!u_has_view || !u_has_cells) return ivec3(0);
   P = (u_to_local * vec4(world, 1.0)).xyz;
   vec3 n = u_normal_to_local * normal;
   float l = length(n);
   N = l > 0.0 ? n / l : vec3(0.0);
   R = u_poisson * u_factor;
-  if (!(R > 0.0)) return 1.0;
+  if (!(R > 0.0)) return ivec3(0);
   R2 = R * R;
   INV_R = 1.0 / R;
   PLANE = u_plane_tolerance * u_poisson;
@@ -308,13 +314,29 @@ float reconstruct(vec3 world, vec3 normal) {
   nearest_e = vec3(0.0);
   ivec3 base = ivec3(floor((P - u_origin) * u_inv_cell - 0.5));
   for (int k = 0; k < 8; k++) cell(base + ivec3(k & 1, (k >> 1) & 1, k >> 2), true);
+  ok = true;
+  return base;
+}
+
+// Whether the last reconstruct() found no compatible point (psao-client's Found::Nothing).
+bool FOUND_NOTHING;
+
+// AO at the pixel; the irradiance goes into E (0 where there is no compatible point).
+float reconstruct(vec3 world, vec3 normal) {
+  E = vec3(0.0);
+  FOUND_NOTHING = true;
+  bool ok;
+  ivec3 base = block_pass(world, normal, ok);
+  if (!ok) return 1.0;
   if (w_sum > 0.0) {
     E = e_sum / w_sum;
+    FOUND_NOTHING = false;
     return ao_sum / w_sum;
   }
   if (!u_fallback) return 1.0;
   if (nearest_ao >= 0.0) {
     E = nearest_e;
+    FOUND_NOTHING = false;
     return nearest_ao;
   }
   for (int k = 0; k < 64; k++) {
@@ -324,7 +346,61 @@ float reconstruct(vec3 world, vec3 normal) {
   }
   if (nearest_ao < 0.0) return 1.0;
   E = nearest_e;
+  FOUND_NOTHING = false;
   return nearest_ao;
+}
+
+// A fill donor (psao-client's fill.rs): the canvas pixel q's irradiance when its
+// reconstruction finds points in its own block (the kernel or the block's nearest point),
+// with its normal; false otherwise (uncovered, no view or cells, nothing in the block).
+bool donor(ivec2 q, out vec3 nq, out vec3 e) {
+  nq = vec3(0.0);
+  e = vec3(0.0);
+  ivec2 at_g = q * u_scale + u_scale / 2;
+  vec4 gp = texelFetch(u_gposition, at_g, 0);
+  if (gp.w < 0.0) return false;
+  nq = texelFetch(u_gnormal, at_g, 0).xyz;
+  load_instance(int(gp.w));
+  bool ok;
+  block_pass(gp.xyz, nq, ok);
+  if (!ok) return false;
+  if (w_sum > 0.0) {
+    e = e_sum / w_sum;
+    return true;
+  }
+  if (u_fallback && nearest_ao >= 0.0) {
+    e = nearest_e;
+    return true;
+  }
+  return false;
+}
+
+const ivec2 FILL_DIRECTIONS[8] = ivec2[8](ivec2(1, 0), ivec2(1, 1), ivec2(0, 1), ivec2(-1, 1),
+                                          ivec2(-1, 0), ivec2(-1, -1), ivec2(0, -1), ivec2(1, -1));
+
+// psao-client's fill for canvas pixel px with normal n: the donors of the rings at 1, 2, 4, …,
+// 128 pixels weighted ((1 + n·nⱼ)/2)⁸, stopping after the first ring whose weight reaches 1.
+vec3 fill(ivec2 px, vec3 n) {
+  ivec2 size = textureSize(u_gposition, 0) / u_scale;
+  float ws = 0.0;
+  vec3 es = vec3(0.0);
+  for (int r = 0; r < 8; r++) {
+    int d = 1 << r;
+    for (int k = 0; k < 8; k++) {
+      ivec2 q = px + FILL_DIRECTIONS[k] * d;
+      if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) continue;
+      vec3 nq, e;
+      if (!donor(q, nq, e)) continue;
+      float s = max(0.0, 0.5 * (1.0 + dot(n, nq)));
+      float s2 = s * s;
+      float s4 = s2 * s2;
+      float w = s4 * s4;
+      ws += w;
+      es += w * e;
+    }
+    if (ws >= 1.0) break;
+  }
+  return ws > 0.0 ? es / ws : vec3(0.0);
 }
 
 float srgb(float linear) {
@@ -350,6 +426,9 @@ void main() {
   bool points = u_mode != ${MODE_NO_AO} && !(u_lit && u_mode == ${MODE_DIRECT});
   E = vec3(0.0);
   float ao = points ? reconstruct(gp.xyz, n) : 1.0;
+  // Irradiance for a pixel without a compatible point (it replaces black), where shown.
+  bool shows_e = u_mode == ${MODE_COMPOSITED} || u_mode == ${MODE_IRRADIANCE};
+  if (points && u_lit && shows_e && FOUND_NOTHING) E = fill(ivec2(gl_FragCoord.xy), n);
   if (u_mode == ${MODE_AO}) {
     out_colour = vec4(vec3(ao), 1.0);
   } else if (u_mode == ${MODE_COST}) {

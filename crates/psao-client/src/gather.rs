@@ -11,7 +11,8 @@
 //! Irradiance (DESIGN §12) uses the AO kernel: the same points and weights give
 //! `Σ w·E_i / Σ w` per channel (the weighted mean also where AO uses a planar fit), the same
 //! nearest-point fallbacks give the fallback point's irradiance, and a pixel with no
-//! compatible point at all gets zero.
+//! compatible point at all gets zero here ([`Found::Nothing`]; `crate::fill` then fills its
+//! irradiance from neighbouring pixels).
 
 use glam::{IVec3, Vec3};
 use psao_points::irradiance::unpack_rgb9e5;
@@ -24,6 +25,18 @@ use crate::state::CellLights;
 
 /// An instance's irradiance records by cell slot.
 pub(crate) type Lights<'a> = Option<&'a Paged<CellLights>>;
+
+/// Where [`Neighbourhood::sample`] found the pixel's value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Found {
+    /// In the 2×2×2 block: the kernel's weighted points or the block's nearest compatible
+    /// point (with the nearest-point fallback on).
+    Block,
+    /// The nearest compatible point of the ring of cells around the block.
+    Ring,
+    /// No compatible point: AO 1, irradiance zero.
+    Nothing,
+}
 
 /// Most points a 2×2×2 block can hold.
 const MAX_POINTS: usize = 8 * CELL_POINTS;
@@ -60,7 +73,7 @@ impl Neighbourhood {
     /// AO and irradiance at local position `p` with local unit normal `n` on instance
     /// `instance` (whose grid is `grid` and irradiance records `lights`): the AO is the result
     /// of `reconstruct_ao(grid, p, n, params)`, the irradiance interpolated as the module
-    /// documentation says (zero without records).
+    /// documentation says (zero without records), and where they were found.
     #[inline]
     pub(crate) fn sample(
         &mut self,
@@ -69,11 +82,11 @@ impl Neighbourhood {
         p: Vec3,
         n: Vec3,
         params: &ReconstructParams,
-    ) -> (f32, Vec3) {
+    ) -> (f32, Vec3, Found) {
         let layout = grid.layout();
         let mut r = layout.poisson_radius * params.interpolation_factor;
         if !(r > 0.0 && r.is_finite() && p.is_finite()) {
-            return (1.0, Vec3::ZERO);
+            return (1.0, Vec3::ZERO, Found::Nothing);
         }
         let base = layout.nearest_base(p);
         if self.key != Some((instance, base)) {
@@ -130,15 +143,17 @@ impl Neighbourhood {
                 }
                 None => ao_sum / w_sum,
             };
-            (ao, self.weighted_irradiance(&weight, w_sum))
+            (ao, self.weighted_irradiance(&weight, w_sum), Found::Block)
         } else if params.nearest_fallback {
             match self.nearest(p, n, plane, params) {
-                Some(i) => (self.ao[i], self.irradiance_of(i)),
+                Some(i) => (self.ao[i], self.irradiance_of(i), Found::Block),
                 None => ring_nearest((grid, lights), base, p, n, plane, params)
-                    .unwrap_or((1.0, Vec3::ZERO)),
+                    .map_or((1.0, Vec3::ZERO, Found::Nothing), |(ao, e)| {
+                        (ao, e, Found::Ring)
+                    }),
             }
         } else {
-            (1.0, Vec3::ZERO)
+            (1.0, Vec3::ZERO, Found::Nothing)
         }
     }
 

@@ -9,7 +9,8 @@
 //!
 //! With lighting (DESIGN §12; the state then holds irradiance records,
 //! [`ClientState::has_lights`]): `reconstruct_lit_into` gives the AO and the points'
-//! irradiance per pixel, [`direct_light`] the shadow-mapped light of suns and point lights
+//! irradiance per pixel (filling pixels without a compatible point from their neighbours),
+//! [`direct_light`] the shadow-mapped light of suns and point lights
 //! (`psao_raster::ShadowMaps`), and [`composite_lit`] the radiance
 //! `base colour / π × (direct + irradiance)`.
 
@@ -20,6 +21,8 @@ mod composite;
 #[cfg(feature = "render")]
 mod detail;
 mod error;
+#[cfg(feature = "render")]
+mod fill;
 #[cfg(feature = "render")]
 mod gather;
 mod hash;

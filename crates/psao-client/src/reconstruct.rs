@@ -10,7 +10,8 @@ use psao_points::{
 use psao_raster::GBuffer;
 use rayon::prelude::*;
 
-use crate::gather::{Lights, Neighbourhood};
+use crate::fill::fill_holes;
+use crate::gather::{Found, Lights, Neighbourhood};
 use crate::state::ClientState;
 
 /// Smallest |det| of an instance transform's linear part that is still inverted; flatter
@@ -113,9 +114,11 @@ pub fn reconstruct_into(
 
 /// [`reconstruct_into`] that also interpolates the points' irradiance (linear RGB, DESIGN
 /// §12) per pixel into `irradiance` with the same kernel (see the `gather` module: the same
-/// points and weights, the same nearest-point fallbacks; zero where no point is compatible,
-/// on pixels that are not covered, on instances without grid or transform, and everywhere
-/// when the state has no irradiance records). The AO is exactly [`reconstruct_into`]'s.
+/// points and weights, the same nearest-point fallbacks). A covered pixel where no point is
+/// compatible (or whose instance has no grid or transform) takes the normal-weighted mean
+/// irradiance of the nearest pixels around it that found points (the `fill` module), zero
+/// when there are none; pixels that are not covered get zero, and every pixel does when the
+/// state has no irradiance records. The AO is exactly [`reconstruct_into`]'s.
 pub fn reconstruct_lit_into(
     state: &ClientState,
     gbuffer: &GBuffer,
@@ -139,11 +142,19 @@ fn run(
     ao.clear();
     ao.resize(pixels, 1.0);
     let with_lights = irradiance.is_some() && state.has_lights();
-    let irradiance_rows: Vec<Option<&mut [Vec3]>> = match irradiance {
+    // With records: where each pixel found its value, for the hole filling below.
+    let mut found = vec![Found::Nothing; if with_lights { pixels } else { 0 }];
+    let mut irradiance = irradiance;
+    let irradiance_rows: Vec<Option<(&mut [Vec3], &mut [Found])>> = match irradiance.as_mut() {
         Some(e) => {
             e.clear();
             e.resize(pixels, Vec3::ZERO);
-            e.chunks_mut(width.max(1)).map(Some).collect()
+            let found_rows = found.chunks_mut(width.max(1)).map(Some);
+            let found_rows = found_rows.chain(std::iter::repeat_with(|| None));
+            e.chunks_mut(width.max(1))
+                .zip(found_rows)
+                .map(|(e, f)| Some((e, f.unwrap_or_default())))
+                .collect()
         }
         None => (0..gbuffer.height).map(|_| None).collect(),
     };
@@ -180,12 +191,20 @@ fn run(
                     let p = view.to_local.transform_point3a(Vec3A::from(position));
                     let n = (view.normal_to_local * Vec3A::from(normal)).normalize_or_zero();
                     let grid = (view.grid, view.lights);
-                    let (a, e) = cache.sample(instance, grid, p.into(), n.into(), &params);
+                    let (a, e, how) = cache.sample(instance, grid, p.into(), n.into(), &params);
                     *ao = a;
-                    if let Some(slot) = e_row.as_deref_mut().and_then(|r| r.get_mut(x)) {
-                        *slot = e;
+                    if let Some((e_row, found_row)) = e_row.as_mut() {
+                        if let Some(slot) = e_row.get_mut(x) {
+                            *slot = e;
+                        }
+                        if let Some(slot) = found_row.get_mut(x) {
+                            *slot = how;
+                        }
                     }
                 }
             },
         );
+    if let (true, Some(e)) = (with_lights, irradiance) {
+        fill_holes(gbuffer, &found, e);
+    }
 }

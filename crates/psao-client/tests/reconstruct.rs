@@ -371,3 +371,83 @@ fn irradiance_reconstructs_constants_and_keeps_zero_at_zero() {
     psao_client::reconstruct_lit_into(&ao_only, &g, &settings, &mut ao, &mut e);
     assert!(e.iter().all(|&v| v == Vec3::ZERO));
 }
+
+#[test]
+fn irradiance_fills_pixels_without_a_compatible_point_from_their_neighbours() {
+    // A lit plane and a cube on it whose cells never arrived: the cube's pixels find no
+    // point, so their AO is 1 and, without the fill, their irradiance would be 0 (black).
+    let c = Vec3::new(1.5, 0.75, 0.25);
+    let scene = common::scene(2.0, 1);
+    let points = common::points(&scene, 512.0, 11);
+    let mut grids: Vec<_> = common::grids(&points, pattern)
+        .into_iter()
+        .map(|(g, _)| g)
+        .collect();
+    let table = common::table(&points, &grids);
+    grids[1] = psao_points::InstanceGrid::new(*grids[1].layout());
+    let mut state = ClientState::new(&table);
+    let snapshot = common::snapshot(1, &grids, common::transforms(&scene));
+    state
+        .apply(&common::with_lights(snapshot, &grids, |_| c))
+        .unwrap();
+    let g = render(&scene, &common::camera(), 160, 120);
+    let settings = ReconstructSettings::default();
+    let (mut ao, mut e) = (Vec::new(), Vec::new());
+    psao_client::reconstruct_lit_into(&state, &g, &settings, &mut ao, &mut e);
+    assert_eq!(ao, reconstruct(&state, &g, &settings));
+    let (mut cube, mut cube_top) = (0, 0);
+    for (i, &v) in e.iter().enumerate() {
+        if !g.covered(i) {
+            assert_eq!(v, Vec3::ZERO, "uncovered pixel {i}");
+            continue;
+        }
+        // Every covered pixel, the cube's included, shows the plane's light: the only
+        // records are `c`, so any normalised mean of them is `c`.
+        assert!((v - c).abs().max_element() < 1e-5, "pixel {i}: {v}");
+        if g.instance[i] == 1 {
+            cube += 1;
+            assert_eq!(ao[i], 1.0, "the cube has no points: pixel {i}");
+            cube_top += usize::from(g.normal[i].y > 0.99);
+        }
+    }
+    assert!(
+        cube > 300 && cube_top > 50,
+        "{cube} cube pixels, {cube_top} on its top"
+    );
+}
+
+#[test]
+fn filled_irradiance_is_a_normalised_mean_of_the_donors() {
+    // The plane lit `c` where local x > 0 and `d` elsewhere, the cube without points: every
+    // cube pixel, facing up like the plane or sideways, fills with a convex combination of
+    // `c` and `d` (never black, never outside their range).
+    let (c, d) = (Vec3::new(1.0, 0.5, 0.25), Vec3::new(0.25, 0.5, 1.0));
+    let scene = common::scene(2.0, 1);
+    let points = common::points(&scene, 512.0, 11);
+    let mut grids: Vec<_> = common::grids(&points, pattern)
+        .into_iter()
+        .map(|(g, _)| g)
+        .collect();
+    let table = common::table(&points, &grids);
+    grids[1] = psao_points::InstanceGrid::new(*grids[1].layout());
+    let mut state = ClientState::new(&table);
+    let snapshot = common::snapshot(1, &grids, common::transforms(&scene));
+    let light = |p: Vec3| if p.x > 0.0 { c } else { d };
+    state
+        .apply(&common::with_lights(snapshot, &grids, light))
+        .unwrap();
+    let g = render(&scene, &common::camera(), 160, 120);
+    let (mut ao, mut e) = (Vec::new(), Vec::new());
+    psao_client::reconstruct_lit_into(&state, &g, &ReconstructSettings::default(), &mut ao, &mut e);
+    let lo = c.min(d) * (1.0 - 1e-5);
+    let hi = c.max(d) * (1.0 + 1e-5);
+    let mut filled = 0;
+    for i in (0..e.len()).filter(|&i| g.covered(i) && g.instance[i] == 1) {
+        let v = e[i];
+        assert!(v.cmpge(lo).all() && v.cmple(hi).all(), "pixel {i}: {v}");
+        // Blue + red of any mix of c and d is 1.25: the fill is a normalised mean.
+        assert!((v.x + v.z - 1.25).abs() < 1e-4, "pixel {i}: {v}");
+        filled += 1;
+    }
+    assert!(filled > 300, "{filled}");
+}

@@ -27,6 +27,16 @@
 //! other side of a thin wall) keep theirs apart. Each point still takes its own paths and
 //! converges as before; what it accumulates (`Server::irradiance`) is its own.
 //!
+//! # Noise
+//!
+//! A rectangle light is sampled at one point of its area per path vertex, weighted by
+//! `cos θ · cos θ' · area / d²`: at vertices near a panel (a beam beside it, a wall under
+//! it) a sample can be hundreds of times its mean, and with a few paths per point such
+//! samples show as bright blotches that take seconds to average out. The points' paths cap
+//! each rectangle sample at `π ×` its radiance, the irradiance of an emitter filling the
+//! hemisphere, above which no expectation lies
+//! ([`DiffuseLighting::with_clamped_rect_samples`]; the per-pixel reference does not).
+//!
 //! # Invalidation
 //!
 //! Moving geometry restarts a point's irradiance exactly as its AO (the proximity rule of
@@ -330,6 +340,9 @@ impl Lighting {
         if !self.config.sharp_direct {
             lighting = lighting.without_sharp_direct();
         }
+        // A few paths per point and frame: cap the 1/d² spikes of rectangle samples
+        // (module docs, "Noise").
+        lighting = lighting.with_clamped_rect_samples();
         selected
             .par_iter()
             .map(|c| {

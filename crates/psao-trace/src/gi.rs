@@ -49,6 +49,9 @@ pub struct DiffuseLighting<'a> {
     /// Whether the direct light of suns and point lights at the path's first vertex is left
     /// out ([`Self::without_sharp_direct`]).
     skip_sharp_direct: bool,
+    /// Whether a rectangle's sample is capped at `π × its radiance`
+    /// ([`Self::with_clamped_rect_samples`]).
+    clamp_rect_samples: bool,
 }
 
 impl<'a> DiffuseLighting<'a> {
@@ -66,6 +69,7 @@ impl<'a> DiffuseLighting<'a> {
             lights,
             bounces,
             skip_sharp_direct: false,
+            clamp_rect_samples: false,
         }
     }
 
@@ -75,6 +79,19 @@ impl<'a> DiffuseLighting<'a> {
     /// Rectangles and the environment, whose shadows are soft, stay whole.
     pub fn without_sharp_direct(mut self) -> Self {
         self.skip_sharp_direct = true;
+        self
+    }
+
+    /// The same lighting with each rectangle light's sample (its radiance × the sampled
+    /// point's `cos θ · cos θ' · area / d²`) capped at `π ×` its radiance: the irradiance of
+    /// an emitter filling the whole hemisphere, which no true value exceeds. Only samples
+    /// at vertices close to a rectangle, where `1/d²` makes single paths orders of magnitude
+    /// brighter than their mean, are capped, so the estimate loses those rare spikes (a
+    /// small bias, towards darker, next to the panels) for much less variance: what the
+    /// server's few paths per point need (docs/LIGHTING.md "Noise"). The per-pixel reference
+    /// keeps the unbiased samples.
+    pub fn with_clamped_rect_samples(mut self) -> Self {
+        self.clamp_rect_samples = true;
         self
     }
 
@@ -243,7 +260,12 @@ impl<'a> DiffuseLighting<'a> {
                     // The area's cosine times its area: −l · (normal · area).
                     let cos_area = -l.dot(normal_area);
                     if dist > 0.0 && cos_area > 0.0 && visible(l, dist * (1.0 - SHADOW_SHORTEN)) {
-                        e += strength * n.dot(l) * cos_area / dist2;
+                        if self.clamp_rect_samples {
+                            let geometry = n.dot(l) * cos_area / dist2;
+                            e += strength * geometry.min(std::f32::consts::PI);
+                        } else {
+                            e += strength * n.dot(l) * cos_area / dist2;
+                        }
                     }
                 }
             }

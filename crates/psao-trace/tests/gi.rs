@@ -124,6 +124,57 @@ fn a_rectangle_light_matches_the_form_factor() {
     assert_eq!(e, Vec3::ZERO);
 }
 
+/// Capped rectangle samples ([`DiffuseLighting::with_clamped_rect_samples`]): identical where
+/// no sample can exceed `π × radiance` (far from the light), and never above it close to it,
+/// where uncapped samples are.
+#[test]
+fn clamped_rect_samples_stay_below_pi_times_the_radiance() {
+    let mut s = floor(Vec3::ZERO);
+    let rect = |h: f32| Light {
+        shape: LightShape::Rect {
+            centre: Vec3::new(0.0, h, 0.0),
+            half_u: Vec3::new(1.5, 0.0, 0.0),
+            half_v: Vec3::new(0.0, 0.0, 1.0),
+        },
+        color: Vec3::ONE,
+        power: 3.0,
+    };
+    s.lights.push(rect(2.0));
+    let t = tracer(&s);
+    let plain = DiffuseLighting::new(&s, 0.0, 0);
+    let capped = DiffuseLighting::new(&s, 0.0, 0).with_clamped_rect_samples();
+    // At 2 m a sample is at most 3 · 6 m² / 4 m² = 4.5 < 3π: nothing to cap.
+    for i in 0..256 {
+        let a = plain.sample(&t, Vec3::ZERO, Vec3::Y, Vec3::Y, 7, 42, i);
+        let b = capped.sample(&t, Vec3::ZERO, Vec3::Y, Vec3::Y, 7, 42, i);
+        assert!(
+            (a - b).abs().max_element() <= 1e-5 * a.x,
+            "sample {i}: {a} vs {b}"
+        );
+    }
+    s.lights[0] = rect(0.05);
+    let t = tracer(&s);
+    let plain = DiffuseLighting::new(&s, 0.0, 0);
+    let capped = DiffuseLighting::new(&s, 0.0, 0).with_clamped_rect_samples();
+    let bound = 3.0 * std::f32::consts::PI;
+    let (mut above, mut capped_max) = (0, 0.0f32);
+    for i in 0..4096 {
+        let a = plain.sample(&t, Vec3::ZERO, Vec3::Y, Vec3::Y, 7, 42, i).x;
+        let b = capped.sample(&t, Vec3::ZERO, Vec3::Y, Vec3::Y, 7, 42, i).x;
+        above += usize::from(a > bound);
+        capped_max = capped_max.max(b);
+        // The same sample, capped (up to the rounding of a different operation order).
+        assert!(
+            (b - a.min(bound)).abs() <= 1e-5 * bound,
+            "sample {i}: {a} vs {b}"
+        );
+    }
+    assert!(
+        above > 0 && capped_max <= bound,
+        "{above} above, max {capped_max}"
+    );
+}
+
 /// A closed sphere of radius 2 and albedo `albedo`, lit by a point light of intensity 1 at its
 /// centre, and a point on its inner wall with the inward normal.
 fn furnace(albedo: f32) -> (Scene, Vec3, Vec3) {
