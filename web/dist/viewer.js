@@ -1488,6 +1488,9 @@ layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
 layout(location = 2) in uvec4 joints;
 layout(location = 3) in vec4 weights; // renormalised as psao-scene's BindMesh
+// Relit characters' values per vertex (self-shadowing per channel, self-visibility; relit.ts),
+// (1, 1, 1, 1) elsewhere.
+layout(location = 4) in vec4 relit;
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 uniform mat3 u_normal_matrix;
@@ -1497,6 +1500,7 @@ uniform int u_joint_base;
 uniform highp sampler2D u_joints;
 out vec3 v_world;
 out vec3 v_normal;
+out vec4 v_relit;
 invariant gl_Position;
 
 vec4 joint_texel(int i) { return texelFetch(u_joints, ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}), 0); }
@@ -1525,17 +1529,20 @@ void main() {
   vec4 world = u_model * vec4(p, 1.0);
   v_normal = u_normal_matrix * n;
   v_world = world.xyz;
+  v_relit = relit;
   gl_Position = u_view_proj * world;
 }`;
   var GBUFFER = `#version 300 es
 precision highp float;
 in vec3 v_world;
 in vec3 v_normal;
+in vec4 v_relit;
 uniform vec3 u_eye;
 uniform float u_instance;
 uniform float u_colour_index;
 layout(location = 0) out vec4 out_position;
 layout(location = 1) out vec4 out_normal;
+layout(location = 2) out vec4 out_relit;
 
 void main() {
   // The face normal turned towards the eye, and the shading normal in its hemisphere
@@ -1550,6 +1557,7 @@ void main() {
   if (dot(n, g) < 0.0) n = -n;
   out_position = vec4(v_world, u_instance);
   out_normal = vec4(n, u_colour_index);
+  out_relit = v_relit;
 }`;
   var FULLSCREEN = `#version 300 es
 void main() {
@@ -1566,6 +1574,8 @@ uniform int u_mode;
 uniform int u_scale;
 uniform highp sampler2D u_gposition;
 uniform highp sampler2D u_gnormal;
+// Relit characters' interpolated values (1 elsewhere): self-shadowing o, self-visibility a.
+uniform highp sampler2D u_grelit;
 uniform highp sampler2D u_colours; // base colour by index
 uniform vec3 u_sky;
 uniform vec3 u_light_dir;
@@ -1879,14 +1889,19 @@ void main() {
     out_colour = vec4(float(cells_visited), float(points_visited & 255), float(points_visited >> 8), 255.0) / 255.0;
   } else {
     vec3 colour = texelFetch(u_colours, ivec2(int(gn.w), 0), 0).rgb;
+    // A relit character's pixel: its AO or irradiance from the points times psao-prt's
+    // pixel_factor o / max(AO, a) (1 off relit characters, where o = a = 1).
+    vec4 relit = texelFetch(u_grelit, at_g, 0);
+    vec3 m = relit.rgb / max(max(ao, relit.a), 1e-3);
     vec3 rgb;
     if (u_lit) {
       // psao-client's composite_lit: base colour / \u03C0 \xD7 (direct + irradiance).
       vec3 direct = u_mode == ${MODE_IRRADIANCE} ? vec3(0.0) : direct_light(gp.xyz, n);
+      E *= m;
       vec3 e = u_mode == ${MODE_DIRECT} ? direct : u_mode == ${MODE_IRRADIANCE} ? E : direct + E;
       rgb = colour * e / 3.14159265358979;
     } else {
-      float ambient = u_mode == ${MODE_DIRECT} ? 0.0 : u_ambient * ao;
+      vec3 ambient = u_mode == ${MODE_DIRECT} ? vec3(0.0) : u_ambient * ao * m;
       float light = u_mode == ${MODE_IRRADIANCE} ? 0.0 : u_light * max(0.0, dot(n, u_light_dir));
       rgb = colour * (ambient + light);
     }
@@ -1988,6 +2003,7 @@ void main() {
       this.gl = gl2;
       this.position = null;
       this.normal = null;
+      this.relit = null;
       this.depth = null;
       this.width = 0;
       this.height = 0;
@@ -1998,7 +2014,7 @@ void main() {
       const gl2 = this.gl;
       this.width = width;
       this.height = height;
-      for (const t of [this.position, this.normal]) if (t) gl2.deleteTexture(t);
+      for (const t of [this.position, this.normal, this.relit]) if (t) gl2.deleteTexture(t);
       if (this.depth) gl2.deleteRenderbuffer(this.depth);
       const target = () => {
         const t = gl2.createTexture();
@@ -2010,14 +2026,16 @@ void main() {
       };
       this.position = target();
       this.normal = target();
+      this.relit = target();
       this.depth = gl2.createRenderbuffer();
       gl2.bindRenderbuffer(gl2.RENDERBUFFER, this.depth);
       gl2.renderbufferStorage(gl2.RENDERBUFFER, gl2.DEPTH_COMPONENT24, width, height);
       gl2.bindFramebuffer(gl2.FRAMEBUFFER, this.fbo);
       gl2.framebufferTexture2D(gl2.FRAMEBUFFER, gl2.COLOR_ATTACHMENT0, gl2.TEXTURE_2D, this.position, 0);
       gl2.framebufferTexture2D(gl2.FRAMEBUFFER, gl2.COLOR_ATTACHMENT1, gl2.TEXTURE_2D, this.normal, 0);
+      gl2.framebufferTexture2D(gl2.FRAMEBUFFER, gl2.COLOR_ATTACHMENT2, gl2.TEXTURE_2D, this.relit, 0);
       gl2.framebufferRenderbuffer(gl2.FRAMEBUFFER, gl2.DEPTH_ATTACHMENT, gl2.RENDERBUFFER, this.depth);
-      gl2.drawBuffers([gl2.COLOR_ATTACHMENT0, gl2.COLOR_ATTACHMENT1]);
+      gl2.drawBuffers([gl2.COLOR_ATTACHMENT0, gl2.COLOR_ATTACHMENT1, gl2.COLOR_ATTACHMENT2]);
       const status2 = gl2.checkFramebufferStatus(gl2.FRAMEBUFFER);
       gl2.bindFramebuffer(gl2.FRAMEBUFFER, null);
       if (status2 !== gl2.FRAMEBUFFER_COMPLETE) throw new Error(`G-buffer framebuffer incomplete (${status2})`);
@@ -2051,6 +2069,11 @@ void main() {
       this.gl = gl2;
       /// Vertex positions of each mesh (all primitives), for the posed scene's bounds.
       this.meshPositions = [];
+      /// Per mesh, per primitive: its joints and renormalised weights when skinned (for the
+      /// skinned instances' bounds), else null.
+      this.meshSkins = [];
+      /// The joint texels of the frame drawn last (skinned instances' bounds), or null.
+      this.lastJointTexels = null;
       this.boundsCache = [];
       this.meshes = [];
       this.instances = [];
@@ -2062,6 +2085,14 @@ void main() {
       this.lights = new SceneLights(void 0);
       /// Milliseconds of the last frame's shadow maps (0 when none were drawn).
       this.shadowMs = 0;
+      /// The served relit characters, once loaded (`relit.ts`).
+      this.relit = null;
+      /// Why relighting stopped, when a frame's relighting failed.
+      this.relitError = null;
+      /// Per relit instance: the vertex buffer of its values.
+      this.relitBuffers = /* @__PURE__ */ new Map();
+      /// What relit characters are built from: the glb's document, its accessors, the instances.
+      this.source = null;
       if (!gl2.getExtension("EXT_color_buffer_float")) throw new Error("WebGL2 without EXT_color_buffer_float");
       this.gbuffer = program(gl2, VERTEX, GBUFFER);
       this.shade = program(gl2, FULLSCREEN, FRAGMENT);
@@ -2077,6 +2108,7 @@ void main() {
       this.joints = dataTexture(gl2);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, 1, 1, 0, gl2.RGBA, gl2.FLOAT, new Float32Array(4));
       gl2.vertexAttribI4ui(2, 0, 0, 0, 0);
+      gl2.vertexAttrib4f(4, 1, 1, 1, 1);
       const colours = this.load(glb);
       this.colours = dataTexture(gl2);
       gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, Math.max(1, colours.length / 4), 1, 0, gl2.RGBA, gl2.FLOAT, colours.length ? colours : new Float32Array(4));
@@ -2099,13 +2131,18 @@ void main() {
         return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
       };
       const instanceCount = (doc.nodes ?? []).findIndex((n) => n.mesh === void 0 || !n.matrix);
-      const animation = new Animation(doc, instanceCount < 0 ? (doc.nodes ?? []).length : instanceCount, (i) => readAccessor(doc, bin, i));
+      const instances = instanceCount < 0 ? (doc.nodes ?? []).length : instanceCount;
+      const read = (i) => readAccessor(doc, bin, i);
+      this.source = { doc, read, instances };
+      const animation = new Animation(doc, instances, read);
       this.animation = animation.skinned ? animation : null;
       const colours = [];
       for (const mesh of doc.meshes ?? []) {
         const prims = [];
         const positions = [];
+        const skins = [];
         this.meshPositions.push(positions);
+        this.meshSkins.push(skins);
         for (const prim of mesh.primitives) {
           if (prim.attributes.POSITION === void 0 || prim.attributes.NORMAL === void 0 || prim.indices === void 0) continue;
           positions.push(readAccessor(doc, bin, prim.attributes.POSITION));
@@ -2123,15 +2160,19 @@ void main() {
           }
           const { JOINTS_0: joints, WEIGHTS_0: weights } = prim.attributes;
           const skin = joints !== void 0 && weights !== void 0;
+          skins.push(null);
           if (skin) {
+            const jointData = Uint16Array.from(readAccessor(doc, bin, joints));
+            const weightData = renormalisedWeights(readAccessor(doc, bin, weights));
+            skins[skins.length - 1] = { joints: jointData, weights: weightData };
             const jbuf = gl2.createBuffer();
             gl2.bindBuffer(gl2.ARRAY_BUFFER, jbuf);
-            gl2.bufferData(gl2.ARRAY_BUFFER, Uint16Array.from(readAccessor(doc, bin, joints)), gl2.STATIC_DRAW);
+            gl2.bufferData(gl2.ARRAY_BUFFER, jointData, gl2.STATIC_DRAW);
             gl2.enableVertexAttribArray(2);
             gl2.vertexAttribIPointer(2, 4, gl2.UNSIGNED_SHORT, 0, 0);
             const wbuf = gl2.createBuffer();
             gl2.bindBuffer(gl2.ARRAY_BUFFER, wbuf);
-            gl2.bufferData(gl2.ARRAY_BUFFER, renormalisedWeights(readAccessor(doc, bin, weights)), gl2.STATIC_DRAW);
+            gl2.bufferData(gl2.ARRAY_BUFFER, weightData, gl2.STATIC_DRAW);
             gl2.enableVertexAttribArray(3);
             gl2.vertexAttribPointer(3, 4, gl2.FLOAT, false, 0, 0);
           }
@@ -2169,6 +2210,7 @@ void main() {
       gl2.viewport(0, 0, w * scale2, h * scale2);
       gl2.clearBufferfv(gl2.COLOR, 0, [0, 0, 0, -1]);
       gl2.clearBufferfv(gl2.COLOR, 1, [0, 0, 0, 0]);
+      gl2.clearBufferfv(gl2.COLOR, 2, [1, 1, 1, 1]);
       gl2.clearBufferfi(gl2.DEPTH_STENCIL, 0, 1, 0);
       gl2.enable(gl2.DEPTH_TEST);
       gl2.depthFunc(gl2.LESS);
@@ -2178,12 +2220,25 @@ void main() {
       gl2.bindTexture(gl2.TEXTURE_2D, this.joints);
       if (animation) {
         const texels = animation.jointTexels(opts.time ?? 0);
+        this.lastJointTexels = texels;
         const rows2 = Math.ceil(texels.length / 4 / TEX_WIDTH);
         const padded = new Float32Array(rows2 * TEX_WIDTH * 4);
         padded.set(texels);
         gl2.texImage2D(gl2.TEXTURE_2D, 0, gl2.RGBA32F, TEX_WIDTH, rows2, 0, gl2.RGBA, gl2.FLOAT, padded);
       }
       gl2.uniform3fv(g.u_eye, camera.position);
+      if (this.relit) {
+        try {
+          this.relight(camera, state, opts.time ?? 0);
+        } catch (e) {
+          this.relitError = `relit characters: ${e instanceof Error ? e.message : e}`;
+          this.relit.free();
+          this.relit = null;
+          this.relitBuffers.forEach((b) => gl2.deleteBuffer(b));
+          this.relitBuffers.clear();
+        }
+      }
+      gl2.useProgram(this.gbuffer.p);
       this.drawInstances(this.gbuffer, viewProj(camera), state);
       const instF = new Float32Array(this.instances.length * INST_F * 4);
       const instU = new Uint32Array(this.instances.length * INST_U * 4);
@@ -2226,6 +2281,7 @@ void main() {
         ["u_normals", this.normals],
         ["u_gposition", this.targets.position],
         ["u_gnormal", this.targets.normal],
+        ["u_grelit", this.targets.relit],
         ["u_colours", this.colours],
         ["u_instf", this.instF],
         ["u_instu", this.instU],
@@ -2284,14 +2340,41 @@ void main() {
         gl2.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
         gl2.uniform1f(g.u_instance, i);
         const jointBase = animation ? animation.jointBase[i] : -1;
+        const relit = this.relitBuffers.get(i);
         for (const p of this.meshes[inst.mesh] ?? []) {
           gl2.uniform1f(g.u_colour_index, p.colour);
           gl2.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
           gl2.bindVertexArray(p.vao);
+          if (relit) {
+            gl2.bindBuffer(gl2.ARRAY_BUFFER, relit);
+            gl2.enableVertexAttribArray(4);
+            gl2.vertexAttribPointer(4, 4, gl2.FLOAT, false, 0, 0);
+          } else {
+            gl2.disableVertexAttribArray(4);
+          }
           gl2.drawElements(gl2.TRIANGLES, p.count, gl2.UNSIGNED_INT, 0);
         }
       }
       gl2.bindVertexArray(null);
+    }
+    /// Relights the served characters at scene time `time` (their instances at the transforms
+    /// drawn) and uploads each relit instance's values.
+    relight(camera, state, time) {
+      const gl2 = this.gl;
+      const relit = this.relit;
+      const transforms = this.instances.map((_, i) => state?.transforms[i] ?? null);
+      relit.frame(time, transforms, camera.position);
+      for (let i = 0; i < this.instances.length; i++) {
+        const values = relit.values(i);
+        if (!values) continue;
+        let buf = this.relitBuffers.get(i);
+        if (!buf) {
+          buf = gl2.createBuffer();
+          this.relitBuffers.set(i, buf);
+        }
+        gl2.bindBuffer(gl2.ARRAY_BUFFER, buf);
+        gl2.bufferData(gl2.ARRAY_BUFFER, values, gl2.DYNAMIC_DRAW);
+      }
     }
     /// Instance i's model matrix (column-major 4×4): the state's transform, else its rest matrix.
     modelOf(i, state) {
@@ -2299,19 +2382,24 @@ void main() {
       if (!t) return this.instances[i].matrix;
       return new Float32Array([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
     }
-    /// World bounds of every instance's (unskinned) mesh vertices at the drawn transforms, as
-    /// psao-raster's shadow maps take them (skinned instances: their rest vertices); null
-    /// without vertices. Each instance's bounds are kept until its transform changes.
+    /// World bounds of every instance's mesh vertices at the drawn transforms, as psao-raster's
+    /// shadow maps take them (skinned instances: their vertices skinned with the joint
+    /// matrices of the frame, as the vertex shader skins them); null without vertices. Each
+    /// unskinned instance's bounds are kept until its transform changes.
     posedBounds(state) {
       const lo = [Infinity, Infinity, Infinity];
       const hi = [-Infinity, -Infinity, -Infinity];
       for (const [i, inst] of this.instances.entries()) {
         const m = this.modelOf(i, state);
+        const jointBase = this.animation?.jointBase[i] ?? -1;
+        const texels = jointBase >= 0 ? this.lastJointTexels : null;
         const key = m.join(",");
         let b = this.boundsCache[i];
-        if (!b || b.key !== key) {
+        if (!b || b.key !== key || texels) {
           b = { key, lo: [Infinity, Infinity, Infinity], hi: [-Infinity, -Infinity, -Infinity] };
-          for (const positions of this.meshPositions[inst.mesh] ?? []) {
+          for (const [k, rest] of (this.meshPositions[inst.mesh] ?? []).entries()) {
+            const skin = texels ? this.meshSkins[inst.mesh]?.[k] ?? null : null;
+            const positions = texels && skin ? skinned(rest, skin, texels, jointBase) : rest;
             for (let v = 0; v + 3 <= positions.length; v += 3) {
               const [x, y, z] = [positions[v], positions[v + 1], positions[v + 2]];
               for (let r = 0; r < 3; r++) {
@@ -2363,6 +2451,22 @@ void main() {
       );
     }
   };
+  function skinned(positions, skin, texels, base) {
+    const out = new Float32Array(positions.length);
+    for (let v = 0; 3 * v + 3 <= positions.length; v++) {
+      const [x, y, z] = [positions[3 * v], positions[3 * v + 1], positions[3 * v + 2]];
+      for (let k = 0; k < 4; k++) {
+        const w = skin.weights[4 * v + k];
+        if (!(w > 0)) continue;
+        const at = (base + skin.joints[4 * v + k]) * JOINT_TEXELS * 4;
+        if (at + 16 > texels.length) continue;
+        for (let r = 0; r < 3; r++) {
+          out[3 * v + r] += w * (texels[at + r] * x + texels[at + 4 + r] * y + texels[at + 8 + r] * z + texels[at + 12 + r]);
+        }
+      }
+    }
+    return out;
+  }
   function normalMatrixOf(m) {
     const [a, b, c] = [m[0], m[1], m[2]];
     const [d, e, f2] = [m[4], m[5], m[6]];
@@ -2431,6 +2535,150 @@ void main() {
     return out;
   }
 
+  // src/relit.ts
+  var PROPERTIES = { translation: 0, rotation: 1, scale: 2 };
+  var INTERPOLATIONS = { STEP: 0, LINEAR: 1, CUBICSPLINE: 2 };
+  function bytesOf(a) {
+    return new Uint8Array(a.buffer, a.byteOffset, a.byteLength);
+  }
+  var RelitCharacters = class {
+    /// The scene of `doc` (its first `instances` nodes are the instance table's) with the
+    /// served `models` (`/characters/N.prt`, in order) under `index.lighting`; throws with the
+    /// Rust error's text when the scene or a model is refused.
+    constructor(codec2, doc, read, instances, index, models) {
+      /// Milliseconds the last frame's relighting took in wasm (posing, synthesis, shading).
+      this.ms = 0;
+      /// Vertices relit per frame.
+      this.vertices = 0;
+      this.x = codec2.exports;
+      this.handle = this.x.psao_relit_new();
+      try {
+        this.build(doc, read, instances);
+        this.check(this.x.psao_relit_finish(this.handle));
+        const count = this.x.psao_relit_count(this.handle);
+        if (count !== models.length) throw new Error(`the server relights ${models.length} characters, the scene has ${count}`);
+        const lighting = bytesOf(Float32Array.from(index.lighting));
+        models.forEach(
+          (m, i) => this.withBytes(
+            [m, lighting],
+            ([mp, lp]) => this.check(this.x.psao_relit_character(this.handle, i, mp, m.length, lp, lighting.length))
+          )
+        );
+        this.vertices = this.x.psao_relit_vertices(this.handle);
+      } catch (e) {
+        this.free();
+        throw e;
+      }
+    }
+    build(doc, read, instances) {
+      const x = this.x;
+      const h = this.handle;
+      const nodes = doc.nodes ?? [];
+      const parents = nodes.map(() => -1);
+      nodes.forEach((n, p) => n.children?.forEach((c) => parents[c] = p));
+      nodes.forEach((n, k) => {
+        const trs2 = Float32Array.from([...n.translation ?? [0, 0, 0], ...n.rotation ?? [0, 0, 0, 1], ...n.scale ?? [1, 1, 1]]);
+        this.withBytes([bytesOf(trs2)], ([p]) => x.psao_relit_node(h, parents[k], p));
+      });
+      for (const mesh of doc.meshes ?? []) {
+        const prim = mesh.primitives[0];
+        const a = prim?.attributes;
+        if (!prim || a?.POSITION === void 0 || a.NORMAL === void 0 || prim.indices === void 0) {
+          this.check(x.psao_relit_mesh(h, 0, 0, 0, 0, 0, 0, 0));
+          continue;
+        }
+        const positions = Float32Array.from(read(a.POSITION));
+        const normals = Float32Array.from(read(a.NORMAL));
+        const indices = Uint32Array.from(read(prim.indices));
+        const skinned2 = a.JOINTS_0 !== void 0 && a.WEIGHTS_0 !== void 0;
+        const arrays = [bytesOf(positions), bytesOf(normals), bytesOf(indices)];
+        if (skinned2) arrays.push(bytesOf(Uint16Array.from(read(a.JOINTS_0))), bytesOf(Float32Array.from(read(a.WEIGHTS_0))));
+        this.withBytes(
+          arrays,
+          ([p, n, i, j, w]) => this.check(x.psao_relit_mesh(h, positions.length / 3, p, n, i, arrays[2].length, skinned2 ? j : 0, skinned2 ? w : 0))
+        );
+      }
+      for (const skin of doc.skins ?? []) {
+        const joints = bytesOf(Uint32Array.from(skin.joints));
+        const ibm = skin.inverseBindMatrices !== void 0 ? bytesOf(Float32Array.from(read(skin.inverseBindMatrices))) : null;
+        this.withBytes(
+          ibm ? [joints, ibm] : [joints],
+          ([j, m]) => this.check(x.psao_relit_skin(h, skin.joints.length, j, ibm ? m : 0))
+        );
+      }
+      for (let i = 0; i < Math.min(instances, nodes.length); i++) {
+        const n = nodes[i];
+        const matrix = bytesOf(Float32Array.from(n.matrix ?? [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]));
+        const node = n.extras?.psao_node ?? -1;
+        this.withBytes([matrix], ([m]) => x.psao_relit_instance(h, n.mesh ?? 0, node, n.skin ?? -1, m));
+      }
+      (doc.animations ?? []).forEach((anim, clip) => {
+        for (const ch of anim.channels) {
+          const s = anim.samplers[ch.sampler];
+          const property = PROPERTIES[ch.target.path];
+          if (!s || ch.target.node === void 0 || property === void 0) continue;
+          const times = bytesOf(Float32Array.from(read(s.input)));
+          const values = bytesOf(Float32Array.from(read(s.output)));
+          const interpolation = INTERPOLATIONS[s.interpolation ?? "LINEAR"] ?? -1;
+          this.withBytes(
+            [times, values],
+            ([t, v]) => this.check(x.psao_relit_channel(h, clip, ch.target.node, property, interpolation, t, times.length, v, values.length))
+          );
+        }
+      });
+      for (const clip of doc.extras?.psao_playing ?? []) this.check(x.psao_relit_play(h, clip));
+    }
+    /// Relights every character at scene time `time` (seconds) from `eye`, instance i at
+    /// `transforms[i]` (the last update's, an Affine3A's 12 floats) when set; throws on error.
+    frame(time, transforms, eye) {
+      const t0 = performance.now();
+      const count = transforms.length;
+      const t = new Float32Array(count * 12);
+      const given = new Uint8Array(count);
+      transforms.forEach((m, i) => {
+        if (!m) return;
+        t.set(m, i * 12);
+        given[i] = 1;
+      });
+      this.withBytes(
+        [bytesOf(t), given],
+        ([tp, gp]) => this.check(this.x.psao_relit_frame(this.handle, time, count, tp, gp, eye[0], eye[1], eye[2]))
+      );
+      this.ms = performance.now() - t0;
+    }
+    /// Instance `instance`'s values of the last frame (4 per mesh vertex), a view of wasm
+    /// memory valid until the next call; null when it is not relit.
+    values(instance) {
+      const ptr = this.x.psao_relit_values_ptr(this.handle, instance);
+      if (ptr === 0) return null;
+      return new Float32Array(this.x.memory.buffer, ptr, this.x.psao_relit_values_len(this.handle, instance));
+    }
+    /// Frees the wasm side.
+    free() {
+      if (this.handle !== 0) this.x.psao_relit_free(this.handle);
+      this.handle = 0;
+    }
+    /// Copies `arrays` into wasm buffers for the duration of `f` (given their pointers).
+    withBytes(arrays, f2) {
+      const ptrs = arrays.map((a) => {
+        const p = this.x.psao_alloc(a.length);
+        new Uint8Array(this.x.memory.buffer, p, a.length).set(a);
+        return p;
+      });
+      try {
+        return f2(ptrs);
+      } finally {
+        ptrs.forEach((p, k) => this.x.psao_free(p, arrays[k].length));
+      }
+    }
+    check(status2) {
+      if (status2 === 0) return;
+      const x = this.x;
+      const text = new TextDecoder().decode(new Uint8Array(x.memory.buffer, x.psao_relit_error_ptr(this.handle), x.psao_relit_error_len(this.handle)));
+      throw new Error(text);
+    }
+  };
+
   // src/main.ts
   var status = {
     connected: false,
@@ -2463,7 +2711,8 @@ void main() {
     uploadedBytes: 0,
     rebuilds: 0,
     textureBytes: 0,
-    milestones: { scene: null, welcome: null, update: null, ao: null }
+    milestones: { scene: null, welcome: null, update: null, ao: null },
+    relit: { state: "loading", characters: 0, vertices: 0, modelBytes: 0, ms: 0 }
   };
   window.psao = status;
   var params = new URLSearchParams(location.search);
@@ -2771,7 +3020,12 @@ void main() {
       if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
         status.milestones.ao = performance.now();
       }
-      if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
+      status.relit.ms = renderer.relit?.ms ?? 0;
+      if (renderer.relitError && status.relit.state === "ready") {
+        status.relit.state = "error";
+        status.message = renderer.relitError;
+      }
+      if (lockstep && testFrames !== null && answered === testFrames - 1 && status.relit.state !== "loading") status.done = true;
     }
     if (now - lastPointCount > 500) {
       lastPointCount = now;
@@ -2797,7 +3051,49 @@ void main() {
   window.addEventListener("keydown", (e) => {
     if (e.key === "c") cost = measureCost();
   });
-  fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${token}` } }).then((r) => {
+  var authHeaders = token === null ? {} : { Authorization: `Bearer ${token}` };
+  async function loadRelit(r, c) {
+    const source = r.source;
+    const index = await fetch("/characters/index.json", { headers: authHeaders });
+    const served = index.ok ? await index.json() : { count: 0, lighting: [] };
+    if (params.get("relit") === "0" || served.count === 0 || !source) {
+      status.relit.state = "none";
+      return;
+    }
+    const models = await Promise.all(
+      Array.from({ length: served.count }, async (_, i) => {
+        const m = await fetch(`/characters/${i}.prt`, { headers: authHeaders });
+        if (!m.ok) throw new Error(`/characters/${i}.prt: HTTP ${m.status}`);
+        return new Uint8Array(await m.arrayBuffer());
+      })
+    );
+    r.relit = new RelitCharacters(c, source.doc, source.read, source.instances, served, models);
+    status.relit = {
+      state: "ready",
+      characters: served.count,
+      vertices: r.relit.vertices,
+      modelBytes: models.reduce((a, m) => a + m.length, 0),
+      ms: 0
+    };
+  }
+  function measureRelit(frames2 = 60) {
+    const relit = renderer?.relit;
+    if (!relit || !status.camera) return null;
+    const state = session?.state ?? null;
+    const transforms = Array.from({ length: state?.instanceCount() ?? 0 }, (_, i) => state?.transforms[i] ?? null);
+    let maxMs = 0;
+    const t0 = performance.now();
+    for (let f2 = 0; f2 < frames2; f2++) {
+      relit.frame(f2 / 60, transforms, status.camera.position);
+      maxMs = Math.max(maxMs, relit.ms);
+    }
+    return { frames: frames2, vertices: relit.vertices, meanMs: (performance.now() - t0) / frames2, maxMs };
+  }
+  window.psaoRelitCost = measureRelit;
+  var sceneLoaded = () => {
+  };
+  var sceneReady = new Promise((resolve) => sceneLoaded = resolve);
+  fetch("/scene.glb", { headers: authHeaders }).then((r) => {
     if (r.status === 401) throw new Error("wrong or missing token (open the page with #token=\u2026)");
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
     return r.arrayBuffer();
@@ -2806,6 +3102,7 @@ void main() {
     orbit = sceneBounds(glb);
     if (gl) {
       renderer = new SceneRenderer(gl, glb);
+      sceneLoaded(renderer);
       status.milestones.scene = performance.now();
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
@@ -2813,15 +3110,23 @@ void main() {
       } else if (!orbitOnly) {
         path = renderer.paths[0] ?? null;
       }
+    } else {
+      status.relit.state = "none";
     }
   }).catch((e) => {
     sceneError = `cannot load /scene.glb: ${e}`;
+    status.relit.state = "none";
     status.message = sceneError;
     console.error(sceneError);
   });
   Codec.load(fetch("/psao.wasm")).then((c) => {
     codec = c;
     connect();
+    sceneReady.then((r) => loadRelit(r, c)).catch((e) => {
+      status.relit.state = "error";
+      status.message = `relit characters: ${e instanceof Error ? e.message : e}`;
+      console.error(status.message);
+    });
   }).catch((e) => {
     status.message = `cannot load the decoder /psao.wasm: ${e}`;
   });

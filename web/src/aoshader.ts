@@ -40,6 +40,9 @@ layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
 layout(location = 2) in uvec4 joints;
 layout(location = 3) in vec4 weights; // renormalised as psao-scene's BindMesh
+// Relit characters' values per vertex (self-shadowing per channel, self-visibility; relit.ts),
+// (1, 1, 1, 1) elsewhere.
+layout(location = 4) in vec4 relit;
 uniform mat4 u_view_proj;
 uniform mat4 u_model;
 uniform mat3 u_normal_matrix;
@@ -49,6 +52,7 @@ uniform int u_joint_base;
 uniform highp sampler2D u_joints;
 out vec3 v_world;
 out vec3 v_normal;
+out vec4 v_relit;
 invariant gl_Position;
 
 vec4 joint_texel(int i) { return texelFetch(u_joints, ivec2(i % ${TEX_WIDTH}, i / ${TEX_WIDTH}), 0); }
@@ -77,6 +81,7 @@ void main() {
   vec4 world = u_model * vec4(p, 1.0);
   v_normal = u_normal_matrix * n;
   v_world = world.xyz;
+  v_relit = relit;
   gl_Position = u_view_proj * world;
 }`;
 
@@ -84,11 +89,13 @@ export const GBUFFER = `#version 300 es
 precision highp float;
 in vec3 v_world;
 in vec3 v_normal;
+in vec4 v_relit;
 uniform vec3 u_eye;
 uniform float u_instance;
 uniform float u_colour_index;
 layout(location = 0) out vec4 out_position;
 layout(location = 1) out vec4 out_normal;
+layout(location = 2) out vec4 out_relit;
 
 void main() {
   // The face normal turned towards the eye, and the shading normal in its hemisphere
@@ -103,6 +110,7 @@ void main() {
   if (dot(n, g) < 0.0) n = -n;
   out_position = vec4(v_world, u_instance);
   out_normal = vec4(n, u_colour_index);
+  out_relit = v_relit;
 }`;
 
 /// The full-screen pass: a triangle over the canvas.
@@ -122,6 +130,8 @@ uniform int u_mode;
 uniform int u_scale;
 uniform highp sampler2D u_gposition;
 uniform highp sampler2D u_gnormal;
+// Relit characters' interpolated values (1 elsewhere): self-shadowing o, self-visibility a.
+uniform highp sampler2D u_grelit;
 uniform highp sampler2D u_colours; // base colour by index
 uniform vec3 u_sky;
 uniform vec3 u_light_dir;
@@ -435,14 +445,19 @@ void main() {
     out_colour = vec4(float(cells_visited), float(points_visited & 255), float(points_visited >> 8), 255.0) / 255.0;
   } else {
     vec3 colour = texelFetch(u_colours, ivec2(int(gn.w), 0), 0).rgb;
+    // A relit character's pixel: its AO or irradiance from the points times psao-prt's
+    // pixel_factor o / max(AO, a) (1 off relit characters, where o = a = 1).
+    vec4 relit = texelFetch(u_grelit, at_g, 0);
+    vec3 m = relit.rgb / max(max(ao, relit.a), 1e-3);
     vec3 rgb;
     if (u_lit) {
       // psao-client's composite_lit: base colour / π × (direct + irradiance).
       vec3 direct = u_mode == ${MODE_IRRADIANCE} ? vec3(0.0) : direct_light(gp.xyz, n);
+      E *= m;
       vec3 e = u_mode == ${MODE_DIRECT} ? direct : u_mode == ${MODE_IRRADIANCE} ? E : direct + E;
       rgb = colour * e / 3.14159265358979;
     } else {
-      float ambient = u_mode == ${MODE_DIRECT} ? 0.0 : u_ambient * ao;
+      vec3 ambient = u_mode == ${MODE_DIRECT} ? vec3(0.0) : u_ambient * ao * m;
       float light = u_mode == ${MODE_IRRADIANCE} ? 0.0 : u_light * max(0.0, dot(n, u_light_dir));
       rgb = colour * (ambient + light);
     }

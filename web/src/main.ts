@@ -22,6 +22,8 @@
 // `?edges=HOST:PORT,…` lists further servers (edges of a scaled-out session, docs/SCALE-OUT.md)
 // to use in turn, after the page's own, when a connection ends: a viewer whose edge dies
 // moves to the next one.
+// Against `psao serve --relight` the page relights the served characters (`relit.ts`;
+// `?relit=0` leaves them unrelit); `window.psaoRelitCost(frames)` times the relighting.
 // `window.psao` exposes the numbers to tests; `window.psaoCost()` measures the shader's cost.
 
 import { Codec } from "./codec";
@@ -30,6 +32,7 @@ import { sceneBounds } from "./bounds";
 import { GridTextures } from "./grids";
 import { MODE_AO, MODE_COMPOSITED, MODE_COST, MODE_DIRECT, MODE_IRRADIANCE, MODE_NO_AO } from "./aoshader";
 import { SceneRenderer, type CameraPathDoc } from "./render";
+import { RelitCharacters, type RelitIndex } from "./relit";
 import type { Camera } from "./wire";
 
 interface Status {
@@ -82,6 +85,10 @@ interface Status {
   /// When (performance.now() ms) the scene was loaded, the first welcome and update
   /// arrived, and the first frame with AO (grids holding points) was drawn; null until then.
   milestones: { scene: number | null; welcome: number | null; update: number | null; ao: number | null };
+  /// Relit characters: loading (models on their way), none (the server relights nothing, or
+  /// `?relit=0`), ready or error (the message says why); their count, relit vertices, model
+  /// bytes and the last drawn frame's relighting ms (wasm).
+  relit: { state: "loading" | "none" | "ready" | "error"; characters: number; vertices: number; modelBytes: number; ms: number };
 }
 
 const status: Status = {
@@ -116,6 +123,7 @@ const status: Status = {
   rebuilds: 0,
   textureBytes: 0,
   milestones: { scene: null, welcome: null, update: null, ao: null },
+  relit: { state: "loading", characters: 0, vertices: 0, modelBytes: 0, ms: 0 },
 };
 (window as unknown as { psao: Status }).psao = status;
 
@@ -472,7 +480,13 @@ function tick(now: number) {
     if (status.milestones.ao === null && status.mode !== MODE_NO_AO && grids && grids.cellPages > 0 && !grids.problem) {
       status.milestones.ao = performance.now();
     }
-    if (lockstep && testFrames !== null && answered === testFrames - 1) status.done = true;
+    status.relit.ms = renderer.relit?.ms ?? 0;
+    if (renderer.relitError && status.relit.state === "ready") {
+      status.relit.state = "error";
+      status.message = renderer.relitError;
+    }
+    // A test run's last frame counts once the relit characters (if any) are loaded.
+    if (lockstep && testFrames !== null && answered === testFrames - 1 && status.relit.state !== "loading") status.done = true;
   }
   if (now - lastPointCount > 500) {
     lastPointCount = now;
@@ -522,7 +536,57 @@ window.addEventListener("keydown", (e) => {
   if (e.key === "c") cost = measureCost();
 });
 
-fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${token}` } })
+const authHeaders: Record<string, string> = token === null ? {} : { Authorization: `Bearer ${token}` };
+
+/// Loads the served relit characters into the renderer (`/characters/index.json`, then each
+/// model) once the scene and the decoder are there.
+async function loadRelit(r: SceneRenderer, c: Codec) {
+  const source = r.source;
+  const index = await fetch("/characters/index.json", { headers: authHeaders });
+  // A server without the route (or relighting nothing): no relit characters.
+  const served: RelitIndex = index.ok ? await index.json() : { count: 0, lighting: [] };
+  if (params.get("relit") === "0" || served.count === 0 || !source) {
+    status.relit.state = "none";
+    return;
+  }
+  const models = await Promise.all(
+    Array.from({ length: served.count }, async (_, i) => {
+      const m = await fetch(`/characters/${i}.prt`, { headers: authHeaders });
+      if (!m.ok) throw new Error(`/characters/${i}.prt: HTTP ${m.status}`);
+      return new Uint8Array(await m.arrayBuffer());
+    }),
+  );
+  r.relit = new RelitCharacters(c, source.doc, source.read, source.instances, served, models);
+  status.relit = {
+    state: "ready",
+    characters: served.count,
+    vertices: r.relit.vertices,
+    modelBytes: models.reduce((a, m) => a + m.length, 0),
+    ms: 0,
+  };
+}
+
+/// Times the relighting of `frames` frames along the first playing seconds of the scene (at
+/// the drawn camera and transforms): the mean wasm ms per frame over the whole run (the
+/// page's clock is too coarse for one frame), the slowest frame, and the vertices.
+function measureRelit(frames = 60) {
+  const relit = renderer?.relit;
+  if (!relit || !status.camera) return null;
+  const state = session?.state ?? null;
+  const transforms = Array.from({ length: state?.instanceCount() ?? 0 }, (_, i) => state?.transforms[i] ?? null);
+  let maxMs = 0;
+  const t0 = performance.now();
+  for (let f = 0; f < frames; f++) {
+    relit.frame(f / 60, transforms, status.camera.position);
+    maxMs = Math.max(maxMs, relit.ms);
+  }
+  return { frames, vertices: relit.vertices, meanMs: (performance.now() - t0) / frames, maxMs };
+}
+(window as unknown as { psaoRelitCost: typeof measureRelit }).psaoRelitCost = measureRelit;
+
+let sceneLoaded: (r: SceneRenderer) => void = () => {};
+const sceneReady = new Promise<SceneRenderer>((resolve) => (sceneLoaded = resolve));
+fetch("/scene.glb", { headers: authHeaders })
   .then((r) => {
     if (r.status === 401) throw new Error("wrong or missing token (open the page with #token=…)");
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
@@ -533,6 +597,7 @@ fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${
     orbit = sceneBounds(glb);
     if (gl) {
       renderer = new SceneRenderer(gl, glb);
+      sceneLoaded(renderer);
       status.milestones.scene = performance.now();
       if (pathName !== null) {
         path = renderer.paths.find((p) => p.name === pathName) ?? null;
@@ -540,11 +605,14 @@ fetch("/scene.glb", { headers: token === null ? {} : { Authorization: `Bearer ${
       } else if (!orbitOnly) {
         path = renderer.paths[0] ?? null;
       }
+    } else {
+      status.relit.state = "none";
     }
   })
   .catch((e) => {
     // Kept in the overlay: a session's welcome clears status.message.
     sceneError = `cannot load /scene.glb: ${e}`;
+    status.relit.state = "none";
     status.message = sceneError;
     console.error(sceneError);
   });
@@ -552,6 +620,13 @@ Codec.load(fetch("/psao.wasm"))
   .then((c) => {
     codec = c;
     connect();
+    sceneReady
+      .then((r) => loadRelit(r, c))
+      .catch((e) => {
+        status.relit.state = "error";
+        status.message = `relit characters: ${e instanceof Error ? e.message : e}`;
+        console.error(status.message);
+      });
   })
   .catch((e) => {
     status.message = `cannot load the decoder /psao.wasm: ${e}`;

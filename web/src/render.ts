@@ -6,13 +6,15 @@
 // does (`aoshader.ts`). In a lit session (the state holds irradiance records) the pass also
 // reconstructs the irradiance and adds the direct light of the scene's suns and point lights
 // (`/scene.glb`'s `extras.psao_lights`, `lights.ts`) from shadow maps rendered first in the
-// same pose (`shadow.ts`).
+// same pose (`shadow.ts`). Served relit characters (`relit.ts`) carry their per-vertex
+// values into the G-buffer, and the full-screen pass shades their pixels with them.
 
 import { FRAGMENT, FULLSCREEN, GBUFFER, MODE_AO, MODE_IRRADIANCE, VERTEX } from "./aoshader";
 import { SceneLights } from "./lights";
 import { SHADOW_FRAGMENT, ShadowMaps, settingsForImage, type MapCamera } from "./shadow";
 import { TEX_WIDTH, type GridTextures } from "./grids";
-import { Animation, JOINT_TEXELS, type AnimationDoc } from "./skin";
+import { Animation, JOINT_TEXELS, type AccessorReader, type AnimationDoc } from "./skin";
+import type { RelitCharacters } from "./relit";
 import type { ViewerState } from "./codec";
 import type { Camera } from "./wire";
 
@@ -25,7 +27,7 @@ interface Primitive {
   skin: boolean;
 }
 
-type GltfDoc = AnimationDoc & {
+export type GltfDoc = AnimationDoc & {
   meshes?: {
     primitives: {
       attributes: { POSITION?: number; NORMAL?: number; JOINTS_0?: number; WEIGHTS_0?: number };
@@ -43,7 +45,7 @@ const COMPONENTS: Record<string, number> = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 
 
 /// Accessor `index` of `doc` over `bin` as a typed array of its component type (float,
 /// unsigned short or unsigned int, as `psao serve` writes them), copied (aligned).
-function readAccessor(doc: GltfDoc, bin: Uint8Array, index: number): Float32Array | Uint16Array | Uint32Array {
+export function readAccessor(doc: GltfDoc, bin: Uint8Array, index: number): Float32Array | Uint16Array | Uint32Array {
   const a = doc.accessors?.[index];
   const bv = a?.bufferView !== undefined ? doc.bufferViews?.[a.bufferView] : undefined;
   if (!a || !bv) throw new Error(`scene.glb: accessor ${index} has no data`);
@@ -184,12 +186,13 @@ interface InstanceBounds {
   hi: [number, number, number];
 }
 
-/// A G-buffer: world position + instance, shading normal + colour index (RGBA32F each) and
-/// depth, `scale` times the canvas size.
+/// A G-buffer: world position + instance, shading normal + colour index, relit values
+/// (RGBA32F each) and depth, `scale` times the canvas size.
 class GBufferTargets {
   fbo: WebGLFramebuffer;
   position: WebGLTexture | null = null;
   normal: WebGLTexture | null = null;
+  relit: WebGLTexture | null = null;
   depth: WebGLRenderbuffer | null = null;
   width = 0;
   height = 0;
@@ -203,7 +206,7 @@ class GBufferTargets {
     const gl = this.gl;
     this.width = width;
     this.height = height;
-    for (const t of [this.position, this.normal]) if (t) gl.deleteTexture(t);
+    for (const t of [this.position, this.normal, this.relit]) if (t) gl.deleteTexture(t);
     if (this.depth) gl.deleteRenderbuffer(this.depth);
     const target = () => {
       const t = gl.createTexture()!;
@@ -215,14 +218,16 @@ class GBufferTargets {
     };
     this.position = target();
     this.normal = target();
+    this.relit = target();
     this.depth = gl.createRenderbuffer()!;
     gl.bindRenderbuffer(gl.RENDERBUFFER, this.depth);
     gl.renderbufferStorage(gl.RENDERBUFFER, gl.DEPTH_COMPONENT24, width, height);
     gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo);
     gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, this.position, 0);
     gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT1, gl.TEXTURE_2D, this.normal, 0);
+    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT2, gl.TEXTURE_2D, this.relit, 0);
     gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.RENDERBUFFER, this.depth);
-    gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1]);
+    gl.drawBuffers([gl.COLOR_ATTACHMENT0, gl.COLOR_ATTACHMENT1, gl.COLOR_ATTACHMENT2]);
     const status = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     if (status !== gl.FRAMEBUFFER_COMPLETE) throw new Error(`G-buffer framebuffer incomplete (${status})`);
@@ -266,6 +271,11 @@ export class SceneRenderer {
   private shadows: ShadowMaps;
   /// Vertex positions of each mesh (all primitives), for the posed scene's bounds.
   private meshPositions: Float32Array[][] = [];
+  /// Per mesh, per primitive: its joints and renormalised weights when skinned (for the
+  /// skinned instances' bounds), else null.
+  private meshSkins: ({ joints: Uint16Array; weights: Float32Array } | null)[][] = [];
+  /// The joint texels of the frame drawn last (skinned instances' bounds), or null.
+  private lastJointTexels: Float32Array | null = null;
   private boundsCache: (InstanceBounds | null)[] = [];
   private targets: GBufferTargets;
   private meshes: Primitive[][] = [];
@@ -284,6 +294,14 @@ export class SceneRenderer {
   lights: SceneLights = new SceneLights(undefined);
   /// Milliseconds of the last frame's shadow maps (0 when none were drawn).
   shadowMs = 0;
+  /// The served relit characters, once loaded (`relit.ts`).
+  relit: RelitCharacters | null = null;
+  /// Why relighting stopped, when a frame's relighting failed.
+  relitError: string | null = null;
+  /// Per relit instance: the vertex buffer of its values.
+  private relitBuffers = new Map<number, WebGLBuffer>();
+  /// What relit characters are built from: the glb's document, its accessors, the instances.
+  source: { doc: GltfDoc; read: AccessorReader; instances: number } | null = null;
 
   constructor(
     private gl: WebGL2RenderingContext,
@@ -306,6 +324,8 @@ export class SceneRenderer {
     // Unskinned primitives leave the joints attribute disabled: its generic value must be
     // unsigned like the shader's input, or WebGL refuses the draw.
     gl.vertexAttribI4ui(2, 0, 0, 0, 0);
+    // Instances that are not relit leave the relit attribute disabled: nothing shadowed.
+    gl.vertexAttrib4f(4, 1, 1, 1, 1);
     const colours = this.load(glb);
     this.colours = dataTexture(gl);
     gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, Math.max(1, colours.length / 4), 1, 0, gl.RGBA, gl.FLOAT, colours.length ? colours : new Float32Array(4));
@@ -329,13 +349,18 @@ export class SceneRenderer {
       return { bytes: bin.subarray(start, start + a.count * width * 4), count: a.count };
     };
     const instanceCount = (doc.nodes ?? []).findIndex((n) => n.mesh === undefined || !n.matrix);
-    const animation = new Animation(doc, instanceCount < 0 ? (doc.nodes ?? []).length : instanceCount, (i) => readAccessor(doc, bin, i));
+    const instances = instanceCount < 0 ? (doc.nodes ?? []).length : instanceCount;
+    const read = (i: number) => readAccessor(doc, bin, i);
+    this.source = { doc, read, instances };
+    const animation = new Animation(doc, instances, read);
     this.animation = animation.skinned ? animation : null;
     const colours: number[] = [];
     for (const mesh of doc.meshes ?? []) {
       const prims: Primitive[] = [];
       const positions: Float32Array[] = [];
+      const skins: ({ joints: Uint16Array; weights: Float32Array } | null)[] = [];
       this.meshPositions.push(positions);
+      this.meshSkins.push(skins);
       for (const prim of mesh.primitives) {
         if (prim.attributes.POSITION === undefined || prim.attributes.NORMAL === undefined || prim.indices === undefined) continue;
         positions.push(readAccessor(doc, bin, prim.attributes.POSITION) as Float32Array);
@@ -353,15 +378,19 @@ export class SceneRenderer {
         }
         const { JOINTS_0: joints, WEIGHTS_0: weights } = prim.attributes;
         const skin = joints !== undefined && weights !== undefined;
+        skins.push(null);
         if (skin) {
+          const jointData = Uint16Array.from(readAccessor(doc, bin, joints));
+          const weightData = renormalisedWeights(readAccessor(doc, bin, weights));
+          skins[skins.length - 1] = { joints: jointData, weights: weightData };
           const jbuf = gl.createBuffer();
           gl.bindBuffer(gl.ARRAY_BUFFER, jbuf);
-          gl.bufferData(gl.ARRAY_BUFFER, Uint16Array.from(readAccessor(doc, bin, joints)), gl.STATIC_DRAW);
+          gl.bufferData(gl.ARRAY_BUFFER, jointData, gl.STATIC_DRAW);
           gl.enableVertexAttribArray(2);
           gl.vertexAttribIPointer(2, 4, gl.UNSIGNED_SHORT, 0, 0);
           const wbuf = gl.createBuffer();
           gl.bindBuffer(gl.ARRAY_BUFFER, wbuf);
-          gl.bufferData(gl.ARRAY_BUFFER, renormalisedWeights(readAccessor(doc, bin, weights)), gl.STATIC_DRAW);
+          gl.bufferData(gl.ARRAY_BUFFER, weightData, gl.STATIC_DRAW);
           gl.enableVertexAttribArray(3);
           gl.vertexAttribPointer(3, 4, gl.FLOAT, false, 0, 0);
         }
@@ -402,6 +431,7 @@ export class SceneRenderer {
     gl.viewport(0, 0, w * scale, h * scale);
     gl.clearBufferfv(gl.COLOR, 0, [0, 0, 0, -1]);
     gl.clearBufferfv(gl.COLOR, 1, [0, 0, 0, 0]);
+    gl.clearBufferfv(gl.COLOR, 2, [1, 1, 1, 1]);
     gl.clearBufferfi(gl.DEPTH_STENCIL, 0, 1, 0);
     gl.enable(gl.DEPTH_TEST);
     gl.depthFunc(gl.LESS);
@@ -413,12 +443,26 @@ export class SceneRenderer {
     gl.bindTexture(gl.TEXTURE_2D, this.joints);
     if (animation) {
       const texels = animation.jointTexels(opts.time ?? 0);
+      this.lastJointTexels = texels;
       const rows = Math.ceil(texels.length / 4 / TEX_WIDTH);
       const padded = new Float32Array(rows * TEX_WIDTH * 4);
       padded.set(texels);
       gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, TEX_WIDTH, rows, 0, gl.RGBA, gl.FLOAT, padded);
     }
     gl.uniform3fv(g.u_eye, camera.position);
+    if (this.relit) {
+      try {
+        this.relight(camera, state, opts.time ?? 0);
+      } catch (e) {
+        // Relighting refused the frame: the characters are drawn unrelit from now on.
+        this.relitError = `relit characters: ${e instanceof Error ? e.message : e}`;
+        this.relit.free();
+        this.relit = null;
+        this.relitBuffers.forEach((b) => gl.deleteBuffer(b));
+        this.relitBuffers.clear();
+      }
+    }
+    gl.useProgram(this.gbuffer.p);
     this.drawInstances(this.gbuffer, viewProj(camera), state);
     const instF = new Float32Array(this.instances.length * INST_F * 4);
     const instU = new Uint32Array(this.instances.length * INST_U * 4);
@@ -465,6 +509,7 @@ export class SceneRenderer {
       ["u_normals", this.normals],
       ["u_gposition", this.targets.position],
       ["u_gnormal", this.targets.normal],
+      ["u_grelit", this.targets.relit],
       ["u_colours", this.colours],
       ["u_instf", this.instF],
       ["u_instu", this.instU],
@@ -524,14 +569,42 @@ export class SceneRenderer {
       gl.uniformMatrix3fv(g.u_normal_matrix, false, normalMatrixOf(model));
       gl.uniform1f(g.u_instance, i);
       const jointBase = animation ? animation.jointBase[i] : -1;
+      const relit = this.relitBuffers.get(i);
       for (const p of this.meshes[inst.mesh] ?? []) {
         gl.uniform1f(g.u_colour_index, p.colour);
         gl.uniform1i(g.u_joint_base, p.skin ? jointBase : -1);
         gl.bindVertexArray(p.vao);
+        if (relit) {
+          gl.bindBuffer(gl.ARRAY_BUFFER, relit);
+          gl.enableVertexAttribArray(4);
+          gl.vertexAttribPointer(4, 4, gl.FLOAT, false, 0, 0);
+        } else {
+          gl.disableVertexAttribArray(4);
+        }
         gl.drawElements(gl.TRIANGLES, p.count, gl.UNSIGNED_INT, 0);
       }
     }
     gl.bindVertexArray(null);
+  }
+
+  /// Relights the served characters at scene time `time` (their instances at the transforms
+  /// drawn) and uploads each relit instance's values.
+  private relight(camera: Camera, state: ViewerState | null, time: number) {
+    const gl = this.gl;
+    const relit = this.relit!;
+    const transforms = this.instances.map((_, i) => state?.transforms[i] ?? null);
+    relit.frame(time, transforms, camera.position);
+    for (let i = 0; i < this.instances.length; i++) {
+      const values = relit.values(i);
+      if (!values) continue;
+      let buf = this.relitBuffers.get(i);
+      if (!buf) {
+        buf = gl.createBuffer()!;
+        this.relitBuffers.set(i, buf);
+      }
+      gl.bindBuffer(gl.ARRAY_BUFFER, buf);
+      gl.bufferData(gl.ARRAY_BUFFER, values, gl.DYNAMIC_DRAW);
+    }
   }
 
   /// Instance i's model matrix (column-major 4×4): the state's transform, else its rest matrix.
@@ -541,19 +614,24 @@ export class SceneRenderer {
     return new Float32Array([t[0], t[1], t[2], 0, t[3], t[4], t[5], 0, t[6], t[7], t[8], 0, t[9], t[10], t[11], 1]);
   }
 
-  /// World bounds of every instance's (unskinned) mesh vertices at the drawn transforms, as
-  /// psao-raster's shadow maps take them (skinned instances: their rest vertices); null
-  /// without vertices. Each instance's bounds are kept until its transform changes.
+  /// World bounds of every instance's mesh vertices at the drawn transforms, as psao-raster's
+  /// shadow maps take them (skinned instances: their vertices skinned with the joint
+  /// matrices of the frame, as the vertex shader skins them); null without vertices. Each
+  /// unskinned instance's bounds are kept until its transform changes.
   private posedBounds(state: ViewerState | null): [[number, number, number], [number, number, number]] | null {
     const lo: [number, number, number] = [Infinity, Infinity, Infinity];
     const hi: [number, number, number] = [-Infinity, -Infinity, -Infinity];
     for (const [i, inst] of this.instances.entries()) {
       const m = this.modelOf(i, state);
+      const jointBase = this.animation?.jointBase[i] ?? -1;
+      const texels = jointBase >= 0 ? this.lastJointTexels : null;
       const key = m.join(",");
       let b = this.boundsCache[i];
-      if (!b || b.key !== key) {
+      if (!b || b.key !== key || texels) {
         b = { key, lo: [Infinity, Infinity, Infinity], hi: [-Infinity, -Infinity, -Infinity] };
-        for (const positions of this.meshPositions[inst.mesh] ?? []) {
+        for (const [k, rest] of (this.meshPositions[inst.mesh] ?? []).entries()) {
+          const skin = texels ? (this.meshSkins[inst.mesh]?.[k] ?? null) : null;
+          const positions = texels && skin ? skinned(rest, skin, texels, jointBase) : rest;
           for (let v = 0; v + 3 <= positions.length; v += 3) {
             const [x, y, z] = [positions[v], positions[v + 1], positions[v + 2]];
             for (let r = 0; r < 3; r++) {
@@ -603,6 +681,31 @@ export class SceneRenderer {
       i * INST_U * 4,
     );
   }
+}
+
+/// Mesh-local positions skinned with the joint matrices in `texels` (`JOINT_TEXELS` RGBA
+/// texels per joint from `base`: the matrix's columns first) and the renormalised weights,
+/// as the G-buffer's vertex shader (and psao-scene's skinning) blend them.
+function skinned(
+  positions: Float32Array,
+  skin: { joints: Uint16Array; weights: Float32Array },
+  texels: Float32Array,
+  base: number,
+): Float32Array {
+  const out = new Float32Array(positions.length);
+  for (let v = 0; 3 * v + 3 <= positions.length; v++) {
+    const [x, y, z] = [positions[3 * v], positions[3 * v + 1], positions[3 * v + 2]];
+    for (let k = 0; k < 4; k++) {
+      const w = skin.weights[4 * v + k];
+      if (!(w > 0)) continue;
+      const at = (base + skin.joints[4 * v + k]) * JOINT_TEXELS * 4;
+      if (at + 16 > texels.length) continue;
+      for (let r = 0; r < 3; r++) {
+        out[3 * v + r] += w * (texels[at + r] * x + texels[at + 4 + r] * y + texels[at + 8 + r] * z + texels[at + 12 + r]);
+      }
+    }
+  }
+  return out;
 }
 
 /// The inverse transpose of a column-major mat4's linear part (psao-raster's normal matrix).

@@ -8,7 +8,7 @@ import assert from "node:assert/strict";
 import { spawn, type ChildProcess } from "node:child_process";
 import { createInterface } from "node:readline";
 import { createServer } from "node:net";
-import { mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
+import { existsSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { fileURLToPath } from "node:url";
@@ -545,6 +545,121 @@ test("in chromium a skinned character moves as in psao view (AO-only ≥ 40 dB w
     } finally {
       await page.close();
       gpu.child.kill();
+    }
+  } finally {
+    if (process.env.PSAO_KEEP) console.log(`images in ${dir}`);
+    else rmSync(dir, { recursive: true, force: true });
+  }
+});
+
+/// CesiumMan from the shared data (the relit test is skipped without it).
+const CESIUM_MAN = fileURLToPath(new URL("../../../../shared/data/characters/CesiumMan/CesiumMan.gltf", import.meta.url));
+/// Frames of the relit comparison (CesiumMan walks; the path closes in on him).
+const RELIT_FRAMES = 20;
+
+/// A floor box and CesiumMan (as crates/psao/tests/relit_serve.rs) with a camera path close
+/// to him. Returns the scene file.
+function writeRelitScene(dir: string): string {
+  const key = (t: number, x: number) => `[[key]]\ntime = ${t}\nposition = [${x}, 1.2, 3.3]\nlook_at = [-2.0, 0.7, 0.6]\n`;
+  writeFileSync(join(dir, "close.toml"), `name = "close"\nfov_y_deg = 40.0\n\n${key(0, -1.0)}\n${key(1, -0.6)}`);
+  writeFileSync(
+    join(dir, "scene.toml"),
+    `camera_paths = ["close.toml"]\n\n[[asset]]\nfile = "builtin:box"\nscale = [4.0, 0.1, 4.0]\ntranslation = [0.0, -0.1, 0.0]\n\n[[asset]]\nfile = ${JSON.stringify(CESIUM_MAN)}\n`,
+  );
+  return join(dir, "scene.toml");
+}
+
+/// The RGBA pixels of a PNG file, decoded by the browser.
+async function pngPixels(page: Page, file: string): Promise<number[]> {
+  const url = `data:image/png;base64,${readFileSync(file).toString("base64")}`;
+  return page.evaluate(async (u) => {
+    const img = new Image();
+    img.src = u;
+    await img.decode();
+    const c = document.createElement("canvas");
+    c.width = img.width;
+    c.height = img.height;
+    const g = c.getContext("2d")!;
+    g.drawImage(img, 0, 0);
+    return Array.from(g.getImageData(0, 0, img.width, img.height).data);
+  }, url);
+}
+
+/// PSNR (dB, RGB) of `a` against `b` over the pixels of `mask`.
+function maskedPsnr(a: number[], b: number[], mask: boolean[]): number {
+  let sum = 0;
+  let n = 0;
+  mask.forEach((m, i) => {
+    if (!m) return;
+    for (let c = 0; c < 3; c++) sum += (a[4 * i + c] - b[4 * i + c]) ** 2;
+    n += 3;
+  });
+  const mse = sum / Math.max(n, 1);
+  return mse === 0 ? Infinity : 10 * Math.log10((255 * 255) / mse);
+}
+
+test("in chromium a relit character matches psao view's (≥ 40 dB on its pixels; unrelit it does not)", { timeout: 300_000 }, async (t) => {
+  if (!existsSync(CESIUM_MAN)) {
+    t.skip(`${CESIUM_MAN} missing`);
+    return;
+  }
+  const dir = mkdtempSync(join(tmpdir(), "psao-relit-"));
+  const scene = writeRelitScene(dir);
+  const cache = join(dir, "cache");
+  const server = ["--scene", scene, "--lockstep", "--lighting", "ao", "--points-cache", cache];
+  const frame = `frame_${String(RELIT_FRAMES - 1).padStart(5, "0")}.png`;
+  try {
+    // psao view's composited frames against a relighting server (the reference) and against
+    // one that relights nothing (which pixels relighting changes: the character's).
+    for (const [out, extra] of [["relit", ["--relight"]], ["plain", []]] as const) {
+      const cpu = await serve("127.0.0.1:0", [...server, ...extra]);
+      try {
+        const args = ["view", "--scene", scene, "--connect", cpu.addr, "--frames", `${RELIT_FRAMES}`, "--res", AO_RES, "--out", join(dir, out)];
+        assert.equal(await run(args), 0);
+      } finally {
+        cpu.child.kill();
+      }
+    }
+    // The browser's, relit and with `?relit=0`, each against its own relighting server.
+    const shots: Record<string, string> = {};
+    let cost: unknown = null;
+    for (const relit of ["1", "0"]) {
+      const gpu = await serve("127.0.0.1:0", [...server, "--relight"]);
+      const page = await browser.newPage();
+      try {
+        await page.goto(`http://${gpu.addr}/?verify=1&path=close&frames=${RELIT_FRAMES}&lockstep=1&res=${AO_RES}&mode=composited&scale=${AO_SCALE}&relit=${relit}`);
+        const s = (await until(page, "the last lockstep frame", (s) => (s as Status & { done: boolean }).done, 180_000)) as Status & {
+          relit: { state: string; characters: number; vertices: number; modelBytes: number };
+        };
+        assert.equal(s.mismatches, 0);
+        assert.equal(s.relit.state, relit === "1" ? "ready" : "none", JSON.stringify(s.relit));
+        if (relit === "1") {
+          assert.equal(s.relit.characters, 1);
+          cost = await page.evaluate(() => (window as unknown as { psaoRelitCost: (n: number) => unknown }).psaoRelitCost(60));
+          console.log(`relit CesiumMan in chromium (wasm, one thread): ${JSON.stringify(cost)}, model ${s.relit.modelBytes} bytes`);
+        }
+        shots[relit] = join(dir, `browser_${relit}.png`);
+        await savePng(page, shots[relit]);
+      } finally {
+        await page.close();
+        gpu.child.kill();
+      }
+    }
+    const page = await browser.newPage();
+    try {
+      const [view, plain, ours, unrelit] = await Promise.all(
+        [join(dir, "relit", frame), join(dir, "plain", frame), shots["1"], shots["0"]].map((f) => pngPixels(page, f)),
+      );
+      const mask = Array.from({ length: view.length / 4 }, (_, i) => [0, 1, 2].some((c) => view[4 * i + c] !== plain[4 * i + c]));
+      const pixels = mask.filter(Boolean).length;
+      const relitDb = maskedPsnr(ours, view, mask);
+      const unrelitDb = maskedPsnr(unrelit, view, mask);
+      console.log(`relit ${AO_RES} frame ${RELIT_FRAMES - 1}, ${pixels} pixels relighting changes: PSNR ${relitDb.toFixed(2)} dB relit, ${unrelitDb.toFixed(2)} dB unrelit, against psao view`);
+      assert.ok(pixels >= 200, `only ${pixels} pixels show the character's relighting`);
+      assert.ok(relitDb >= 40, `relit PSNR ${relitDb} dB < 40 dB`);
+      assert.ok(unrelitDb < 40 && unrelitDb < relitDb - 3, `unrelit PSNR ${unrelitDb} dB: the test does not see the relighting`);
+    } finally {
+      await page.close();
     }
   } finally {
     if (process.env.PSAO_KEEP) console.log(`images in ${dir}`);

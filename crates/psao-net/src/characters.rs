@@ -1,5 +1,7 @@
 //! The relit characters a server hands out (docs/RELIGHTING.md, "Served characters"): each
-//! skinned character's model file, served at `GET /characters/N.prt` and sent in a
+//! skinned character's model file, served at `GET /characters/N.prt` (with
+//! `GET /characters/index.json` telling the browser how many there are and the lighting,
+//! [`ServedCharacters::index_json`]) and sent in a
 //! [`Message::Relighting`] after the welcome to clients that announce
 //! [`capabilities::RELIGHT`], with the scene's environment lighting as order-4 SH.
 //!
@@ -53,6 +55,14 @@ impl ServedCharacters {
             return None;
         }
         self.models.get(n.parse::<usize>().ok()?).cloned()
+    }
+
+    /// `/characters/index.json`: `{"count": N, "lighting": [...]}`, the characters served
+    /// (`/characters/0.prt` … `N−1`) and the SH lighting they are relit under (16 numbers per
+    /// colour channel, as in the relighting messages; empty when none is served).
+    pub fn index_json(&self) -> Bytes {
+        let index = serde_json::json!({ "count": self.models.len(), "lighting": self.lighting });
+        Bytes::from(index.to_string())
     }
 
     /// The relighting messages a client with `client_capabilities` is sent after the welcome
@@ -122,6 +132,24 @@ mod tests {
         };
         assert_eq!((r.character, r.model.as_slice()), (1, &b"one"[..]));
         assert_eq!(r.channels(), 3);
+    }
+
+    #[test]
+    fn the_index_lists_the_count_and_the_lighting_exactly() {
+        let lighting: Vec<f32> = (0..48).map(|i| 0.1 + i as f32 / 7.0).collect();
+        let s = ServedCharacters::new(vec![b"m".to_vec(); 3], lighting.clone()).unwrap();
+        let index: serde_json::Value = serde_json::from_slice(&s.index_json()).unwrap();
+        assert_eq!(index["count"], 3);
+        let got: Vec<f32> = index["lighting"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap() as f32)
+            .collect();
+        assert_eq!(got, lighting, "every number reads back to the same f32");
+        let none: serde_json::Value =
+            serde_json::from_slice(&ServedCharacters::default().index_json()).unwrap();
+        assert_eq!(none, serde_json::json!({ "count": 0, "lighting": [] }));
     }
 
     #[test]

@@ -1,12 +1,13 @@
 //! HTTP on the serve port, through hyper: `/` the browser viewer (embedded in the binary),
 //! `/viewer.js` its script, `/psao.wasm` its decoder (crates/psao-wasm), `/scene.glb` the
 //! served scene as binary glTF, `/characters/N.prt` the relighting model of skinned character
-//! N (404 when there is none), `/health` a JSON status, and the WebSocket upgrade at `/ws`,
+//! N (404 when there is none), `/characters/index.json` how many there are and their SH
+//! lighting, `/health` a JSON status, and the WebSocket upgrade at `/ws`,
 //! after which the connection speaks frames. Only GET and HEAD are answered (405 otherwise);
 //! unknown paths get 404, a `/ws` request that is no valid upgrade 400; request heads are
 //! limited in size and time.
 //!
-//! With a token ([`Access`]), `/scene.glb` and `/characters/N.prt` need
+//! With a token ([`Access`]), `/scene.glb` and `/characters/…` need
 //! `Authorization: Bearer TOKEN` (401 without) and `/health` tells only that the server is
 //! up; `/`, `/viewer.js` and `/psao.wasm` are the viewer program itself (the same bytes in
 //! every psao build, no scene data) and answer anyone, so that a page opened with `#token=…`
@@ -141,12 +142,13 @@ fn route(req: Request<Incoming>, ctx: &Arc<HttpContext>, permit: Permit) -> Resp
         p if p.starts_with("/characters/") && !ctx.access.request_authorized(req.headers()) => {
             let mut r = text(
                 StatusCode::UNAUTHORIZED,
-                "/characters/N.prt needs the token (Authorization: Bearer TOKEN)\n",
+                "/characters/ needs the token (Authorization: Bearer TOKEN)\n",
             );
             r.headers_mut()
                 .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
             r
         }
+        "/characters/index.json" => body("application/json", ctx.characters.index_json()),
         p if p.starts_with("/characters/") => match ctx.characters.model_at(p) {
             Some(model) => body("application/octet-stream", model),
             None => text(StatusCode::NOT_FOUND, "no such character\n"),
