@@ -642,17 +642,17 @@ mod tests {
             sample_at(&f, 12, 10, 1, [0.05; 3]),
         ];
         let img = view_dependent(&s);
-        for c in 0..3 {
-            // Own pixels: the kept share of the base under them plus their radiance.
-            let own = 0.6 * px(10, 10)[c] + 0.25;
-            assert!((img[(10 * W + 10) as usize][c] - own).abs() < 1e-6);
-            // Between them (total weight 1.28): the kept base plus their mean radiance.
-            let mid = 0.6 * px(11, 10)[c] + 0.15;
-            assert!((img[(10 * W + 11) as usize][c] - mid).abs() < 1e-6);
-            // The rim of one (weight 0.64): mixed with the base by that confidence.
-            let rim = px(9, 10)[c] + 0.64 * (0.25 - 0.4 * px(9, 10)[c]);
-            assert!((img[(10 * W + 9) as usize][c] - rim).abs() < 1e-6);
-        }
+        let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-6);
+        // Own pixels: the kept share of the base under them plus their radiance.
+        let own: [f32; 3] = std::array::from_fn(|c| 0.6 * px(10, 10)[c] + 0.25);
+        assert!(close(img[(10 * W + 10) as usize], own));
+        // Between them (total weight 1.28): the kept base plus their mean radiance.
+        let mid: [f32; 3] = std::array::from_fn(|c| 0.6 * px(11, 10)[c] + 0.15);
+        assert!(close(img[(10 * W + 11) as usize], mid));
+        // The rim of one (weight 0.64): mixed with the base by that confidence.
+        let rim: [f32; 3] =
+            std::array::from_fn(|c| px(9, 10)[c] + 0.64 * (0.25 - 0.4 * px(9, 10)[c]));
+        assert!(close(img[(10 * W + 9) as usize], rim));
         // A pixel no sample reaches keeps the whole base, and no sample changes nothing.
         assert_eq!(img[(20 * W + 30) as usize], px(30, 20));
         assert_eq!(view_dependent(&[]), base);
