@@ -7,7 +7,7 @@
 //! rays of the correction tracer that reach diffuse surfaces return what the client shows there.
 
 use crate::cache::view_tolerance;
-use crate::trace::DiffuseShade;
+use crate::trace::{diffuse_weight, DiffuseShade};
 use glam::Vec3;
 use psao_client::Shading;
 use psao_raster::GBuffer;
@@ -131,6 +131,22 @@ pub fn view_tolerances(scene: &Scene, mirror_turn: f32) -> HashMap<u32, f32> {
             let material = scene.materials.get(m.material)?;
             is_object(scene, object)
                 .then(|| (object, view_tolerance(mirror_turn, material.roughness)))
+        })
+        .collect()
+}
+
+/// Per pixel of `g` seen from `eye`, the share of a lit base that stays under a
+/// view-dependent correction ([`crate::splat::SplatTarget::keep`]): the diffuse weight of the
+/// pixel's material at its view angle ([`diffuse_weight`], as the correction tracer weighs
+/// the diffuse part of a non-diffuse hit); 1 where nothing is covered.
+pub fn diffuse_keep(scene: &Scene, g: &GBuffer, eye: Vec3) -> Vec<f32> {
+    (0..g.len())
+        .map(|i| {
+            let Some(m) = g.material(scene, i).and_then(|m| scene.materials.get(m)) else {
+                return 1.0;
+            };
+            let v = (eye - g.position[i]).normalize_or_zero();
+            diffuse_weight(m, g.normal[i].dot(v).abs())
         })
         .collect()
 }

@@ -427,6 +427,7 @@ mod tests {
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: &black,
+                keep: None,
                 ids: &s.ids,
                 gbuffer: &s.g,
             },

@@ -23,6 +23,13 @@
 //! - a pixel no sample reaches keeps the base;
 //! - a highlight ([`is_highlight`]) reaches its own pixel only.
 //!
+//! Over a lit base (diffuse light from the points and shadow maps, DESIGN §12) the samples
+//! carry only the view-dependent part of their radiance (reflection, refraction,
+//! highlights: the paper's additive corrections over a diffuse global-illumination base),
+//! and each pixel they reach keeps the share of its base that its material's diffuse weight
+//! leaves ([`SplatTarget::keep`]): the client's own diffuse light stays under the
+//! corrections instead of the server's estimate of it.
+//!
 //! The frame is cut into bands of rows written in parallel; every band visits the samples in
 //! the same order, so the result does not depend on the number of threads.
 
@@ -57,8 +64,15 @@ pub struct SplatTarget<'a> {
     pub color: &'a mut [[f32; 3]],
     /// The base's diffuse value per pixel that the samples' radiance is relative to (the
     /// client's diffuse shading the tracer reproduces on diffuse surfaces); the same as
-    /// `color` when the frame shows that shading.
+    /// `color` when the frame shows that shading. Not read when `keep` is given.
     pub diffuse: &'a [[f32; 3]],
+    /// `Some` when the samples carry only the view-dependent part of their radiance (a lit
+    /// base, traced without the diffuse part of their own surface,
+    /// [`crate::trace::TraceSettings::own_diffuse`]): per pixel, the share of the base that
+    /// stays under a correction (the diffuse weight of its material at its view angle,
+    /// [`crate::base::diffuse_keep`]). A pixel a sample reaches then shows
+    /// `keep × base + the samples' radiance`, blended with the base by confidence as below.
+    pub keep: Option<&'a [f32]>,
     /// Object id per pixel (0 = diffuse), the stencil.
     pub ids: &'a [u32],
     /// The frame's G-buffer: depth, world positions and normals.
@@ -101,7 +115,8 @@ struct Placed {
     normal: Vec3,
     /// Traced radiance.
     color: [f32; 3],
-    /// Traced radiance minus the base's diffuse value at the sample's pixel.
+    /// Traced radiance minus the base's diffuse value at the sample's pixel (the radiance
+    /// itself when it is the view-dependent part only).
     correction: [f32; 3],
 }
 
@@ -121,7 +136,7 @@ fn place(
     view: &ScreenView,
     hierarchy: &Hierarchy,
     ids: &[u32],
-    diffuse: &[[f32; 3]],
+    diffuse: Option<&[[f32; 3]]>,
     g: &GBuffer,
 ) -> Option<Placed> {
     let (x, y, z) = view.project(s.position)?;
@@ -141,7 +156,7 @@ fn place(
     let reach = if is_highlight(s) { 1.0 } else { spacing };
     // Pixels strictly closer than `reach`: |dx|, |dy| ≤ ⌈reach⌉ − 1.
     let r = reach.ceil() as i32 - 1;
-    let base = diffuse[i];
+    let base = diffuse.map_or([0.0; 3], |d| d[i]);
     Some(Placed {
         x,
         y,
@@ -214,6 +229,24 @@ impl Acc {
             base
         }
     }
+
+    /// The corrected pixel when the samples carry view-dependent radiance only and `keep`
+    /// of `base` stays under it: a sample's own pixel is `keep × base` plus its radiance;
+    /// elsewhere the blend `keep × base + Σ w·radiance / Σ w` is mixed with `base` by the
+    /// confidence `min(Σ w, 1)`, so the rim of a lone sample fades towards the base.
+    fn resolve_view_dependent(&self, base: [f32; 3], keep: f32) -> [f32; 3] {
+        if self.own_level > 0 {
+            std::array::from_fn(|c| keep * base[c] + self.own[c])
+        } else if self.weight > 0.0 {
+            let norm = self.weight.max(1.0);
+            let confidence = self.weight.min(1.0);
+            std::array::from_fn(|c| {
+                base[c] + self.sum[c] / norm - confidence * (1.0 - keep) * base[c]
+            })
+        } else {
+            base
+        }
+    }
 }
 
 /// Splat `batches` (each in its order; later samples win ties) into `target`; returns how
@@ -232,7 +265,7 @@ pub fn splat(
     let g = target.gbuffer;
     assert!(
         target.color.len() == n
-            && target.diffuse.len() == n
+            && target.keep.map_or(target.diffuse.len(), <[f32]>::len) == n
             && target.ids.len() == n
             && g.depth.len() == n
             && g.position.len() == n
@@ -242,13 +275,15 @@ pub fn splat(
     if n == 0 {
         return 0;
     }
-    let (ids, diffuse) = (target.ids, target.diffuse);
+    let (ids, diffuse, keep) = (target.ids, target.diffuse, target.keep);
+    // View-dependent samples are corrections as they are.
+    let relative_to = keep.is_none().then_some(diffuse);
     let mut placed: Vec<Placed> = Vec::new();
     for batch in batches {
         placed.par_extend(
             batch
                 .par_iter()
-                .filter_map(|s| place(s, view, hierarchy, ids, diffuse, g)),
+                .filter_map(|s| place(s, view, hierarchy, ids, relative_to, g)),
         );
     }
     // Enough bands to balance the threads; each is a few rows high.
@@ -277,7 +312,10 @@ pub fn splat(
             }
             let offset = by0 as usize * w;
             for (i, (c, a)) in color.iter_mut().zip(&acc).enumerate() {
-                *c = a.resolve(*c, diffuse[offset + i]);
+                *c = match keep {
+                    Some(k) => a.resolve_view_dependent(*c, k[offset + i]),
+                    None => a.resolve(*c, diffuse[offset + i]),
+                };
             }
         });
     placed.len()
@@ -351,6 +389,7 @@ mod tests {
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: base,
+                keep: None,
                 ids: &f.ids,
                 gbuffer: &f.g,
             },
@@ -455,6 +494,7 @@ mod tests {
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: &base,
+                keep: None,
                 ids: &f.ids,
                 gbuffer: &f.g,
             },
@@ -561,11 +601,60 @@ mod tests {
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: &diffuse,
+                keep: None,
                 ids: &f.ids,
                 gbuffer: &f.g,
             },
         );
         let i = (y * W + x + 1) as usize;
         assert!((color[i][0] - lit[i][0] - 0.25 * weight(1.0, 25.0)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn view_dependent_samples_keep_the_diffuse_share_of_the_base_they_reach() {
+        let f = frame(0, 0.0, W);
+        let h = Hierarchy::new(2).unwrap();
+        // A textured lit base; 60 % of it stays under a correction (the material's diffuse
+        // weight). Level 1 of 2: reach √5, weight 0.64 at 1 px.
+        let base: Vec<[f32; 3]> = (0..W * H)
+            .map(|i| [0.2 + 0.004 * (i % 53) as f32, 0.3, 0.1])
+            .collect();
+        let keep = vec![0.6; (W * H) as usize];
+        let view_dependent = |samples: &[Sample]| {
+            let mut color = base.clone();
+            splat(
+                &[samples],
+                &h,
+                &f.view,
+                &mut SplatTarget {
+                    color: &mut color,
+                    diffuse: &[],
+                    keep: Some(&keep),
+                    ids: &f.ids,
+                    gbuffer: &f.g,
+                },
+            );
+            color
+        };
+        let px = |x: u32, y: u32| base[(y * W + x) as usize];
+        let s = [
+            sample_at(&f, 10, 10, 1, [0.25; 3]),
+            sample_at(&f, 12, 10, 1, [0.05; 3]),
+        ];
+        let img = view_dependent(&s);
+        let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-6);
+        // Own pixels: the kept share of the base under them plus their radiance.
+        let own: [f32; 3] = std::array::from_fn(|c| 0.6 * px(10, 10)[c] + 0.25);
+        assert!(close(img[(10 * W + 10) as usize], own));
+        // Between them (total weight 1.28): the kept base plus their mean radiance.
+        let mid: [f32; 3] = std::array::from_fn(|c| 0.6 * px(11, 10)[c] + 0.15);
+        assert!(close(img[(10 * W + 11) as usize], mid));
+        // The rim of one (weight 0.64): mixed with the base by that confidence.
+        let rim: [f32; 3] =
+            std::array::from_fn(|c| px(9, 10)[c] + 0.64 * (0.25 - 0.4 * px(9, 10)[c]));
+        assert!(close(img[(10 * W + 9) as usize], rim));
+        // A pixel no sample reaches keeps the whole base, and no sample changes nothing.
+        assert_eq!(img[(20 * W + 30) as usize], px(30, 20));
+        assert_eq!(view_dependent(&[]), base);
     }
 }

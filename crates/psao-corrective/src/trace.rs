@@ -47,10 +47,16 @@ pub struct TraceSettings {
     pub sky: Vec3,
     /// Seed of every random choice.
     pub seed: u64,
+    /// Whether a primary hit's radiance includes the diffuse part of its own surface. Off
+    /// over a lit base: a sample is then the view-dependent part only (reflection,
+    /// refraction, highlights), and the client keeps [`diffuse_weight`] of its own diffuse
+    /// light under it ([`crate::splat::SplatTarget::keep`]).
+    pub own_diffuse: bool,
 }
 
 impl Default for TraceSettings {
-    /// Depth 4, 8 glossy rays, 4 area-light samples, a grey sky, seed 1.
+    /// Depth 4, 8 glossy rays, 4 area-light samples, a grey sky, seed 1, the own diffuse
+    /// part included.
     fn default() -> Self {
         Self {
             max_depth: 4,
@@ -58,8 +64,25 @@ impl Default for TraceSettings {
             area_samples: 4,
             sky: Vec3::new(0.62, 0.66, 0.72),
             seed: 1,
+            own_diffuse: true,
         }
     }
+}
+
+/// The weight of the diffuse part of `material`'s radiance seen at `n_v` = n·v:
+/// `(1 − metallic)·(1 − transmission)·(1 − F)`, F Schlick's Fresnel term (its largest
+/// channel) with the material's F0. 1 for a diffuse dielectric seen head on, less towards
+/// grazing angles, 0 for metals and clear glass.
+pub fn diffuse_weight(material: &Material, n_v: f32) -> f32 {
+    let fv = schlick(f0_of(material), n_v.max(1e-4));
+    (1.0 - material.metallic) * (1.0 - material.transmission) * (1.0 - fv.max_element())
+}
+
+/// Normal-incidence reflectance of `m`: the dielectric's from its index, the base colour for
+/// metals, blended by `metallic`.
+fn f0_of(m: &Material) -> Vec3 {
+    let dielectric_f0 = ((m.ior - 1.0) / (m.ior + 1.0)).powi(2);
+    Vec3::splat(dielectric_f0).lerp(m.base_color.truncate(), m.metallic)
 }
 
 /// Traces correction samples of a scene: every instance at its stored transform, or at a
@@ -248,15 +271,15 @@ impl<'a> CorrectionTracer<'a> {
         let n = s.normal;
         let n_v = n.dot(v).max(1e-4);
         let base = m.base_color.truncate();
-        let dielectric_f0 = ((m.ior - 1.0) / (m.ior + 1.0)).powi(2);
-        let f0 = Vec3::splat(dielectric_f0).lerp(base, m.metallic);
+        let f0 = f0_of(m);
         let fv = schlick(f0, n_v);
         let opaque = 1.0 - m.transmission;
         let dielectric = 1.0 - m.metallic;
         let mut out = Vec3::ZERO;
-        // The diffuse part, as the client shows it.
-        let kd = dielectric * opaque * (1.0 - fv.max_element());
-        if kd > 0.0 {
+        // The diffuse part, as the client shows it (left to the client at a primary hit
+        // over a lit base).
+        let kd = diffuse_weight(m, n_v);
+        if kd > 0.0 && (depth > 0 || self.settings.own_diffuse) {
             out += kd * self.shade.shade(s.point, n, s.instance, m);
         }
         let alpha = (m.roughness * m.roughness).max(1e-3);

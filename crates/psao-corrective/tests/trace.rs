@@ -1,7 +1,7 @@
 //! The correction tracer on small scenes, through every compiled backend.
 
 use glam::{Affine3A, Vec3, Vec4};
-use psao_corrective::trace::{CorrectionTracer, DiffuseShade, TraceSettings};
+use psao_corrective::trace::{diffuse_weight, CorrectionTracer, DiffuseShade, TraceSettings};
 use psao_scene::builtin::shapes::cuboid;
 use psao_scene::{Instance, Light, LightShape, Material, Mesh, Scene};
 use psao_trace::{Backend, GeometryMode, Tracer};
@@ -278,4 +278,46 @@ fn a_posed_tracer_sees_skinned_vertices_like_a_scene_built_in_that_pose() {
             "the pose changes {moved} of {on_slab} samples"
         );
     }
+}
+
+/// Without the own diffuse part (a lit base), a sample of a glossy dielectric is its full
+/// radiance minus `diffuse_weight × the client's shading` at its surface: what is left is
+/// the view-dependent part. A diffuse-looking grazing view keeps less of the base.
+#[test]
+fn a_view_dependent_sample_leaves_out_exactly_the_diffuse_part_of_its_own_surface() {
+    let lacquer = Material {
+        name: "lacquer".into(),
+        base_color: Vec4::new(0.8, 0.1, 0.1, 1.0),
+        roughness: 0.0,
+        ..Material::default()
+    };
+    let s = scene(lacquer.clone());
+    for t in tracers(&s) {
+        let full = CorrectionTracer::new(&s, &t, &PerInstance, TraceSettings::default());
+        let view_dependent = CorrectionTracer::new(
+            &s,
+            &t,
+            &PerInstance,
+            TraceSettings {
+                own_diffuse: false,
+                ..TraceSettings::default()
+            },
+        );
+        let dir = Vec3::new(0.1, 0.05, -1.0);
+        let (l_full, hit) = full.primary(EYE, dir, 0, 9);
+        let (l_view, _) = view_dependent.primary(EYE, dir, 0, 9);
+        let (p, n) = hit.unwrap();
+        let kd = diffuse_weight(&lacquer, n.dot((EYE - p).normalize()));
+        assert!(kd > 0.9 && kd < 1.0, "{kd}");
+        // The slab's diffuse shading is instance 0's grey.
+        let expected = l_full - kd * Vec3::splat(0.3);
+        assert!(
+            (l_view - expected).length() < 1e-5,
+            "{l_view} vs {expected}"
+        );
+        // A mirror reflection of the grey wall in front remains (Fresnel at normal incidence).
+        assert!(l_view.min_element() > 0.0);
+    }
+    assert!(diffuse_weight(&lacquer, 0.1) < diffuse_weight(&lacquer, 1.0));
+    assert_eq!(diffuse_weight(&chrome(0.2), 1.0), 0.0);
 }

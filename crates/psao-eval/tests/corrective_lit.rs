@@ -60,6 +60,7 @@ const LIT: GiEval = GiEval {
     bounces: 1,
     base_paths: 2,
     reference_paths: 16,
+    full_samples: false,
 };
 
 /// The base row's PSNR over all pixels (every pixel is diffuse here).

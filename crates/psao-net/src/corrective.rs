@@ -14,7 +14,9 @@ use std::sync::{Arc, PoisonError, RwLock, RwLockReadGuard};
 use glam::{Affine3A, Vec3};
 use psao_client::Shading;
 use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
-use psao_corrective::base::{is_object, object_ids, view_tolerances, TracedAoShade};
+use psao_corrective::base::{
+    diffuse_keep, is_object, object_ids, view_tolerances, GiShade, TracedAoShade,
+};
 use psao_corrective::cache::{CacheConfig, SampleCache};
 use psao_corrective::saliency::{saliency, RgbImage};
 use psao_corrective::schedule::{DEFAULT_DECAY, DEFAULT_JOB_SIZE};
@@ -22,10 +24,11 @@ use psao_corrective::screen::ScreenView;
 use psao_corrective::session::Planner;
 use psao_corrective::splat::{Sample, SplatTarget};
 use psao_corrective::sqrt5::{Hierarchy, PixelRect};
-use psao_corrective::trace::{CorrectionTracer, TraceSettings};
+use psao_corrective::trace::{CorrectionTracer, DiffuseShade, TraceSettings};
 use psao_raster::GBuffer;
 use psao_scene::{Animator, Camera, Motion, Scene, ScenePose};
 use psao_trace::ao::hash64;
+use psao_trace::gi::DiffuseLighting;
 use psao_trace::{Backend, GeometryMode, Tracer};
 use psao_wire::{CameraMsg, Message, Region, RegionsMsg, SampleMsg, SamplesMsg, MAX_SAMPLES};
 use rayon::prelude::*;
@@ -46,14 +49,52 @@ pub fn hierarchy_for(width: u32, height: u32) -> Hierarchy {
     Hierarchy::for_spacing(width.min(height) as f32 / 4.0)
 }
 
+/// Default light paths per diffuse point a lit session's correction rays reach.
+pub const DEFAULT_LIGHT_PATHS: u32 = 8;
+
+/// How a lit session's correction tracer shades the diffuse surfaces its rays reach: with
+/// the diffuse lighting the clients show ([`psao_trace::gi`]: the scene's lights with shadow
+/// rays, its environment and `bounces` bounces; the clients' shadow-mapped direct light plus
+/// the points' irradiance estimate the same), path-traced with `paths` paths per point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LitCorrections {
+    /// Indirect bounces (the server's).
+    pub bounces: u32,
+    /// Light paths per diffuse point reached.
+    pub paths: u32,
+}
+
+impl LitCorrections {
+    /// The corrections of a server with `lighting` (`None`: AO only, no lit corrections) and
+    /// `config`'s paths per point.
+    pub fn of(
+        lighting: Option<&psao_server::LightingConfig>,
+        config: &CorrectiveConfig,
+    ) -> Option<Self> {
+        lighting.map(|l| Self {
+            bounces: l.bounces,
+            paths: config.light_paths.max(1),
+        })
+    }
+}
+
 /// What the server traces with: the scene, its animation, and its tracers at the pose last
 /// asked for.
+///
+/// Samples are what the client's base lacks. AO sessions: the full radiance, the diffuse
+/// surfaces reached shaded as the AO composite (the client subtracts its AO composite at the
+/// sample's pixel). Lit sessions ([`Self::with_lighting`]): the view-dependent part only
+/// (reflection, refraction, highlights, with the diffuse surfaces they reach lit as the
+/// client's lit composite is), added over the client's lit composite, of which each pixel
+/// keeps its material's diffuse share ([`psao_corrective::splat::SplatTarget::keep`]).
 pub struct CorrectionEngine {
     scene: Arc<Scene>,
     /// The scene's animation, when anything moves.
     animator: Option<Animator>,
     geometry: RwLock<PosedGeometry>,
     ao_spp: u32,
+    /// Lit corrections (`None`: the AO composite is the base).
+    lighting: Option<LitCorrections>,
     seed: u64,
 }
 
@@ -90,12 +131,23 @@ impl CorrectionEngine {
             scene,
             geometry: RwLock::new(geometry),
             ao_spp: ao_spp.max(1),
+            lighting: None,
             seed,
         })
     }
 
+    /// The same engine for the clients of a lit server (`Some`), or of an AO-only one.
+    pub fn with_lighting(mut self, lighting: Option<LitCorrections>) -> Self {
+        self.lighting = lighting.map(|l| LitCorrections {
+            paths: l.paths.max(1),
+            ..l
+        });
+        self
+    }
+
     /// Runs `f` with the correction tracer of the scene at `time` (diffuse surfaces shaded as
-    /// the client shades them, AO traced with the DESIGN §2 estimator). An animated scene is
+    /// the client shades them: AO traced with the DESIGN §2 estimator, or the diffuse lighting
+    /// at `time` when lit). An animated scene is
     /// posed at `time` first unless the tracers hold it already; callers at the same time
     /// trace side by side.
     pub(crate) fn with_tracer<R>(
@@ -104,12 +156,12 @@ impl CorrectionEngine {
         f: impl FnOnce(&CorrectionTracer<'_>) -> R,
     ) -> Result<R, NetError> {
         let Some(animator) = &self.animator else {
-            return Ok(self.trace_in(&read(&self.geometry), f));
+            return Ok(self.trace_in(&read(&self.geometry), time, f));
         };
         {
             let geometry = read(&self.geometry);
             if geometry.pose.as_ref().is_some_and(|p| p.time == time) {
-                return Ok(self.trace_in(&geometry, f));
+                return Ok(self.trace_in(&geometry, time, f));
             }
         }
         let mut geometry = self
@@ -130,28 +182,58 @@ impl CorrectionEngine {
             }
             g.pose = Some(pose);
         }
-        Ok(self.trace_in(&geometry, f))
+        Ok(self.trace_in(&geometry, time, f))
     }
 
-    /// `f` with the correction tracer over `geometry`.
+    /// `f` with the correction tracer over `geometry` at scene time `time`.
     fn trace_in<R>(
         &self,
         geometry: &PosedGeometry,
+        time: f32,
         f: impl FnOnce(&CorrectionTracer<'_>) -> R,
     ) -> R {
-        let shade = TracedAoShade {
-            tracer: &geometry.occlusion,
-            shading: Shading::default(),
-            radius: self.scene.ao_radius,
-            spp: self.ao_spp,
-            seed: self.seed,
-        };
         let settings = TraceSettings {
             sky: Vec3::from_array(psao_client::SKY_GREY),
             seed: self.seed,
+            own_diffuse: self.lighting.is_none(),
             ..TraceSettings::default()
         };
-        let tracer = CorrectionTracer::new(&self.scene, &geometry.primary, &shade, settings);
+        match self.lighting {
+            None => {
+                let shade = TracedAoShade {
+                    tracer: &geometry.occlusion,
+                    shading: Shading::default(),
+                    radius: self.scene.ao_radius,
+                    spp: self.ao_spp,
+                    seed: self.seed,
+                };
+                self.trace_with(geometry, &shade, settings, f)
+            }
+            Some(lit) => {
+                let lighting = DiffuseLighting::new(&self.scene, time, lit.bounces);
+                let shade = GiShade {
+                    tracer: &geometry.occlusion,
+                    lighting: match &geometry.pose {
+                        Some(pose) => lighting.posed(pose),
+                        None => lighting,
+                    },
+                    paths: lit.paths,
+                    seed: self.seed,
+                };
+                self.trace_with(geometry, &shade, settings, f)
+            }
+        }
+    }
+
+    /// `f` with the correction tracer over `geometry` shading diffuse surfaces with `shade`.
+    fn trace_with<R>(
+        &self,
+        geometry: &PosedGeometry,
+        shade: &dyn DiffuseShade,
+        settings: TraceSettings,
+        f: impl FnOnce(&CorrectionTracer<'_>) -> R,
+    ) -> R {
+        let tracer = CorrectionTracer::new(&self.scene, &geometry.primary, shade, settings);
         match &geometry.pose {
             Some(pose) => f(&tracer.posed(pose)),
             None => f(&tracer),
@@ -401,12 +483,16 @@ impl Default for CorrectiveClientConfig {
     }
 }
 
-/// The client's frame that corrections are added to.
+/// The client's frame that corrections are added to; it must match the server's engine
+/// ([`CorrectionEngine::with_lighting`]), as it does when both follow the server's lighting
+/// (a lit server sends irradiance records, and its clients show the lit composite).
 ///
-/// The correction tracer shades the diffuse surfaces its rays reach as the AO composite does
-/// (`base colour × (ambient × AO + sun)`), so a sample's correction is its radiance minus the
-/// AO composite at its pixel (what the tracer's radiance holds of the diffuse shading there)
-/// whatever frame is shown; the correction is then added to the frame shown.
+/// - AO: the correction tracer shades the diffuse surfaces its rays reach as the AO
+///   composite does (`base colour × (ambient × AO + sun)`), so a sample's correction is its
+///   radiance minus the AO composite at its pixel.
+/// - Lit: samples are the view-dependent part of the radiance, added over the lit composite,
+///   of which each pixel they reach keeps its material's diffuse share
+///   ([`psao_corrective::base::diffuse_keep`]).
 #[derive(Clone, Copy, Debug)]
 pub enum BaseFrame<'a> {
     /// The AO composite of the reconstructed AO per pixel, shown as it is.
@@ -697,18 +783,29 @@ impl CorrectiveClient {
             .as_ref()
             .map(|m| m.moving.clone())
             .unwrap_or_default();
-        let diffuse = psao_client::composite(scene, gbuffer, base.ao(), &Shading::default());
-        let mut image = match base {
-            BaseFrame::Ao(_) => diffuse.clone(),
-            BaseFrame::Lit { lit, .. } => lit.to_vec(),
-        };
         let ids = object_ids(scene, gbuffer);
+        let (mut image, keep) = match base {
+            BaseFrame::Ao(ao) => (
+                psao_client::composite(scene, gbuffer, ao, &Shading::default()),
+                None,
+            ),
+            BaseFrame::Lit { lit, .. } => (
+                lit.to_vec(),
+                self.camera
+                    .map(|c| diffuse_keep(scene, gbuffer, c.position)),
+            ),
+        };
+        let diffuse = match keep {
+            Some(_) => Vec::new(),
+            None => image.clone(),
+        };
         let drawn = match self.camera {
             Some(camera) => self.cache.splat(
                 &ScreenView::new(&camera, gbuffer.width, gbuffer.height),
                 &mut SplatTarget {
                     color: &mut image,
                     diffuse: &diffuse,
+                    keep: keep.as_deref(),
                     ids: &ids,
                     gbuffer,
                 },
@@ -774,6 +871,8 @@ pub struct CorrectiveConfig {
     pub frame_ms: Option<f32>,
     /// AO rays per diffuse point the correction rays reach.
     pub ao_spp: u32,
+    /// Light paths per diffuse point the correction rays reach, when the server is lit.
+    pub light_paths: u32,
     /// The client's side.
     pub client: CorrectiveClientConfig,
 }
@@ -784,6 +883,7 @@ impl Default for CorrectiveConfig {
             samples_per_second: DEFAULT_SAMPLES_PER_SECOND,
             frame_ms: None,
             ao_spp: 8,
+            light_paths: DEFAULT_LIGHT_PATHS,
             client: CorrectiveClientConfig::default(),
         }
     }
@@ -818,7 +918,8 @@ fn over_the_wire(message: &Message, limit: u32) -> Result<(Message, usize), NetE
 
 impl InProcessCorrections {
     /// Both halves for `width × height` frames of `scene` (the server half traces a clone of
-    /// it, posed at each client frame's time).
+    /// it, posed at each client frame's time), for a server with `lighting` (`None`: AO
+    /// only).
     pub fn new(
         scene: &Scene,
         backend: Backend,
@@ -826,9 +927,12 @@ impl InProcessCorrections {
         width: u32,
         height: u32,
         config: &CorrectiveConfig,
+        lighting: Option<&psao_server::LightingConfig>,
     ) -> Result<Self, NetError> {
+        let engine = CorrectionEngine::new(Arc::new(scene.clone()), backend, config.ao_spp, seed)?
+            .with_lighting(LitCorrections::of(lighting, config));
         Ok(Self {
-            engine: CorrectionEngine::new(Arc::new(scene.clone()), backend, config.ao_spp, seed)?,
+            engine,
             remote: RemoteCorrections::new(config.samples_per_second),
             client: CorrectiveClient::new(width, height, config.client)?,
             pending: None,
@@ -1072,6 +1176,74 @@ mod tests {
         assert_eq!(frame(&mut client, 90), (0, asked));
         client.receive(&samples(&[ball])).unwrap();
         assert_eq!(count(&client, ball), 1);
+    }
+
+    /// Over a lit base a sample is the view-dependent part: its own pixel shows the kept
+    /// diffuse share of the lit composite plus the sample (none of it on chrome, most of it
+    /// on a glossy dielectric), pixels no sample reaches keep the lit composite; over the AO
+    /// composite a sample's own pixel shows its radiance.
+    #[test]
+    fn a_lit_client_adds_view_dependent_samples_over_its_diffuse_share() {
+        let scene = animated_scene();
+        let (w, h) = (64, 36);
+        let camera = Camera::look_at(Vec3::new(0.0, 1.5, 3.5), Vec3::new(0.0, 0.4, 0.0), 60.0);
+        let gbuffer =
+            psao_raster::rasterize(&scene, &camera, &psao_raster::RasterOptions::new(w, h));
+        let ids = object_ids(&scene, &gbuffer);
+        let material = |i: usize| &scene.materials[gbuffer.material(&scene, i).unwrap()];
+        // The centre-most pixel of each object: the chrome ball and the glossy box.
+        let pixel_of = |metal: bool| {
+            (0..ids.len())
+                .filter(|&i| ids[i] != 0 && (material(i).metallic > 0.5) == metal)
+                .min_by_key(|&i| {
+                    let (x, y) = ((i as u32 % w) as i32, (i as u32 / w) as i32);
+                    (x - 32).pow(2) + (y - 18).pow(2)
+                })
+                .unwrap()
+        };
+        let (chrome, glossy) = (pixel_of(true), pixel_of(false));
+        let levels = hierarchy_for(w, h).levels();
+        let sample = |i: usize| SampleMsg {
+            object: ids[i],
+            level: levels,
+            position: gbuffer.position[i].to_array(),
+            normal: gbuffer.normal[i].to_array(),
+            ndotv: 0.9,
+            color: [0.2, 0.3, 0.4],
+        };
+        let msg = crate::convert::camera_msg(0, &camera, w as f32 / h as f32);
+        let ao = vec![1.0; (w * h) as usize];
+        let lit = vec![[0.5f32; 3]; (w * h) as usize];
+        let corrected = |base: BaseFrame<'_>| {
+            let mut client =
+                CorrectiveClient::new(w, h, CorrectiveClientConfig::default()).unwrap();
+            client.camera(&msg);
+            client
+                .receive(&SamplesMsg {
+                    client_frame: None,
+                    camera_age: 0,
+                    samples: vec![sample(chrome), sample(glossy)],
+                })
+                .unwrap();
+            let c = client.frame(&scene, 1, &gbuffer, base);
+            assert_eq!(c.drawn, 2);
+            c.image
+        };
+        let img = corrected(BaseFrame::Lit { ao: &ao, lit: &lit });
+        let keep = diffuse_keep(&scene, &gbuffer, camera.position);
+        assert_eq!(keep[chrome], 0.0);
+        assert!(keep[glossy] > 0.5 && keep[glossy] < 1.0, "{}", keep[glossy]);
+        for (i, k) in [(chrome, 0.0), (glossy, keep[glossy])] {
+            for (c, s) in [0.2, 0.3, 0.4].into_iter().enumerate() {
+                assert!((img[i][c] - (k * 0.5 + s)).abs() < 1e-6, "{:?}", img[i]);
+            }
+        }
+        let untouched = (0..ids.len()).find(|&i| ids[i] == 0).unwrap();
+        assert_eq!(img[untouched], [0.5; 3]);
+        // Over the AO composite a sample carries its full radiance.
+        let img = corrected(BaseFrame::Ao(&ao));
+        assert_eq!(img[chrome], [0.2, 0.3, 0.4]);
+        assert_eq!(img[glossy], [0.2, 0.3, 0.4]);
     }
 
     #[test]

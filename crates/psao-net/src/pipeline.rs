@@ -168,6 +168,7 @@ impl<'a> Pipeline<'a> {
                 config.res.width,
                 config.res.height,
                 c,
+                config.server.lighting.as_ref(),
             )?),
             None => None,
         };

@@ -98,7 +98,11 @@ pub fn run(args: &ServeArgs) -> Result<()> {
             args.tuning.backend.unwrap_or_default(),
             c.ao_spp,
             args.tuning.seed,
-        )?;
+        )?
+        .with_lighting(psao_net::corrective::LitCorrections::of(
+            lighting.as_ref(),
+            &c,
+        ));
         serve = serve.with_corrections(
             psao_net::serve::Corrections::new(
                 std::sync::Arc::new(engine),

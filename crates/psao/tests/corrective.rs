@@ -248,6 +248,11 @@ fn bench_reports_the_cache_costs() {
 /// A small room with a chrome ball, a glossy box, a diffuse post sliding between them in the
 /// first 0.2 s and a sun, and a 1-second camera path.
 fn split_fixture() -> tempfile::TempDir {
+    room_fixture(true)
+}
+
+/// The room of [`split_fixture`], with the sliding post when `post`.
+fn room_fixture(post: bool) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let mut obj = String::new();
     let quads: [[[f32; 3]; 4]; 3] = [
@@ -260,19 +265,27 @@ fn split_fixture() -> tempfile::TempDir {
             obj += &format!("v {} {} {}\n", v[0], v[1], v[2]);
         }
         let b = i * 4 + 1;
-        obj += &format!("f {} {} {}\nf {} {} {}\n", b, b + 1, b + 2, b, b + 2, b + 3);
+        // Fronts face into the room (the path generator walks on floors' fronts).
+        obj += &format!("f {} {} {}\nf {} {} {}\n", b, b + 3, b + 2, b, b + 2, b + 1);
     }
     std::fs::write(dir.path().join("room.obj"), obj).unwrap();
-    let scene = "ao_radius = 0.6\n\
+    let post = if post {
+        "[[asset]]\nfile = \"builtin:cylinder\"\nscale = [0.4, 1.2, 0.4]\n\
+        keys = { times = [0, 0.2, 1], translation = [[0.3, 0, 1.2], [0.1, 0, 0.4], [0.1, 0, 0.4]] }\n"
+    } else {
+        ""
+    };
+    let scene = format!(
+        "ao_radius = 0.6\n\
         camera_paths = [\"path.toml\"]\n\
         [[asset]]\nfile = \"room.obj\"\n\
         [[asset]]\nfile = \"builtin:sphere\"\ntranslation = [-0.6, 0.5, 0.0]\n\
         [[asset]]\nfile = \"builtin:box\"\ntranslation = [0.9, 0.0, -0.5]\nscale = 0.8\n\
-        [[asset]]\nfile = \"builtin:cylinder\"\nscale = [0.4, 1.2, 0.4]\n\
-        keys = { times = [0, 0.2, 1], translation = [[0.3, 0, 1.2], [0.1, 0, 0.4], [0.1, 0, 0.4]] }\n\
+        {post}\
         [[material]]\nname = \"sphere\"\npreset = \"chrome\"\n\
         [[material]]\nname = \"box\"\npreset = \"glossy\"\n\
-        [[light]]\nkind = \"sun\"\ndirection = [0.35, 1.0, 0.6]\npower = 2.0\n";
+        [[light]]\nkind = \"sun\"\ndirection = [0.35, 1.0, 0.6]\npower = 2.0\n"
+    );
     std::fs::write(dir.path().join("scene.toml"), scene).unwrap();
     let path = "name = \"orbit\"\nfov_y_deg = 60.0\n\
         [[key]]\ntime = 0.0\nposition = [2.5, 1.5, 2.5]\nlook_at = [0.0, 0.5, 0.0]\n\
@@ -367,6 +380,166 @@ fn serve_and_view_with_corrections_end_in_the_same_state_as_run() {
     assert_eq!(view["samples"].as_u64().unwrap(), received);
     assert_eq!(view["corrective_state_hash"].as_str().unwrap(), run_hash);
     assert_eq!(view["state_hash"], run["state_hash"]);
+}
+
+/// A lit session (`--lighting gi`) with corrections on a generated path through the still
+/// room: the served viewer's corrected frames are closer than its base frames (the lit
+/// composite) to a path-traced reference (diffuse lighting with the server's bounce count
+/// plus the reflected and refracted paths, an independent seed), in mean PSNR and FLIP over
+/// the frames and on the non-diffuse pixels, and serve + view ends in the state of run.
+#[test]
+fn lit_corrections_bring_a_served_viewer_closer_to_the_path_traced_reference() {
+    let fx = room_fixture(false);
+    let scene_file = fx.path().join("scene.toml");
+    let scene = scene_file.to_str().unwrap();
+    let paths = fx.path().join("paths");
+    let o = psao(&[
+        "paths",
+        "--scene",
+        scene,
+        "--seeds",
+        "2",
+        "--duration",
+        "0.5",
+        "--out",
+        paths.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let path_file = String::from_utf8_lossy(&o.stdout).trim().to_string();
+    let (w, h, frames) = (64u32, 36u32, 24u32);
+    let res = format!("{w}x{h}");
+    let server: &[&str] = &[
+        "--lighting",
+        "gi",
+        "--points",
+        "64",
+        "--ray-budget",
+        "20000",
+        "--no-points-cache",
+        "--corrective",
+        "--samples-per-second",
+        "6000",
+        "--corrective-paths",
+        "4",
+    ];
+    let client: &[&str] = &["--corrective", "--analyze-every", "3"];
+    let input: &[&str] = &["--scene", scene, "--path", &path_file, "--res", &res];
+
+    let run_out = fx.path().join("run");
+    let range = format!("0..{frames}");
+    let o = psao(
+        &[
+            &["run", "--frames", &range, "--server-hz", "30"][..],
+            input,
+            server,
+            &["--analyze-every", "3", "--out", run_out.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let run = json(&run_out.join("stats.json"));
+
+    let (mut served, addr) = start_serve(
+        scene,
+        &[server, &["--hz", "30", "--lockstep", "--once"]].concat(),
+    );
+    let view_out = fx.path().join("view");
+    let view_json = fx.path().join("view.json");
+    let count = frames.to_string();
+    let o = psao(
+        &[
+            &["view", "--connect", &addr, "--frames", &count][..],
+            input,
+            client,
+            &[
+                "--out",
+                view_out.to_str().unwrap(),
+                "--json",
+                view_json.to_str().unwrap(),
+            ],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(served.0.wait().unwrap().success());
+    let view = json(&view_json);
+    assert!(view["samples"].as_u64().unwrap() > 0);
+    assert_eq!(view["corrective_state_hash"], run["corrective_state_hash"]);
+    assert_eq!(view["state_hash"], run["state_hash"]);
+
+    // The reference of every frame, traced here.
+    let mut scene_data = psao_scene::scene_file::load(&scene_file).unwrap().scene;
+    scene_data.freeze();
+    let path = psao_scene::CameraPath::load(Path::new(&path_file)).unwrap();
+    let tracers = psao_eval::corrective::Tracers::new(&scene_data).unwrap();
+    let lighting = psao_corrective::base::GiShade {
+        tracer: &tracers.occlusion,
+        lighting: psao_trace::gi::DiffuseLighting::new(&scene_data, 0.0, 1),
+        paths: 64,
+        seed: 0x5eed,
+    };
+    let settings = psao_corrective::trace::TraceSettings {
+        sky: glam::Vec3::from_array(psao_client::SKY_GREY),
+        seed: 0x5eed,
+        ..Default::default()
+    };
+    let tracer = psao_corrective::trace::CorrectionTracer::new(
+        &scene_data,
+        &tracers.primary,
+        &lighting,
+        settings,
+    );
+    let shading = psao_eval::corrective::frame::ReferenceShading {
+        tracer: &tracer,
+        diffuse: Some(&lighting as &dyn psao_corrective::trace::DiffuseShade),
+    };
+    let png = |name: String| {
+        image::open(view_out.join(name))
+            .unwrap()
+            .to_rgb8()
+            .into_raw()
+    };
+    let mean_flip = |r: &[u8], t: &[u8]| {
+        let map = psao_eval::corrective::metrics::flip_map(r, t, w, h);
+        map.iter().map(|&f| f as f64).sum::<f64>() / map.len() as f64
+    };
+    let (mut base_err, mut corrected_err) = ([0.0f64; 3], [0.0f64; 3]);
+    let mut non_diffuse_frames = 0;
+    for frame in 0..frames {
+        let camera = path.camera_at_frame(frame as usize);
+        let f = psao_eval::corrective::frame::frame_images(
+            &scene_data,
+            camera,
+            0,
+            (w, h),
+            &lighting,
+            &shading,
+        );
+        let base = png(format!("frame_{frame:05}.png"));
+        let corrected = png(format!("corrected_{frame:05}.png"));
+        let psnr = |t: &[u8], keep: &dyn Fn(usize) -> bool| {
+            psao_eval::corrective::metrics::psnr_where(&f.reference_srgb, t, keep)
+        };
+        let all = |_: usize| true;
+        let non_diffuse = |i: usize| f.ids[i] != 0;
+        for (err, img) in [(&mut base_err, &base), (&mut corrected_err, &corrected)] {
+            err[0] += psnr(&img[..], &all).unwrap();
+            err[1] += mean_flip(&f.reference_srgb, &img[..]);
+            err[2] += psnr(&img[..], &non_diffuse).unwrap_or(0.0);
+        }
+        non_diffuse_frames += usize::from(f.ids.iter().any(|&i| i != 0));
+    }
+    let n = f64::from(frames);
+    let report = format!(
+        "base: {:.2} dB, FLIP {:.4}, non-diffuse {:.2} dB; corrected: {:.2} dB, FLIP {:.4}, non-diffuse {:.2} dB ({non_diffuse_frames} frames show non-diffuse pixels)",
+        base_err[0] / n, base_err[1] / n, base_err[2] / n,
+        corrected_err[0] / n, corrected_err[1] / n, corrected_err[2] / n,
+    );
+    eprintln!("{report}");
+    assert!(non_diffuse_frames * 2 >= frames as usize, "{report}");
+    assert!(corrected_err[0] > base_err[0], "PSNR: {report}");
+    assert!(corrected_err[1] < base_err[1], "FLIP: {report}");
+    assert!(corrected_err[2] > base_err[2], "non-diffuse PSNR: {report}");
 }
 
 /// Starts `psao serve` on the split fixture (port 0) with `extra`; returns it and its address.

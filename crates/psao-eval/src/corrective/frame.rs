@@ -34,6 +34,9 @@ pub struct FrameImages {
     pub reference_saliency: Map,
     /// Camera age (number of camera changes so far): the key of this frame's samples.
     pub camera_age: u32,
+    /// With view-dependent samples over a lit base: the share of the base each pixel keeps
+    /// under a correction ([`psao_corrective::splat::SplatTarget::keep`]).
+    pub keep: Option<Vec<f32>>,
 }
 
 /// The linear image as the saliency model's input.
@@ -130,5 +133,6 @@ pub fn frame_images(
         reference_srgb,
         reference_saliency,
         camera_age,
+        keep: None,
     }
 }

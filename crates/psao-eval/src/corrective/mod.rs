@@ -7,6 +7,7 @@ pub mod metrics;
 pub mod report;
 pub mod run;
 pub mod seeds;
+pub mod worse;
 
 pub use run::{evaluate_path, Budget, EvalConfig, GiEval, Order, PathEval, Tracers};
 

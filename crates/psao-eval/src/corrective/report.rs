@@ -97,8 +97,15 @@ fn base_description(config: &EvalConfig) -> String {
             config.ao_spp
         ),
         Some(g) => format!(
-            "base: the lit composite with {} paths per point and {} bounces; reference: path-traced diffuse lighting with {} paths per point plus the reflected and refracted paths",
-            g.base_paths, g.bounces, g.reference_paths
+            "base: the lit composite with {} paths per point and {} bounces; reference: path-traced diffuse lighting with {} paths per point plus the reflected and refracted paths; samples: {}",
+            g.base_paths,
+            g.bounces,
+            g.reference_paths,
+            if g.full_samples {
+                "full radiance relative to the base at their pixel"
+            } else {
+                "the view-dependent part over the base's diffuse share"
+            }
         ),
     }
 }

@@ -14,7 +14,7 @@ use std::str::FromStr;
 use std::time::Instant;
 
 use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_WEIGHT};
-use psao_corrective::base::{view_tolerances, GiShade, TracedAoShade};
+use psao_corrective::base::{diffuse_keep, view_tolerances, GiShade, TracedAoShade};
 use psao_corrective::cache::CacheConfig;
 use psao_corrective::saliency::{saliency, Map};
 use psao_corrective::schedule::DEFAULT_JOB_SIZE;
@@ -31,6 +31,7 @@ use serde::Serialize;
 
 use super::frame::{frame_images, rgb_image, trace_sample, FrameImages, ReferenceShading};
 use super::metrics::{centre_bias, frame_error, ErrorSums, FrameError, MeanError, Truth};
+use super::worse::{error_change, Compared, ErrorChange};
 use super::EvalError;
 
 /// Mixed into the seed of the reference's paths, so they are independent of the base's.
@@ -139,6 +140,11 @@ pub struct GiEval {
     pub base_paths: u32,
     /// Paths per point of the reference.
     pub reference_paths: u32,
+    /// Whether samples carry their full radiance, as corrections relative to the base at
+    /// their pixel (the splatting before view-dependent samples, kept to compare); false:
+    /// the view-dependent part only, over the base of which each pixel keeps its material's
+    /// diffuse share, as in the split ([`psao_corrective::splat::SplatTarget::keep`]).
+    pub full_samples: bool,
 }
 
 impl EvalConfig {
@@ -242,6 +248,10 @@ pub struct FrameRow {
     pub error: FrameError,
     /// Cached samples after the frame.
     pub cache_size: usize,
+    /// When the corrected frame is worse than the base frame (lower PSNR or higher FLIP):
+    /// where its squared error changed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worse_pixels: Option<ErrorChange>,
 }
 
 /// The static-view run of one ordering.
@@ -374,14 +384,18 @@ impl Context<'_> {
 
     fn frame(&self, camera: psao_scene::Camera, camera_age: u32) -> FrameImages {
         let c = self.config;
-        frame_images(
+        let mut f = frame_images(
             self.scene,
             camera,
             camera_age,
             (c.width, c.height),
             self.base,
             &self.reference,
-        )
+        );
+        if c.lighting.is_some_and(|g| !g.full_samples) {
+            f.keep = Some(diffuse_keep(self.scene, &f.gbuffer, camera.position));
+        }
+        f
     }
 
     fn error(&self, f: &FrameImages, test: &[[f32; 3]]) -> FrameError {
@@ -447,6 +461,7 @@ fn splatted(corrector: &Corrector, f: &FrameImages) -> Vec<[f32; 3]> {
         &mut SplatTarget {
             color: &mut color,
             diffuse: &f.base,
+            keep: f.keep.as_deref(),
             ids: &f.ids,
             gbuffer: &f.gbuffer,
         },
@@ -546,7 +561,12 @@ pub fn evaluate_path(
         seed: config.seed,
         ..TraceSettings::default()
     };
-    let tracer = CorrectionTracer::new(scene, &tracers.primary, base, settings);
+    // Over a lit base, samples are the view-dependent part (unless compared as before).
+    let sample_settings = TraceSettings {
+        own_diffuse: config.lighting.is_none_or(|g| g.full_samples),
+        ..settings
+    };
+    let tracer = CorrectionTracer::new(scene, &tracers.primary, base, sample_settings);
     let reference_tracer = lit
         .as_ref()
         .map(|(_, r)| CorrectionTracer::new(scene, &tracers.primary, r, settings));
@@ -598,6 +618,7 @@ pub fn evaluate_path(
             budget: Budget::Samples(0),
             error: base_err,
             cache_size: 0,
+            worse_pixels: None,
         });
         let analyze_now = (frame - range.start) % config.analyze_every == 0;
         for sim in &mut sims {
@@ -623,6 +644,16 @@ pub fn evaluate_path(
                 budget: sim.budget,
                 error: e,
                 cache_size: sim.corrector.cache().len(),
+                worse_pixels: (e.psnr < base_err.psnr || e.flip > base_err.flip).then(|| {
+                    error_change(&Compared {
+                        reference_srgb: &f.reference_srgb,
+                        reference: &f.reference,
+                        base: &f.base,
+                        corrected: &corrected,
+                        ids: &f.ids,
+                        width: config.width as usize,
+                    })
+                }),
             });
             if frame == show && sim.budget == shown_budget && sim.order == config.orders[0] {
                 middle = Some(MiddleFrame {

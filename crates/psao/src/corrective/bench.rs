@@ -192,6 +192,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: &black,
+                keep: None,
                 ids: &ids,
                 gbuffer: &g_b,
             },

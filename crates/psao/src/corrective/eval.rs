@@ -74,6 +74,10 @@ pub struct EvalArgs {
     /// Paths per point of the lit reference.
     #[arg(long, default_value_t = 64)]
     pub reference_paths: u32,
+    /// With `--lighting gi`: samples carry their full radiance as corrections relative to
+    /// the base at their pixel (the splatting before view-dependent samples, to compare).
+    #[arg(long)]
+    pub full_lit_samples: bool,
     /// Seeds, comma-separated: one run per seed (replaces `--seed`), reported as mean and
     /// spread over the seeds.
     #[arg(long, value_delimiter = ',')]
@@ -144,6 +148,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             bounces: args.bounces,
             base_paths: args.base_paths,
             reference_paths: args.reference_paths,
+            full_samples: args.full_lit_samples,
         }),
     };
     std::fs::create_dir_all(&args.out)

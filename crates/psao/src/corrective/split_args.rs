@@ -3,7 +3,8 @@
 
 use anyhow::{bail, Result};
 use psao_net::corrective::{
-    CorrectiveClientConfig, CorrectiveConfig, DEFAULT_ANALYZE_EVERY, DEFAULT_SAMPLES_PER_SECOND,
+    CorrectiveClientConfig, CorrectiveConfig, DEFAULT_ANALYZE_EVERY, DEFAULT_LIGHT_PATHS,
+    DEFAULT_SAMPLES_PER_SECOND,
 };
 
 /// Corrective-splatting options.
@@ -27,6 +28,10 @@ pub struct CorrectiveArgs {
     /// Server: AO rays per diffuse point the correction rays reach.
     #[arg(long, default_value_t = 8)]
     pub corrective_ao_spp: u32,
+    /// Server, when lit (`--lighting gi`): light paths per diffuse point the correction rays
+    /// reach (the diffuse light of what reflections and refractions show).
+    #[arg(long, default_value_t = DEFAULT_LIGHT_PATHS)]
+    pub corrective_paths: u32,
 }
 
 impl CorrectiveArgs {
@@ -53,6 +58,7 @@ impl CorrectiveArgs {
             samples_per_second: self.samples_per_second,
             frame_ms: self.correction_ms,
             ao_spp: self.corrective_ao_spp.clamp(1, 1024),
+            light_paths: self.corrective_paths.clamp(1, 1024),
             client: CorrectiveClientConfig {
                 analyze_every: self.analyze_every,
                 ..CorrectiveClientConfig::default()
