@@ -118,11 +118,6 @@ impl ClientState {
                     instance: delta.instance,
                 })?;
             validate_delta(grid.layout(), delta)?;
-            grid.has_room_for(delta.cells.len())
-                .map_err(|source| ClientError::Grid {
-                    instance: delta.instance,
-                    source,
-                })?;
         }
         Ok(())
     }

@@ -24,6 +24,11 @@ pub trait Codec: Send {
     /// may hold) to what the instance table allows, at most [`crate::MAX_DECODE_LIMIT`].
     /// Codecs without a configurable limit keep [`crate::MAX_DECODED_BYTES`].
     fn set_decode_limit(&mut self, _bytes: u64) {}
+    /// Heap bytes the codec keeps between updates (its encoder's and decoder's references,
+    /// allocated capacity); 0 for a stateless codec.
+    fn heap_bytes(&self) -> u64 {
+        0
+    }
 }
 
 /// A fresh codec by name (`"compact"` or `"paper"`).

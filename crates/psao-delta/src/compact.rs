@@ -158,6 +158,17 @@ impl Sent {
         self.cells.iter_mut().for_each(Vec::clear);
         self.lights.iter_mut().for_each(Vec::clear);
     }
+
+    /// Heap bytes of the records (allocated capacity, outer vectors included).
+    fn heap_bytes(&self) -> u64 {
+        fn bytes<T>(v: &Vec<T>) -> u64 {
+            (v.capacity() * std::mem::size_of::<T>()) as u64
+        }
+        fn nested<T>(v: &Vec<Vec<T>>) -> u64 {
+            bytes(v) + v.iter().map(bytes).sum::<u64>()
+        }
+        bytes(&self.transforms) + nested(&self.buckets) + nested(&self.cells) + nested(&self.lights)
+    }
 }
 
 /// Records ahead of the one being coded whose reference is fetched into the cache: the
@@ -641,6 +652,10 @@ impl Codec for CompactCodec {
 
     fn set_decode_limit(&mut self, bytes: u64) {
         self.decode_limit = bytes.min(MAX_DECODE_LIMIT);
+    }
+
+    fn heap_bytes(&self) -> u64 {
+        self.sent.heap_bytes() + self.reference.records.heap_bytes()
     }
 }
 
@@ -1199,6 +1214,23 @@ mod tests {
                 })
                 .collect(),
         }
+    }
+
+    /// Both references are counted, and grow with the highest slot coded.
+    #[test]
+    fn heap_bytes_count_both_references() {
+        let (mut enc, mut dec) = (CompactCodec::new(), CompactCodec::new());
+        assert_eq!(enc.heap_bytes(), 0);
+        let u = update(1, true, 10, 0..50);
+        let bytes = enc.encode(&u);
+        let sent = enc.heap_bytes();
+        // At least one 28-byte cell record per coded slot.
+        assert!(sent >= 50 * 28, "{sent}");
+        dec.decode(&bytes).unwrap();
+        assert!(dec.heap_bytes() >= 50 * 28);
+        let both = dec.heap_bytes();
+        dec.encode(&u);
+        assert!(dec.heap_bytes() >= both + 50 * 28);
     }
 
     #[test]

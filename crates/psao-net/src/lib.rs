@@ -20,6 +20,7 @@ pub mod http;
 pub mod io;
 pub mod pipeline;
 pub mod priority;
+pub mod process_memory;
 pub mod relit;
 mod resolution;
 pub mod scale;

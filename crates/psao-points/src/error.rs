@@ -99,12 +99,6 @@ pub enum PointsError {
         /// Most entries a table holds.
         max: usize,
     },
-    /// A mirror's point arena would hold more records than it can address.
-    #[error("point arena full: at most {max} records")]
-    ArenaFull {
-        /// Most records an arena holds.
-        max: usize,
-    },
     /// A point location that does not hold a point.
     #[error("no point at cell slot {slot}, index {index}")]
     NoSuchPoint {

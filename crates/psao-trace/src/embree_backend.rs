@@ -10,6 +10,9 @@ use embree3::{
     BufferUsage, BuildQuality, Device, Format, Geometry, GeometryKind, Hit16, IntersectContext,
     Ray16, RayHit16, Scene, SceneFlags, ValidMask, ValidMaskN, INVALID_ID,
 };
+use std::sync::atomic::{AtomicI64, Ordering};
+use std::sync::Arc;
+
 use glam::{Affine3A, Mat4, Vec3};
 use psao_scene::Scene as PsaoScene;
 
@@ -40,6 +43,8 @@ pub(crate) struct EmbreeTracer {
     meshes: Vec<Option<MeshScene>>,
     /// Per scene instance: whether it has a top-level geometry and whether it is enabled.
     attached: Vec<Option<bool>>,
+    /// Bytes Embree holds, by its memory monitor (allocations minus frees).
+    allocated: Arc<AtomicI64>,
     _device: Device,
 }
 
@@ -126,6 +131,12 @@ impl EmbreeTracer {
     /// Builds one scene per included mesh and the instancing top scene.
     pub(crate) fn new(scene: &PsaoScene, included: &[bool]) -> Result<Self, TraceError> {
         let device = new_device()?;
+        let allocated = Arc::new(AtomicI64::new(0));
+        let counter = Arc::clone(&allocated);
+        device.set_memory_monitor_function(move |bytes, _post| {
+            counter.fetch_add(bytes as i64, Ordering::Relaxed);
+            true
+        });
         let mut meshes = scene
             .meshes
             .iter()
@@ -175,8 +186,15 @@ impl EmbreeTracer {
             top,
             meshes,
             attached,
+            allocated,
             _device: device,
         })
+    }
+
+    /// Bytes Embree holds for this tracer (its memory monitor's count: BVHs, vertex and index
+    /// buffers, scenes).
+    pub(crate) fn allocated_bytes(&self) -> u64 {
+        self.allocated.load(Ordering::Relaxed).max(0) as u64
     }
 
     pub(crate) fn set_instance_transform(&mut self, instance: usize, transform: Affine3A) {

@@ -67,6 +67,16 @@ impl Tracer {
         })
     }
 
+    /// Bytes the backend's structure holds, where the backend counts them: Embree's own count
+    /// of its allocations (BVHs, buffers, scenes); `None` for obvhs.
+    pub fn structure_bytes(&self) -> Option<u64> {
+        match &self.inner {
+            Inner::Obvhs(_) => None,
+            #[cfg(feature = "embree")]
+            Inner::Embree(t) => Some(t.allocated_bytes()),
+        }
+    }
+
     /// The backend holding the structure.
     pub fn backend(&self) -> Backend {
         self.backend

@@ -300,3 +300,27 @@ fn empty_and_invalid_scenes() {
         ));
     }
 }
+
+/// Embree counts what it holds (at least the copied vertices and triangles); obvhs does not.
+#[test]
+fn embree_counts_its_structure_bytes() {
+    let s = scene(
+        vec![unit_cube()],
+        vec![
+            instance(0, Affine3A::IDENTITY),
+            instance(0, Affine3A::IDENTITY),
+        ],
+    );
+    for backend in Backend::compiled() {
+        let t = Tracer::new(backend, &s, GeometryMode::Primary).unwrap();
+        match backend {
+            Backend::Obvhs => assert_eq!(t.structure_bytes(), None),
+            Backend::Embree => {
+                let mesh = &s.meshes[0];
+                let copied = 12 * (mesh.positions.len() + mesh.indices.len()) as u64;
+                let bytes = t.structure_bytes().unwrap();
+                assert!(bytes >= copied, "{bytes} < {copied}");
+            }
+        }
+    }
+}

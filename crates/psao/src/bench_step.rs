@@ -3,7 +3,9 @@
 //! frame's updates are encoded for the clients during the next step, as `psao serve` does.
 //! Reports wall ms per frame with the step's phases, and the process's CPU ms per frame.
 //! Without a network or client processes beside it, this is a quieter measure of the
-//! server's part of `psao bench serve`.
+//! server's part of `psao bench serve`. It also itemises the process's whole resident size
+//! ([`crate::memory_account`]): server structures, scene, tracer, the clients' codec
+//! references, the first client's mirror, other heap, executable, allocator slack.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -16,10 +18,12 @@ use serde::Serialize;
 
 use crate::args::Resolution;
 use crate::bench_serve::LoadArgs;
+use crate::memory_account::{itemise, scene_heap_bytes, Item};
 use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
 use psao_net::cpu_time::cpu_seconds;
 use psao_net::pipeline::CLIENT_HZ;
+use psao_net::process_memory::{malloc_stats, release_free_memory, resident};
 use psao_net::serve::{code, coding_plan, mean, percentile};
 
 /// Rays in the set `bench trace`'s reference rate is measured on.
@@ -95,6 +99,17 @@ pub struct BenchStepReport {
     pub bytes_per_point: f64,
     /// The process's peak resident memory per stored point.
     pub peak_bytes_per_point: f64,
+    /// Resident bytes per stored point once the server is started.
+    pub started_bytes_per_point: f64,
+    /// The same once the free memory start-up left behind is given back
+    /// ([`release_free_memory`], as `psao serve` does).
+    pub started_released_bytes_per_point: f64,
+    /// The resident memory after the last frame item by item, adding up to
+    /// `bytes_per_point` ([`crate::memory_account::itemise`]).
+    pub resident: Vec<MemoryRow>,
+    /// Free bytes the C allocator holds after the last frame, per stored point (resident or
+    /// not; part of the slack row when resident).
+    pub malloc_free_bytes_per_point: f64,
     /// Heap bytes per stored point of each server structure after the last frame.
     pub memory: Vec<MemoryRow>,
     /// Points in the first client's mirror after the last frame (what its views reached).
@@ -114,31 +129,15 @@ pub struct BenchStepReport {
     pub trace_ratio: f64,
 }
 
-/// One server structure's memory in the report.
+/// One structure's memory in the report.
 #[derive(Debug, Default, Serialize)]
 pub struct MemoryRow {
     /// What it holds.
-    pub name: &'static str,
+    pub name: String,
     /// Heap bytes.
     pub bytes: u64,
     /// Heap bytes per stored point.
     pub bytes_per_point: f64,
-}
-
-/// Resident and peak resident bytes of this process, from `/proc/self/status` (Linux;
-/// `None` elsewhere).
-fn resident_bytes() -> Option<(u64, u64)> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let kib = |key: &str| -> Option<u64> {
-        let line = status.lines().find(|l| l.starts_with(key))?;
-        line[key.len()..]
-            .trim()
-            .trim_end_matches("kB")
-            .trim()
-            .parse()
-            .ok()
-    };
-    Some((kib("VmRSS:")? * 1024, kib("VmHWM:")? * 1024))
 }
 
 /// Run `psao bench step`.
@@ -166,6 +165,9 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     )
     .context("cannot start the server (point generation or tracer)")?;
     let startup_s = started.elapsed().as_secs_f64();
+    let started_rss = resident().map_or(0, |r| r.bytes);
+    release_free_memory();
+    let released_rss = resident().map_or(0, |r| r.bytes);
     let ids: Vec<ClientId> = (0..args.load.clients)
         .map(|_| server.add_client())
         .collect();
@@ -231,17 +233,48 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         (Some(a), Some(b)) => (b - a) * 1e3 / n,
         _ => 0.0,
     };
-    let (rss, peak) = resident_bytes().unwrap_or((0, 0));
+    let process = resident().unwrap_or_default();
+    let malloc = malloc_stats();
     let points = server.point_count();
     let per_point = |bytes: u64| bytes as f64 / points.max(1) as f64;
-    let memory = server
-        .memory_use()
-        .into_iter()
-        .map(|p| MemoryRow {
-            name: p.name,
+    let row = |name: String, bytes: u64| MemoryRow {
+        name,
+        bytes,
+        bytes_per_point: per_point(bytes),
+    };
+    let server_parts = server.memory_use();
+    let memory = server_parts
+        .iter()
+        .map(|p| row(p.name.to_string(), p.bytes))
+        .collect();
+    let mut heap: Vec<Item> = server_parts
+        .iter()
+        .map(|p| Item {
+            name: format!("server: {}", p.name),
             bytes: p.bytes,
-            bytes_per_point: per_point(p.bytes),
         })
+        .collect();
+    heap.extend([
+        Item {
+            name: "scene (meshes, textures, animation)".into(),
+            bytes: scene_heap_bytes(&input.scene),
+        },
+        Item {
+            name: format!("codec references ({} clients)", ids.len()),
+            bytes: codecs.iter().map(|c| c.heap_bytes()).sum(),
+        },
+        Item {
+            name: "first client's mirror".into(),
+            bytes: mirror.heap_bytes(),
+        },
+    ]);
+    let tracer = server
+        .tracer()
+        .structure_bytes()
+        .map(|bytes| (bytes, tracer_buffer_bytes(&input.scene)));
+    let resident_items = itemise(process, malloc, heap, tracer)
+        .into_iter()
+        .map(|i| row(i.name, i.bytes))
         .collect();
     let step_trace_mrays_s = rays as f64 / (sums.trace_ms * 1e-3).max(1e-9) / 1e6;
     let bench_trace_mrays_s =
@@ -269,8 +302,12 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
             / ((n - 1.0).max(1.0) * f64::from(args.load.clients)),
         startup_s,
         points,
-        bytes_per_point: per_point(rss),
-        peak_bytes_per_point: per_point(peak),
+        bytes_per_point: per_point(process.bytes),
+        peak_bytes_per_point: per_point(process.peak),
+        started_bytes_per_point: per_point(started_rss),
+        started_released_bytes_per_point: per_point(released_rss),
+        resident: resident_items,
+        malloc_free_bytes_per_point: malloc.map_or(0.0, |m| per_point(m.free)),
         memory,
         client_points: mirror.point_count(),
         client_bytes_per_point: mirror.heap_bytes() as f64 / mirror.point_count().max(1) as f64,
@@ -279,7 +316,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
             .named()
             .into_iter()
             .map(|(name, bytes)| MemoryRow {
-                name,
+                name: name.to_string(),
                 bytes,
                 bytes_per_point: bytes as f64 / mirror.point_count().max(1) as f64,
             })
@@ -322,9 +359,14 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         report.trace_ratio,
         report.bench_trace_mrays_s
     );
-    for m in &report.memory {
+    println!(
+        "resident after start-up {:.1} bytes per point, {:.1} once its free memory was given \
+         back; after the last frame, item by item:",
+        report.started_bytes_per_point, report.started_released_bytes_per_point
+    );
+    for m in &report.resident {
         println!(
-            "  {:<30} {:>8.1} bytes per point",
+            "  {:<62} {:>8.1} bytes per point",
             m.name, m.bytes_per_point
         );
     }
@@ -342,6 +384,23 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         write_json(json, &report)?;
     }
     Ok(())
+}
+
+/// Bytes of the vertex and index buffers Embree copies the AO geometry into (allocated
+/// through malloc, unlike its BVH nodes): 12 per vertex and per triangle of the meshes AO rays
+/// hit.
+fn tracer_buffer_bytes(scene: &psao_scene::Scene) -> u64 {
+    scene
+        .meshes
+        .iter()
+        .filter(|m| {
+            !scene
+                .materials
+                .get(m.material)
+                .is_some_and(|mat| mat.skipped_by_rays())
+        })
+        .map(|m| 12 * (m.positions.len() + m.indices.len()) as u64)
+        .sum()
 }
 
 /// Encode each group's update with one client's codec and advance the others' (as

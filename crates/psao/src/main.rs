@@ -15,6 +15,7 @@ mod demo;
 mod demo_relight;
 mod eval;
 mod lpips_weights;
+mod memory_account;
 mod paths_cmd;
 mod png_io;
 mod progress;

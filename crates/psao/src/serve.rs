@@ -142,11 +142,15 @@ pub(crate) fn scene_server(
         },
     )?;
     config.server.lighting = lighting;
-    start_server(
+    let server = start_server(
         &input.scene,
         config.server,
         input.medium(),
         config.points_cache.as_deref(),
     )
-    .context("cannot start the server (point generation or tracer)")
+    .context("cannot start the server (point generation or tracer)")?;
+    // Start-up's temporary buffers are freed by now: give their pages back (docs/BENCHMARKS.md,
+    // "The server process").
+    psao_net::process_memory::release_free_memory();
+    Ok(server)
 }
