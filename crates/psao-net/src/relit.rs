@@ -2,9 +2,10 @@
 //! characters of the scene shaded with the relighting models the server sends
 //! ([`psao_wire::RelightingMsg`]), frame by frame from the client's own pose.
 //!
-//! Per frame and character, a [`ServedRelighter`] synthesises every vertex's lobes from the
-//! pose and gives its self-shadowing `o_c` per colour channel under the served lighting and
-//! its self-visibility `a` ([`psao_prt::served`], the computation the browser shares).
+//! Per frame and character, a [`psao_prt::served::ServedRelighter`] (through
+//! [`ServedCharacter`]) synthesises every vertex's lobes from the pose and gives its
+//! self-shadowing `o_c` per colour channel under the served lighting and its
+//! self-visibility `a` ([`psao_prt::served`], the computation the browser shares).
 //! Both are interpolated over the rasterized triangles. The points the server traces on the
 //! character's surfaces see the scene *and* the character, so their AO `A` (and their
 //! irradiance) already count the character's own occlusion. A relit pixel's AO or irradiance
@@ -15,12 +16,9 @@
 //! shadow itself (`o = a = 1`) keeps the points' shading unchanged.
 
 use glam::{Affine3A, Vec3};
-use psao_prt::character::{normal_matrix, Character};
 use psao_prt::groups::skinned_groups;
-use psao_prt::model_file;
-use psao_prt::runtime::FramePose;
-use psao_prt::served::{pixel_factor, ServedRelighter, VertexValues, NOT_RELIT};
-use psao_prt::shade::Mode;
+use psao_prt::served::{pixel_factor, VertexValues, NOT_RELIT};
+use psao_prt::served_character::{InstanceGeometry, ServedCharacter};
 use psao_prt::PrtError;
 use psao_raster::{GBuffer, InstancePose};
 use psao_scene::Scene;
@@ -29,24 +27,11 @@ use rayon::prelude::*;
 
 use crate::NetError;
 
-/// One served character, ready to relight.
-struct RelitCharacter {
-    character: Character,
-    /// Per instance of the character's group: its index in the scene.
-    instances: Vec<usize>,
-    relighter: ServedRelighter,
-    /// Scratch: world positions and normals of the relit vertices.
-    positions: Vec<Vec3>,
-    normals: Vec<Vec3>,
-    /// The relit vertices' values in character order.
-    values: Vec<VertexValues>,
-}
-
 /// The relit characters of a scene on a client, and the values of the frame last relit.
 #[derive(Default)]
 pub struct RelitCharacters {
     /// By served index.
-    characters: Vec<Option<RelitCharacter>>,
+    characters: Vec<Option<ServedCharacter>>,
     /// Per scene instance: for relit instances, one [`VertexValues`] per mesh vertex.
     values: Vec<Option<Vec<VertexValues>>>,
 }
@@ -75,31 +60,12 @@ impl RelitCharacters {
                     "the scene has no such skinned character".into(),
                 ))
             })?;
-        let character = Character::new(group.scene, None).map_err(fail)?;
-        let model = model_file::from_bytes(&msg.model).map_err(fail)?;
-        if model.vertices != character.vertex_count() || model.joints != character.joint_count() {
-            return Err(fail(PrtError::WrongCharacter {
-                model: model.character.clone(),
-                model_vertices: model.vertices,
-                model_joints: model.joints,
-                character: format!("character {index} of the scene"),
-                vertices: character.vertex_count(),
-                joints: character.joint_count(),
-            }));
-        }
-        let relighter = ServedRelighter::new(model, character.rig(), Mode::Diffuse, &msg.lighting)
-            .map_err(fail)?;
+        let character =
+            ServedCharacter::new(index, &group, &msg.model, &msg.lighting).map_err(fail)?;
         if self.characters.len() <= index {
             self.characters.resize_with(index + 1, || None);
         }
-        self.characters[index] = Some(RelitCharacter {
-            character,
-            instances: group.instances,
-            relighter,
-            positions: Vec::new(),
-            normals: Vec::new(),
-            values: Vec::new(),
-        });
+        self.characters[index] = Some(character);
         Ok(())
     }
 
@@ -115,16 +81,18 @@ impl RelitCharacters {
         self.values.resize(scene.instances.len(), None);
         for (index, slot) in self.characters.iter_mut().enumerate() {
             let Some(c) = slot else { continue };
-            c.gather(scene, poses);
-            let joint_local = c.character.joint_local(nodes);
-            let pose = FramePose {
-                joint_local: &joint_local,
-                positions: &c.positions,
-                normals: &c.normals,
-                transform: Affine3A::IDENTITY,
+            let geometry = |i: usize| {
+                let pose = poses
+                    .get(i)
+                    .copied()
+                    .unwrap_or(InstancePose::rest(&scene.instances[i]));
+                InstanceGeometry {
+                    transform: pose.transform,
+                    positions: pose.positions,
+                    normals: pose.normals,
+                }
             };
-            c.relighter
-                .relight(&pose, eye, &mut c.values)
+            c.relight(scene, nodes, geometry, eye)
                 .map_err(|source| NetError::Relight {
                     character: index as u32,
                     source,
@@ -167,52 +135,5 @@ impl RelitCharacters {
         }
         let ao = ao.get(i).copied().unwrap_or(1.0);
         Some(pixel_factor(Vec3::new(v[0], v[1], v[2]), v[3], ao))
-    }
-}
-
-impl RelitCharacter {
-    /// The relit vertices' world positions and normals from the rasterized poses (an
-    /// instance's own mesh where its pose has none).
-    fn gather(&mut self, scene: &Scene, poses: &[InstancePose<'_>]) {
-        self.positions.clear();
-        self.normals.clear();
-        for (part, vertices) in self.character.parts() {
-            let instance = self.instances[part];
-            let mesh = &scene.meshes[scene.instances[instance].mesh];
-            let pose = poses
-                .get(instance)
-                .copied()
-                .unwrap_or(InstancePose::rest(&scene.instances[instance]));
-            let (p, n) = (
-                pose.positions.unwrap_or(&mesh.positions),
-                pose.normals.unwrap_or(&mesh.normals),
-            );
-            let to_normal = normal_matrix(pose.transform);
-            for &v in vertices {
-                let v = v as usize;
-                self.positions.push(
-                    pose.transform
-                        .transform_point3(p.get(v).copied().unwrap_or(Vec3::ZERO)),
-                );
-                let normal = n.get(v).copied().unwrap_or(Vec3::Z);
-                self.normals
-                    .push((to_normal * normal).normalize_or(Vec3::Z));
-            }
-        }
-    }
-
-    /// The frame's [`VertexValues`] onto the instances' mesh vertices.
-    fn scatter(&self, scene: &Scene, values: &mut [Option<Vec<VertexValues>>]) {
-        let mut relit = self.values.iter();
-        for (part, vertices) in self.character.parts() {
-            let instance = self.instances[part];
-            let count = scene.meshes[scene.instances[instance].mesh].positions.len();
-            let out = values[instance].get_or_insert_with(Vec::new);
-            out.clear();
-            out.resize(count, NOT_RELIT);
-            for (&v, x) in vertices.iter().zip(&mut relit) {
-                out[v as usize] = *x;
-            }
-        }
     }
 }

@@ -27,6 +27,7 @@ pub mod reference;
 pub mod rotation;
 pub mod runtime;
 pub mod served;
+pub mod served_character;
 pub mod sh;
 pub mod shade;
 pub mod shrink;

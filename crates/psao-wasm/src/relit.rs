@@ -1,23 +1,22 @@
 //! Relit characters in the browser (docs/RELIGHTING.md, "Served characters"): the served
 //! scene rebuilt as a psao-scene [`Scene`] from `/scene.glb` (web/src/relit.ts hands over its
 //! nodes, meshes, skins, instances and playing clips), posed by psao-scene's [`Animator`] as
-//! `psao view` poses it, and each served character relit by psao-prt's [`ServedRelighter`]
-//! from its model file (`/characters/N.prt`) and the served lighting.
+//! `psao view` poses it, and each served character relit by psao-prt's
+//! [`psao_prt::served::ServedRelighter`] from its model file (`/characters/N.prt`) and the
+//! served lighting.
 //!
 //! The characters are the scene's [`skinned_groups`] in their order, as on the server and in
-//! `psao view` (`psao_net::relit`, whose per-frame steps this module takes over: the relit
-//! vertices' world positions and normals from the client's pose at the transforms of the last
-//! server update, the joints' local transforms from the pose's nodes, the values scattered
-//! onto each instance's mesh vertices). A renderer interpolates the values over its triangles
-//! and multiplies a relit pixel's AO or irradiance by [`psao_prt::served::pixel_factor`].
+//! `psao view`, and each frame goes through the same [`ServedCharacter`] steps as
+//! `psao_net::relit`'s: the relit vertices' world positions and normals from the client's
+//! pose at the transforms of the last server update, the joints' local transforms from the
+//! pose's nodes, the values scattered onto each instance's mesh vertices. A renderer
+//! interpolates the values over its triangles and multiplies a relit pixel's AO or
+//! irradiance by [`psao_prt::served::pixel_factor`].
 
 use glam::{Affine3A, Vec3};
-use psao_prt::character::{normal_matrix, Character};
 use psao_prt::groups::{skinned_groups, SkinnedGroup};
-use psao_prt::model_file;
-use psao_prt::runtime::FramePose;
-use psao_prt::served::{ServedRelighter, VertexValues, NOT_RELIT};
-use psao_prt::shade::Mode;
+use psao_prt::served::VertexValues;
+use psao_prt::served_character::{InstanceGeometry, ServedCharacter};
 use psao_scene::{
     AnimatedProperty, Animation, Animator, Channel, Instance, Interpolation, Mesh, Node, Scene,
     ScenePose, Skin,
@@ -68,17 +67,6 @@ pub struct MeshData {
     pub weights: Vec<[f32; 4]>,
 }
 
-/// One served character, ready to relight (the shape of `psao_net::relit`'s).
-struct RelitCharacter {
-    character: Character,
-    /// Per part of the character: its instance in the scene.
-    instances: Vec<usize>,
-    relighter: ServedRelighter,
-    positions: Vec<Vec3>,
-    normals: Vec<Vec3>,
-    values: Vec<VertexValues>,
-}
-
 /// The served scene, its pose and the relit characters with the values of the last frame.
 #[derive(Default)]
 pub struct RelitScene {
@@ -86,7 +74,7 @@ pub struct RelitScene {
     animator: Option<Animator>,
     groups: Vec<SkinnedGroup>,
     pose: ScenePose,
-    characters: Vec<Option<RelitCharacter>>,
+    characters: Vec<Option<ServedCharacter>>,
     /// Per scene instance: for relit instances, one [`VertexValues`] per mesh vertex.
     values: Vec<Option<Vec<VertexValues>>>,
 }
@@ -221,33 +209,13 @@ impl RelitScene {
             .groups
             .get(index as usize)
             .ok_or_else(|| fail("the scene has no such skinned character".into()))?;
-        let character =
-            Character::new(group.scene.clone(), None).map_err(|e| fail(e.to_string()))?;
-        let model = model_file::from_bytes(model).map_err(|e| fail(e.to_string()))?;
-        if model.vertices != character.vertex_count() || model.joints != character.joint_count() {
-            return Err(fail(format!(
-                "the model was trained on `{}` ({} vertices, {} joints), the scene's character has {} vertices, {} joints",
-                model.character,
-                model.vertices,
-                model.joints,
-                character.vertex_count(),
-                character.joint_count()
-            )));
-        }
-        let vertices = character.vertex_count();
-        let relighter = ServedRelighter::new(model, character.rig(), Mode::Diffuse, lighting)
+        let character = ServedCharacter::new(index as usize, group, model, lighting)
             .map_err(|e| fail(e.to_string()))?;
+        let vertices = character.vertex_count();
         if self.characters.len() <= index as usize {
             self.characters.resize_with(index as usize + 1, || None);
         }
-        self.characters[index as usize] = Some(RelitCharacter {
-            character,
-            instances: group.instances.clone(),
-            relighter,
-            positions: Vec::new(),
-            normals: Vec::new(),
-            values: Vec::new(),
-        });
+        self.characters[index as usize] = Some(character);
         Ok(vertices)
     }
 
@@ -266,16 +234,21 @@ impl RelitScene {
         animator.pose_into(time, &mut self.pose);
         for (index, slot) in self.characters.iter_mut().enumerate() {
             let Some(c) = slot else { continue };
-            c.gather(&self.scene, &self.pose, transforms);
-            let joint_local = c.character.joint_local(&self.pose.nodes);
-            let pose = FramePose {
-                joint_local: &joint_local,
-                positions: &c.positions,
-                normals: &c.normals,
-                transform: Affine3A::IDENTITY,
+            let (scene, pose) = (&self.scene, &self.pose);
+            let geometry = |i: usize| {
+                let own = pose.instance(i);
+                InstanceGeometry {
+                    transform: transforms
+                        .get(i)
+                        .copied()
+                        .flatten()
+                        .or(own.map(|p| p.transform))
+                        .unwrap_or(scene.instances[i].transform),
+                    positions: own.and_then(|o| o.positions),
+                    normals: own.and_then(|o| o.normals),
+                }
             };
-            c.relighter
-                .relight(&pose, eye, &mut c.values)
+            c.relight(scene, &pose.nodes, geometry, eye)
                 .map_err(|e| RelitError::Character {
                     character: index as u32,
                     message: e.to_string(),
@@ -296,63 +269,13 @@ impl RelitScene {
         self.characters
             .iter()
             .flatten()
-            .map(|c| c.character.vertex_count())
+            .map(ServedCharacter::vertex_count)
             .sum()
     }
 
     /// The scene's characters (its skinned node groups), once finished.
     pub fn character_count(&self) -> usize {
         self.groups.len()
-    }
-}
-
-impl RelitCharacter {
-    /// The relit vertices' world positions and normals: the pose's skinned vertices (the
-    /// mesh's own where the instance does not deform) at the given transform, else the
-    /// pose's.
-    fn gather(&mut self, scene: &Scene, pose: &ScenePose, transforms: &[Option<Affine3A>]) {
-        self.positions.clear();
-        self.normals.clear();
-        for (part, vertices) in self.character.parts() {
-            let instance = self.instances[part];
-            let mesh = &scene.meshes[scene.instances[instance].mesh];
-            let own = pose.instance(instance);
-            let transform = transforms
-                .get(instance)
-                .copied()
-                .flatten()
-                .or(own.map(|p| p.transform))
-                .unwrap_or(scene.instances[instance].transform);
-            let p = own.and_then(|o| o.positions).unwrap_or(&mesh.positions[..]);
-            let n = own.and_then(|o| o.normals).unwrap_or(&mesh.normals[..]);
-            let to_normal = normal_matrix(transform);
-            for &v in vertices {
-                let v = v as usize;
-                self.positions
-                    .push(transform.transform_point3(p.get(v).copied().unwrap_or(Vec3::ZERO)));
-                let normal = n.get(v).copied().unwrap_or(Vec3::Z);
-                self.normals
-                    .push((to_normal * normal).normalize_or(Vec3::Z));
-            }
-        }
-    }
-
-    /// The frame's values onto the instances' mesh vertices.
-    fn scatter(&self, scene: &Scene, values: &mut [Option<Vec<VertexValues>>]) {
-        let mut relit = self.values.iter();
-        for (part, vertices) in self.character.parts() {
-            let instance = self.instances[part];
-            let count = scene.meshes[scene.instances[instance].mesh].positions.len();
-            let Some(slot) = values.get_mut(instance) else {
-                continue;
-            };
-            let out = slot.get_or_insert_with(Vec::new);
-            out.clear();
-            out.resize(count, NOT_RELIT);
-            for (&v, x) in vertices.iter().zip(&mut relit) {
-                out[v as usize] = *x;
-            }
-        }
     }
 }
 
@@ -391,6 +314,7 @@ mod tests {
     use super::*;
     use glam::{Mat4, Quat};
     use psao_prt::model::PoseModel;
+    use psao_prt::model_file;
 
     /// A unit square on two joints (its upper edge on the second, 0.5 up) that a clip bends
     /// over 1 s, at the origin, and a second, rigid square beside it.
