@@ -112,18 +112,16 @@ test("in chromium the viewer's state hash equals the server's", { timeout: 120_0
   const { child, addr } = await serve("127.0.0.1:0");
   const page = await browser.newPage();
   try {
-    await page.goto(`http://${addr}/?verify=1`);
+    // The AO view (`mode=ao`) shows the geometry whatever the lighting: the composite of a
+    // lit session is dark where no irradiance record has arrived yet (the hall has no direct
+    // light), and its fill of such pixels re-runs the block pass at up to 64 neighbours, which
+    // software WebGL (SwiftShader) draws at seconds per full-window frame (docs/LIGHTING.md).
+    await page.goto(`http://${addr}/?verify=1&mode=ao`);
     await until(page, "the welcome", (s) => s.sessions === 1);
     assert.equal(await drive(addr, 120), 0);
     const s = await until(page, "verified updates", (s) => s.verified >= 3);
     assert.equal(s.mismatches, 0);
     await until(page, "a WebGL2 frame", (s) => s.drawn > 0);
-    // The AO view (key 4) shows the geometry whatever the lighting: the composite of a lit
-    // session is dark where no irradiance record has arrived yet (the hall has no direct
-    // light), so it says nothing about whether the scene was drawn.
-    await page.keyboard.press("4");
-    const drawnBefore = (await statusOf(page)).drawn;
-    await until(page, "a frame in the AO view", (s) => s.mode === 3 && s.drawn > drawnBefore + 1);
     // Share of the canvas the scene covers (pixels far from the clear colour).
     const covered = await page.evaluate(() => {
       const view = document.getElementById("view") as HTMLCanvasElement;
@@ -138,7 +136,6 @@ test("in chromium the viewer's state hash equals the server's", { timeout: 120_0
       return n / (c.width * c.height);
     });
     assert.ok(covered > 0.05, `the scene covers ${covered} of the canvas`);
-    await page.keyboard.press("1");
     // The viewer opens on the scene's first camera path; dragging takes the camera over from
     // it, W flies it forward and Space gives it back to the path.
     const opened = await statusOf(page);
