@@ -196,7 +196,8 @@ test("in chromium the viewer reconnects to a restarted server and converges", { 
   let server = await serve(listen);
   const page = await browser.newPage();
   try {
-    await page.goto(`http://${server.addr}/?verify=1`);
+    // The AO view, as in the first test: these sessions test the connection, not the lighting.
+    await page.goto(`http://${server.addr}/?verify=1&mode=ao`);
     await until(page, "the first session", (s) => s.sessions === 1 && s.updates >= 1);
     server.child.kill();
     await new Promise((r) => server.child.once("exit", r));
@@ -218,7 +219,8 @@ test("in chromium the viewer moves to the next server of ?edges= when its own di
   const b = await serve("127.0.0.1:0");
   const page = await browser.newPage();
   try {
-    await page.goto(`http://${a.addr}/?verify=1&edges=${b.addr},not%20a%20host`);
+    // The AO view, as in the first test: these sessions test the connection, not the lighting.
+    await page.goto(`http://${a.addr}/?verify=1&mode=ao&edges=${b.addr},not%20a%20host`);
     await until(page, "the first session", (s) => s.sessions === 1 && s.updates >= 1 && s.edge === a.addr);
     a.child.kill();
     const before = (await statusOf(page)).verified;
