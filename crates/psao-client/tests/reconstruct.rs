@@ -372,11 +372,9 @@ fn irradiance_reconstructs_constants_and_keeps_zero_at_zero() {
     assert!(e.iter().all(|&v| v == Vec3::ZERO));
 }
 
-#[test]
-fn irradiance_fills_pixels_without_a_compatible_point_from_their_neighbours() {
-    // A lit plane and a cube on it whose cells never arrived: the cube's pixels find no
-    // point, so their AO is 1 and, without the fill, their irradiance would be 0 (black).
-    let c = Vec3::new(1.5, 0.75, 0.25);
+/// The plane and cube of `common::scene` with the plane's points lit by `light` (of the
+/// point's position) and the cube's cells never sent: a client state holding only the plane.
+fn lit_plane_and_pointless_cube(light: impl Fn(Vec3) -> Vec3) -> (Scene, ClientState) {
     let scene = common::scene(2.0, 1);
     let points = common::points(&scene, 512.0, 11);
     let mut grids: Vec<_> = common::grids(&points, pattern)
@@ -388,8 +386,17 @@ fn irradiance_fills_pixels_without_a_compatible_point_from_their_neighbours() {
     let mut state = ClientState::new(&table);
     let snapshot = common::snapshot(1, &grids, common::transforms(&scene));
     state
-        .apply(&common::with_lights(snapshot, &grids, |_| c))
+        .apply(&common::with_lights(snapshot, &grids, light))
         .unwrap();
+    (scene, state)
+}
+
+#[test]
+fn irradiance_fills_pixels_without_a_compatible_point_from_their_neighbours() {
+    // A lit plane and a cube on it whose cells never arrived: the cube's pixels find no
+    // point, so their AO is 1 and, without the fill, their irradiance would be 0 (black).
+    let c = Vec3::new(1.5, 0.75, 0.25);
+    let (scene, state) = lit_plane_and_pointless_cube(|_| c);
     let g = render(&scene, &common::camera(), 160, 120);
     let settings = ReconstructSettings::default();
     let (mut ao, mut e) = (Vec::new(), Vec::new());
@@ -422,20 +429,7 @@ fn filled_irradiance_is_a_normalised_mean_of_the_donors() {
     // cube pixel, facing up like the plane or sideways, fills with a convex combination of
     // `c` and `d` (never black, never outside their range).
     let (c, d) = (Vec3::new(1.0, 0.5, 0.25), Vec3::new(0.25, 0.5, 1.0));
-    let scene = common::scene(2.0, 1);
-    let points = common::points(&scene, 512.0, 11);
-    let mut grids: Vec<_> = common::grids(&points, pattern)
-        .into_iter()
-        .map(|(g, _)| g)
-        .collect();
-    let table = common::table(&points, &grids);
-    grids[1] = psao_points::InstanceGrid::new(*grids[1].layout());
-    let mut state = ClientState::new(&table);
-    let snapshot = common::snapshot(1, &grids, common::transforms(&scene));
-    let light = |p: Vec3| if p.x > 0.0 { c } else { d };
-    state
-        .apply(&common::with_lights(snapshot, &grids, light))
-        .unwrap();
+    let (scene, state) = lit_plane_and_pointless_cube(|p| if p.x > 0.0 { c } else { d });
     let g = render(&scene, &common::camera(), 160, 120);
     let (mut ao, mut e) = (Vec::new(), Vec::new());
     psao_client::reconstruct_lit_into(&state, &g, &ReconstructSettings::default(), &mut ao, &mut e);
