@@ -40,6 +40,12 @@ export interface SessionHandler {
   closed(reason: string, fatal: boolean): void;
 }
 
+/// Share of the page's time that checking the server's state hash may take, as in
+/// `psao view` (`psao_net::hash_pacing`, docs/PROTOCOL.md): a hash reads the whole state,
+/// so on a large scene an update's hash is checked only once the last check's cost is this
+/// share of the time since it started; a small scene's is checked at every update.
+const HASH_SHARE = 0.1;
+
 /// Settings of a session.
 export interface SessionOptions {
   url: string;
@@ -65,6 +71,8 @@ export class Session {
   private lastSent = 0;
   private lastAck = 0;
   private keepAlive: ReturnType<typeof setInterval> | null = null;
+  /// When the next hash check is due (ms, `performance.now()`).
+  private nextCheck = 0;
 
   constructor(
     private codec: Codec,
@@ -120,8 +128,10 @@ export class Session {
         this.decodeMs += performance.now() - t0;
         this.updates++;
         let verified = false;
-        if (m.delta.stateHash !== null) {
+        const start = performance.now();
+        if (m.delta.stateHash !== null && start >= this.nextCheck) {
           this.lastHash = this.state.stateHash();
+          this.nextCheck = start + (performance.now() - start) / HASH_SHARE;
           verified = this.lastHash === m.delta.stateHash;
           if (!verified) this.mismatches++;
         }

@@ -16,6 +16,7 @@ pub mod cpu_time;
 pub mod deadline;
 mod error;
 pub mod glb;
+mod hash_pacing;
 pub mod http;
 pub mod io;
 pub mod pipeline;

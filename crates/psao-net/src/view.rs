@@ -23,6 +23,7 @@ use tokio::sync::mpsc;
 use crate::convert::{camera_msg, client_decoder, table_of};
 use crate::corrective::{CorrectiveClient, CorrectiveClientConfig};
 use crate::cpu_time::cpu_seconds;
+use crate::hash_pacing::HashPacing;
 use crate::pipeline::{client_time, ClientFrame, ClientRenderer, CLIENT_HZ};
 use crate::transport::{connect, ReadError};
 use crate::view_analyzer::Analyzer;
@@ -90,10 +91,13 @@ pub struct ViewStats {
     pub reconnects: u32,
     /// Hash of the client's final buckets + cells.
     pub state_hash: String,
-    /// The server's hash at the last applied update (when it sent one).
+    /// The server's hash at the last applied update (when it carried one).
     pub server_state_hash: Option<String>,
     /// Updates whose server hash differed from the client's after applying.
     pub hash_mismatches: u32,
+    /// Server hashes compared: every one in lockstep; outside it as often as the
+    /// comparison's cost allows (`crate::hash_pacing`), and the last update's at the end.
+    pub hash_checks: u32,
     /// Bytes received.
     pub bytes: u64,
     /// Deltas and snapshots applied.
@@ -293,9 +297,10 @@ pub fn view(
         frames,
         mbit_s: client.bytes as f64 * 8.0 / seconds / 1e6,
         reconnects: client.sessions.saturating_sub(1),
-        state_hash: format!("{:016x}", client.state.state_hash()),
+        state_hash: format!("{:016x}", client.check_last_hash()),
         server_state_hash: client.server_hash.map(|h| format!("{h:016x}")),
         hash_mismatches: client.mismatches,
+        hash_checks: client.hash_checks,
         bytes: client.bytes,
         updates: client.updates,
         snapshots: client.snapshots,
@@ -330,8 +335,17 @@ struct Client {
     updates: u32,
     snapshots: u32,
     mismatches: u32,
+    /// Server hashes compared with this state's.
+    hash_checks: u32,
     last_frame: u64,
+    /// The server's hash of the last applied update's state (when it carried one).
     server_hash: Option<u64>,
+    /// Whether that hash is not compared yet.
+    unchecked: bool,
+    /// Whether the session is in lockstep (every server hash is then compared).
+    lockstep: bool,
+    /// When the next comparison is due outside lockstep.
+    hash_pacing: HashPacing,
     /// Lockstep: the latest client frame the server answered.
     answered: Option<u32>,
     record: Option<PathBuf>,
@@ -365,8 +379,12 @@ impl Default for Client {
             updates: 0,
             snapshots: 0,
             mismatches: 0,
+            hash_checks: 0,
             last_frame: 0,
             server_hash: None,
+            unchecked: false,
+            lockstep: false,
+            hash_pacing: HashPacing::default(),
             answered: None,
             record: None,
             recorded: 0,
@@ -403,6 +421,7 @@ impl Client {
                 self.sessions += 1;
                 self.ids.push(w.client_id);
                 self.answered = None;
+                self.lockstep = w.lockstep;
                 // A new session starts corrections afresh (the server's state is new too).
                 self.corrective = match self.corrective_config {
                     Some(c) => Some(CorrectiveClient::new(self.res.width, self.res.height, c)?),
@@ -513,11 +532,19 @@ impl Client {
         self.updates += 1;
         self.snapshots += u32::from(snapshot);
         self.last_frame = d.frame;
+        // The server's hash of this update's state, checked as often as its cost allows
+        // outside lockstep (crate::hash_pacing); one left unchecked at the end of the view
+        // is checked then ([`Client::check_last_hash`]).
+        self.server_hash = d.state_hash;
+        self.unchecked = false;
         if let Some(h) = d.state_hash {
-            self.server_hash = Some(h);
-            if h != self.state.state_hash() {
-                self.mismatches += 1;
-                tracing::error!("state differs from the server's after frame {}", d.frame);
+            let state = &self.state;
+            match self
+                .hash_pacing
+                .hash_if_due(self.lockstep, || state.state_hash())
+            {
+                Some(mine) => self.compare_hash(h, mine, d.frame),
+                None => self.unchecked = true,
             }
         }
         if d.client_frame.is_some() {
@@ -525,6 +552,27 @@ impl Client {
         }
         let _ = out.send(Outgoing::Send(Message::Ack(Ack { frame: d.frame })));
         Ok(())
+    }
+}
+
+impl Client {
+    fn compare_hash(&mut self, server: u64, mine: u64, frame: u64) {
+        self.hash_checks += 1;
+        if server != mine {
+            self.mismatches += 1;
+            tracing::error!("state differs from the server's after frame {frame}");
+        }
+    }
+
+    /// The final state's hash, compared with the server's hash of the last applied update
+    /// when that one was left unchecked.
+    fn check_last_hash(&mut self) -> u64 {
+        let mine = self.state.state_hash();
+        if let (true, Some(server)) = (self.unchecked, self.server_hash) {
+            self.unchecked = false;
+            self.compare_hash(server, mine, self.last_frame);
+        }
+        mine
     }
 }
 

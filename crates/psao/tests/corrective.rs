@@ -997,8 +997,15 @@ fn regions_of_missing_objects_cost_the_attackers_budget_and_no_one_elses() {
 #[ignore = "measurement: run with --ignored --nocapture"]
 fn measure_the_frame_rate_under_the_corrections_attack() {
     let dir = tempfile::tempdir().unwrap();
-    let seeds = [1u64, 2, 3, 4, 5];
-    let seed_list = seeds.map(|s| s.to_string()).join(",");
+    // `PSAO_ATTACK_SEEDS=5` (a comma-separated list) measures other seeds than 1–5.
+    let seeds: Vec<u64> = std::env::var("PSAO_ATTACK_SEEDS")
+        .map(|v| v.split(',').map(|s| s.parse().unwrap()).collect())
+        .unwrap_or_else(|_| vec![1, 2, 3, 4, 5]);
+    let seed_list = seeds
+        .iter()
+        .map(u64::to_string)
+        .collect::<Vec<_>>()
+        .join(",");
     let out = dir.path().to_str().unwrap();
     let o = psao(&[
         "paths",
@@ -1013,7 +1020,7 @@ fn measure_the_frame_rate_under_the_corrections_attack() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let mut ratios = Vec::new();
-    for seed in seeds {
+    for &seed in &seeds {
         let path = dir.path().join(format!("seed{seed}_0.toml"));
         let mut fps = Vec::new();
         // Alternated twice, so a change in the machine's load weighs on both.
@@ -1085,12 +1092,14 @@ fn frame_rate_beside(dir: &Path, path: &Path, round: usize, attacked: bool) -> f
     let samples = json(&view_json)["samples"].as_u64().unwrap();
     let number = |key: &str| serve[key].as_f64().unwrap();
     println!(
-        "attacked {attacked}: {:.2} server frames/s over {:.1} s, {} late, {:.2} ms mean, \
-         viewer received {samples} samples",
+        "attacked {attacked}: {:.2} server frames/s over {:.1} s, {} late, {:.2} ms mean \
+         (hashing {:.2} ms, {} frames hashed), viewer received {samples} samples",
         number("fps"),
         number("seconds"),
         number("late_frames"),
-        number("mean_ms")
+        number("mean_ms"),
+        number("mean_hash_ms"),
+        number("hashed_frames")
     );
     number("fps")
 }

@@ -277,7 +277,11 @@ fn animated_scene_lockstep_view_matches_run_and_the_server_state() {
     .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(server.wait(10).success());
-    assert_exact(&json(&json_a));
+    let view = json(&json_a);
+    assert_exact(&view);
+    // In lockstep every update carries the server's hash and every one is compared.
+    assert!(view["updates"].as_u64().unwrap() > 0, "{view}");
+    assert_eq!(view["hash_checks"], view["updates"], "{view}");
     run_in_process(&fx, 8, &r, &[]);
     let stats = json(&r.join("stats.json"));
     let invalidated: u64 = stats["per_frame"]

@@ -34,6 +34,7 @@ use crate::characters::ServedCharacters;
 use crate::convert::{entry_of, view_of};
 use crate::cpu_time::cpu_seconds;
 use crate::deadline::{Deadlined, SERVER_DEADLINES};
+use crate::hash_pacing::HashPacing;
 use crate::http::{serve_http, Health, HttpContext};
 use crate::io::BoxIo;
 use crate::pipeline::CLIENT_HZ;
@@ -147,6 +148,9 @@ pub struct ServeStats {
     pub mean_encode_ms: f64,
     /// Mean per server frame of hashing the server state for verifying clients, ms.
     pub mean_hash_ms: f64,
+    /// Server frames whose updates carried a state hash (every frame in lockstep; outside
+    /// it as often as [`crate::hash_pacing::HASH_SHARE`] allows).
+    pub hashed_frames: u64,
     /// Server frames that started late because the previous one overran the period.
     pub late_frames: u64,
     /// Wall-clock seconds from the first server frame to the end of the loop.
@@ -364,6 +368,7 @@ impl Serve {
             encode_ms: 0.0,
             unsent: None,
             hash_ms: 0.0,
+            hash_pacing: HashPacing::default(),
             health,
             corrections,
             status: None,
@@ -656,6 +661,8 @@ struct Simulation {
     update_ms: f64,
     encode_ms: f64,
     hash_ms: f64,
+    /// When the next state hash is due (outside lockstep).
+    hash_pacing: HashPacing,
     /// The last frame's updates, sent during the next frame (not in lockstep).
     unsent: Option<FrameUpdates>,
     /// What `/health` reports.
@@ -927,11 +934,17 @@ impl Simulation {
         }
         self.rays += step.rays;
         let th = Instant::now();
-        let hash = self
-            .sessions
-            .values()
-            .any(|s| s.want_hash)
-            .then(|| self.state_hash());
+        // Outside lockstep only as often as its cost allows (crate::hash_pacing): the
+        // sessions that want hashes get one with the updates of the frames that have one.
+        let hash = if self.sessions.values().any(|s| s.want_hash) {
+            let mut pacing = self.hash_pacing;
+            let hash = pacing.hash_if_due(self.lockstep, || self.state_hash());
+            self.hash_pacing = pacing;
+            self.stats.hashed_frames += u64::from(hash.is_some());
+            hash
+        } else {
+            None
+        };
         self.hash_ms += th.elapsed().as_secs_f64() * 1e3;
         let tu = Instant::now();
         let mut due = Vec::new();
