@@ -7,15 +7,8 @@
 // the in-page decode + apply ms per update and the grid texture bytes uploaded per update.
 import { spawn } from "node:child_process";
 import { createInterface } from "node:readline";
-import { mkdtempSync, rmSync } from "node:fs";
-import { tmpdir } from "node:os";
-import { join } from "node:path";
-import { fileURLToPath } from "node:url";
-import puppeteer from "puppeteer-core";
+import { BIN, launchChromium, sleep } from "./chromium";
 
-// Bundled into build/bench/: the workspace's target/ is three levels up.
-const BIN = process.env.PSAO_BIN ?? fileURLToPath(new URL("../../../target/release/psao", import.meta.url));
-const CHROMIUM = process.env.CHROMIUM ?? "/usr/bin/chromium";
 const SECONDS = Number(process.env.SECONDS ?? "20");
 const POINTS = process.env.POINTS ?? "1024";
 const SIZES = (process.env.SIZES ?? "640x360,1280x720").split(",");
@@ -31,12 +24,8 @@ interface Status {
 const serve = spawn(BIN, ["--log", "warn", "serve", "--listen", "127.0.0.1:0", "--points", POINTS], { stdio: ["ignore", "pipe", "inherit"] });
 const line: string = await new Promise((r) => createInterface({ input: serve.stdout! }).once("line", r));
 const addr = line.replace("listening on ", "").trim();
-const profile = mkdtempSync(join(tmpdir(), "psao-chromium-"));
-const browser = await puppeteer.launch({
-  executablePath: CHROMIUM,
-  args: ["--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", `--user-data-dir=${profile}`],
-});
-const sleep = (ms: number) => new Promise((r) => setTimeout(r, ms));
+const chromium = await launchChromium();
+const browser = chromium.browser;
 try {
   for (const size of SIZES) {
     const [w, h] = size.split("x").map(Number);
@@ -67,7 +56,6 @@ try {
     await page.close();
   }
 } finally {
-  await browser.close();
-  rmSync(profile, { recursive: true, force: true });
+  await chromium.close();
   serve.kill();
 }

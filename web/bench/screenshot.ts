@@ -7,15 +7,10 @@
 // ../docs/img/viewer.png) at RES (default 960x540).
 import { spawn } from "node:child_process";
 import { createInterface } from "node:readline";
-import { mkdtempSync, rmSync } from "node:fs";
-import { tmpdir } from "node:os";
-import { join } from "node:path";
 import { fileURLToPath } from "node:url";
-import puppeteer from "puppeteer-core";
+import { BIN, launchChromium, sleep } from "./chromium";
 
 // Bundled into build/bench/: the workspace is three levels up.
-const BIN = process.env.PSAO_BIN ?? fileURLToPath(new URL("../../../target/release/psao", import.meta.url));
-const CHROMIUM = process.env.CHROMIUM ?? "/usr/bin/chromium";
 const POINTS = process.env.POINTS ?? "1024";
 const SECONDS = Number(process.env.SECONDS ?? "20");
 const OUT = process.env.OUT ?? fileURLToPath(new URL("../../../docs/img/viewer.png", import.meta.url));
@@ -34,12 +29,8 @@ const serve = spawn(BIN, ["--log", "warn", "serve", "--listen", "127.0.0.1:0", "
 });
 const line: string = await new Promise((r) => createInterface({ input: serve.stdout! }).once("line", r));
 const addr = line.replace("listening on ", "").trim();
-const profile = mkdtempSync(join(tmpdir(), "psao-chromium-"));
-const browser = await puppeteer.launch({
-  executablePath: CHROMIUM,
-  args: ["--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", `--user-data-dir=${profile}`],
-});
-const sleep = (ms: number) => new Promise((r) => setTimeout(r, ms));
+const chromium = await launchChromium();
+const browser = chromium.browser;
 try {
   const page = await browser.newPage();
   await page.setViewport({ width: w, height: h });
@@ -52,7 +43,6 @@ try {
   await page.screenshot({ path: OUT });
   console.log(`wrote ${OUT}`);
 } finally {
-  await browser.close();
+  await chromium.close();
   serve.kill();
-  rmSync(profile, { recursive: true, force: true });
 }

@@ -13,12 +13,8 @@ import { createInterface } from "node:readline";
 import { mkdtempSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
-import { fileURLToPath } from "node:url";
-import puppeteer from "puppeteer-core";
+import { BIN, launchChromium, sleep } from "./chromium";
 
-// Bundled into build/bench/: the workspace's target/ is three levels up.
-const BIN = process.env.PSAO_BIN ?? fileURLToPath(new URL("../../../target/release/psao", import.meta.url));
-const CHROMIUM = process.env.CHROMIUM ?? "/usr/bin/chromium";
 const RUNS = Number(process.env.RUNS ?? "3");
 const RES = process.env.RES ?? "1280x720";
 const COLD = (process.env.CACHE ?? "cold") === "cold";
@@ -30,11 +26,8 @@ interface Milestones {
   ao: number | null;
 }
 
-const profile = mkdtempSync(join(tmpdir(), "psao-chromium-"));
-const browser = await puppeteer.launch({
-  executablePath: CHROMIUM,
-  args: ["--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", `--user-data-dir=${profile}`],
-});
+const chromium = await launchChromium();
+const browser = chromium.browser;
 const [w, h] = RES.split("x").map(Number);
 const warmCache = mkdtempSync(join(tmpdir(), "psao-cache-"));
 const totals: number[] = [];
@@ -81,8 +74,7 @@ try {
     }
   }
 } finally {
-  await browser.close();
-  rmSync(profile, { recursive: true, force: true });
+  await chromium.close();
   rmSync(warmCache, { recursive: true, force: true });
 }
 totals.sort((a, b) => a - b);
