@@ -52,7 +52,9 @@
 
 use glam::Affine3A;
 use psao_points::pack::VALID_BIT;
-use psao_points::{Bucket, BucketEntry, Cell, KeyMap, BUCKET_ENTRIES, CELL_POINTS};
+use psao_points::{
+    vec_bytes, Bucket, BucketEntry, Cell, KeyMap, PagedRuns, BUCKET_ENTRIES, CELL_POINTS,
+};
 
 use crate::model::{compact_bucket, compact_cell, InstanceDelta, Update};
 use crate::{Codec, DeltaError, MAX_DECODED_BYTES, MAX_DECODE_LIMIT};
@@ -92,12 +94,113 @@ impl Entries {
             slots: bucket.entries.map(|e| e.slot),
         }
     }
+
+    /// The entries of a run of the encoder's reference (empty past it).
+    fn of_run(run: &[SentEntry]) -> Self {
+        let mut out = Self::default();
+        for (i, &[low, high, slot]) in run.iter().enumerate() {
+            out.keys[i] = u64::from(low) | (u64::from(high) << 32);
+            out.slots[i] = slot;
+        }
+        out
+    }
 }
 
-/// Records stored densely by instance, bucket index and cell slot: the encoder's reference
-/// (what it last sent; the server's indices are dense) and the decoder's ([`Reference`]).
+/// A used bucket entry in the encoder's reference: the key's low and high words, the slot.
+type SentEntry = [u32; 3];
+
+/// What the encoder last sent for one instance, stored for what its receiver holds
+/// ([`PagedRuns`] by bucket index and by cell slot): a receiver holds the part of the
+/// server's grid its views reached, while the indices run over the server's whole table.
+#[derive(Default, Clone)]
+struct SentInstance {
+    /// The used entries of every bucket, in order.
+    buckets: PagedRuns<SentEntry>,
+    /// The points of every cell, in order.
+    cells: PagedRuns<u32>,
+    /// The irradiance records of every cell's points (none when sent without lights).
+    lights: PagedRuns<u32>,
+}
+
+impl SentInstance {
+    /// Store compacted `bucket` at `index` and return the entries it replaces.
+    fn swap_bucket(&mut self, index: u32, bucket: &Bucket) -> Entries {
+        let old = Entries::of_run(self.buckets.get(index));
+        let mut run = [[0; 3]; BUCKET_ENTRIES];
+        let n = used_entries(&bucket.entries.map(|e| e.key));
+        for (dst, e) in run.iter_mut().zip(&bucket.entries[..n]) {
+            *dst = [e.key as u32, (e.key >> 32) as u32, e.slot];
+        }
+        self.buckets.set(index, &run[..n]);
+        old
+    }
+
+    /// Store compacted `points` at `slot` and return the points they replace.
+    fn swap_cell(&mut self, slot: u32, points: &[u32; CELL_POINTS]) -> [u32; CELL_POINTS] {
+        let old = padded(self.cells.get(slot));
+        self.cells.set(slot, &points[..used_points(points)]);
+        old
+    }
+
+    /// Store the first `n` irradiance records of `light` (0 past them) at `slot` and return
+    /// the records they replace.
+    fn swap_light(
+        &mut self,
+        slot: u32,
+        light: &[u32; CELL_POINTS],
+        n: usize,
+    ) -> [u32; CELL_POINTS] {
+        let old = padded(self.lights.get(slot));
+        self.lights.set(slot, &light[..n]);
+        old
+    }
+}
+
+/// A cell's records from a run (0 past it).
+fn padded(run: &[u32]) -> [u32; CELL_POINTS] {
+    let mut out = [0; CELL_POINTS];
+    out[..run.len()].copy_from_slice(run);
+    out
+}
+
+/// The encoder's reference: what it last sent in this session, which is what its receiver
+/// holds (transforms by instance, the rest per instance as a [`SentInstance`]).
 #[derive(Default, Clone)]
 struct Sent {
+    transforms: Vec<[u32; TRANSFORM_WORDS]>,
+    instances: Vec<SentInstance>,
+}
+
+impl Sent {
+    /// Forget everything (a snapshot follows), freeing the records.
+    fn clear(&mut self) {
+        self.transforms.clear();
+        for i in &mut self.instances {
+            i.buckets.clear();
+            i.cells.clear();
+            i.lights.clear();
+        }
+    }
+
+    /// Heap bytes of the reference (allocated capacity).
+    fn heap_bytes(&self) -> u64 {
+        let runs = self
+            .instances
+            .iter()
+            .map(|i| i.buckets.heap_bytes() + i.cells.heap_bytes() + i.lights.heap_bytes());
+        vec_bytes(&self.transforms) + vec_bytes(&self.instances) + runs.sum::<u64>()
+    }
+
+    /// Points held (all instances).
+    fn points(&self) -> usize {
+        self.instances.iter().map(|i| i.cells.len()).sum()
+    }
+}
+
+/// Records stored densely by instance, bucket index and cell slot: the decoder's reference
+/// ([`Reference`]), whose indices come from the wire.
+#[derive(Default, Clone)]
+struct Received {
     transforms: Vec<[u32; TRANSFORM_WORDS]>,
     buckets: Vec<Vec<Entries>>,
     cells: Vec<Vec<[u32; CELL_POINTS]>>,
@@ -112,7 +215,7 @@ struct Sent {
 /// hold up to twice their length in capacity.
 #[derive(Default, Clone)]
 struct Reference {
-    records: Sent,
+    records: Received,
     /// Bytes of elements the vectors hold.
     bytes: u64,
 }
@@ -150,7 +253,7 @@ fn stored<T: Copy + Default>(v: &[T], index: u32) -> T {
     v.get(index as usize).copied().unwrap_or_default()
 }
 
-impl Sent {
+impl Received {
     /// Forget everything (a snapshot follows), keeping the allocations.
     fn clear(&mut self) {
         self.transforms.clear();
@@ -200,11 +303,11 @@ fn swap_in<T: Copy + Default>(v: &mut Vec<T>, index: u32, new: T) -> T {
     std::mem::replace(&mut v[i], new)
 }
 
-/// The per-instance vector of `v` for `instance`, created empty when missing.
-fn instance_of<T>(v: &mut Vec<Vec<T>>, instance: u32) -> &mut Vec<T> {
+/// The element of `v` for `instance`, created empty when missing.
+fn instance_of<T: Default>(v: &mut Vec<T>, instance: u32) -> &mut T {
     let i = instance as usize;
     if i >= v.len() {
-        v.resize_with(i + 1, Vec::new);
+        v.resize_with(i + 1, T::default);
     }
     &mut v[i]
 }
@@ -459,9 +562,11 @@ impl Streams {
 }
 
 /// The compact codec. Stateful: one instance per sending or receiving end of a session.
-/// The encoder's memory grows with the largest instance, bucket index and cell slot it is
-/// given (the server's dense indices); the decoder's likewise with those it decodes, within
-/// the decode limit ([`Codec::set_decode_limit`]).
+/// The encoder's memory grows with what it sent (the records its receiver holds, 12 bytes
+/// per bucket entry and 4 per point, plus their pages) and by 8 bytes per 64 bucket indices
+/// or cell slots up to the largest it was given; the decoder's with the largest instance,
+/// bucket index and cell slot it decodes (dense records), within the decode limit
+/// ([`Codec::set_decode_limit`]).
 #[derive(Clone)]
 pub struct CompactCodec {
     /// The decoder's reference.
@@ -484,10 +589,7 @@ impl std::fmt::Debug for CompactCodec {
             .field("level", &self.level)
             .field("decode_limit", &self.decode_limit)
             .field("reference_bytes", &self.reference.bytes)
-            .field(
-                "sent_cells",
-                &self.sent.cells.iter().map(Vec::len).sum::<usize>(),
-            )
+            .field("sent_points", &self.sent.points())
             .finish()
     }
 }
@@ -543,13 +645,10 @@ impl CompactCodec {
                 ranks
             });
             let mut prev = -1i64;
-            let sent_buckets = instance_of(&mut r.buckets, d.instance);
-            for (k, (b, bucket)) in d.buckets.iter().enumerate() {
-                if let Some((ahead, _)) = d.buckets.get(k + PREFETCH_AHEAD) {
-                    prefetch(sent_buckets, *ahead);
-                }
+            let sent = instance_of(&mut r.instances, d.instance);
+            for (b, bucket) in &d.buckets {
                 let bucket = compact_bucket(bucket);
-                let old = swap_in(sent_buckets, *b, Entries::of(&bucket));
+                let old = sent.swap_bucket(*b, &bucket);
                 if let (Some(st), Some(ranks)) = (streams.as_deref_mut(), &ranks) {
                     put_delta(&mut st.index, &mut prev, *b);
                     st.bucket(*b, &bucket, &old, ranks);
@@ -557,21 +656,18 @@ impl CompactCodec {
             }
             let mut prev = -1i64;
             let (mut previous, mut previous_light) = ([0; CELL_POINTS], [0; CELL_POINTS]);
-            let sent_cells = instance_of(&mut r.cells, d.instance);
-            let sent_lights = instance_of(&mut r.lights, d.instance);
             for (k, (s, cell)) in d.cells.iter().enumerate() {
-                if let Some((ahead, _)) = d.cells.get(k + PREFETCH_AHEAD) {
-                    prefetch(sent_cells, *ahead);
-                }
                 let points = compact_cell(cell).points;
-                let old = swap_in(sent_cells, *s, points);
+                let old = sent.swap_cell(*s, &points);
                 // Records past the cell's points are not coded: the reference holds 0 there.
+                let n = used_points(&points);
                 let mut light = d.lights.get(k).copied().unwrap_or_default();
-                light[used_points(&points)..].fill(0);
+                light[n..].fill(0);
                 let old_light = if lit {
-                    swap_in(sent_lights, *s, light)
+                    sent.swap_light(*s, &light, n)
                 } else {
-                    forget_light(sent_lights, *s);
+                    // A cell sent without lights has zero irradiance records.
+                    sent.lights.set(*s, &[]);
                     [0; CELL_POINTS]
                 };
                 if let Some(st) = streams.as_deref_mut() {
@@ -1216,21 +1312,92 @@ mod tests {
         }
     }
 
-    /// Both references are counted, and grow with the highest slot coded.
+    /// Both references are counted: the encoder's by what it sent, the decoder's by the
+    /// highest slot decoded.
     #[test]
     fn heap_bytes_count_both_references() {
         let (mut enc, mut dec) = (CompactCodec::new(), CompactCodec::new());
         assert_eq!(enc.heap_bytes(), 0);
         let u = update(1, true, 10, 0..50);
+        let points: usize = (u.instances.iter().flat_map(|d| &d.cells))
+            .map(|(_, c)| c.count())
+            .sum();
+        let entries = 2 * 12;
         let bytes = enc.encode(&u);
         let sent = enc.heap_bytes();
-        // At least one 28-byte cell record per coded slot.
-        assert!(sent >= 50 * 28, "{sent}");
+        // At least 4 bytes per point and 12 per bucket entry sent.
+        assert!(sent >= (4 * points + entries) as u64, "{sent}");
         dec.decode(&bytes).unwrap();
+        // One 28-byte cell record per decoded slot.
         assert!(dec.heap_bytes() >= 50 * 28);
         let both = dec.heap_bytes();
         dec.encode(&u);
-        assert!(dec.heap_bytes() >= both + 50 * 28);
+        assert!(dec.heap_bytes() >= both + (4 * points) as u64);
+    }
+
+    /// The encoder's reference costs what it sent, not the highest index it was given.
+    #[test]
+    fn the_encoders_reference_costs_what_it_sent() {
+        let mut u = update(1, true, 10, 0..0);
+        let far = (1 << 20) + 5;
+        u.instances[0].buckets[0].0 = far / 2;
+        u.instances[0].cells = vec![(far, cell(3, 7))];
+        let mut enc = CompactCodec::new();
+        enc.encode(&u);
+        // Dense records up to slot 2^20 would take 28 MiB; a page table of 8 bytes per 64
+        // indices of each kind and a few pages remain.
+        let table = (far / 64 + 1) * 8 + (far / 128 + 1) * 8;
+        let sent = enc.heap_bytes();
+        assert!(sent < u64::from(table) * 5 / 4 + 4096, "{sent} vs {table}");
+        // A snapshot without the far cell forgets it.
+        enc.encode(&update(2, true, 10, 0..0));
+        assert!(enc.sent.instances[0].cells.is_empty());
+        assert!(enc.sent.instances[0].buckets.get(far / 2).is_empty());
+    }
+
+    /// After any session, what the encoder keeps for every slot is what the decoder
+    /// received there.
+    #[test]
+    fn the_encoder_keeps_what_the_decoder_received() {
+        for seed in 0..3 {
+            let (mut enc, mut dec) = (CompactCodec::new(), CompactCodec::new());
+            let mut held = (0, 0);
+            for (k, u) in growing_session(seed, 120).iter().enumerate() {
+                let sent = if k % 4 == 3 { u.clone() } else { lit(u) };
+                dec.decode(&enc.encode(&sent)).unwrap();
+                let (sent, received) = (&enc.sent, &dec.reference.records);
+                assert_eq!(
+                    sent.transforms, received.transforms,
+                    "seed {seed} update {k}"
+                );
+                for (i, mine) in sent.instances.iter().enumerate() {
+                    let entries = |b: usize| {
+                        received
+                            .buckets
+                            .get(i)
+                            .and_then(|v| v.get(b))
+                            .copied()
+                            .unwrap_or_default()
+                    };
+                    for b in 0..16 {
+                        let (e, r) = (Entries::of_run(mine.buckets.get(b as u32)), entries(b));
+                        assert_eq!((e.keys, e.slots), (r.keys, r.slots), "bucket {b}");
+                        held.0 += used_entries(&e.keys);
+                    }
+                    let records = |v: &Vec<Vec<[u32; CELL_POINTS]>>, s: usize| {
+                        v.get(i).and_then(|v| v.get(s)).copied().unwrap_or_default()
+                    };
+                    for s in 0..64 {
+                        let cell = padded(mine.cells.get(s as u32));
+                        assert_eq!(cell, records(&received.cells, s), "cell {s}");
+                        let light = padded(mine.lights.get(s as u32));
+                        assert_eq!(light, records(&received.lights, s), "light {s}");
+                        held.1 += used_points(&cell);
+                    }
+                }
+            }
+            assert!(held.0 > 1000 && held.1 > 1000, "{held:?}");
+        }
     }
 
     #[test]

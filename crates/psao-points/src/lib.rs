@@ -44,7 +44,7 @@ pub use layout::{
 };
 pub use linear_fit::LinearFit;
 pub use lookup::CellLookup;
-pub use mirror::{MirrorGrid, MirrorMemory};
+pub use mirror::{MirrorGrid, MirrorMemory, PagedRuns, MAX_RUN};
 pub use paged::Paged;
 pub use reconstruct::{
     reconstruct_ao, NearestK, ReconstructParams, ADAPTIVE_NEIGHBOURS, DEFAULT_ADAPTIVE_RADIUS,

@@ -10,8 +10,8 @@
 //!   fit. A bucket's entries lie in one probe run in the order they were inserted, so a bucket
 //!   reads back (in order) by scanning that run, and a cell is found by its id in the same
 //!   scan.
-//! * Cells live in pages of 64 slots ([`cells`]): a 4-bit point count per slot and one vector
-//!   of the page's valid points (4 bytes each).
+//! * Cells live in pages of 64 slots ([`cells`], [`PagedRuns`]): a 4-bit point count per slot
+//!   and one vector of the page's valid points (4 bytes each).
 
 use glam::UVec3;
 
@@ -21,9 +21,11 @@ use crate::layout::GridLayout;
 use crate::lookup::CellLookup;
 
 mod cells;
+mod runs;
 mod table;
 
 use cells::CellStore;
+pub use runs::{PagedRuns, MAX_RUN};
 use table::CellTable;
 
 /// Heap bytes of a [`MirrorGrid`] by what they hold ([`MirrorGrid::memory_parts`]).

@@ -1,87 +1,25 @@
-//! A mirror's cells by slot: per page of [`SLOTS`] slots, a 4-bit point count per slot and
-//! one vector of the page's valid points, slot after slot. A slot's points start where the
-//! counts of the slots before it in the page add up to (a few word operations), so a held
+//! A mirror's cells by slot: the valid points of every slot as a [`PagedRuns`] (pages of 64
+//! slots, a 4-bit point count per slot and one vector of the page's valid points), so a held
 //! cell costs its points plus its share of its page (counts, vector header, spare room).
 
 use crate::grid::Cell;
 use crate::layout::CELL_POINTS;
 use crate::pack::is_valid;
 
-/// Cell slots per page.
-const SLOTS: usize = 64;
-/// Slots whose counts share one word.
-const PER_WORD: usize = 16;
-/// Records of spare room a page's vector gets when it must grow (so that a cell gaining
-/// points does not reallocate its page every time).
-const SPARE: usize = 4;
-
-/// One page of slots.
-#[derive(Clone, Debug, Default)]
-struct Page {
-    /// 4-bit point count per slot.
-    counts: [u64; SLOTS / PER_WORD],
-    /// The valid points of the page's slots, in slot order.
-    records: Vec<u32>,
-}
-
-/// Sum of the sixteen 4-bit fields of `x`.
-#[inline]
-fn nibble_sum(x: u64) -> usize {
-    const LOW: u64 = 0x0f0f_0f0f_0f0f_0f0f;
-    let bytes = (x & LOW) + ((x >> 4) & LOW);
-    (bytes.wrapping_mul(0x0101_0101_0101_0101) >> 56) as usize
-}
-
-impl Page {
-    /// Where slot `j` (of this page) starts in `records`, and its point count.
-    #[inline]
-    fn span(&self, j: usize) -> (usize, usize) {
-        let (w, shift) = (j / PER_WORD, 4 * (j % PER_WORD));
-        let before: usize = self.counts[..w].iter().map(|&c| nibble_sum(c)).sum();
-        let word = self.counts[w];
-        let below = word & ((1u64 << shift) - 1);
-        (before + nibble_sum(below), ((word >> shift) & 15) as usize)
-    }
-
-    /// Replace slot `j`'s points with `new`.
-    fn set(&mut self, j: usize, new: &[u32]) {
-        let (offset, count) = self.span(j);
-        if count == new.len() {
-            self.records[offset..offset + count].copy_from_slice(new);
-            return;
-        }
-        let len = self.records.len() - count + new.len();
-        if len > self.records.capacity() {
-            self.records.reserve_exact(len + SPARE - self.records.len());
-        }
-        self.records
-            .splice(offset..offset + count, new.iter().copied());
-        let (w, shift) = (j / PER_WORD, 4 * (j % PER_WORD));
-        self.counts[w] = (self.counts[w] & !(15 << shift)) | ((new.len() as u64) << shift);
-    }
-}
+use super::runs::PagedRuns;
 
 /// Cells by slot (see the module documentation).
 #[derive(Clone, Debug, Default)]
 pub(super) struct CellStore {
-    /// Pages by slot / [`SLOTS`], allocated when a slot in them first holds points.
-    pages: Vec<Option<Box<Page>>>,
-    /// Points held.
-    points: usize,
+    /// The valid points of every slot, in pages of slots.
+    runs: PagedRuns<u32>,
 }
 
 impl CellStore {
     /// The valid points of `slot`, in order.
     #[inline]
     pub(super) fn records(&self, slot: u32) -> &[u32] {
-        let s = slot as usize;
-        match self.pages.get(s / SLOTS) {
-            Some(Some(page)) => {
-                let (offset, count) = page.span(s % SLOTS);
-                &page.records[offset..offset + count]
-            }
-            _ => &[],
-        }
+        self.runs.get(slot)
     }
 
     /// Replace `slot`'s points with the valid words of `cell`, in order.
@@ -92,50 +30,22 @@ impl CellStore {
             records[n] = bits;
             n += 1;
         }
-        let (p, j) = (slot as usize / SLOTS, slot as usize % SLOTS);
-        if p >= self.pages.len() {
-            if n == 0 {
-                return;
-            }
-            // Grow the page table by an eighth at least, exactly (no doubling).
-            let more = (p + 1 - self.pages.len()).max(self.pages.len() / 8);
-            self.pages.reserve_exact(more);
-            self.pages.resize(p + 1, None);
-        }
-        let page = match &mut self.pages[p] {
-            Some(page) => page,
-            None if n == 0 => return,
-            empty => empty.insert(Box::default()),
-        };
-        let before = page.span(j).1;
-        page.set(j, &records[..n]);
-        self.points = self.points + n - before;
-        if page.records.is_empty() {
-            self.pages[p] = None;
-        }
+        self.runs.set(slot, &records[..n]);
     }
 
     /// Points held.
     pub(super) fn points(&self) -> usize {
-        self.points
+        self.runs.len()
     }
 
     /// Heap bytes of the page table and pages without their records.
     pub(super) fn index_bytes(&self) -> u64 {
-        let table = self.pages.capacity() * std::mem::size_of::<Option<Box<Page>>>();
-        let pages = self.pages.iter().flatten().count() * std::mem::size_of::<Page>();
-        (table + pages) as u64
+        self.runs.index_bytes()
     }
 
     /// Heap bytes of the pages' record vectors (held points and spare room).
     pub(super) fn record_bytes(&self) -> u64 {
-        let words: usize = self
-            .pages
-            .iter()
-            .flatten()
-            .map(|p| p.records.capacity())
-            .sum();
-        4 * words as u64
+        self.runs.record_bytes()
     }
 }
 
@@ -143,27 +53,6 @@ impl CellStore {
 mod tests {
     use super::*;
     use crate::pack::VALID_BIT;
-
-    #[test]
-    fn nibble_sums_and_spans() {
-        assert_eq!(nibble_sum(0), 0);
-        assert_eq!(nibble_sum(u64::MAX), 16 * 15);
-        assert_eq!(nibble_sum(0x7070_0000_0000_0007), 21);
-        let mut page = Page::default();
-        let words = |n: usize, v: u32| vec![VALID_BIT | v; n];
-        for j in 0..SLOTS {
-            page.set(j, &words(j % 8, j as u32));
-        }
-        let mut offset = 0;
-        for j in 0..SLOTS {
-            assert_eq!(page.span(j), (offset, j % 8));
-            assert!(page.records[offset..offset + j % 8]
-                .iter()
-                .all(|&w| w == VALID_BIT | j as u32));
-            offset += j % 8;
-        }
-        assert_eq!(page.records.len(), offset);
-    }
 
     #[test]
     fn empty_pages_are_freed() {
