@@ -68,13 +68,44 @@ pub fn release_free_memory() {
     }
 }
 
+/// Gives free pages back whenever the resident size has grown by more than a sixteenth since
+/// the last time: a server's frames allocate short-lived buffers (rays, hits, updates), which
+/// land in the holes start-up left in the heap and keep those pages resident after they are
+/// freed (docs/BENCHMARKS.md, "The server process"). Reading the resident size costs about
+/// as much as opening a small file; trimming walks the heap's free blocks, and happens only
+/// as often as the resident size grows by a sixteenth.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SlackTrimmer {
+    /// Resident bytes after the last release (0: none yet).
+    after_release: u64,
+}
+
+impl SlackTrimmer {
+    /// Release free memory if the resident size grew past the bound; true when it did.
+    pub fn after_frame(&mut self) -> bool {
+        let Some(now) = resident() else {
+            return false;
+        };
+        if self.after_release > 0 && now.bytes <= self.after_release + self.after_release / 16 {
+            return false;
+        }
+        release_free_memory();
+        self.after_release = resident().map_or(now.bytes, |r| r.bytes);
+        true
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    /// The tests measure the whole process: one at a time.
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
     #[test]
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     fn freed_memory_is_counted_free_and_released() {
+        let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
         let r = resident().unwrap();
         assert!(r.bytes > 0 && r.peak >= r.bytes && r.file > 0 && r.file < r.bytes);
         // Many blocks below the mmap threshold, touched so their pages are resident; every
@@ -97,5 +128,38 @@ mod tests {
         let after = resident().unwrap().bytes;
         assert!(after + 40_000_000 <= before, "{before} -> {after}");
         assert!(blocks.len() == 1000 && blocks.iter().all(|b| b[59_999] & 1 == 1));
+    }
+
+    #[test]
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    fn the_trimmer_releases_only_after_the_resident_size_grew() {
+        let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+        let mut t = SlackTrimmer::default();
+        assert!(t.after_frame(), "the first frame sets the bound");
+        assert!(!t.after_frame(), "nothing grew");
+        // Touched blocks below the mmap threshold, then every other one freed: the holes stay
+        // resident until released.
+        let grow = t.after_release / 8 + 64_000_000;
+        let mut blocks: Vec<Vec<u8>> = (0..grow / 60_000)
+            .map(|k| vec![k as u8 | 1; 60_000])
+            .collect();
+        let mut k = 0;
+        blocks.retain(|_| {
+            k += 1;
+            k % 2 == 0
+        });
+        let before = resident().unwrap().bytes;
+        assert!(
+            t.after_frame(),
+            "grew by {} of {}",
+            before - t.after_release,
+            t.after_release
+        );
+        assert!(
+            t.after_release + 20_000_000 <= before,
+            "{before} -> {}",
+            t.after_release
+        );
+        assert!(blocks.iter().all(|b| b[59_999] & 1 == 1));
     }
 }

@@ -23,7 +23,7 @@ use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
 use psao_net::cpu_time::cpu_seconds;
 use psao_net::pipeline::CLIENT_HZ;
-use psao_net::process_memory::{malloc_stats, release_free_memory, resident};
+use psao_net::process_memory::{malloc_stats, release_free_memory, resident, SlackTrimmer};
 use psao_net::serve::{code, coding_plan, mean, percentile};
 
 /// Rays in the set `bench trace`'s reference rate is measured on.
@@ -183,6 +183,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     let (mut rays, mut bytes) = (0u64, 0u64);
     let mut pending: Option<Vec<(Vec<ClientId>, Update)>> = None;
     let cpu_start = cpu_seconds();
+    let mut trimmer = SlackTrimmer::default();
     for f in 0..u64::from(args.frames) {
         let t = Instant::now();
         let client_frame = f * u64::from(CLIENT_HZ) / u64::from(args.load.hz);
@@ -223,6 +224,8 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         }
         pending = Some(updates);
         sums.update_ms += tu.elapsed().as_secs_f64() * 1e3;
+        // As `psao serve` does after each frame.
+        trimmer.after_frame();
         frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
         bar.inc(1);
     }

@@ -38,6 +38,7 @@ use crate::hash_pacing::HashPacing;
 use crate::http::{serve_http, Health, HttpContext};
 use crate::io::BoxIo;
 use crate::pipeline::CLIENT_HZ;
+use crate::process_memory::SlackTrimmer;
 use crate::transport::{accept, Accepted, FrameReader, FrameWriter, ReadError};
 use crate::NetError;
 
@@ -369,6 +370,7 @@ impl Serve {
             unsent: None,
             hash_ms: 0.0,
             hash_pacing: HashPacing::default(),
+            trimmer: SlackTrimmer::default(),
             health,
             corrections,
             status: None,
@@ -663,6 +665,8 @@ struct Simulation {
     hash_ms: f64,
     /// When the next state hash is due (outside lockstep).
     hash_pacing: HashPacing,
+    /// Gives the frames' freed buffers back to the system as the resident size grows.
+    trimmer: SlackTrimmer,
     /// The last frame's updates, sent during the next frame (not in lockstep).
     unsent: Option<FrameUpdates>,
     /// What `/health` reports.
@@ -712,6 +716,7 @@ impl Simulation {
                 if last_tick != Some(tick) {
                     last_tick = Some(tick);
                     self.frame(seconds, true);
+                    self.trimmer.after_frame();
                 } else {
                     self.answer_without_update(seconds);
                 }
@@ -730,6 +735,7 @@ impl Simulation {
                 self.corrections(self.hz, false);
                 let seconds = (self.server.frame() + 1) as f64 / f64::from(self.hz);
                 self.frame(seconds, false);
+                self.trimmer.after_frame();
             }
         }
         self.shutdown()
