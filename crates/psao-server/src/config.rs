@@ -46,6 +46,12 @@ pub struct LightingConfig {
     /// render that light with shadow maps and the points carry only its bounces (DESIGN §12,
     /// [`psao_trace::gi::DiffuseLighting::without_sharp_direct`]).
     pub sharp_direct: bool,
+    /// Paths a published irradiance record pools at least while the points around it are
+    /// young: its pooling reach widens beyond the clients' reconstruction radius, nearest
+    /// coplanar points first, until it holds this many paths, at most to
+    /// [`crate::POOL_MAX_REACH`] reconstruction radii (docs/LIGHTING.md, "Pooling"). 0 keeps
+    /// the reach at the reconstruction radius.
+    pub pool_paths: u32,
 }
 
 /// Most bounces a server path may take (each costs a closest-hit ray and a shadow ray per
@@ -54,12 +60,16 @@ pub const MAX_BOUNCES: u32 = 8;
 
 impl Default for LightingConfig {
     /// One bounce (the bounce of the sun and of small lights), 4 paths per point and frame,
-    /// the direct light of suns and point lights left to the clients.
+    /// the direct light of suns and point lights left to the clients, records pooling at
+    /// least 64 paths: the paths one point converges with at the server's defaults (256 AO
+    /// samples, 16 rays and 4 paths per frame), so that a young point's record rests on as
+    /// many paths as a converged point's own mean.
     fn default() -> Self {
         Self {
             bounces: 1,
             paths_per_point: 4,
             sharp_direct: false,
+            pool_paths: 64,
         }
     }
 }

@@ -34,7 +34,7 @@ pub use config::{LightingConfig, ServerConfig, Thresholds, MAX_BOUNCES};
 pub use dynamics::{Invalidation, MotionStats};
 pub use error::ServerError;
 pub use frustum::{Frustum, View};
-pub use light::{POOL_COS, POOL_PLANE, SUN_TOLERANCE_DEG};
+pub use light::{POOL_COS, POOL_MAX_REACH, POOL_PLANE, SUN_TOLERANCE_DEG};
 pub use memory::MemoryPart;
 pub use near_field::{NEAR_FIELD_RAYS, NEAR_FIELD_SPACINGS};
 pub use partition::{Owners, Partition};

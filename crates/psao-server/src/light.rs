@@ -27,6 +27,15 @@
 //! other side of a thin wall) keep theirs apart. Each point still takes its own paths and
 //! converges as before; what it accumulates (`Server::irradiance`) is its own.
 //!
+//! While the points around are young (a cold start, a view turned to new surfaces: a few
+//! paths each, and most neighbours not traced yet) that radius holds few paths. The reach
+//! then widens, nearest coplanar points first, until the pool holds
+//! [`LightingConfig::pool_paths`] paths (by default those a converged point averages), at
+//! most to [`POOL_MAX_REACH`] reconstruction radii; as paths accumulate it shrinks back to
+//! the reconstruction radius. A young record trades some blur of the irradiance over a few
+//! point spacings for the noise of a handful of paths, which is the larger error; the same
+//! plane test bounds the reach on curved or creased geometry.
+//!
 //! # Noise
 //!
 //! A rectangle light is sampled at one point of its area per path vertex, weighted by
@@ -66,13 +75,20 @@ use crate::LightingConfig;
 /// density: finer turns would change what the points can show by less than they resolve.
 pub const SUN_TOLERANCE_DEG: f32 = 1.0;
 
-/// Cosine of the largest angle between the normals of two points of a cell whose paths pool
-/// (about 26°).
+/// Cosine of the largest angle between the normals of two points whose paths pool (about
+/// 26°).
 pub const POOL_COS: f32 = 0.9;
 
 /// Largest offset, in Poisson radii, of a point from another's tangent plane for their
 /// paths to pool.
 pub const POOL_PLANE: f32 = 0.5;
+
+/// Largest reach, in reconstruction radii (Poisson radius × interpolation factor, the
+/// clients' kernel), that a young point's pooling widens to while it holds fewer than
+/// [`LightingConfig::pool_paths`] paths: about 5.7 point spacings (2 Poisson radii each),
+/// 16 times the area (about 116 coplanar points against 7 within the reconstruction
+/// radius), so that even a frame that traces one point in sixteen finds several.
+pub const POOL_MAX_REACH: f32 = 4.0;
 
 /// Irradiance accumulators of one instance's points.
 pub(crate) struct LightSums {
@@ -84,17 +100,22 @@ pub(crate) struct LightSums {
     /// AO rays and light paths per selected point and frame: the rate between the counts.
     rays_per_point: u32,
     paths_per_point: u32,
+    /// Paths a published record pools at least, reach permitting
+    /// ([`LightingConfig::pool_paths`]).
+    pool_paths: u32,
 }
 
 impl LightSums {
-    /// Empty accumulators for `n` points.
-    pub fn new(n: usize, rays_per_point: u32, paths_per_point: u32) -> Self {
+    /// Empty accumulators for `n` points traced with `rays_per_point` AO rays and
+    /// `config`'s paths per selected point and frame.
+    pub fn new(n: usize, rays_per_point: u32, config: &LightingConfig) -> Self {
         Self {
             sum: vec![Vec3::ZERO; n],
             count: vec![0; n],
             published: vec![0; n],
             rays_per_point,
-            paths_per_point,
+            paths_per_point: config.paths_per_point,
+            pool_paths: config.pool_paths,
         }
     }
 
@@ -155,23 +176,57 @@ impl InstanceState {
     /// paths of every point within the reconstruction radius of it (the clients' kernel
     /// reach: Poisson radius × interpolation factor, local units) that lies in its tangent plane
     /// (normals within [`POOL_COS`], offsets along its normal within [`POOL_PLANE`] Poisson
-    /// radii), its own included, each point weighted by its paths. `None` while `i` has no
-    /// paths or without lighting.
+    /// radii), its own included, each point weighted by its paths; while those hold fewer
+    /// than [`LightingConfig::pool_paths`] paths, also of the nearest coplanar points beyond
+    /// (by distance, then index), until they do or the reach is [`POOL_MAX_REACH`] radii.
+    /// `None` while `i` has no paths or without lighting.
     pub(crate) fn pooled_irradiance(&self, i: usize) -> Option<Vec3> {
         let light = self.points.light.as_ref()?;
         if light.count[i] == 0 {
             return None;
         }
+        let radius = self.poisson_radius * DEFAULT_INTERPOLATION_FACTOR;
+        let (mut sum, mut count) = (light.sum[i], u64::from(light.count[i]));
+        self.coplanar_lit_points(i, radius, |j, _| {
+            sum += light.sum[j];
+            count += u64::from(light.count[j]);
+        });
+        let wanted = u64::from(light.pool_paths);
+        if count < wanted {
+            let mut farther = Vec::new();
+            self.coplanar_lit_points(i, radius * POOL_MAX_REACH, |j, d2| {
+                if d2 > radius * radius {
+                    farther.push((d2, j));
+                }
+            });
+            farther.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for (_, j) in farther {
+                if count >= wanted {
+                    break;
+                }
+                sum += light.sum[j];
+                count += u64::from(light.count[j]);
+            }
+        }
+        Some(sum / count as f32)
+    }
+
+    /// Call `f(j, d²)` for every point `j ≠ i` with light paths within `reach` of point `i`
+    /// (local units; `d` its distance) that lies in `i`'s tangent plane: normals within
+    /// [`POOL_COS`], offset along `i`'s normal within [`POOL_PLANE`] Poisson radii. Visits
+    /// cells in a fixed order, so sums over it are deterministic.
+    fn coplanar_lit_points(&self, i: usize, reach: f32, mut f: impl FnMut(usize, f32)) {
+        let Some(light) = self.points.light.as_ref() else {
+            return;
+        };
         let layout = self.layout();
         let (x, n) = (self.points.position[i], self.points.normal[i]);
-        let reach = self.poisson_radius * DEFAULT_INTERPOLATION_FACTOR;
         let plane = POOL_PLANE * self.poisson_radius;
         let cell = |p: Vec3| {
             let c = ((p - layout.origin) / layout.cell_size).floor();
             c.clamp(Vec3::ZERO, (layout.dims - 1).as_vec3()).as_uvec3()
         };
         let (lo, hi) = (cell(x - Vec3::splat(reach)), cell(x + Vec3::splat(reach)));
-        let (mut sum, mut count) = (light.sum[i], u64::from(light.count[i]));
         for z in lo.z..=hi.z {
             for y in lo.y..=hi.y {
                 for cx in lo.x..=hi.x {
@@ -184,18 +239,17 @@ impl InstanceState {
                             continue;
                         }
                         let d = self.points.position[j] - x;
+                        let d2 = d.length_squared();
                         if self.points.normal[j].dot(n) >= POOL_COS
                             && d.dot(n).abs() <= plane
-                            && d.length_squared() <= reach * reach
+                            && d2 <= reach * reach
                         {
-                            sum += light.sum[j];
-                            count += u64::from(light.count[j]);
+                            f(j, d2);
                         }
                     }
                 }
             }
         }
-        Some(sum / count as f32)
     }
 
     /// The irradiance record point `i` would be published with now: its pooled irradiance,
@@ -374,5 +428,146 @@ impl Lighting {
         self.config
             .paths_per_point
             .min(max_paths.saturating_sub(count))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Affine3A;
+    use psao_points::{generate_instance_points, GenerateParams};
+    use psao_scene::{Material, Mesh};
+
+    /// A 1 m floor quad's points at 256 per m², with empty irradiance accumulators pooling
+    /// at least `pool_paths` paths, and the point nearest its centre.
+    fn floor(pool_paths: u32) -> (InstanceState, usize) {
+        let mesh = Mesh {
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ],
+            indices: vec![[0, 2, 1], [0, 3, 2]],
+            ..Default::default()
+        };
+        let params = GenerateParams {
+            density: 256.0,
+            seed: 1,
+        };
+        let points = generate_instance_points(
+            &mesh,
+            &Material::default(),
+            &Affine3A::IDENTITY,
+            &params,
+            None,
+        )
+        .unwrap();
+        let mut s = InstanceState::new(&points, Affine3A::IDENTITY, 0, 0, false, 256).unwrap();
+        let config = LightingConfig {
+            pool_paths,
+            ..LightingConfig::default()
+        };
+        s.points.light = Some(LightSums::new(s.points.position.len(), 16, &config));
+        let centre = Vec3::new(0.5, 0.0, 0.5);
+        let i = (0..s.points.position.len())
+            .filter(|&i| s.points.stored.get(i))
+            .min_by(|&a, &b| {
+                let d = |k: usize| (s.points.position[k] - centre).length_squared();
+                d(a).total_cmp(&d(b))
+            })
+            .unwrap();
+        (s, i)
+    }
+
+    /// Give point `j` `paths` paths of irradiance `value` (grey).
+    fn set(s: &mut InstanceState, j: usize, paths: u32, value: f32) {
+        let light = s.points.light.as_mut().unwrap();
+        light.count[j] = paths;
+        light.sum[j] = Vec3::splat(value * paths as f32);
+    }
+
+    /// The reconstruction radius and the stored points other than `i` with their squared
+    /// distance from it, nearest first.
+    fn by_distance(s: &InstanceState, i: usize) -> (f32, Vec<(f32, usize)>) {
+        let x = s.points.position[i];
+        let mut others: Vec<(f32, usize)> = (0..s.points.position.len())
+            .filter(|&j| j != i && s.points.stored.get(j))
+            .map(|j| ((s.points.position[j] - x).length_squared(), j))
+            .collect();
+        others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        (s.poisson_radius * DEFAULT_INTERPOLATION_FACTOR, others)
+    }
+
+    #[test]
+    fn a_mature_neighbourhood_pools_within_the_reconstruction_radius_only() {
+        let (mut s, i) = floor(64);
+        let (radius, others) = by_distance(&s, i);
+        set(&mut s, i, 64, 1.0);
+        for &(d2, j) in &others {
+            set(
+                &mut s,
+                j,
+                64,
+                if d2 <= radius * radius { 1.0 } else { 100.0 },
+            );
+        }
+        assert_eq!(s.pooled_irradiance(i), Some(Vec3::ONE));
+    }
+
+    #[test]
+    fn a_young_point_widens_its_reach_nearest_first_until_it_holds_pool_paths() {
+        let (mut s, i) = floor(64);
+        let (radius, others) = by_distance(&s, i);
+        // Every point has 4 paths of a value of its own; 64 paths take 15 neighbours.
+        set(&mut s, i, 4, 0.0);
+        for &(_, j) in &others {
+            set(&mut s, j, 4, j as f32);
+        }
+        let nearest = &others[..15];
+        let reach = POOL_MAX_REACH * radius;
+        assert!(nearest[14].0 > radius * radius && nearest[14].0 < reach * reach);
+        assert!(nearest[14].0 < others[15].0, "a tie at the 15th neighbour");
+        let expected = nearest.iter().map(|&(_, j)| j as f32).sum::<f32>() / 16.0;
+        let pooled = s.pooled_irradiance(i).unwrap();
+        assert!(
+            (pooled.x - expected).abs() <= 1e-4 * expected,
+            "{pooled} vs {expected}"
+        );
+        // Without widening, only the reconstruction radius.
+        let (mut fixed, _) = floor(0);
+        let (from, to) = (s.points.light.as_ref(), fixed.points.light.as_mut());
+        let (from, to) = (from.unwrap(), to.unwrap());
+        to.sum.clone_from(&from.sum);
+        to.count.clone_from(&from.count);
+        let within: Vec<usize> = others
+            .iter()
+            .take_while(|(d2, _)| *d2 <= radius * radius)
+            .map(|&(_, j)| j)
+            .collect();
+        let expected = within.iter().map(|&j| j as f32).sum::<f32>() / (within.len() + 1) as f32;
+        let pooled = fixed.pooled_irradiance(i).unwrap();
+        assert!(
+            (pooled.x - expected).abs() <= 1e-4 * expected,
+            "{pooled} vs {expected}"
+        );
+    }
+
+    #[test]
+    fn the_reach_stops_at_pool_max_reach() {
+        let (mut s, i) = floor(64);
+        let (radius, others) = by_distance(&s, i);
+        set(&mut s, i, 4, 1.0);
+        let reach = POOL_MAX_REACH * radius;
+        let far: Vec<usize> = others
+            .iter()
+            .filter(|(d2, _)| *d2 > reach * reach)
+            .map(|&(_, j)| j)
+            .collect();
+        assert!(far.len() > 16);
+        for j in far {
+            set(&mut s, j, 64, 100.0);
+        }
+        assert_eq!(s.pooled_irradiance(i), Some(Vec3::ONE));
     }
 }

@@ -51,11 +51,16 @@ pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Optio
 /// number of points published.
 pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64) -> usize {
     let mut dirty_cells = std::mem::take(&mut inst.pending_cells);
-    for &(i, bits) in updates {
+    // The irradiance records (pooled over the neighbours) first, in parallel.
+    let view: &InstanceState = inst;
+    let light_records: Vec<Option<u32>> = updates
+        .par_iter()
+        .map(|&(i, _)| view.light_record(i as usize))
+        .collect();
+    for (&(i, bits), light_record) in updates.iter().zip(light_records) {
         let i = i as usize;
         // Only stored points are republished.
         dirty_cells.extend(inst.slot_of(i));
-        let light_record = inst.light_record(i);
         let p = &mut inst.points;
         // A point that changed cell had its flag cleared and its old cell queued (rehome).
         p.published_here.set(i, true);

@@ -208,8 +208,7 @@ impl Server {
         if let Some(l) = &config.lighting {
             for inst in &mut instances {
                 let n = inst.points.position.len();
-                inst.points.light =
-                    Some(LightSums::new(n, config.rays_per_point, l.paths_per_point));
+                inst.points.light = Some(LightSums::new(n, config.rays_per_point, l));
             }
         }
         let server = Server {
@@ -627,6 +626,15 @@ impl Server {
             sum / count as f32
         };
         Some((mean, count))
+    }
+
+    /// Point `index` of `instance`'s irradiance as last published (what clients have: the
+    /// pooled irradiance of docs/LIGHTING.md, "Pooling", in its RGB9E5 record). `None`
+    /// without lighting, for a point never published or one that does not exist.
+    pub fn published_irradiance(&self, instance: usize, index: usize) -> Option<Vec3> {
+        let inst = self.instances.get(instance)?;
+        let record = *inst.points.light.as_ref()?.published.get(index)?;
+        (inst.points.published[index] != 0).then(|| psao_points::irradiance::unpack_rgb9e5(record))
     }
 
     /// The lights the points' light paths are traced with (the scene's lights at the time of

@@ -70,6 +70,7 @@ fn lit(bounces: u32, paths_per_point: u32) -> ServerConfig {
             bounces,
             paths_per_point,
             sharp_direct: false,
+            ..LightingConfig::default()
         }),
         ..ServerConfig::default()
     }
@@ -649,14 +650,9 @@ fn at_equal_points_per_frame_lighting_leaves_the_ao_of_a_moving_scene_unchanged(
     }
 }
 
-/// Published irradiance pools the paths of a cell's coplanar points (docs/LIGHTING.md,
-/// "Pooling within a cell"): on one mesh of a floor before a sunlit wall, the floor's
-/// published records vary less than its points' own means after one frame of 4 paths, and
-/// at the crease, where cells hold floor and wall points, neither takes the other's light.
-#[test]
-fn published_irradiance_pools_coplanar_points_of_a_cell_only() {
-    use psao_points::irradiance::unpack_rgb9e5;
-    use psao_points::pack::unpack_normal;
+/// A floor in front of a sunlit 4 m × 2 m wall (one mesh, albedo 0.8, sky 0.1): the floor is
+/// lit by the sky and the wall's bounce, which few cosine paths find (noisy young points).
+fn sunlit_corner() -> Scene {
     let wall = quad(
         Vec3::new(-2.0, 0.0, 0.0),
         Vec3::new(2.0, 0.0, 0.0),
@@ -670,9 +666,82 @@ fn published_irradiance_pools_coplanar_points_of_a_cell_only() {
     corner
         .indices
         .extend(ground.indices.iter().map(|t| t.map(|i| i + 4)));
-    // A horizontal sun lights the wall (E = power) and not the floor (sky only, ≤ π·0.1).
-    let (sky, power) = (Vec3::splat(0.1), 2.0);
-    let scene = scene_of(vec![corner], 0.8, sky, vec![sun(Vec3::Z, Vec3::ONE, power)]);
+    // A horizontal sun lights the wall (E = power) and not the floor.
+    scene_of(
+        vec![corner],
+        0.8,
+        Vec3::splat(0.1),
+        vec![sun(Vec3::Z, Vec3::ONE, 2.0)],
+    )
+}
+
+/// While few of the points around a record have paths (a cold start: a budget that traces
+/// one point in twelve per frame), its pooling reach widens until it holds `pool_paths`
+/// paths (docs/LIGHTING.md, "Pooling"): after one frame the floor's published records lie
+/// closer to the converged irradiance (256 paths per point) than with the reach held at the
+/// reconstruction radius (`pool_paths = 0`). (That the reach stays in the tangent plane is
+/// `published_irradiance_pools_coplanar_points_of_a_cell_only`'s, whose records widen too.)
+#[test]
+fn young_records_widen_their_pooling_towards_pool_paths() {
+    let scene = sunlit_corner();
+    let views = [view(
+        Vec3::new(0.0, 2.5, 3.5),
+        Vec3::new(0.0, 0.3, 0.0),
+        80.0,
+    )];
+    let config = |paths_per_point: u32, pool_paths: u32, ray_budget: u64| {
+        let mut c = lit(1, paths_per_point);
+        c.density = 256.0;
+        c.ray_budget = ray_budget;
+        if let Some(l) = &mut c.lighting {
+            l.pool_paths = pool_paths;
+        }
+        c
+    };
+    let mut truth = Server::new(&scene, config(256, 0, 100_000_000)).unwrap();
+    truth.step(&views);
+    let converged: Vec<(usize, Vec3)> = lit_points(&truth, 0)
+        .iter()
+        .filter(|(_, _, n, _, paths)| n.y > 0.9 && *paths == 256)
+        .map(|(i, _, _, e, _)| (*i, *e))
+        .collect();
+    let floor_points = truth.points(0).filter(|p| p.normal.y > 0.9).count();
+    assert!(
+        converged.len() > 1000,
+        "{} converged floor points",
+        converged.len()
+    );
+    // Charge per point: 4 AO rays + 4 paths × 2 vertices × (1 + 1 light) = 20 rays.
+    let budget = 20 * (2 * floor_points as u64) / 12;
+    let rms_error = |pool_paths: u32| {
+        let mut server = Server::new(&scene, config(4, pool_paths, budget)).unwrap();
+        let stats = server.step(&views);
+        assert!(stats.traced_points * 8 < 2 * floor_points, "{stats:?}");
+        let errors: Vec<f32> = converged
+            .iter()
+            .filter_map(|&(i, e)| Some((server.published_irradiance(0, i)? - e).x))
+            .collect();
+        assert!(errors.len() > 50, "{} published floor points", errors.len());
+        (errors.iter().map(|d| d * d).sum::<f32>() / errors.len() as f32).sqrt()
+    };
+    let (widened, fixed) = (rms_error(64), rms_error(0));
+    assert!(
+        widened < 0.7 * fixed,
+        "rms error {widened} widening to 64 paths vs {fixed} at the reconstruction radius"
+    );
+}
+
+/// Published irradiance pools the paths of coplanar points (docs/LIGHTING.md, "Pooling"):
+/// on one mesh of a floor before a sunlit wall, the floor's published records vary less
+/// than its points' own means after one frame of 4 paths, and at the crease, where cells
+/// hold floor and wall points, neither takes the other's light, also with the reach widened
+/// (the points within the reconstruction radius hold fewer than `pool_paths` paths).
+#[test]
+fn published_irradiance_pools_coplanar_points_of_a_cell_only() {
+    use psao_points::irradiance::unpack_rgb9e5;
+    use psao_points::pack::unpack_normal;
+    // The sun lights the wall (E = power) and not the floor (sky only, ≤ π·0.1).
+    let (scene, power) = (sunlit_corner(), 2.0);
     let mut server = Server::new(&scene, lit_sharp(0, 4)).unwrap();
     let client = server.add_client();
     let views = [view(

@@ -193,6 +193,12 @@ pub struct LightingArgs {
     /// this / `--rays-per-point` paths; docs/LIGHTING.md, "One selection, one budget").
     #[arg(long, default_value_t = LightingConfig::default().paths_per_point)]
     pub paths_per_point: u32,
+    /// Paths a published irradiance record pools at least with `--lighting gi`: while the
+    /// points within the reconstruction radius hold fewer, the reach widens to the nearest
+    /// coplanar points beyond (at most 4 radii); 0 keeps the reconstruction radius
+    /// (docs/LIGHTING.md, "Pooling").
+    #[arg(long, default_value_t = LightingConfig::default().pool_paths)]
+    pub pool_paths: u32,
 }
 
 /// The lighting of `psao run`, `psao serve` and `psao demo` when `--lighting` is not given:
@@ -215,6 +221,7 @@ impl LightingArgs {
             (self.lighting.unwrap_or(default) == Lighting::Gi).then(|| LightingConfig {
                 bounces: self.bounces,
                 paths_per_point: self.paths_per_point,
+                pool_paths: self.pool_paths,
                 ..LightingConfig::default()
             }),
         )
