@@ -14,6 +14,7 @@
 pub mod character;
 pub mod compact;
 mod error;
+pub mod fade;
 pub mod filter;
 pub mod fit;
 pub mod groups;
