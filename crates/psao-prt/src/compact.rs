@@ -434,10 +434,9 @@ fn compact_block<'a>(
     let mut best = (zeros, 0usize);
     if let Some(tolerance) = tolerance {
         let limit = (tolerance as f64).max(bound_of(zeros, 0));
-        for d in zeros..=n {
-            if prefix[d] + base_rounding as f64 > limit {
-                break;
-            }
+        // Dropping more than fits stops the search (the dropped changes only grow).
+        let droppable = (zeros..=n).take_while(|&d| prefix[d] + (base_rounding as f64) <= limit);
+        for d in droppable {
             // The most 8-bit rows that fit after dropping d.
             let e = (0..=n - d)
                 .rev()
