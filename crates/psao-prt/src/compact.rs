@@ -8,14 +8,20 @@
 //! coordinates). Each coordinate stays within the box `|cᵢ| ≤ bᵢ`, so the columns scaled
 //! to the change they can make, `Dᵢ = bᵢ·Cᵢ`, are decomposed by a thin SVD (through their
 //! `k × k` Gram matrix): `D = Σⱼ σⱼ·qⱼ·rⱼᵀ`, and component j moves an output by at most
-//! `σⱼ·√k·max|qⱼ|`. The smallest components are dropped while the sum of these bounds stays
-//! within a tolerance (a model without limits has no box and keeps every component).
+//! `σⱼ·√k·max|qⱼ|` (a model without limits has no box: it keeps every component, at 16 bits).
 //!
-//! The rows left (base and components) are stored as 16-bit integers with one factor per
-//! row, in blocks of [`LANES`] vertices: per block, per row, per output number, the block's
-//! vertices side by side. A frame synthesises a block's lobes ([`CompactModel::synthesise_block`])
-//! by reading its numbers once, in order, into one array per output number (a structure of
-//! arrays that the shading's lane loops read directly), right before shading it.
+//! The rows (base and components) are stored in blocks of [`LANES`] vertices, and each block
+//! keeps only what its own vertices need: component j changes an output of block b by at
+//! most `c_bj = σⱼ·√k·max_b|qⱼ|` (the maximum over the block's vertices), so per block the
+//! components are sorted by `c_bj` and the smallest dropped, the next stored as 8-bit and the
+//! rest as 16-bit integers (one factor per block and row; the base always 16-bit), choosing
+//! how many of each to store the fewest bytes while the block's summed bound, dropped
+//! changes plus rounding (half a step times the row's largest factor), stays within the
+//! tolerance (with tolerance 0 only rows that change nothing in the block are dropped, and
+//! nothing is 8-bit). Much of a character barely moves with the pose; its blocks keep few
+//! rows. A frame synthesises a block's lobes ([`CompactModel::synthesise_block`]) by reading
+//! its stored rows once, in order, into one array per output number (a structure of arrays
+//! that the shading's lane loops read directly), right before shading it.
 
 use crate::model::{PoseModel, LOBE_DIM};
 use crate::PrtError;
@@ -23,18 +29,42 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 /// Default largest change (in the model's output units: axis components and zonal
-/// coefficients) that the dropped components can make to any output of a pose within the
-/// training poses' box.
+/// coefficients) that the dropped components and the rounding can make to any output of a
+/// pose within the training poses' box.
 pub const DEFAULT_TOLERANCE: f32 = 1e-3;
 
-/// Largest stored integer.
+/// Largest stored 16-bit integer.
 const I16_MAX: f32 = i16::MAX as f32;
+
+/// Largest stored 8-bit integer.
+const I8_MAX: f32 = i8::MAX as f32;
 
 /// Vertices per block of the stored rows (and lanes of the run time's structure of arrays).
 pub const LANES: usize = 64;
 
 /// One output number of a block of vertices, one lane per vertex.
 pub type Lanes = [f32; LANES];
+
+/// How a block stores one of its rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Width {
+    /// 16-bit integers.
+    Wide,
+    /// 8-bit integers.
+    Narrow,
+}
+
+/// One row stored for one block: `outputs per vertex × LANES` integers.
+#[derive(Clone, Copy, Debug)]
+struct Stored {
+    /// The row: 0 the base, j + 1 component j.
+    row: u32,
+    width: Width,
+    /// Where its integers start in `wide` or `narrow`.
+    offset: u32,
+    /// The factor of its integers.
+    scale: f32,
+}
 
 /// A pose model re-expressed for fast synthesis (see the module's doc).
 #[derive(Clone, Debug)]
@@ -43,23 +73,34 @@ pub struct CompactModel {
     model_shape: PoseModel,
     /// Outputs per vertex (`lobes·7`).
     per_vertex: usize,
-    /// Stored rows: the base, then one per kept component.
+    /// Rows: the base, then one per component.
     rows: usize,
-    /// Per kept component: coefficients on the coordinates (`σⱼ·rⱼ / b`, `k` numbers).
+    /// Per component: coefficients on the coordinates (`σⱼ·rⱼ / b`, `k` numbers).
     projection: Vec<f32>,
-    /// Per row: the factor of its stored integers.
-    scale: Vec<f32>,
-    /// Block-major `blocks × rows × per_vertex × LANES` integers (the last block padded with
-    /// zeros).
-    values: Vec<i16>,
-    /// Largest change the dropped components and the rounding to integers can make to an
-    /// output, for poses within the box.
+    /// Per block, the rows it stores (from `block_start[b]` to `block_start[b + 1]`).
+    stored: Vec<Stored>,
+    block_start: Vec<u32>,
+    /// The 16-bit and the 8-bit rows' integers, block-major, each row `per_vertex × LANES`
+    /// (lanes past the last vertex are 0).
+    wide: Vec<i16>,
+    narrow: Vec<i8>,
+    /// Largest change the dropped rows and the rounding to integers can make to an output,
+    /// for poses within the box.
+    bound: f32,
+}
+
+/// One block's rows before they are laid out: per stored row its number, factor and
+/// integers (16-bit or 8-bit), and the block's bound.
+struct BlockRows {
+    wide: Vec<(u32, f32, Vec<i16>)>,
+    narrow: Vec<(u32, f32, Vec<i8>)>,
     bound: f32,
 }
 
 impl CompactModel {
-    /// Compacts `model`, dropping components whose summed largest change to an output stays
-    /// within `tolerance` (≥ 0). Errors when the decomposition fails.
+    /// Compacts `model`, storing per block the fewest bytes whose summed largest change to
+    /// an output (dropped rows and rounding) stays within `tolerance` (≥ 0; module doc).
+    /// Errors when the decomposition fails.
     pub fn new(model: &PoseModel, tolerance: f32) -> Result<Self, PrtError> {
         if tolerance.is_nan() || tolerance < 0.0 {
             return Err(PrtError::Parameter(format!(
@@ -132,9 +173,9 @@ impl CompactModel {
             .thin_svd()
             .map_err(|e| PrtError::Solve(format!("SVD did not converge: {e:?}")))?;
         let (s, r) = (svd.S().column_vector(), svd.U());
-        // Per component: σⱼ, qⱼ = D·rⱼ / σⱼ and its bound σⱼ·√k·max|qⱼ|.
+        // Per component: σⱼ and qⱼ = D·rⱼ / σⱼ.
         let smax = if k == 0 { 0.0 } else { s[0].max(0.0).sqrt() };
-        let mut components: Vec<(f64, Vec<f32>, f32)> = Vec::new();
+        let mut components: Vec<(f64, Vec<f32>)> = Vec::new();
         for j in 0..k {
             let sigma = s[j].max(0.0).sqrt();
             if sigma <= 1e-7 * smax {
@@ -147,73 +188,77 @@ impl CompactModel {
                     (dot / sigma) as f32
                 })
                 .collect();
-            let reach = (sigma * (k as f64).sqrt()) as f32 * max_abs(&q);
-            components.push((sigma, q, reach));
-        }
-        // Drop from the smallest while the summed bound stays within the tolerance (only
-        // with a box: without one a coordinate is unbounded).
-        let mut dropped = 0.0f32;
-        if bounds.is_some() {
-            while let Some(&(_, _, reach)) = components.last() {
-                if dropped + reach > tolerance {
-                    break;
-                }
-                dropped += reach;
-                components.pop();
-            }
+            components.push((sigma, q));
         }
         let projection = components
             .iter()
             .enumerate()
-            .flat_map(|(j, (sigma, _, _))| {
+            .flat_map(|(j, (sigma, _))| {
                 (0..k).map(move |i| (sigma * r[(i, j)] / scale_of(i) as f64) as f32)
             })
             .collect();
+        // Each component's largest factor: σⱼ·√k within the box (|cᵢ| ≤ bᵢ); without a
+        // box a coordinate is unbounded (the bound is then for unit pose features) and
+        // every row is kept at 16 bits.
+        let factor_bound: Vec<f32> = components
+            .iter()
+            .map(|(sigma, _)| (sigma * (k as f64).sqrt()) as f32)
+            .collect();
+        let reducible = bounds.is_some();
         let rows_data: Vec<&[f32]> = std::iter::once(base.as_slice())
-            .chain(components.iter().map(|(_, q, _)| q.as_slice()))
+            .chain(components.iter().map(|(_, q)| q.as_slice()))
             .collect();
         let per_vertex = model.lobes * LOBE_DIM;
-        let stride = per_vertex.max(1);
-        let rows = rows_data.len();
-        let scale: Vec<f32> = rows_data.iter().map(|r| max_abs(r) / I16_MAX).collect();
         let blocks = model.vertices.div_ceil(LANES);
-        let block_len = rows * stride * LANES;
-        let mut values = vec![0i16; blocks * block_len];
-        values
-            .par_chunks_mut(block_len)
-            .enumerate()
-            .for_each(|(b, out)| {
-                for (row, (data, &s)) in rows_data.iter().zip(&scale).enumerate() {
-                    let out = &mut out[row * stride * LANES..(row + 1) * stride * LANES];
-                    for lane in 0..LANES.min(model.vertices - b * LANES) {
-                        let v = b * LANES + lane;
-                        let src = &data[v * per_vertex..(v + 1) * per_vertex];
-                        for (k, x) in src.iter().enumerate() {
-                            out[k * LANES + lane] =
-                                if s > 0.0 { (x / s).round() as i16 } else { 0 };
-                        }
-                    }
-                }
-            });
-        // Rounding: half a step per row, times the row's largest factor (1 for the base,
-        // σⱼ·√k for a component).
-        let rounding: f32 = 0.5 * scale[0]
-            + components
-                .iter()
-                .zip(&scale[1..])
-                .map(|((sigma, _, _), s)| 0.5 * s * (*sigma * (k as f64).sqrt()) as f32)
-                .sum::<f32>();
+        let block_rows: Vec<BlockRows> = (0..blocks)
+            .into_par_iter()
+            .map(|b| {
+                let lanes = LANES.min(model.vertices - b * LANES);
+                let data =
+                    |row: usize| &rows_data[row][b * LANES * per_vertex..][..lanes * per_vertex];
+                let bound = reducible.then_some(tolerance);
+                compact_block(data, rows_data.len(), &factor_bound, bound, per_vertex)
+            })
+            .collect();
+        // Lay the blocks out one after the other.
+        let (mut stored, mut block_start) = (Vec::new(), vec![0u32]);
+        let (mut wide, mut narrow) = (Vec::new(), Vec::new());
+        let mut bound = 0.0f32;
+        for block in block_rows {
+            for (row, scale, values) in block.wide {
+                stored.push(Stored {
+                    row,
+                    width: Width::Wide,
+                    offset: wide.len() as u32,
+                    scale,
+                });
+                wide.extend(values);
+            }
+            for (row, scale, values) in block.narrow {
+                stored.push(Stored {
+                    row,
+                    width: Width::Narrow,
+                    offset: narrow.len() as u32,
+                    scale,
+                });
+                narrow.extend(values);
+            }
+            block_start.push(stored.len() as u32);
+            bound = bound.max(block.bound);
+        }
         Ok(Self {
             model_shape: PoseModel {
                 weights: Vec::new(),
                 ..model.clone()
             },
             per_vertex,
-            rows,
+            rows: rows_data.len(),
             projection,
-            scale,
-            values,
-            bound: dropped + rounding,
+            stored,
+            block_start,
+            wide,
+            narrow,
+            bound,
         })
     }
 
@@ -222,25 +267,32 @@ impl CompactModel {
         self.model_shape.vertices
     }
 
-    /// Stored rows: the base and one per kept component.
+    /// Rows: the base and one per component of the pose's change.
     pub fn rows(&self) -> usize {
         self.rows
     }
 
-    /// The largest change that the dropped components and the rounding to 16-bit integers
-    /// can make to any output, for a pose within the training poses' box (without limits:
-    /// the rounding's, for unit pose features).
+    /// The rows stored per block, on average (16- and 8-bit).
+    pub fn stored_rows(&self) -> f64 {
+        self.stored.len() as f64 / self.blocks().max(1) as f64
+    }
+
+    /// The largest change that the dropped rows and the rounding to integers can make to
+    /// any output, for a pose within the training poses' box (without limits: the
+    /// rounding's, for unit pose features).
     pub fn bound(&self) -> f32 {
         self.bound
     }
 
-    /// Size of the stored rows in megabytes (10⁶ bytes).
+    /// Size of the stored rows in megabytes (10⁶ bytes): their integers and, per stored
+    /// row of a block, its factor.
     pub fn megabytes(&self) -> f64 {
-        self.values.len() as f64 * 2.0 / 1e6
+        (self.wide.len() * 2 + self.narrow.len() + self.stored.len() * 4) as f64 / 1e6
     }
 
-    /// Per row, the factor of its stored integers for the pose of these joint rotations
-    /// (every skin joint's rotation vector relative to the bind pose).
+    /// Per row, the factor of its values for the pose of these joint rotations (every skin
+    /// joint's rotation vector relative to the bind pose): 1 for the base, then the
+    /// components' coordinates.
     pub fn row_factors(&self, joint_rotations: &[Vec3]) -> Vec<f32> {
         let raw = self.model_shape.raw_pose_vector(joint_rotations);
         let features = &raw[1..];
@@ -256,22 +308,29 @@ impl CompactModel {
                     .chunks_exact(k.max(1))
                     .map(|p| p.iter().zip(&coords).map(|(a, c)| a * c).sum()),
             )
-            .zip(&self.scale)
-            .map(|(f, s): (f32, &f32)| f * s)
             .collect()
+    }
+
+    /// The rows block `block` stores.
+    fn stored_of(&self, block: usize) -> &[Stored] {
+        &self.stored[self.block_start[block] as usize..self.block_start[block + 1] as usize]
     }
 
     /// The outputs (`lobes·7` numbers) of vertex `v` for the factors of
     /// [`Self::row_factors`] into `out` (at least that long).
     pub fn vertex_outputs(&self, factors: &[f32], v: usize, out: &mut [f32]) {
-        let stride = self.per_vertex.max(1);
         let out = &mut out[..self.per_vertex];
         out.fill(0.0);
         let (block, lane) = (v / LANES, v % LANES);
-        let rows = &self.values[block * self.rows * stride * LANES..][..self.rows * stride * LANES];
-        for (row, &f) in rows.chunks_exact(stride * LANES).zip(factors) {
+        for s in self.stored_of(block) {
+            let f = factors[s.row as usize] * s.scale;
+            let at = s.offset as usize + lane;
             for (k, o) in out.iter_mut().enumerate() {
-                *o += f * row[k * LANES + lane] as f32;
+                let x = match s.width {
+                    Width::Wide => self.wide[at + k * LANES] as f32,
+                    Width::Narrow => self.narrow[at + k * LANES] as f32,
+                };
+                *o += f * x;
             }
         }
     }
@@ -289,11 +348,20 @@ impl CompactModel {
         let len = self.per_vertex * LANES;
         let out = &mut out.as_flattened_mut()[..len];
         out.fill(0.0);
-        let stride = self.per_vertex.max(1) * LANES;
-        let rows = &self.values[block * self.rows * stride..][..self.rows * stride];
-        for (row, &f) in rows.chunks_exact(stride).zip(factors) {
-            for (o, &x) in out.iter_mut().zip(&row[..len]) {
-                *o += f * x as f32;
+        for s in self.stored_of(block) {
+            let f = factors[s.row as usize] * s.scale;
+            let at = s.offset as usize;
+            match s.width {
+                Width::Wide => {
+                    for (o, &x) in out.iter_mut().zip(&self.wide[at..at + len]) {
+                        *o += f * x as f32;
+                    }
+                }
+                Width::Narrow => {
+                    for (o, &x) in out.iter_mut().zip(&self.narrow[at..at + len]) {
+                        *o += f * x as f32;
+                    }
+                }
             }
         }
     }
@@ -329,6 +397,98 @@ impl CompactModel {
     pub fn shape(&self) -> &PoseModel {
         &self.model_shape
     }
+}
+
+/// One block's rows (`data(row)`: its vertices' outputs of that row, `per_vertex` each;
+/// `rows` rows, the base first): which to drop, store as 8-bit or as 16-bit (module doc),
+/// given each component's largest factor and the tolerance (`None`: coordinates are
+/// unbounded, every row is stored at 16 bits).
+fn compact_block<'a>(
+    data: impl Fn(usize) -> &'a [f32],
+    rows: usize,
+    factor_bound: &[f32],
+    tolerance: Option<f32>,
+    per_vertex: usize,
+) -> BlockRows {
+    let base_max = max_abs(data(0));
+    let base_rounding = 0.5 * base_max / I16_MAX;
+    // Components by their largest change to this block's outputs, smallest first.
+    let mut changes: Vec<(usize, f32)> = (1..rows)
+        .map(|row| (row, factor_bound[row - 1] * max_abs(data(row))))
+        .collect();
+    changes.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let n = changes.len();
+    // Prefix sums of the changes (f64: the totals are compared with the tolerance).
+    let mut prefix = vec![0.0f64; n + 1];
+    for (i, (_, c)) in changes.iter().enumerate() {
+        prefix[i + 1] = prefix[i] + *c as f64;
+    }
+    let rounding =
+        |bits_max: f32, from: usize, to: usize| (prefix[to] - prefix[from]) * 0.5 / bits_max as f64;
+    // The d smallest dropped, the next e 8-bit, the rest 16-bit.
+    let bound_of = |d: usize, e: usize| {
+        base_rounding as f64 + prefix[d] + rounding(I8_MAX, d, d + e) + rounding(I16_MAX, d + e, n)
+    };
+    // Rows that change nothing here are dropped whatever the tolerance.
+    let zeros = changes.iter().take_while(|(_, c)| *c == 0.0).count();
+    let mut best = (zeros, 0usize);
+    if let Some(tolerance) = tolerance {
+        let limit = (tolerance as f64).max(bound_of(zeros, 0));
+        // Dropping more than fits stops the search (the dropped changes only grow).
+        let droppable = (zeros..=n).take_while(|&d| prefix[d] + (base_rounding as f64) <= limit);
+        for d in droppable {
+            // The most 8-bit rows that fit after dropping d.
+            let e = (0..=n - d)
+                .rev()
+                .find(|&e| bound_of(d, e) <= limit)
+                .unwrap_or(0);
+            let saved = |(d, e): (usize, usize)| 2 * d + e;
+            if saved((d, e)) > saved(best) && bound_of(d, e) <= limit {
+                best = (d, e);
+            }
+        }
+    }
+    let (d, e) = best;
+    let quantise = |row: usize, top: f32| -> (f32, Vec<f32>) {
+        let values = data(row);
+        let scale = max_abs(values) / top;
+        let mut out = vec![0.0f32; per_vertex * LANES];
+        for (lane, v) in values.chunks_exact(per_vertex.max(1)).enumerate() {
+            for (k, x) in v.iter().enumerate() {
+                out[k * LANES + lane] = if scale > 0.0 {
+                    (x / scale).round()
+                } else {
+                    0.0
+                };
+            }
+        }
+        (scale, out)
+    };
+    let mut block = BlockRows {
+        wide: Vec::new(),
+        narrow: Vec::new(),
+        bound: bound_of(d, e) as f32,
+    };
+    let (scale, values) = quantise(0, I16_MAX);
+    block
+        .wide
+        .push((0, scale, values.iter().map(|&x| x as i16).collect()));
+    for (i, &(row, _)) in changes.iter().enumerate().skip(d) {
+        if i < d + e {
+            let (scale, values) = quantise(row, I8_MAX);
+            block
+                .narrow
+                .push((row as u32, scale, values.iter().map(|&x| x as i8).collect()));
+        } else {
+            let (scale, values) = quantise(row, I16_MAX);
+            block.wide.push((
+                row as u32,
+                scale,
+                values.iter().map(|&x| x as i16).collect(),
+            ));
+        }
+    }
+    block
 }
 
 /// The largest absolute value (0 when empty).
@@ -410,7 +570,13 @@ mod tests {
         let m = model(true);
         let full = CompactModel::new(&m, 0.0).unwrap();
         let cut = CompactModel::new(&m, 10.0).unwrap();
-        assert_eq!(cut.rows(), 1, "everything fits in a tolerance of 10");
+        assert_eq!(cut.rows(), 3);
+        assert_eq!(full.stored_rows(), 3.0);
+        assert_eq!(
+            cut.stored_rows(),
+            1.0,
+            "everything fits in a tolerance of 10"
+        );
         let rot = [Vec3::new(0.1, -0.3, 0.2), Vec3::new(0.0, 0.05, 0.4)];
         let worst = outputs(&full, &rot)
             .iter()
@@ -419,5 +585,63 @@ mod tests {
             .fold(0.0f32, f32::max);
         assert!(worst <= cut.bound() + 1e-6, "{worst} > {}", cut.bound());
         assert!(CompactModel::new(&m, -1.0).is_err());
+    }
+
+    #[test]
+    fn each_block_keeps_what_its_vertices_need_within_the_tolerance() {
+        // 130 vertices in 3 blocks; the pose moves only the first block's vertices, and the
+        // second component barely.
+        let vertices = 130;
+        let out = vertices * LOBE_DIM;
+        let mut weights = vec![0.0f32; 7 * out];
+        for (i, w) in weights.iter_mut().enumerate() {
+            let (row, col) = (i / out, i % out);
+            let hash = ((i * 2_654_435_761usize) % 1000) as f32 / 1000.0 - 0.5;
+            *w = match row {
+                0 => hash + 1.0,
+                _ if col >= LANES * LOBE_DIM => 0.0,
+                4 => 1e-3 * hash,
+                _ => hash,
+            };
+        }
+        let m = PoseModel {
+            vertices,
+            weights,
+            ..model(true)
+        };
+        let exact = CompactModel::new(&m, 0.0).unwrap();
+        let loose = CompactModel::new(&m, 1e-2).unwrap();
+        // Blocks 1 and 2 store the base alone, whatever the tolerance.
+        assert_eq!(exact.stored_of(1).len(), 1);
+        assert_eq!(exact.stored_of(2).len(), 1);
+        assert!(exact.stored_of(0).iter().all(|s| s.width == Width::Wide));
+        assert!(loose.megabytes() < exact.megabytes());
+        assert!(
+            loose.bound() <= 1e-2 && exact.bound() < 1e-4,
+            "{} {}",
+            loose.bound(),
+            exact.bound()
+        );
+        for rot in [
+            [Vec3::new(0.1, -0.3, 0.2), Vec3::new(0.0, 0.05, 0.4)],
+            [Vec3::new(-0.4, 0.1, 0.0), Vec3::new(0.3, 0.2, -0.1)],
+        ] {
+            let mut want = Vec::new();
+            m.predict_raw(&m.pose_vector(&rot), &mut want);
+            for c in [&exact, &loose] {
+                let got = outputs(c, &rot);
+                let worst = got
+                    .iter()
+                    .zip(&want)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0f32, f32::max);
+                assert!(worst <= c.bound() + 1e-6, "{worst} > bound {}", c.bound());
+                // One vertex at a time gives the same.
+                let factors = c.row_factors(&rot);
+                let mut one = [0.0f32; LOBE_DIM];
+                c.vertex_outputs(&factors, 65, &mut one);
+                assert_eq!(one.as_slice(), &got[65 * LOBE_DIM..66 * LOBE_DIM]);
+            }
+        }
     }
 }

@@ -5,7 +5,8 @@
 //! ([`rotation`]), zonal lobes ([`zonal`]) and the analytic normalised-Phong convolution
 //! operator ([`phong`]) form the toolkit. On top: per-vertex visibility of a posed character
 //! ([`visibility`]), multi-lobe zonal fits kept in correspondence over frames ([`fit`]), the
-//! linear pose model ([`model`]), environment lighting ([`lighting`]) and run-time shading
+//! linear pose model ([`model`]) with its pose limits ([`limits`]), per-vertex shrink ([`shrink`]) and glossy fade
+//! ([`fade`]), environment lighting ([`lighting`]) and run-time shading
 //! ([`shade`]) with its Monte Carlo reference ([`reference`]); [`runtime`] relights a
 //! character frame by frame from its joint transforms, as a client does, with the model
 //! compacted ([`compact`]) and the lighting tabulated over the sphere ([`transfer_table`]). Pure code: no
@@ -14,6 +15,7 @@
 pub mod character;
 pub mod compact;
 mod error;
+pub mod fade;
 pub mod filter;
 pub mod fit;
 pub mod groups;

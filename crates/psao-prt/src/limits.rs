@@ -80,6 +80,33 @@ impl PoseLimits {
             .then(|| self.distance(&self.coords(x)) / self.radius)
     }
 
+    /// The share of the pose's departure from the training mean that the box keeps: the
+    /// length of the box-limited departure over the length of the pose's own (Euclidean, in
+    /// the pose features' radians, so it does not depend on the ridge; the axes are
+    /// orthonormal, so a direction the training poses did not vary in is not kept at all).
+    /// 1 for a pose inside the box (every training pose), towards 0 for a pose far outside
+    /// it or off the training poses' span. 1 without limits or for another length.
+    pub fn coverage(&self, x: &[f32]) -> f32 {
+        if self.range.is_empty() || x.len() != self.mean.len() {
+            return 1.0;
+        }
+        let departure: f32 = x
+            .iter()
+            .zip(&self.mean)
+            .map(|(a, m)| (a - m) * (a - m))
+            .sum();
+        if departure <= 0.0 {
+            return 1.0;
+        }
+        let kept: f32 = self
+            .coords(x)
+            .iter()
+            .zip(&self.range)
+            .map(|(c, &[lo, hi])| c.clamp(lo, hi).powi(2))
+            .sum();
+        (kept / departure).sqrt().min(1.0)
+    }
+
     /// The principal coordinates of the pose features `x` (of the right length).
     fn coords(&self, x: &[f32]) -> Vec<f32> {
         let d: Vec<f32> = x.iter().zip(&self.mean).map(|(a, m)| a - m).collect();
@@ -173,6 +200,25 @@ mod tests {
         let mut y = [5.0, 3.0, 0.0];
         l.box_only().apply(&mut y);
         assert_eq!(y, [3.0, 0.5, 0.0]);
+    }
+
+    #[test]
+    fn coverage_is_the_share_of_the_departure_the_box_keeps() {
+        let l = limits();
+        // Inside the box (and the mean itself): all of it.
+        assert_eq!(l.coverage(&[2.5, 0.2, 0.0]), 1.0);
+        assert_eq!(l.coverage(&[1.0, 0.0, 0.0]), 1.0);
+        // x clamped from 4 to 2: half of a departure along x.
+        assert!((l.coverage(&[5.0, 0.0, 0.0]) - 0.5).abs() < 1e-6);
+        // Along z (not an axis): nothing kept; (1.5, 0, 2) from the mean keeps x: 1.5 / 2.5.
+        assert_eq!(l.coverage(&[1.0, 0.0, 2.0]), 0.0);
+        assert!((l.coverage(&[2.5, 0.0, 2.0]) - 0.6).abs() < 1e-6);
+        // The ball and the ridge play no part.
+        assert_eq!(
+            l.coverage(&[5.0, 3.0, 0.0]),
+            l.box_only().coverage(&[5.0, 3.0, 0.0])
+        );
+        assert_eq!(PoseLimits::default().coverage(&[9.0, 9.0, 9.0]), 1.0);
     }
 
     #[test]

@@ -22,8 +22,11 @@
 //! A constant light (SH coefficients zero beyond band 0, e.g. the white sky whose shade is
 //! the self-visibility) needs no table: each lobe shades it in closed form
 //! ([`Shader::constant_transfer`]), a cubic in the cosine between the lobe and the BRDF axis.
-//! The result equals [`Shader::shade`] of the model's prediction up to the compaction's
-//! bound and the table's interpolation (measured in docs/RELIGHTING.md).
+//! The mode's fade ([`crate::fade::FadeRule::of_mode`]) blends the synthesised visibility
+//! towards unoccluded by one factor per frame, folded into the lobes' coefficients. The
+//! result equals [`Shader::shade`] of the model's faded prediction
+//! ([`crate::fade::predict`]) up to the compaction's bound and the table's interpolation
+//! (measured in docs/RELIGHTING.md).
 //!
 //! Vertices go in blocks of [`LANES`], each in passes over a structure of arrays (one array
 //! per quantity, one lane per vertex): the compacted model's synthesis of every lobe number
@@ -38,6 +41,7 @@ use rayon::prelude::*;
 
 use crate::character::rotation_vector;
 use crate::compact::{CompactModel, Lanes, DEFAULT_TOLERANCE, LANES};
+use crate::fade::FadeRule;
 use crate::model::{PoseModel, LOBE_DIM};
 use crate::sh::{self, ShVec, BANDS, COEFFS};
 use crate::shade::{orthonormalised, Mode, Shader};
@@ -299,6 +303,7 @@ impl Relighter {
         }
         let rotations = self.rig.joint_rotations(pose.joint_local)?;
         let factors = self.compact.row_factors(&rotations);
+        let fade = FadeRule::of_mode(self.shader.mode()).weight(self.compact.shape(), &rotations);
         if !matches!(&self.lighting, Some(l) if l.lights == lights) {
             self.lighting = Some(Lighting::new(&self.shader, lights));
         }
@@ -312,6 +317,7 @@ impl Relighter {
             rows: table_rows(&self.shader),
             constant: self.shader.constant_transfer(),
             window: self.shader.filter().window.factors(),
+            fade,
             factors: &factors,
             neighbours: &self.rig.neighbours,
             pose,
@@ -344,6 +350,8 @@ struct Frame<'a> {
     constant: ([f32; BANDS], f32),
     /// The visibility filter's window per band.
     window: [f32; BANDS],
+    /// The share of the predicted shadowing kept at this pose ([`crate::fade`]).
+    fade: f32,
     factors: &'a [f32],
     neighbours: &'a [u32],
     pose: &'a FramePose<'a>,
@@ -514,9 +522,14 @@ impl Frame<'_> {
             .sources
             .iter()
             .any(|x| matches!(x, Source::Constant(_)));
-        let (u, w) = (self.constant.0, self.window);
+        let u = self.constant.0;
+        let w = self.window.map(|x| x * self.fade);
+        // What the fade blends in: unoccluded visibility (band 0 alone, as the window
+        // keeps it).
+        let open = (1.0 - self.fade) * UNIT0;
         s.vis = [[0.0; LANES]; COEFFS];
-        s.unit = [0.0; LANES];
+        s.vis[0] = [open; LANES];
+        s.unit = [open * u[0]; LANES];
         for lobe in s.lobes.chunks_exact(LOBE_DIM) {
             for i in 0..LANES {
                 let local = normalize_or(Vec3::new(lobe[0][i], lobe[1][i], lobe[2][i]), Vec3::Z);
@@ -860,6 +873,74 @@ mod tests {
             }
             // The constant light scaled by 0.7 is shaded 0.7 times the white one.
             assert!((got[1] - 0.7 * got[3]).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn a_glossy_frame_fades_the_shadows_of_a_pose_outside_the_box_as_the_direct_shading_does() {
+        use crate::fade::{predict, FadeRule};
+        use crate::limits::PoseLimits;
+        // The training poses turned the joint about z within ±0.2 rad.
+        let model = PoseModel {
+            limits: PoseLimits {
+                mean: vec![0.0; 3],
+                axes: vec![0.0, 0.0, 1.0],
+                range: vec![[-0.2, 0.2]],
+                ..PoseLimits::default()
+            },
+            ..model()
+        };
+        let positions = [Vec3::ZERO, Vec3::X];
+        let normals = [Vec3::Z; 2];
+        let mut sky = unit_visibility();
+        sky[2] = 1.5;
+        sky[3] = 0.4;
+        // Seen from −x: the reflection vector leans away from the lobe (tilted towards +x).
+        let eye = Vec3::new(-3.0, 0.0, 1.0);
+        let mode = Mode::Phong { alpha: 8.0 };
+        // 0.4 about z (0.2 kept) and 0.3 about x (none kept): coverage 0.2 / 0.5.
+        let rotation = Vec3::new(0.3, 0.0, 0.4);
+        let fade = FadeRule::of_mode(mode);
+        assert!((fade.weight(&model, &[rotation]) - 0.4).abs() < 1e-5);
+        let mut r = Relighter::new(model.clone(), Shader::new(mode).unwrap(), rig()).unwrap();
+        let local =
+            Affine3A::from_quat(Quat::from_rotation_x(0.3) * Quat::from_scaled_axis(rotation));
+        let pose = FramePose {
+            joint_local: &[local],
+            positions: &positions,
+            normals: &normals,
+            transform: Affine3A::IDENTITY,
+        };
+        let client = r.shade(&pose, &[sky], eye).unwrap();
+        let geometry = ShadingGeometry {
+            positions: &positions,
+            frames: &skin_frames(&positions, &normals, &[1, 0]),
+            transform: Affine3A::IDENTITY,
+        };
+        let shader = Shader::new(mode).unwrap();
+        let shade = |rule: FadeRule| {
+            let mut raw = Vec::new();
+            predict(&model, rule, &[rotation], &mut raw);
+            shader
+                .shade(Visibility::Model(&model, &raw), geometry, &[sky], eye)
+                .unwrap()
+        };
+        let (faded, unfaded) = (shade(fade), shade(FadeRule::NONE));
+        let plain = shader
+            .shade(Visibility::Unshadowed, geometry, &[sky], eye)
+            .unwrap();
+        for v in 0..2 {
+            let (a, b) = (client[v], faded[v]);
+            assert!((a - b).abs() < 2e-3 * b.abs().max(1.0), "{v}: {a} vs {b}");
+            // 40 % of the way from unshadowed to the unfaded model's shade.
+            let want = plain[v] + 0.4 * (unfaded[v] - plain[v]);
+            assert!((b - want).abs() < 1e-4, "{v}: {b} vs {want}");
+            assert!(
+                (unfaded[v] - plain[v]).abs() > 2e-3,
+                "{v}: the model shadows: {} vs {}",
+                unfaded[v],
+                plain[v]
+            );
         }
     }
 

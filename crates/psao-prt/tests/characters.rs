@@ -194,6 +194,7 @@ fn a_client_frame_shades_like_the_characters_own_pose() {
 /// vertex, stay within 2e-3 (worst vertex) and 2e-4 (mean).
 #[test]
 fn a_trained_model_relights_like_its_direct_shading() {
+    use psao_prt::fade::FadeRule;
     use psao_prt::runtime::{FramePose, Relighter};
     use psao_prt::shade::{Mode, Shader, ShadingGeometry, Visibility};
     let Some(fox) = fox("Walk") else { return };
@@ -241,7 +242,8 @@ fn a_trained_model_relights_like_its_direct_shading() {
             };
             let client = relighter.shade(&frame, &lights, eye).unwrap();
             let mut raw = Vec::new();
-            model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+            let fade = FadeRule::of_mode(mode);
+            psao_prt::fade::predict(&model, fade, &pose.joint_rotations, &mut raw);
             let direct = Shader::new(mode)
                 .unwrap()
                 .shade(

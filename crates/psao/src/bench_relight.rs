@@ -80,10 +80,14 @@ struct BenchResult {
     /// Median milliseconds of the compacted model's synthesis alone (every vertex's lobes).
     synthesis_ms: f64,
     model_mb: f64,
-    /// Size of the compacted model's rows (16-bit integers).
+    /// Size of the compacted model's stored rows (16- and 8-bit integers and their
+    /// factors).
     compact_mb: f64,
-    /// Rows of the compacted model: its base and one per kept component.
+    /// Rows of the compacted model: its base and one per component.
     compact_rows: usize,
+    /// Rows stored per block of vertices, on average (each block keeps what its vertices
+    /// need).
+    compact_stored_rows: f64,
     /// Largest change the compaction can make to a lobe number (pose within the box).
     compact_bound: f32,
 }
@@ -230,13 +234,14 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         model_mb,
         compact_mb: relighter.compact().megabytes(),
         compact_rows: relighter.compact().rows(),
+        compact_stored_rows: relighter.compact().stored_rows(),
         compact_bound: relighter.compact().bound(),
     };
     let cpu_text = result
         .cpu_ms_per_frame
         .map_or("not available".to_string(), |c| format!("{c:.3} ms"));
     println!(
-        "{}: {} vertices, {} lobes, {} on {} threads: {:.3} ms per frame (synthesis {:.3} ms), CPU {cpu_text} per frame, model {:.2} MB (compacted {} rows, {:.2} MB, bound {:.1e})",
+        "{}: {} vertices, {} lobes, {} on {} threads: {:.3} ms per frame (synthesis {:.3} ms), CPU {cpu_text} per frame, model {:.2} MB (compacted {} rows, {:.1} stored per block, {:.2} MB, bound {:.1e})",
         result.character,
         result.vertices,
         result.lobes,
@@ -246,6 +251,7 @@ pub fn run(args: &BenchRelightArgs) -> Result<()> {
         result.synthesis_ms,
         result.model_mb,
         result.compact_rows,
+        result.compact_stored_rows,
         result.compact_mb,
         result.compact_bound
     );

@@ -7,6 +7,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use psao_prt::character::Character;
+use psao_prt::fade::{self, FadeRule};
 use psao_prt::filter::Filter;
 use psao_prt::model::{train, Sample, TrainReport};
 use psao_prt::shade::{Mode, Shader, ShadingGeometry, Visibility};
@@ -341,7 +342,12 @@ fn run_render(args: &RenderArgs) -> Result<()> {
     for i in range.start..range.end {
         let t = i as f32 / FPS;
         let pose = c.pose(t);
-        model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+        fade::predict(
+            &model,
+            FadeRule::of_mode(shader.mode()),
+            &pose.joint_rotations,
+            &mut raw,
+        );
         let light = lighting.rotated_about_up((args.light_rotate * t).to_radians());
         let values = shader.shade(
             Visibility::Model(&model, &raw),

@@ -10,6 +10,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use psao_eval::{AoImage, Metrics};
 use psao_prt::character::Character;
+use psao_prt::fade::{self, FadeRule};
 use psao_prt::filter::Filter;
 use psao_prt::lighting::{EnvMap, Radiance, LUMINANCE};
 use psao_prt::model::{cosine_fit_errors, mean_std, model_errors, PoseLimits, PoseModel, Sample};
@@ -71,7 +72,10 @@ pub struct EvalArgs {
     /// Also shade each model with parts of its protection against unseen poses switched
     /// off (methods `lobesN-VARIANT`): `unlimited` (poses not moved into the training
     /// poses' limits), `box` (the limits' box without their ball), `noshrink` (no
-    /// per-vertex shrink towards the average lobes), `plain` (box only, no shrink).
+    /// per-vertex shrink towards the average lobes), `plain` (box only, no shrink),
+    /// `nofade` (shadows not blended towards unoccluded as the pose leaves the training
+    /// poses' box; `fade`, `fade2`: blended in every mode, by the pose's coverage or its
+    /// square).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub variants: Vec<Variant>,
     /// Lobe counts to train and compare.
@@ -105,6 +109,12 @@ pub enum Variant {
     Unlimited,
     /// The limits' box without their ball (shrink kept).
     Box,
+    /// Shadows never blended towards unoccluded (see `psao_prt::fade`).
+    Nofade,
+    /// Shadows blended towards unoccluded by the pose's coverage in every mode.
+    Fade,
+    /// As `fade` with the coverage squared.
+    Fade2,
     /// No per-vertex shrink (limits kept).
     Noshrink,
     /// The box alone, no ball and no shrink.
@@ -119,21 +129,50 @@ impl Variant {
             Variant::Box => "-box",
             Variant::Noshrink => "-noshrink",
             Variant::Plain => "-plain",
+            Variant::Nofade => "-nofade",
+            Variant::Fade => "-fade",
+            Variant::Fade2 => "-fade2",
         }
     }
 
     /// This variant of the trained `model` (`unshrunk`: the same before its shrink).
-    fn of(self, model: &PoseModel, unshrunk: &PoseModel) -> PoseModel {
+    fn of(self, model: &PoseModel, unshrunk: &PoseModel) -> Method {
         let (base, limits) = match self {
             Variant::Unlimited => (model, PoseLimits::default()),
             Variant::Box => (model, model.limits.box_only()),
             Variant::Noshrink => (unshrunk, unshrunk.limits.clone()),
             Variant::Plain => (unshrunk, unshrunk.limits.box_only()),
+            Variant::Nofade | Variant::Fade | Variant::Fade2 => (model, model.limits.clone()),
         };
-        PoseModel {
-            limits,
-            ..base.clone()
+        let fade = match self {
+            Variant::Nofade => Some(FadeRule::NONE),
+            Variant::Fade => Some(FadeRule { power: 1.0 }),
+            Variant::Fade2 => Some(FadeRule { power: 2.0 }),
+            _ => None,
+        };
+        Method {
+            model: PoseModel {
+                limits,
+                ..base.clone()
+            },
+            fade,
         }
+    }
+}
+
+/// A model as shaded: its weights and limits, and how it fades its shadows.
+struct Method {
+    model: PoseModel,
+    /// `None`: as the mode does by default (`FadeRule::of_mode`).
+    fade: Option<FadeRule>,
+}
+
+impl Method {
+    /// The model's raw outputs at the pose of `joint_rotations`, faded for `mode`, into
+    /// `raw`.
+    fn predict(&self, mode: Mode, joint_rotations: &[glam::Vec3], raw: &mut Vec<f32>) {
+        let rule = self.fade.unwrap_or_else(|| FadeRule::of_mode(mode));
+        fade::predict(&self.model, rule, joint_rotations, raw);
     }
 }
 
@@ -166,6 +205,9 @@ struct FitError {
     /// Per test frame: its pose's distance from the training poses' mean as a multiple of
     /// the farthest training pose's (the pose limits' ball; `null` without one).
     pose_reach: Vec<Option<f32>>,
+    /// Per test frame: the share of its pose's departure from the training mean that the
+    /// limits' box keeps (`PoseLimits::coverage`; 1 inside the box).
+    pose_coverage: Vec<f32>,
 }
 
 /// Averages of one method.
@@ -313,7 +355,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     )?;
 
     // Per lobe count: the model and its variants, each with its method name.
-    let mut models: Vec<(usize, Vec<(String, PoseModel)>)> = Vec::new();
+    let mut models: Vec<(usize, Vec<(String, Method)>)> = Vec::new();
     let mut fit_error = Vec::new();
     for &lobes in &args.lobes {
         let start = Instant::now();
@@ -340,6 +382,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                     model.limits.reach(&pose[1..])
                 })
                 .collect(),
+            pose_coverage: tests
+                .iter()
+                .map(|s| {
+                    let pose = model.raw_pose_vector(&s.joint_rotations);
+                    model.limits.coverage(&pose[1..])
+                })
+                .collect(),
         });
         let variants = args.variants.iter().map(|v| {
             (
@@ -347,11 +396,10 @@ pub fn run(args: &EvalArgs) -> Result<()> {
                 v.of(&model, &report.unshrunk),
             )
         });
-        let named: Vec<(String, PoseModel)> = variants.collect();
-        models.push((
-            lobes,
-            [vec![(format!("lobes{lobes}"), model)], named].concat(),
-        ));
+        let named: Vec<(String, Method)> = variants.collect();
+        let default = Method { model, fade: None };
+        let all = std::iter::once((format!("lobes{lobes}"), default)).chain(named);
+        models.push((lobes, all.collect()));
     }
 
     // Fig. 3 on at most FIG3_FRAMES training frames spread over the set.
@@ -418,7 +466,7 @@ struct Shared<'a> {
     /// The test frames' traced visibility.
     tests: &'a [Sample],
     /// Per lobe count: the model and its variants, each with its method name.
-    models: &'a [(usize, Vec<(String, PoseModel)>)],
+    models: &'a [(usize, Vec<(String, Method)>)],
     fit_error: &'a [FitError],
     sh_fit: &'a [ShFit],
     env: &'a EnvMap,
@@ -532,13 +580,13 @@ fn evaluate_mode(shared: &Shared, mode: Mode, out: &std::path::Path) -> Result<(
                 )?,
             ));
         }
-        for (name, model) in models.iter().flat_map(|(_, named)| named) {
-            model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+        for (name, method) in models.iter().flat_map(|(_, named)| named) {
+            method.predict(mode, &pose.joint_rotations, &mut raw);
             for (suffix, shader) in &shaders {
                 methods.push((
                     format!("{name}{suffix}"),
                     shader.shade(
-                        Visibility::Model(model, &raw),
+                        Visibility::Model(&method.model, &raw),
                         geometry,
                         &lighting.rgb,
                         camera.position,
@@ -568,15 +616,15 @@ fn evaluate_mode(shared: &Shared, mode: Mode, out: &std::path::Path) -> Result<(
 
     // Run time: synthesis + shading per frame, median of the test frames (3 runs each).
     for (fe, (_, named)) in fit_error.iter_mut().zip(models) {
-        let model = &named[0].1;
+        let method = &named[0].1;
         let mut times = Vec::new();
         for &t in test_times {
             let pose = tc.pose(t);
             for _ in 0..3 {
                 let start = Instant::now();
-                model.predict_raw(&model.pose_vector(&pose.joint_rotations), &mut raw);
+                method.predict(mode, &pose.joint_rotations, &mut raw);
                 let v = shader.shade(
-                    Visibility::Model(model, &raw),
+                    Visibility::Model(&method.model, &raw),
                     ShadingGeometry {
                         positions: &pose.positions,
                         frames: &pose.frames,
@@ -735,8 +783,8 @@ fn markdown(r: &Report) -> String {
          frames {}..{} (held out of training), times {:?} s; \
          {} visibility rays per vertex; reference {} samples per vertex.\n\n\
          ## Fit error (RMS over the sphere of predicted vs projected visibility, test frames)\n\n\
-         | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame | pose reach per test frame |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+         | lobes | mean | std | 99th percentile | lobe fit (train) | training s | model MB | ridge | ms per frame | pose reach per test frame | pose coverage per test frame |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
         r.character,
         r.clip,
         r.vertices,
@@ -753,7 +801,7 @@ fn markdown(r: &Report) -> String {
     );
     for f in &r.fit_error {
         s += &format!(
-            "| {} | {:.4} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} | {} |\n",
+            "| {} | {:.4} | {:.4} | {:.4} | {:.4} ± {:.4} | {:.1} | {:.2} | {:.2e} | {:.2} | {} | {} |\n",
             f.lobes,
             f.mean,
             f.std,
@@ -767,6 +815,11 @@ fn markdown(r: &Report) -> String {
             f.pose_reach
                 .iter()
                 .map(|r| r.map_or("—".to_string(), |r| format!("{r:.2}")))
+                .collect::<Vec<_>>()
+                .join(", "),
+            f.pose_coverage
+                .iter()
+                .map(|c| format!("{c:.2}"))
                 .collect::<Vec<_>>()
                 .join(", ")
         );
