@@ -21,6 +21,20 @@ pub const DEFAULT_JOB_SIZE: u64 = 64;
 /// which lost to equal priorities on saliency-weighted FLIP (docs/CORRECTIVE.md).
 pub const DEFAULT_DECAY: f32 = 0.8;
 
+/// How a queue orders the regions an analysis gives it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RegionOrder {
+    /// By the regions' priorities (the paper: bottom-up saliency blended with task
+    /// importance, [`crate::attention`]).
+    Priority,
+    /// All regions equal: breadth-first over the regions, coarse levels first.
+    Uniform,
+}
+
+/// The default order: by priority. On camera paths generated through the scenes
+/// (docs/CORRECTIVE.md, *Saliency against uniform*) ...
+pub const DEFAULT_ORDER: RegionOrder = RegionOrder::Priority;
+
 /// A piece of work: `len` positions of one level of one region, from position `start` on.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Job {

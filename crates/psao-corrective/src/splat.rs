@@ -185,16 +185,23 @@ struct Acc {
     sum: [f32; 3],
     /// Finest level of a sample whose own pixel this is (0: none).
     own_level: u8,
-    /// That sample's radiance.
+    /// The summed radiance of that level's samples whose own pixel this is.
     own: [f32; 3],
+    /// How many they are.
+    own_count: u16,
 }
 
 impl Acc {
     fn add(&mut self, p: &Placed, x: i32, y: i32) {
         if x == p.x && y == p.y {
-            if p.level >= self.own_level {
-                self.own_level = p.level;
-                self.own = p.color;
+            if p.level > self.own_level {
+                (self.own_level, self.own, self.own_count) = (p.level, [0.0; 3], 0);
+            }
+            if p.level == self.own_level && self.own_count < u16::MAX {
+                self.own_count += 1;
+                for c in 0..3 {
+                    self.own[c] += p.color[c];
+                }
             }
             return;
         }
@@ -216,12 +223,19 @@ impl Acc {
         }
     }
 
+    /// The mean radiance of the finest level's samples whose own pixel this is.
+    fn own_mean(&self) -> [f32; 3] {
+        let n = f32::from(self.own_count.max(1));
+        self.own.map(|v| v / n)
+    }
+
     /// The corrected pixel: `base` plus the correction, with `diffuse` the base's diffuse
     /// value there. A sample's own pixel gets the sample's radiance plus what the base adds to
     /// its diffuse value there: exactly the radiance when `base` is `diffuse`.
     fn resolve(&self, base: [f32; 3], diffuse: [f32; 3]) -> [f32; 3] {
         if self.own_level > 0 {
-            std::array::from_fn(|c| self.own[c] + (base[c] - diffuse[c]))
+            let own = self.own_mean();
+            std::array::from_fn(|c| own[c] + (base[c] - diffuse[c]))
         } else if self.weight > 0.0 {
             let norm = self.weight.max(1.0);
             std::array::from_fn(|c| base[c] + self.sum[c] / norm)
@@ -236,7 +250,8 @@ impl Acc {
     /// confidence `min(Σ w, 1)`, so the rim of a lone sample fades towards the base.
     fn resolve_view_dependent(&self, base: [f32; 3], keep: f32) -> [f32; 3] {
         if self.own_level > 0 {
-            std::array::from_fn(|c| keep * base[c] + self.own[c])
+            let own = self.own_mean();
+            std::array::from_fn(|c| keep * base[c] + own[c])
         } else if self.weight > 0.0 {
             let norm = self.weight.max(1.0);
             let confidence = self.weight.min(1.0);
