@@ -10,8 +10,11 @@
 //! and object edges.
 //!
 //! At each pixel:
-//! - a pixel that is some drawn sample's own pixel takes that sample's correction exactly
-//!   (the finest such sample, the last one in order among equals): the sample knows it;
+//! - a pixel that is some drawn sample's own pixel shows that sample's radiance: the samples
+//!   know it. When several samples of its finest such level have it as their own pixel
+//!   (traces of other camera ages the cache still holds as valid), it shows their mean, so
+//!   one sample's noise (e.g. a rare spike of a glossy highlight's area-light estimate)
+//!   does not stand alone there;
 //! - otherwise only the finest level whose samples reach the pixel counts (a coarse sample
 //!   fills only pixels no finer sample covers), and its samples' corrections are blended
 //!   with weights `(1 − d²/R²)²` falling with the distance `d` from each sample over its
@@ -264,8 +267,8 @@ impl Acc {
     }
 }
 
-/// Splat `batches` (each in its order; later samples win ties) into `target`; returns how
-/// many samples were drawn.
+/// Splat `batches` (samples of one level are averaged where they meet, up to rounding in
+/// any order) into `target`; returns how many samples were drawn.
 ///
 /// # Panics
 /// When the target's buffers are not `view.width × view.height` (a caller bug).
@@ -473,6 +476,29 @@ mod tests {
         assert_eq!(at(&img, 12, 10), 0.75);
         assert!((at(&img, 9, 10) - 0.25 * 0.64).abs() < 1e-6);
         assert!((at(&img, 13, 10) - 0.75 * 0.64).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_pixel_shows_the_mean_of_the_samples_of_its_finest_level_it_is_own_to() {
+        let f = frame(0, 0.0, W);
+        let h = Hierarchy::new(2).unwrap();
+        let base = grey(0.2);
+        // Three traces of pixel (10, 10) at level 2 (of other camera ages): one a noise
+        // spike. The pixel shows their mean, whatever their order; a coarser sample there
+        // does not count; a lone sample shows itself exactly.
+        let mut s = [
+            sample_at(&f, 10, 10, 2, [0.3; 3]),
+            sample_at(&f, 10, 10, 2, [0.9; 3]),
+            sample_at(&f, 10, 10, 2, [0.3; 3]),
+        ];
+        let coarse = [sample_at(&f, 10, 10, 1, [0.0; 3])];
+        for _ in 0..3 {
+            let img = run(&f, &h, &base, &[&coarse, &s]);
+            assert!((at(&img, 10, 10) - 0.5).abs() < 1e-6);
+            s.rotate_left(1);
+        }
+        let img = run(&f, &h, &base, &[&s[..1]]);
+        assert_eq!(at(&img, 10, 10), s[0].color[0]);
     }
 
     #[test]
