@@ -304,7 +304,7 @@ impl SampleCache {
     /// shows their mean); returns how many were drawn.
     pub fn splat(&self, view: &ScreenView, target: &mut SplatTarget<'_>) -> usize {
         let batches: Vec<&[Sample]> = self.levels.iter().map(Vec::as_slice).collect();
-        splat(&batches, &self.hierarchy, view, target)
+        splat(&batches, &self.hierarchy, view, self.camera_age, target)
     }
 }
 

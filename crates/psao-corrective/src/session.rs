@@ -6,9 +6,9 @@
 //! e.g. in parallel); [`Corrector::add`] the samples; [`Corrector::splat`] onto the base frame.
 
 use crate::attention::ObjectRegion;
-use crate::schedule::{RegionOrder, DEFAULT_ORDER};
 use crate::cache::{AgingStats, CacheConfig, CacheError, SampleCache};
 use crate::schedule::{Job, RegionQueue};
+use crate::schedule::{RegionOrder, DEFAULT_ORDER};
 use crate::screen::ScreenView;
 use crate::splat::{Sample, SplatTarget};
 use crate::sqrt5::{Hierarchy, PixelRect};

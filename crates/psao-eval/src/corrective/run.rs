@@ -29,9 +29,9 @@ use psao_trace::{Backend, GeometryMode, Tracer};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::dump::{dump_frame, DumpOf, FrameDump};
 use super::frame::{frame_images, rgb_image, trace_sample, FrameImages, ReferenceShading};
 use super::metrics::{centre_bias, frame_error, ErrorSums, FrameError, MeanError, Truth};
-use super::dump::{dump_frame, DumpOf, FrameDump};
 use super::worse::{error_change, Compared, ErrorChange};
 use super::EvalError;
 

@@ -223,10 +223,11 @@ pub fn run(args: &EvalArgs) -> Result<()> {
 
 /// The frame dumps of every run, as `dump/s{seed}_{path}_{order}_{budget}_f{frame}.json`.
 fn write_dumps(out: &Path, report: &psao_eval::corrective::seeds::SeedsReport) -> Result<()> {
-    let dumps = report
-        .runs
-        .iter()
-        .flat_map(|r| r.paths.iter().flat_map(move |p| p.dumps.iter().map(move |d| (r.seed, d))));
+    let dumps = report.runs.iter().flat_map(|r| {
+        r.paths
+            .iter()
+            .flat_map(move |p| p.dumps.iter().map(move |d| (r.seed, d)))
+    });
     for (i, (seed, d)) in dumps.enumerate() {
         if i == 0 {
             std::fs::create_dir_all(out.join("dump"))?;
