@@ -300,10 +300,11 @@ impl SampleCache {
     }
 
     /// Reproject the cached samples to `view` and splat them ([`crate::splat`]: finer levels
-    /// take precedence, newer samples win ties); returns how many were drawn.
+    /// take precedence; a pixel that several samples of one level have as their own pixel
+    /// shows their mean); returns how many were drawn.
     pub fn splat(&self, view: &ScreenView, target: &mut SplatTarget<'_>) -> usize {
         let batches: Vec<&[Sample]> = self.levels.iter().map(Vec::as_slice).collect();
-        splat(&batches, &self.hierarchy, view, target)
+        splat(&batches, &self.hierarchy, view, self.camera_age, target)
     }
 }
 

@@ -21,6 +21,24 @@ pub const DEFAULT_JOB_SIZE: u64 = 64;
 /// which lost to equal priorities on saliency-weighted FLIP (docs/CORRECTIVE.md).
 pub const DEFAULT_DECAY: f32 = 0.8;
 
+/// How a queue orders the regions an analysis gives it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RegionOrder {
+    /// By the regions' priorities (the paper: bottom-up saliency blended with task
+    /// importance, [`crate::attention`]).
+    Priority,
+    /// All regions equal: breadth-first over the regions, coarse levels first.
+    Uniform,
+}
+
+/// The default order: uniform. On camera paths generated through `scenes/corrective.toml`
+/// and `scenes/sponza_glossy.toml` (5 seeds each) the saliency ordering did not beat equal
+/// priorities on plain FLIP over the non-diffuse pixels by more than the spread over seeds
+/// (docs/CORRECTIVE.md, *Saliency against uniform ordering*), so the queue ignores the
+/// analyses' priorities unless told otherwise ([`crate::session::Planner::set_order`]); the
+/// analyses still say which regions to correct.
+pub const DEFAULT_ORDER: RegionOrder = RegionOrder::Uniform;
+
 /// A piece of work: `len` positions of one level of one region, from position `start` on.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Job {

@@ -8,6 +8,7 @@
 use crate::attention::ObjectRegion;
 use crate::cache::{AgingStats, CacheConfig, CacheError, SampleCache};
 use crate::schedule::{Job, RegionQueue};
+use crate::schedule::{RegionOrder, DEFAULT_ORDER};
 use crate::screen::ScreenView;
 use crate::splat::{Sample, SplatTarget};
 use crate::sqrt5::{Hierarchy, PixelRect};
@@ -39,10 +40,12 @@ pub struct Planner {
     last: Vec<ObjectRegion>,
     /// The viewer's current camera age, when told.
     camera_age: Option<u32>,
+    /// Whether the analyses' priorities order the queue.
+    order: RegionOrder,
 }
 
 impl Planner {
-    /// An empty queue over `hierarchy`'s levels.
+    /// An empty queue over `hierarchy`'s levels, ordered by [`DEFAULT_ORDER`].
     pub fn new(hierarchy: Hierarchy, job_size: u64, decay: f32) -> Self {
         Self {
             hierarchy,
@@ -51,7 +54,13 @@ impl Planner {
             finished: Vec::new(),
             last: Vec::new(),
             camera_age: None,
+            order: DEFAULT_ORDER,
         }
+    }
+
+    /// How the queue orders the regions of later analyses.
+    pub fn set_order(&mut self, order: RegionOrder) {
+        self.order = order;
     }
 
     /// The √5 hierarchy.
@@ -65,9 +74,15 @@ impl Planner {
         if changed {
             self.finished.clear();
         }
-        self.queue.submit(regions, changed, &self.finished);
+        let mut regions = regions.to_vec();
+        if self.order == RegionOrder::Uniform {
+            for r in &mut regions {
+                r.priority = 1.0;
+            }
+        }
+        self.queue.submit(&regions, changed, &self.finished);
         self.analyzed_age = Some(camera_age);
-        self.last = regions.to_vec();
+        self.last = regions;
     }
 
     /// The viewer's camera age now. Once the queue has run dry while the camera moved
@@ -166,6 +181,11 @@ impl Corrector {
             planner: Planner::new(hierarchy, job_size, decay),
             cache: SampleCache::new(cache, hierarchy)?,
         })
+    }
+
+    /// How the queue orders the regions of later analyses ([`Planner::set_order`]).
+    pub fn set_order(&mut self, order: RegionOrder) {
+        self.planner.set_order(order);
     }
 
     /// The sample cache.
@@ -349,5 +369,47 @@ mod tests {
         // A later analysis at that age keeps the progress (nothing is traced twice).
         p.analyze(&[region], 1);
         assert!(!p.has_work());
+    }
+
+    #[test]
+    fn a_uniform_order_ignores_the_priorities_and_goes_breadth_first() {
+        let region = |id: u32, x0: i32, priority: f32| ObjectRegion {
+            id,
+            rect: PixelRect {
+                x0,
+                y0: 0,
+                x1: x0 + 40,
+                y1: 40,
+            },
+            pixels: 1600,
+            saliency: priority,
+            importance: 0.0,
+            priority,
+        };
+        let regions = [region(1, 0, 1.0), region(2, 50, 0.1)];
+        // The (object, level) of each job until object 2 gets its first one.
+        let jobs_until_object_2 = |order: RegionOrder| {
+            let mut p = Planner::new(Hierarchy::new(3).unwrap(), 10_000, 0.8);
+            p.set_order(order);
+            p.analyze(&regions, 0);
+            let mut jobs = Vec::new();
+            while let Some(job) = p.take_job(u64::MAX) {
+                jobs.push((job.object, job.level));
+                if job.object == 2 {
+                    break;
+                }
+            }
+            jobs
+        };
+        // By priority, object 1 is refined (0.2 after its first level) before object 2 (0.1)
+        // gets a first coarse level; uniform, both get level 1 first.
+        assert_eq!(
+            jobs_until_object_2(RegionOrder::Priority),
+            vec![(1, 1), (1, 2), (2, 1)]
+        );
+        assert_eq!(
+            jobs_until_object_2(RegionOrder::Uniform),
+            vec![(1, 1), (2, 1)]
+        );
     }
 }

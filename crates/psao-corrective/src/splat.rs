@@ -10,8 +10,12 @@
 //! and object edges.
 //!
 //! At each pixel:
-//! - a pixel that is some drawn sample's own pixel takes that sample's correction exactly
-//!   (the finest such sample, the last one in order among equals): the sample knows it;
+//! - a pixel that is some drawn sample's own pixel shows the radiance of the samples of its
+//!   finest such level: the samples know it. When one of them was traced for the current
+//!   camera age it shows that one (it knows the current view); otherwise, when several
+//!   traces of other camera ages the cache still holds as valid have it as their own pixel,
+//!   it shows their mean, so one stale trace's noise (e.g. a rare spike of a glossy
+//!   highlight's area-light estimate) does not stand alone there;
 //! - otherwise only the finest level whose samples reach the pixel counts (a coarse sample
 //!   fills only pixels no finer sample covers), and its samples' corrections are blended
 //!   with weights `(1 − d²/R²)²` falling with the distance `d` from each sample over its
@@ -110,6 +114,8 @@ struct Placed {
     x1: i32,
     y1: i32,
     level: u8,
+    /// Whether it was traced for the current camera age.
+    fresh: bool,
     object: u32,
     position: Vec3,
     normal: Vec3,
@@ -133,6 +139,7 @@ impl Placed {
 /// Where a sample lands on screen, or `None` when it is off screen, occluded or on another object.
 fn place(
     s: &Sample,
+    now: u32,
     view: &ScreenView,
     hierarchy: &Hierarchy,
     ids: &[u32],
@@ -166,6 +173,7 @@ fn place(
         x1: (x + r + 1).min(view.width as i32),
         y1: (y + r + 1).min(view.height as i32),
         level: s.level,
+        fresh: s.age == now,
         object: s.object,
         position: s.position,
         normal: s.normal,
@@ -185,16 +193,40 @@ struct Acc {
     sum: [f32; 3],
     /// Finest level of a sample whose own pixel this is (0: none).
     own_level: u8,
-    /// That sample's radiance.
+    /// The summed radiance of that level's samples whose own pixel this is.
     own: [f32; 3],
+    /// How many they are.
+    own_count: u16,
+    /// The summed radiance of those traced for the current camera age.
+    fresh: [f32; 3],
+    /// How many they are.
+    fresh_count: u16,
 }
 
 impl Acc {
     fn add(&mut self, p: &Placed, x: i32, y: i32) {
         if x == p.x && y == p.y {
-            if p.level >= self.own_level {
-                self.own_level = p.level;
-                self.own = p.color;
+            if p.level > self.own_level {
+                *self = Acc {
+                    own_level: p.level,
+                    own: [0.0; 3],
+                    own_count: 0,
+                    fresh: [0.0; 3],
+                    fresh_count: 0,
+                    ..*self
+                };
+            }
+            if p.level == self.own_level && self.own_count < u16::MAX {
+                self.own_count += 1;
+                for c in 0..3 {
+                    self.own[c] += p.color[c];
+                }
+                if p.fresh {
+                    self.fresh_count += 1;
+                    for c in 0..3 {
+                        self.fresh[c] += p.color[c];
+                    }
+                }
             }
             return;
         }
@@ -216,12 +248,25 @@ impl Acc {
         }
     }
 
+    /// The radiance of the finest level's samples whose own pixel this is: those traced for
+    /// the current view when there are any (they know it), else the mean of all (each an
+    /// estimate of a nearby view, none better than the others).
+    fn own_mean(&self) -> [f32; 3] {
+        let (sum, n) = if self.fresh_count > 0 {
+            (self.fresh, self.fresh_count)
+        } else {
+            (self.own, self.own_count.max(1))
+        };
+        sum.map(|v| v / f32::from(n))
+    }
+
     /// The corrected pixel: `base` plus the correction, with `diffuse` the base's diffuse
     /// value there. A sample's own pixel gets the sample's radiance plus what the base adds to
     /// its diffuse value there: exactly the radiance when `base` is `diffuse`.
     fn resolve(&self, base: [f32; 3], diffuse: [f32; 3]) -> [f32; 3] {
         if self.own_level > 0 {
-            std::array::from_fn(|c| self.own[c] + (base[c] - diffuse[c]))
+            let own = self.own_mean();
+            std::array::from_fn(|c| own[c] + (base[c] - diffuse[c]))
         } else if self.weight > 0.0 {
             let norm = self.weight.max(1.0);
             std::array::from_fn(|c| base[c] + self.sum[c] / norm)
@@ -236,7 +281,8 @@ impl Acc {
     /// confidence `min(Σ w, 1)`, so the rim of a lone sample fades towards the base.
     fn resolve_view_dependent(&self, base: [f32; 3], keep: f32) -> [f32; 3] {
         if self.own_level > 0 {
-            std::array::from_fn(|c| keep * base[c] + self.own[c])
+            let own = self.own_mean();
+            std::array::from_fn(|c| keep * base[c] + own[c])
         } else if self.weight > 0.0 {
             let norm = self.weight.max(1.0);
             let confidence = self.weight.min(1.0);
@@ -249,8 +295,9 @@ impl Acc {
     }
 }
 
-/// Splat `batches` (each in its order; later samples win ties) into `target`; returns how
-/// many samples were drawn.
+/// Splat `batches` (samples of one level are averaged where they meet, up to rounding in
+/// any order) into `target`, `now` being the current camera age (samples of that age know
+/// their own pixel in this view); returns how many samples were drawn.
 ///
 /// # Panics
 /// When the target's buffers are not `view.width × view.height` (a caller bug).
@@ -258,6 +305,7 @@ pub fn splat(
     batches: &[&[Sample]],
     hierarchy: &Hierarchy,
     view: &ScreenView,
+    now: u32,
     target: &mut SplatTarget<'_>,
 ) -> usize {
     let (w, h) = (view.width as usize, view.height as usize);
@@ -283,7 +331,7 @@ pub fn splat(
         placed.par_extend(
             batch
                 .par_iter()
-                .filter_map(|s| place(s, view, hierarchy, ids, relative_to, g)),
+                .filter_map(|s| place(s, now, view, hierarchy, ids, relative_to, g)),
         );
     }
     // Enough bands to balance the threads; each is a few rows high.
@@ -379,13 +427,25 @@ mod tests {
         }
     }
 
-    /// `batches` splatted over `base` (also the diffuse value).
+    /// `batches` splatted over `base` (also the diffuse value) at camera age 0.
     fn run(f: &Frame, h: &Hierarchy, base: &[[f32; 3]], batches: &[&[Sample]]) -> Vec<[f32; 3]> {
+        run_at(f, h, base, batches, 0)
+    }
+
+    /// `batches` splatted over `base` at camera age `now`.
+    fn run_at(
+        f: &Frame,
+        h: &Hierarchy,
+        base: &[[f32; 3]],
+        batches: &[&[Sample]],
+        now: u32,
+    ) -> Vec<[f32; 3]> {
         let mut color = base.to_vec();
         splat(
             batches,
             h,
             &f.view,
+            now,
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: base,
@@ -461,6 +521,37 @@ mod tests {
     }
 
     #[test]
+    fn a_pixel_shows_its_fresh_sample_or_else_the_mean_of_its_stale_ones() {
+        let f = frame(0, 0.0, W);
+        let h = Hierarchy::new(2).unwrap();
+        let base = grey(0.2);
+        let traced = |age: u32, v: f32| Sample {
+            age,
+            ..sample_at(&f, 10, 10, 2, [v; 3])
+        };
+        // Three traces of pixel (10, 10) at level 2 at camera ages 1–3, one a noise spike:
+        // at age 5 none knows the current view, and the pixel shows their mean, whatever
+        // their order; a coarser sample there does not count.
+        let mut stale = [traced(1, 0.3), traced(2, 0.9), traced(3, 0.3)];
+        let coarse = [Sample {
+            age: 5,
+            ..sample_at(&f, 10, 10, 1, [0.0; 3])
+        }];
+        for _ in 0..3 {
+            let img = run_at(&f, &h, &base, &[&coarse, &stale], 5);
+            assert!((at(&img, 10, 10) - 0.5).abs() < 1e-6);
+            stale.rotate_left(1);
+        }
+        // A trace for the current view knows the pixel: it shows that one exactly.
+        let fresh = [traced(5, 0.7)];
+        for batches in [[&stale[..], &fresh[..]], [&fresh[..], &stale[..]]] {
+            assert_eq!(at(&run_at(&f, &h, &base, &batches, 5), 10, 10), 0.7);
+        }
+        // A lone stale sample shows itself exactly.
+        assert_eq!(at(&run_at(&f, &h, &base, &[&stale[..1]], 5), 10, 10), 0.3);
+    }
+
+    #[test]
     fn a_highlight_reaches_its_own_pixel_only() {
         let f = frame(0, 0.0, W);
         let h = Hierarchy::new(3).unwrap();
@@ -491,6 +582,7 @@ mod tests {
             &[&[s]],
             &h,
             &f.view,
+            0,
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: &base,
@@ -598,6 +690,7 @@ mod tests {
             &[&[bright]],
             &h,
             &f.view,
+            0,
             &mut SplatTarget {
                 color: &mut color,
                 diffuse: &diffuse,
@@ -626,6 +719,7 @@ mod tests {
                 &[samples],
                 &h,
                 &f.view,
+                0,
                 &mut SplatTarget {
                     color: &mut color,
                     diffuse: &[],

@@ -53,6 +53,7 @@ fn config(lighting: Option<GiEval>) -> EvalConfig {
         seed: 3,
         mirror_turn: 1f32.to_radians(),
         lighting,
+        dump_frames: Vec::new(),
     }
 }
 

@@ -2,6 +2,7 @@
 //! along camera paths against the reference ([`run`]), on committed or generated paths, and
 //! the mean and spread of the results over seeds ([`seeds`]).
 
+pub mod dump;
 pub mod frame;
 pub mod metrics;
 pub mod report;

@@ -17,7 +17,7 @@ use psao_corrective::attention::{analyze_tiles, ObjectRegion, DEFAULT_SALIENCY_W
 use psao_corrective::base::{diffuse_keep, view_tolerances, GiShade, TracedAoShade};
 use psao_corrective::cache::CacheConfig;
 use psao_corrective::saliency::{saliency, Map};
-use psao_corrective::schedule::DEFAULT_JOB_SIZE;
+use psao_corrective::schedule::{RegionOrder, DEFAULT_JOB_SIZE};
 use psao_corrective::session::Corrector;
 use psao_corrective::splat::{Sample, SplatTarget};
 use psao_corrective::sqrt5::Hierarchy;
@@ -29,6 +29,7 @@ use psao_trace::{Backend, GeometryMode, Tracer};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::dump::{dump_frame, DumpOf, FrameDump};
 use super::frame::{frame_images, rgb_image, trace_sample, FrameImages, ReferenceShading};
 use super::metrics::{centre_bias, frame_error, ErrorSums, FrameError, MeanError, Truth};
 use super::worse::{error_change, Compared, ErrorChange};
@@ -122,6 +123,9 @@ pub struct EvalConfig {
     /// The lit session's base and the full reference (`None`: the AO composite, whose
     /// shading the reference shares on diffuse pixels).
     pub lighting: Option<GiEval>,
+    /// Path frames whose corrected images and caches are dumped per ordering and budget
+    /// ([`PathEval::dumps`]).
+    pub dump_frames: Vec<u32>,
 }
 
 /// A lit evaluation (`psao corrective eval --lighting gi`): the base frame is the lit
@@ -320,6 +324,9 @@ pub struct PathEval {
     /// Images of the middle frame.
     #[serde(skip)]
     pub middle: Option<MiddleFrame>,
+    /// The frames of [`EvalConfig::dump_frames`], per ordering and budget.
+    #[serde(skip)]
+    pub dumps: Vec<FrameDump>,
 }
 
 /// One simulated viewer.
@@ -371,6 +378,10 @@ impl Context<'_> {
         let mut corrector =
             Corrector::new(self.hierarchy, cache, DEFAULT_JOB_SIZE, self.config.decay)?;
         corrector.set_view_tolerances(view_tolerances(self.scene, cache.mirror_turn));
+        corrector.set_order(match order {
+            Order::Uniform => RegionOrder::Uniform,
+            Order::Saliency | Order::Random => RegionOrder::Priority,
+        });
         Ok(Sim {
             order,
             budget,
@@ -602,6 +613,7 @@ pub fn evaluate_path(
     let mut previous = None;
     let show = range.start + (range.end - range.start) / 2;
     let mut middle = None;
+    let mut dumps = Vec::new();
     for frame in range.clone() {
         let camera = path.camera_at_frame(frame as usize);
         let moved = previous.is_some_and(|p| p != camera);
@@ -655,6 +667,15 @@ pub fn evaluate_path(
                     })
                 }),
             });
+            if config.dump_frames.contains(&frame) {
+                let what = DumpOf {
+                    path: &path.name,
+                    frame,
+                    order: sim.order.name(),
+                    budget: sim.budget,
+                };
+                dumps.push(dump_frame(&what, &f, &corrected, &sim.corrector));
+            }
             if frame == show && sim.budget == shown_budget && sim.order == config.orders[0] {
                 middle = Some(MiddleFrame {
                     base: psao_client::composite_srgb8(&f.base),
@@ -703,6 +724,7 @@ pub fn evaluate_path(
         convergence,
         timing,
         middle,
+        dumps,
     })
 }
 

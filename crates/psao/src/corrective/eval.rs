@@ -86,6 +86,10 @@ pub struct EvalArgs {
     /// space instead of `--path`.
     #[arg(long)]
     pub random_paths: Option<usize>,
+    /// Path frames to dump per ordering and budget (`dump/` of `--out`: every non-diffuse
+    /// pixel's base, corrected and reference values and every cached sample), comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    pub dump_frames: Vec<u32>,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -150,6 +154,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             reference_paths: args.reference_paths,
             full_samples: args.full_lit_samples,
         }),
+        dump_frames: args.dump_frames.clone(),
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -193,6 +198,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .and_then(|r| r.paths.first())
         .context("the evaluation ran no path")?;
     write_path_outputs(&args.out, &input.name, args, &config, first)?;
+    write_dumps(&args.out, &report)?;
     if seeds.len() > 1 || paths_per_seed > 1 {
         let file = SeedsFile {
             scene: &input.name,
@@ -211,6 +217,24 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         println!("{}", summary_table(&report));
     } else {
         println!("{}", rows_table(&first.rows));
+    }
+    Ok(())
+}
+
+/// The frame dumps of every run, as `dump/s{seed}_{path}_{order}_{budget}_f{frame}.json`.
+fn write_dumps(out: &Path, report: &psao_eval::corrective::seeds::SeedsReport) -> Result<()> {
+    let dumps = report.runs.iter().flat_map(|r| {
+        r.paths
+            .iter()
+            .flat_map(move |p| p.dumps.iter().map(move |d| (r.seed, d)))
+    });
+    for (i, (seed, d)) in dumps.enumerate() {
+        if i == 0 {
+            std::fs::create_dir_all(out.join("dump"))?;
+        }
+        let budget = d.budget.to_string().replace(' ', "");
+        let name = format!("s{seed}_{}_{}_{budget}_f{}.json", d.path, d.order, d.frame);
+        write_text(&out.join("dump").join(name), &serde_json::to_string(d)?)?;
     }
     Ok(())
 }
