@@ -43,7 +43,8 @@ export interface SessionHandler {
 /// Share of the page's time that checking the server's state hash may take, as in
 /// `psao view` (`psao_net::hash_pacing`, docs/PROTOCOL.md): a hash reads the whole state,
 /// so on a large scene an update's hash is checked only once the last check's cost is this
-/// share of the time since it started; a small scene's is checked at every update.
+/// share of the time since it started; a small scene's is checked at every update, and in
+/// lockstep every one is.
 const HASH_SHARE = 0.1;
 
 /// Settings of a session.
@@ -129,7 +130,9 @@ export class Session {
         this.updates++;
         let verified = false;
         const start = performance.now();
-        if (m.delta.stateHash !== null && start >= this.nextCheck) {
+        // In lockstep every hash is checked, as `psao view` does: each round waits anyway.
+        const due = this.welcomeMsg?.lockstep === true || start >= this.nextCheck;
+        if (m.delta.stateHash !== null && due) {
           this.lastHash = this.state.stateHash();
           this.nextCheck = start + (performance.now() - start) / HASH_SHARE;
           verified = this.lastHash === m.delta.stateHash;

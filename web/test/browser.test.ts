@@ -169,7 +169,8 @@ test("in chromium the token comes from the fragment; a wrong one shows the messa
   try {
     // The right token: the scene loads (it needs the token) and a session starts; the token
     // leaves the address bar.
-    await page.goto(`http://${addr}/#token=sesame`);
+    // The AO view, as in the first test: this one tests the token, not the lighting.
+    await page.goto(`http://${addr}/?mode=ao#token=sesame`);
     await until(page, "the welcome", (s) => s.sessions === 1);
     const loaded = await page.evaluate(() => {
       const p = (window as unknown as { psao: { milestones: { scene: number | null } } }).psao;
@@ -178,7 +179,7 @@ test("in chromium the token comes from the fragment; a wrong one shows the messa
     assert.notEqual(loaded.scene, null, "the scene did not load with the token");
     assert.doesNotMatch(loaded.url, /sesame/);
     // A query unlike the first forces a new document (a fragment alone would not reload).
-    await page.goto(`http://${addr}/?again=1#token=wrong`);
+    await page.goto(`http://${addr}/?mode=ao&again=1#token=wrong`);
     const s = await until(page, "the refusal", (s) => s.fatal);
     assert.match(s.message ?? "", /wrong or missing token/);
     const shown = await page.$eval("#message", (e) => e.textContent ?? "");

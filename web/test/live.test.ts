@@ -1,5 +1,5 @@
 // The viewer's session code against a real `psao serve` (the release binary; PSAO_BIN
-// overrides its path): its state hash equals the server's after every update while a
+// overrides its path): its state hash equals the server's at every update that carries it while a
 // `psao view` drives the server along the built-in camera path; a wrong token ends the session
 // with a clear message; garbage on a WebSocket leaves the server serving the others.
 // Node runs it with --experimental-websocket (Node 20) for the global WebSocket.
@@ -65,7 +65,7 @@ function open(addr: string, token: string | null): Outcome {
   return { session, welcomed: w, closed: c, verified: () => verifiedCount };
 }
 
-test("the viewer's state hash equals the server's after every update", { timeout: 120_000 }, async () => {
+test("the viewer's state hash equals the server's at every update that carries it", { timeout: 120_000 }, async () => {
   const { child, addr } = await serve([]);
   try {
     const o = open(addr, null);
@@ -85,10 +85,12 @@ test("the viewer's state hash equals the server's after every update", { timeout
     await new Promise((r) => setTimeout(r, 300));
     const s = o.session;
     assert.equal(s.mismatches, 0, "updates left the viewer's state different from the server's");
-    // Each update is checked against the server's hash, which takes the viewer a while on a
-    // loaded machine: the server coalesces what it cannot take in time, so the count varies.
+    // Outside lockstep the server hashes its state, and the viewer checks a hash, only as
+    // often as the hash's cost allows (docs/PROTOCOL.md, "State hash"), and the server
+    // coalesces what the viewer cannot take in time: the counts vary, but hashes keep coming
+    // and every one checked matched.
     assert.ok(s.updates >= 3, `only ${s.updates} updates`);
-    assert.equal(o.verified(), s.updates, "every update carried the server's hash and matched");
+    assert.ok(o.verified() >= 3, `only ${o.verified()} of ${s.updates} updates checked against the server's hash`);
     const points = s.state!.pointCount();
     assert.ok(points > 1000, `only ${points} points received`);
     s.close();
