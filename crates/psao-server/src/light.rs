@@ -434,36 +434,11 @@ impl Lighting {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Affine3A;
-    use psao_points::{generate_instance_points, GenerateParams};
-    use psao_scene::{Material, Mesh};
 
-    /// A 1 m floor quad's points at 256 per m², with empty irradiance accumulators pooling
+    /// A 1 m floor quad's points at 256 per m² (`publish::tests::state`), with empty irradiance accumulators pooling
     /// at least `pool_paths` paths, and the point nearest its centre.
     fn floor(pool_paths: u32) -> (InstanceState, usize) {
-        let mesh = Mesh {
-            positions: vec![
-                Vec3::ZERO,
-                Vec3::new(1.0, 0.0, 0.0),
-                Vec3::new(1.0, 0.0, 1.0),
-                Vec3::new(0.0, 0.0, 1.0),
-            ],
-            indices: vec![[0, 2, 1], [0, 3, 2]],
-            ..Default::default()
-        };
-        let params = GenerateParams {
-            density: 256.0,
-            seed: 1,
-        };
-        let points = generate_instance_points(
-            &mesh,
-            &Material::default(),
-            &Affine3A::IDENTITY,
-            &params,
-            None,
-        )
-        .unwrap();
-        let mut s = InstanceState::new(&points, Affine3A::IDENTITY, 0, 0, false, 256).unwrap();
+        let mut s = crate::publish::tests::state();
         let config = LightingConfig {
             pool_paths,
             ..LightingConfig::default()

@@ -111,14 +111,15 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::instance::NONE;
     use glam::{Affine3A, Quat, Vec3};
     use psao_points::{generate_instance_points, GenerateParams};
     use psao_scene::{Material, Mesh};
 
-    fn state() -> InstanceState {
+    /// A 1 m floor quad's points at 256 per m² (seed 1), identity transform.
+    pub(crate) fn state() -> InstanceState {
         let mesh = Mesh {
             positions: vec![
                 Vec3::ZERO,
