@@ -510,6 +510,25 @@ impl Client {
         Ok(())
     }
 
+    fn compare_hash(&mut self, server: u64, mine: u64, frame: u64) {
+        self.hash_checks += 1;
+        if server != mine {
+            self.mismatches += 1;
+            tracing::error!("state differs from the server's after frame {frame}");
+        }
+    }
+
+    /// The final state's hash, compared with the server's hash of the last applied update
+    /// when that one was left unchecked.
+    fn check_last_hash(&mut self) -> u64 {
+        let mine = self.state.state_hash();
+        if let (true, Some(server)) = (self.unchecked, self.server_hash) {
+            self.unchecked = false;
+            self.compare_hash(server, mine, self.last_frame);
+        }
+        mine
+    }
+
     fn apply(
         &mut self,
         d: Delta,
@@ -552,27 +571,6 @@ impl Client {
         }
         let _ = out.send(Outgoing::Send(Message::Ack(Ack { frame: d.frame })));
         Ok(())
-    }
-}
-
-impl Client {
-    fn compare_hash(&mut self, server: u64, mine: u64, frame: u64) {
-        self.hash_checks += 1;
-        if server != mine {
-            self.mismatches += 1;
-            tracing::error!("state differs from the server's after frame {frame}");
-        }
-    }
-
-    /// The final state's hash, compared with the server's hash of the last applied update
-    /// when that one was left unchecked.
-    fn check_last_hash(&mut self) -> u64 {
-        let mine = self.state.state_hash();
-        if let (true, Some(server)) = (self.unchecked, self.server_hash) {
-            self.unchecked = false;
-            self.compare_hash(server, mine, self.last_frame);
-        }
-        mine
     }
 }
 

@@ -943,9 +943,10 @@ impl Simulation {
         // Outside lockstep only as often as its cost allows (crate::hash_pacing): the
         // sessions that want hashes get one with the updates of the frames that have one.
         let hash = if self.sessions.values().any(|s| s.want_hash) {
-            let mut pacing = self.hash_pacing;
-            let hash = pacing.hash_if_due(self.lockstep, || self.state_hash());
-            self.hash_pacing = pacing;
+            let server = &self.server;
+            let hash = self
+                .hash_pacing
+                .hash_if_due(self.lockstep, || state_hash(server));
             self.stats.hashed_frames += u64::from(hash.is_some());
             hash
         } else {
@@ -1009,15 +1010,6 @@ impl Simulation {
         }
     }
 
-    /// The hash a client's mirror reaches (grids and, with lighting, irradiance records).
-    fn state_hash(&self) -> u64 {
-        let server = &self.server;
-        psao_client::lit_state_hash_of(
-            (0..server.instance_count()).map(|i| server.grid(i)),
-            |i, s| server.light_cell(i, s),
-        )
-    }
-
     /// Say bye to everyone and collect the statistics.
     fn shutdown(mut self) -> ServeStats {
         let seconds = self.wall_start.map_or(0.0, |t| t.elapsed().as_secs_f64());
@@ -1061,7 +1053,7 @@ impl Simulation {
         if let (Some(a), Some(b)) = (self.cpu_start, cpu_seconds()) {
             stats.cpu_ms = (b - a) * 1e3 / frames;
         }
-        stats.state_hash = format!("{:016x}", self.state_hash());
+        stats.state_hash = format!("{:016x}", state_hash(&self.server));
         stats.clients.sort_by_key(|c| c.id);
         tracing::info!(
             "{} server frames, {:.2} ms mean ({:.2} ms step), {} late",
@@ -1212,6 +1204,15 @@ pub fn percentile(v: &[f64], q: f64) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);
     s[((s.len() - 1) as f64 * q).round() as usize]
+}
+
+/// The hash a client's mirror of `server` reaches (grids and, with lighting, irradiance
+/// records).
+fn state_hash(server: &Server) -> u64 {
+    psao_client::lit_state_hash_of(
+        (0..server.instance_count()).map(|i| server.grid(i)),
+        |i, s| server.light_cell(i, s),
+    )
 }
 
 #[cfg(test)]
