@@ -97,6 +97,25 @@ struct BlockRows {
     bound: f32,
 }
 
+/// Appends a block's rows of one width to that width's `values`, each row's place in
+/// `stored`.
+fn lay_out<T>(
+    rows: Vec<(u32, f32, Vec<T>)>,
+    width: Width,
+    values: &mut Vec<T>,
+    stored: &mut Vec<Stored>,
+) {
+    for (row, scale, data) in rows {
+        stored.push(Stored {
+            row,
+            width,
+            offset: values.len() as u32,
+            scale,
+        });
+        values.extend(data);
+    }
+}
+
 impl CompactModel {
     /// Compacts `model`, storing per block the fewest bytes whose summed largest change to
     /// an output (dropped rows and rounding) stays within `tolerance` (≥ 0; module doc).
@@ -225,24 +244,8 @@ impl CompactModel {
         let (mut wide, mut narrow) = (Vec::new(), Vec::new());
         let mut bound = 0.0f32;
         for block in block_rows {
-            for (row, scale, values) in block.wide {
-                stored.push(Stored {
-                    row,
-                    width: Width::Wide,
-                    offset: wide.len() as u32,
-                    scale,
-                });
-                wide.extend(values);
-            }
-            for (row, scale, values) in block.narrow {
-                stored.push(Stored {
-                    row,
-                    width: Width::Narrow,
-                    offset: narrow.len() as u32,
-                    scale,
-                });
-                narrow.extend(values);
-            }
+            lay_out(block.wide, Width::Wide, &mut wide, &mut stored);
+            lay_out(block.narrow, Width::Narrow, &mut narrow, &mut stored);
             block_start.push(stored.len() as u32);
             bound = bound.max(block.bound);
         }
