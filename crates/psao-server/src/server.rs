@@ -56,7 +56,8 @@ pub struct StepStats {
     pub cull_ms: f64,
     /// Milliseconds spent selecting, tracing and accumulating (included in `ms`).
     pub trace_ms: f64,
-    /// Milliseconds spent publishing (included in `ms`).
+    /// Milliseconds spent publishing, until [`Server::step_beside`]'s work beside it ended
+    /// too (included in `ms`).
     pub publish_ms: f64,
     /// Wall time of the step in milliseconds.
     pub ms: f64,
@@ -291,12 +292,28 @@ impl Server {
     /// charges both, see `light.rs`). Errors only when the tracer rejects a skinned pose
     /// (non-finite vertices).
     pub fn step_at(&mut self, views: &[View], time: f32) -> Result<StepStats, ServerError> {
+        self.step_beside(views, time, || ()).0
+    }
+
+    /// [`Server::step_at`], running `beside` on the rayon pool at the same time as the
+    /// publishing phase, whose work is partly serial, rather than beside the tracing, which
+    /// keeps every core busy: how a caller overlaps the previous frame's encoding and sending
+    /// with a step. `beside` runs whether or not the step succeeds.
+    pub fn step_beside<R: Send>(
+        &mut self,
+        views: &[View],
+        time: f32,
+        beside: impl FnOnce() -> R + Send,
+    ) -> (Result<StepStats, ServerError>, R) {
         let start = Instant::now();
         let crate::dynamics::Advanced {
             stats: motion,
             moved,
             restarted,
-        } = self.pose(time)?;
+        } = match self.pose(time) {
+            Ok(advanced) => advanced,
+            Err(e) => return (Err(e), beside()),
+        };
         let relit_points = self.relight(time);
         let animate_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frame += 1;
@@ -351,7 +368,7 @@ impl Server {
             candidates.dedup();
         }
         self.retain_held(&mut candidates);
-        let published = self.publish(&candidates);
+        let (published, beside) = rayon::join(|| self.publish(&candidates), beside);
         let cull_ms = (t_cull - start).as_secs_f64() * 1e3 - animate_ms;
         let trace_ms = (t_trace - t_cull).as_secs_f64() * 1e3;
         let publish_ms = t_trace.elapsed().as_secs_f64() * 1e3;
@@ -364,7 +381,7 @@ impl Server {
             publish_ms,
             "step"
         );
-        Ok(StepStats {
+        let stats = StepStats {
             visible_points: visible,
             traced_points: traced.len(),
             rays,
@@ -381,7 +398,8 @@ impl Server {
             trace_ms,
             publish_ms,
             ms: start.elapsed().as_secs_f64() * 1e3,
-        })
+        };
+        (Ok(stats), beside)
     }
 
     /// Pose the scene at `time` (tracer, instance transforms, skinned points, proximity

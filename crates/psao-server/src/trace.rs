@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 use psao_trace::ao::{ao_rays_range, medium_stream, sample_value, Medium, MediumSampler};
-use psao_trace::{sort_rays_spatially, Hit, Ray, Tracer};
+use psao_trace::{Hit, Ray, Tracer};
 use rayon::prelude::*;
 
 use crate::blocks::{WorldBox, BLOCK_POINTS, GROUP_BLOCKS, SUBS_PER_BLOCK, SUB_POINTS};
@@ -11,8 +11,8 @@ use crate::instance::InstanceState;
 use crate::light::LightSample;
 use crate::summary::{bin, bin_of, count_up_to, offset_of, LAST_BIN};
 
-/// Rays traced together per parallel work item. The batch's points are neighbours (the
-/// selection is put in Morton order first) and each point's rays stay together, so a
+/// Rays traced together per parallel work item. The batch's points are neighbours (points
+/// are numbered in Morton order) and each point's rays stay together, so a
 /// 16-ray packet shares its origin: measured faster than re-sorting the rays of a batch
 /// by origin and octant (Embree: −25 % CPU time per step; obvhs: about equal).
 const BATCH_RAYS: usize = 8192;
@@ -423,9 +423,9 @@ struct Job {
 }
 
 /// Trace up to `rays_per_point` new samples (never beyond `max_samples`) for each selected
-/// point, in spatially coherent batches (points in Morton order of position and normal
-/// octant) on the rayon pool, through `medium` if any (one medium sampler per work item).
-/// Results are in the order of `selected` and do not depend on the number of threads.
+/// point, in spatially coherent batches (runs of `selected`, whose points are numbered in
+/// Morton order of position) on the rayon pool, through `medium` if any (one medium sampler
+/// per work item). Results are in the order of `selected` and do not depend on the number of threads.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn trace(
     tracer: &Tracer,
@@ -437,78 +437,58 @@ pub(crate) fn trace(
     max_samples: u32,
     seed: u64,
 ) -> Vec<Traced> {
-    let jobs: Vec<Job> = selected
-        .par_iter()
-        .map(|c| {
-            let inst = &instances[c.instance as usize];
-            let (origin, normal) = inst.world(c.index as usize);
-            let count = inst.points.count[c.index as usize];
-            Job {
-                instance: c.instance,
-                index: c.index,
-                origin,
-                normal,
-                first: count,
-                rays: rays_per_point.min(max_samples.saturating_sub(count)),
-            }
-        })
-        .collect();
-    // Group nearby points (and similar normals) into the same batches.
-    let probes: Vec<Ray> = jobs
-        .par_iter()
-        .map(|j| Ray::new(j.origin, j.normal, 1.0))
-        .collect();
-    let order = sort_rays_spatially(&probes);
+    let job = |c: &Candidate| {
+        let inst = &instances[c.instance as usize];
+        let (origin, normal) = inst.world(c.index as usize);
+        let count = inst.points.count[c.index as usize];
+        Job {
+            instance: c.instance,
+            index: c.index,
+            origin,
+            normal,
+            first: count,
+            rays: rays_per_point.min(max_samples.saturating_sub(count)),
+        }
+    };
+    // `selected` is in (instance, index) order and the server numbers each instance's points
+    // in Morton order of their positions ([`crate::blocks::morton_order`]), so consecutive
+    // candidates are neighbours already: batches are runs of them, with no sort and no
+    // permutation back.
     let per_batch = (BATCH_RAYS / rays_per_point.max(1) as usize).max(1);
-    // In `order`: the results of `jobs[order[0]]`, `jobs[order[1]]`, …
-    let sorted: Vec<Traced> = order
+    selected
         .par_chunks(per_batch)
         .map_init(
             || (medium.map(|m| m.sampler()), Scratch::default()),
             |(sampler, scratch), batch| {
-                trace_batch(
-                    tracer,
-                    sampler.as_deref_mut(),
-                    scratch,
-                    &jobs,
-                    batch,
-                    radius,
-                    seed,
-                )
+                scratch.jobs.clear();
+                scratch.jobs.extend(batch.iter().map(job));
+                trace_batch(tracer, sampler.as_deref_mut(), scratch, radius, seed)
             },
         )
         .flatten_iter()
-        .collect();
-    // Back to the order of `selected`: `order` is a permutation of its indices.
-    let mut traced = vec![Traced::default(); jobs.len()];
-    for (&j, t) in order.iter().zip(sorted) {
-        traced[j as usize] = t;
-    }
-    traced
+        .collect()
 }
 
 /// A work item's buffers, reused from batch to batch.
 #[derive(Default)]
 struct Scratch {
+    jobs: Vec<Job>,
     rays: Vec<Ray>,
     hits: Vec<Option<Hit>>,
 }
 
-/// Trace the jobs `batch` (indices into `jobs`) with the buffers `scratch`; returns their
-/// results in the order of `batch`.
+/// Trace the jobs of `scratch` with its buffers; returns their results in the order of the
+/// jobs.
 fn trace_batch(
     tracer: &Tracer,
     mut medium: Option<&mut (dyn MediumSampler + '_)>,
     scratch: &mut Scratch,
-    jobs: &[Job],
-    batch: &[u32],
     radius: f32,
     seed: u64,
 ) -> Vec<Traced> {
-    let Scratch { rays, hits } = scratch;
+    let Scratch { jobs, rays, hits } = scratch;
     rays.clear();
-    for &j in batch {
-        let job = &jobs[j as usize];
+    for job in jobs.iter() {
         let key = sample_key(job.instance, job.index);
         ao_rays_range(
             job.origin, job.normal, radius, job.first, job.rays, seed, key, rays,
@@ -518,10 +498,8 @@ fn trace_batch(
     hits.resize(rays.len(), None);
     tracer.intersect(rays, hits);
     let mut at = 0;
-    batch
-        .iter()
-        .map(|&j| {
-            let job = &jobs[j as usize];
+    jobs.iter()
+        .map(|job| {
             let n = job.rays as usize;
             let key = sample_key(job.instance, job.index);
             let sum = rays[at..at + n]

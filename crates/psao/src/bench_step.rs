@@ -1,6 +1,7 @@
 //! `psao bench step`: the server alone, in this process. N clients' cameras follow a path
 //! (client k starts k/N of the way along it), server frames run back to back, and each
-//! frame's updates are encoded for the clients during the next step, as `psao serve` does.
+//! frame's updates are encoded for the clients during the next step's publishing phase
+//! ([`psao_server::Server::step_beside`]), as `psao serve` does.
 //! Reports wall ms per frame with the step's phases, and the process's CPU ms per frame.
 //! Without a network or client processes beside it, this is a quieter measure of the
 //! server's part of `psao bench serve`. It also itemises the process's whole resident size
@@ -81,7 +82,7 @@ pub struct BenchStepReport {
     pub publish_ms: f64,
     /// Collecting the clients' updates after the step.
     pub update_ms: f64,
-    /// Encoding all clients' updates (beside the next step).
+    /// Encoding all clients' updates (beside the next step's publishing).
     pub encode_ms: f64,
     /// This process's CPU time per frame (all threads).
     pub cpu_ms: f64,
@@ -200,10 +201,9 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
         }
         let seconds = (server.frame() + 1) as f32 / args.load.hz as f32;
         let previous = pending.take();
-        let (step, encoded) = rayon::join(
-            || server.step_at(&views, seconds),
-            || previous.map(|groups| encode(&mut codecs, &ids, &groups)),
-        );
+        let (step, encoded) = server.step_beside(&views, seconds, || {
+            previous.map(|groups| encode(&mut codecs, &ids, &groups))
+        });
         let step = step.context("server frame failed")?;
         if let Some((n, ms)) = encoded {
             bytes += n;
@@ -331,7 +331,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
     println!(
         "{} clients on {}: {} server frames, {:.0} rays per frame; {:.1} ms per frame \
          (median {:.1}, p95 {:.1}): step {:.1} (animate {:.1}, cull {:.1}, trace {:.1}, \
-         publish {:.1}), updates {:.1}, encoding beside the step {:.1}; CPU {:.1} ms per \
+         publish {:.1}), updates {:.1}, encoding beside publishing {:.1}; CPU {:.1} ms per \
          frame = {:.2} cores busy; {:.2} Mbit/s per client",
         report.clients,
         report.scene,

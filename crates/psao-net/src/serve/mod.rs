@@ -177,12 +177,27 @@ pub trait Stepper: Send {
         seconds: f32,
     ) -> Result<StepStats, NetError>;
 
+    /// [`Stepper::step`] with `beside` running on the rayon pool at the same time; by
+    /// default beside the whole step.
+    fn step_beside(
+        &mut self,
+        server: &mut Server,
+        views: &[View],
+        seconds: f32,
+        beside: Beside<'_>,
+    ) -> Result<StepStats, NetError> {
+        rayon::join(|| self.step(server, views, seconds), beside).0
+    }
+
     /// Why updates are stalled, when they are (an edge waiting for its trace nodes); sent
     /// to the clients that understand status messages whenever it changes.
     fn stalled(&self) -> Option<String> {
         None
     }
 }
+
+/// Work a [`Stepper`] overlaps with a server frame: the previous frame's encoding and sending.
+pub type Beside<'a> = Box<dyn FnOnce() + Send + 'a>;
 
 /// Tracing in this process: [`Server::step_at`].
 pub struct LocalStep;
@@ -195,6 +210,20 @@ impl Stepper for LocalStep {
         seconds: f32,
     ) -> Result<StepStats, NetError> {
         server.step_at(views, seconds).map_err(NetError::from)
+    }
+
+    /// `beside` runs beside the publishing phase, not the tracing ([`Server::step_beside`]).
+    fn step_beside(
+        &mut self,
+        server: &mut Server,
+        views: &[View],
+        seconds: f32,
+        beside: Beside<'_>,
+    ) -> Result<StepStats, NetError> {
+        server
+            .step_beside(views, seconds, beside)
+            .0
+            .map_err(NetError::from)
     }
 }
 
@@ -912,10 +941,9 @@ impl Simulation {
         let previous = self.unsent.take();
         let (server, sessions, rt) = (&mut self.server, &mut self.sessions, &self.rt);
         let stepper = &mut self.stepper;
-        let (step, sent) = rayon::join(
-            || stepper.step(server, &views, seconds as f32),
-            || previous.map(|u| send_updates(sessions, u, false, rt)),
-        );
+        let mut sent = None;
+        let send = Box::new(|| sent = previous.map(|u| send_updates(sessions, u, false, rt)));
+        let step = stepper.step_beside(server, &views, seconds as f32, send);
         if let Some(sent) = sent {
             self.sent(sent);
         }

@@ -11,7 +11,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 pub use medium::{Medium, MediumSampler};
-use sampling::azimuth;
+use sampling::azimuths;
 pub use sampling::{
     cosine_hemisphere, hash64, medium_stream, orthonormal_basis, ray_offset, sample_2d, Hemisphere,
     Sequence2d,
@@ -44,23 +44,18 @@ pub fn ao_rays_range(
     out: &mut Vec<Ray>,
 ) {
     let origin = ray_offset(x, n);
-    // The point's sequence and frame once, then only per-sample work: in groups, the
-    // azimuths' sines first (library calls), then the rest (vectorised).
+    // The point's sequence and frame once, then only per-sample work, in groups of lanes
+    // (vectorised).
     let (sequence, hemisphere) = (Sequence2d::new(seed, key), Hemisphere::new(n));
     out.reserve(count as usize);
-    let (mut u1, mut sin, mut cos) = (
-        [0.0; SAMPLE_GROUP],
-        [0.0; SAMPLE_GROUP],
-        [0.0; SAMPLE_GROUP],
-    );
+    let [mut u1, mut u2, mut sin, mut cos] = [[0.0; SAMPLE_GROUP]; 4];
     let mut dirs = [Vec3::ZERO; SAMPLE_GROUP];
     for start in (0..count).step_by(SAMPLE_GROUP) {
         let len = (count - start).min(SAMPLE_GROUP as u32) as usize;
         for k in 0..len {
-            let (a, b) = sequence.at(first.wrapping_add(start + k as u32));
-            u1[k] = a;
-            (sin[k], cos[k]) = azimuth(b);
+            (u1[k], u2[k]) = sequence.at(first.wrapping_add(start + k as u32));
         }
+        azimuths(&u2, &mut sin, &mut cos);
         hemisphere.cosine_lanes(&u1, &sin, &cos, &mut dirs);
         out.extend(dirs[..len].iter().map(|&d| Ray::new(origin, d, radius)));
     }
