@@ -350,17 +350,31 @@ impl CompactModel {
     pub fn synthesise_block(&self, factors: &[f32], block: usize, out: &mut [Lanes]) {
         let len = self.per_vertex * LANES;
         let out = &mut out.as_flattened_mut()[..len];
-        out.fill(0.0);
-        for s in self.stored_of(block) {
+        let stored = self.stored_of(block);
+        if stored.is_empty() {
+            out.fill(0.0);
+        }
+        // The first stored row is written, the others added (no clearing pass).
+        for (r, s) in stored.iter().enumerate() {
             let f = factors[s.row as usize] * s.scale;
             let at = s.offset as usize;
-            match s.width {
-                Width::Wide => {
+            match (s.width, r == 0) {
+                (Width::Wide, true) => {
+                    for (o, &x) in out.iter_mut().zip(&self.wide[at..at + len]) {
+                        *o = f * x as f32;
+                    }
+                }
+                (Width::Wide, false) => {
                     for (o, &x) in out.iter_mut().zip(&self.wide[at..at + len]) {
                         *o += f * x as f32;
                     }
                 }
-                Width::Narrow => {
+                (Width::Narrow, true) => {
+                    for (o, &x) in out.iter_mut().zip(&self.narrow[at..at + len]) {
+                        *o = f * x as f32;
+                    }
+                }
+                (Width::Narrow, false) => {
                     for (o, &x) in out.iter_mut().zip(&self.narrow[at..at + len]) {
                         *o += f * x as f32;
                     }

@@ -42,6 +42,7 @@ use rayon::prelude::*;
 use crate::character::rotation_vector;
 use crate::compact::{CompactModel, Lanes, DEFAULT_TOLERANCE, LANES};
 use crate::fade::FadeRule;
+use crate::filter::Filter;
 use crate::model::{PoseModel, LOBE_DIM};
 use crate::sh::{self, ShVec, BANDS, COEFFS};
 use crate::shade::{orthonormalised, Mode, Shader};
@@ -426,10 +427,16 @@ impl Frame<'_> {
                     s.weights[k][i] = weights[k];
                 }
             }
+            self.table_shades(table, count, s);
         }
+        self.constant_shades(s);
         for (i, slot) in slots.chunks_mut(per).enumerate() {
-            self.shade_vertex(i, s);
-            f(&s.shadowed, &s.unshadowed, slot);
+            for (light, (shadowed, unshadowed)) in s.shadowed.iter().zip(&s.unshadowed).enumerate()
+            {
+                s.vertex_shadowed[light] = shadowed[i];
+                s.vertex_unshadowed[light] = unshadowed[i];
+            }
+            f(&s.vertex_shadowed, &s.vertex_unshadowed, slot);
         }
     }
 
@@ -527,10 +534,14 @@ impl Frame<'_> {
         // What the fade blends in: unoccluded visibility (band 0 alone, as the window
         // keeps it).
         let open = (1.0 - self.fade) * UNIT0;
-        s.vis = [[0.0; LANES]; COEFFS];
-        s.vis[0] = [open; LANES];
+        // The first lobe's visibility is added to the open share's (written, not added, so
+        // that the lanes need no clearing).
+        let start: [f32; COEFFS] = std::array::from_fn(|k| if k == 0 { open } else { 0.0 });
+        if s.lobes.is_empty() {
+            s.vis = start.map(|x| [x; LANES]);
+        }
         s.unit = [open * u[0]; LANES];
-        for lobe in s.lobes.chunks_exact(LOBE_DIM) {
+        for (j, lobe) in s.lobes.chunks_exact(LOBE_DIM).enumerate() {
             for i in 0..LANES {
                 let local = normalize_or(Vec3::new(lobe[0][i], lobe[1][i], lobe[2][i]), Vec3::Z);
                 let t = Vec3::new(s.tangent[0][i], s.tangent[1][i], s.tangent[2][i]);
@@ -546,7 +557,8 @@ impl Frame<'_> {
                     let y = sh::eval(axis);
                     for (k, y) in y.iter().enumerate() {
                         let l = sh::band_of(k);
-                        s.vis[k][i] += ZH_SCALE[l] * c[l] * y;
+                        let before = if j == 0 { start[k] } else { s.vis[k][i] };
+                        s.vis[k][i] = before + ZH_SCALE[l] * c[l] * y;
                     }
                 }
                 if need_unit {
@@ -561,25 +573,30 @@ impl Frame<'_> {
         }
     }
 
-    /// Vertex `i` of the block: its shades with and without shadowing per light into the
-    /// scratch.
+    /// The first `count` lanes' shades under the table's lights, with and without
+    /// shadowing, into the lights' lanes: per vertex and group of [`GROUP`] channels, the
+    /// table interpolated (its three corners, the group's channels side by side) and dotted
+    /// with the visibility.
     #[inline(always)]
-    fn shade_vertex(&self, i: usize, s: &mut Scratch) {
-        let above = s.above[i];
-        let (u, back) = self.constant;
-        let mut vis: ShVec = std::array::from_fn(|k| s.vis[k][i]);
-        self.shader.filter_visibility(&mut vis);
-        if let Some(table) = &self.lighting.table {
-            let rows = self.rows;
-            for group in 0..self.lighting.groups {
-                let mut g = [[0.0f32; GROUP]; COEFFS];
+    fn table_shades(&self, table: &SphereTable, count: usize, s: &mut Scratch) {
+        let rows = self.rows;
+        let filtered = self.shader.filter() != Filter::default();
+        for group in 0..self.lighting.groups {
+            for i in 0..count {
+                let mut vis: ShVec = std::array::from_fn(|k| s.vis[k][i]);
+                if filtered {
+                    self.shader.filter_visibility(&mut vis);
+                }
+                let mut g = [0.0f32; COEFFS * GROUP];
                 let mut back = [0.0f32; GROUP];
                 for k in 0..3 {
                     let w = s.weights[k][i];
                     let point =
                         &table.point(s.offsets[k][i])[group * rows * GROUP..][..rows * GROUP];
                     let (front, rest) = point.split_at(COEFFS * GROUP);
-                    for (g, t) in g.as_flattened_mut().iter_mut().zip(front) {
+                    let front: &[f32; COEFFS * GROUP] =
+                        front.try_into().expect("a group's front is 16 vectors");
+                    for (g, t) in g.iter_mut().zip(front) {
                         *g += w * t;
                     }
                     for (b, t) in back.iter_mut().zip(rest) {
@@ -587,25 +604,38 @@ impl Frame<'_> {
                     }
                 }
                 let mut dot = [0.0f32; GROUP];
-                for (v, g) in vis.iter().zip(&g) {
+                for (v, g) in vis.iter().zip(g.chunks_exact(GROUP)) {
                     for (d, g) in dot.iter_mut().zip(g) {
                         *d += v * g;
                     }
                 }
+                let above = s.above[i];
                 for c in 0..GROUP {
-                    let channel = group * GROUP + c;
-                    if channel < s.table_lights.len() {
-                        let light = s.table_lights[channel];
-                        s.shadowed[light] = above * dot[c] + back[c];
-                        s.unshadowed[light] = above * UNIT0 * g[0][c] + back[c];
-                    }
+                    s.group_shadowed[c][i] = above * dot[c] + back[c];
+                    s.group_unshadowed[c][i] = above * UNIT0 * g[c] + back[c];
+                }
+            }
+            for c in 0..GROUP {
+                if let Some(&light) = s.table_lights.get(group * GROUP + c) {
+                    s.shadowed[light] = s.group_shadowed[c];
+                    s.unshadowed[light] = s.group_unshadowed[c];
                 }
             }
         }
+    }
+
+    /// Lane by lane: the shades under the constant lights, with and without shadowing,
+    /// into the lights' lanes.
+    #[inline(always)]
+    fn constant_shades(&self, s: &mut Scratch) {
+        let (u, back) = self.constant;
         for (light, source) in self.lighting.sources.iter().enumerate() {
             if let Source::Constant(k) = *source {
-                s.shadowed[light] = k * (above * s.unit[i] + back);
-                s.unshadowed[light] = k * (above * UNIT0 * u[0] + back);
+                for i in 0..LANES {
+                    let above = s.above[i];
+                    s.shadowed[light][i] = k * (above * s.unit[i] + back);
+                    s.unshadowed[light][i] = k * (above * UNIT0 * u[0] + back);
+                }
             }
         }
     }
@@ -657,9 +687,16 @@ struct Scratch {
     weights: [Lanes; 3],
     /// Per table channel, its light.
     table_lights: Vec<usize>,
+    /// One group of table channels: per channel, the lanes' shades with and without
+    /// shadowing.
+    group_shadowed: [Lanes; GROUP],
+    group_unshadowed: [Lanes; GROUP],
+    /// Per light, the lanes' shades with and without shadowing.
+    shadowed: Vec<Lanes>,
+    unshadowed: Vec<Lanes>,
     /// One vertex's shades per light, with and without shadowing.
-    shadowed: Vec<f32>,
-    unshadowed: Vec<f32>,
+    vertex_shadowed: Vec<f32>,
+    vertex_unshadowed: Vec<f32>,
 }
 
 impl Scratch {
@@ -688,8 +725,12 @@ impl Scratch {
             offsets: [[0; LANES]; 3],
             weights: [[0.0; LANES]; 3],
             table_lights,
-            shadowed: vec![0.0; lights],
-            unshadowed: vec![0.0; lights],
+            group_shadowed: [[0.0; LANES]; GROUP],
+            group_unshadowed: [[0.0; LANES]; GROUP],
+            shadowed: vec![[0.0; LANES]; lights],
+            unshadowed: vec![[0.0; LANES]; lights],
+            vertex_shadowed: vec![0.0; lights],
+            vertex_unshadowed: vec![0.0; lights],
         })
     }
 }

@@ -73,7 +73,8 @@ impl SphereTable {
             uv.y.max(0.0).floor().min(last),
         );
         let (fx, fy) = (uv.x - fi, uv.y - fj);
-        let (i, j) = (fi as u32, fj as u32);
+        // Through i32 (the cells are within 0..res): a conversion that vectorises.
+        let (i, j) = (fi as i32 as u32, fj as i32 as u32);
         // The cell's triangle: split along the diagonal parallel to the fold of its
         // quadrant (|u| + |v| = 1), so that the map's kink lies on triangle edges. Corners
         // as (di, dj, weight).
