@@ -54,6 +54,7 @@ fn config(lighting: Option<GiEval>) -> EvalConfig {
         mirror_turn: 1f32.to_radians(),
         lighting,
         dump_frames: Vec::new(),
+        full_samples: false,
     }
 }
 
@@ -61,7 +62,6 @@ const LIT: GiEval = GiEval {
     bounces: 1,
     base_paths: 2,
     reference_paths: 16,
-    full_samples: false,
 };
 
 /// The base row's PSNR over all pixels (every pixel is diffuse here).

@@ -91,21 +91,19 @@ pub fn paired_table(pairs: &[Paired]) -> String {
 
 /// What the base frame and the reference are.
 fn base_description(config: &EvalConfig) -> String {
+    let samples = if config.full_samples {
+        "full radiance relative to the base at their pixel"
+    } else {
+        "the view-dependent part over the base's diffuse share"
+    };
     match config.lighting {
         None => format!(
-            "base: the AO composite with {} AO rays per point (the reference shades diffuse pixels the same way)",
+            "base: the AO composite with {} AO rays per point (the reference shades diffuse pixels the same way); samples: {samples}",
             config.ao_spp
         ),
         Some(g) => format!(
-            "base: the lit composite with {} paths per point and {} bounces; reference: path-traced diffuse lighting with {} paths per point plus the reflected and refracted paths; samples: {}",
-            g.base_paths,
-            g.bounces,
-            g.reference_paths,
-            if g.full_samples {
-                "full radiance relative to the base at their pixel"
-            } else {
-                "the view-dependent part over the base's diffuse share"
-            }
+            "base: the lit composite with {} paths per point and {} bounces; reference: path-traced diffuse lighting with {} paths per point plus the reflected and refracted paths; samples: {samples}",
+            g.base_paths, g.bounces, g.reference_paths,
         ),
     }
 }

@@ -126,6 +126,12 @@ pub struct EvalConfig {
     /// Path frames whose corrected images and caches are dumped per ordering and budget
     /// ([`PathEval::dumps`]).
     pub dump_frames: Vec<u32>,
+    /// Whether samples carry their full radiance, as corrections relative to the base at
+    /// the pixel they land on (the splatting before view-dependent samples, kept to
+    /// compare); false: the view-dependent part only, over the base of which each pixel
+    /// keeps its material's diffuse share, as in the split
+    /// ([`psao_corrective::splat::SplatTarget::keep`]), over either base.
+    pub full_samples: bool,
 }
 
 /// A lit evaluation (`psao corrective eval --lighting gi`): the base frame is the lit
@@ -144,11 +150,6 @@ pub struct GiEval {
     pub base_paths: u32,
     /// Paths per point of the reference.
     pub reference_paths: u32,
-    /// Whether samples carry their full radiance, as corrections relative to the base at
-    /// their pixel (the splatting before view-dependent samples, kept to compare); false:
-    /// the view-dependent part only, over the base of which each pixel keeps its material's
-    /// diffuse share, as in the split ([`psao_corrective::splat::SplatTarget::keep`]).
-    pub full_samples: bool,
 }
 
 impl EvalConfig {
@@ -403,7 +404,7 @@ impl Context<'_> {
             self.base,
             &self.reference,
         );
-        if c.lighting.is_some_and(|g| !g.full_samples) {
+        if !c.full_samples {
             f.keep = Some(diffuse_keep(self.scene, &f.gbuffer, camera.position));
         }
         f
@@ -572,22 +573,24 @@ pub fn evaluate_path(
         seed: config.seed,
         ..TraceSettings::default()
     };
-    // Over a lit base, samples are the view-dependent part (unless compared as before).
+    // Samples are the view-dependent part (unless compared as before).
     let sample_settings = TraceSettings {
-        own_diffuse: config.lighting.is_none_or(|g| g.full_samples),
+        own_diffuse: config.full_samples,
         ..settings
     };
     let tracer = CorrectionTracer::new(scene, &tracers.primary, base, sample_settings);
-    let reference_tracer = lit
-        .as_ref()
-        .map(|(_, r)| CorrectionTracer::new(scene, &tracers.primary, r, settings));
+    // The reference is the full radiance, its diffuse surfaces shaded as the base (AO) or
+    // with the reference's lighting (lit).
+    let reference_shade: &dyn DiffuseShade = lit.as_ref().map_or(base, |(_, r)| r);
+    let reference_tracer =
+        CorrectionTracer::new(scene, &tracers.primary, reference_shade, settings);
     let cx = Context {
         config,
         scene,
         base,
         tracer: &tracer,
         reference: ReferenceShading {
-            tracer: reference_tracer.as_ref().unwrap_or(&tracer),
+            tracer: &reference_tracer,
             diffuse: lit.as_ref().map(|(_, r)| r as &dyn DiffuseShade),
         },
         hierarchy: Hierarchy::for_spacing(config.width.min(config.height) as f32 / 4.0),

@@ -74,10 +74,12 @@ pub struct EvalArgs {
     /// Paths per point of the lit reference.
     #[arg(long, default_value_t = 64)]
     pub reference_paths: u32,
-    /// With `--lighting gi`: samples carry their full radiance as corrections relative to
-    /// the base at their pixel (the splatting before view-dependent samples, to compare).
-    #[arg(long)]
-    pub full_lit_samples: bool,
+    /// What samples carry: `full` radiance (their own surface's diffuse light included), a
+    /// correction relative to the base at the pixel they land on, or the `view-dependent`
+    /// part only, added over the base's diffuse share. Default: `full` with `--lighting
+    /// ao`, `view-dependent` with `--lighting gi` (as the split); the other to compare.
+    #[arg(long, value_enum)]
+    pub samples: Option<SampleKind>,
     /// Seeds, comma-separated: one run per seed (replaces `--seed`), reported as mean and
     /// spread over the seeds.
     #[arg(long, value_delimiter = ',')]
@@ -93,6 +95,15 @@ pub struct EvalArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// What correction samples carry (`--samples`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SampleKind {
+    /// The full radiance.
+    Full,
+    /// The view-dependent part.
+    ViewDependent,
 }
 
 /// A positive count.
@@ -152,9 +163,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             bounces: args.bounces,
             base_paths: args.base_paths,
             reference_paths: args.reference_paths,
-            full_samples: args.full_lit_samples,
         }),
         dump_frames: args.dump_frames.clone(),
+        full_samples: match args.samples {
+            Some(kind) => kind == SampleKind::Full,
+            None => args.lighting == Lighting::Ao,
+        },
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
