@@ -3,8 +3,7 @@
 
 use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use psao_points::{
-    Bucket, Cell, GridLayout, InstancePoints, MirrorGrid, CELL_POINTS,
-    DEFAULT_INTERPOLATION_FACTOR,
+    Bucket, Cell, GridLayout, InstancePoints, MirrorGrid, CELL_POINTS, DEFAULT_INTERPOLATION_FACTOR,
 };
 
 use crate::alloc::CellAlloc;

@@ -340,7 +340,11 @@ fn skinned_points_follow_their_triangles_and_mirroring_stays_exact() {
             let coord = layout.coord_of_id(e.key - 1).unwrap();
             assert_eq!(layout.bucket_of(e.key - 1), b);
             let slot = grid.find_cell(coord).unwrap();
-            for p in grid.records(slot).iter().filter_map(|&r| layout.unpack(coord, r)) {
+            for p in grid
+                .records(slot)
+                .iter()
+                .filter_map(|&r| layout.unpack(coord, r))
+            {
                 decoded += 1;
                 let near = current
                     .iter()
