@@ -68,6 +68,28 @@ pub fn release_free_memory() {
     }
 }
 
+/// Size from which [`map_large_blocks_apart`] has every block mapped on its own.
+pub const MMAP_THRESHOLD: usize = 256 * 1024;
+
+/// Have the C allocator map every block of at least [`MMAP_THRESHOLD`] bytes on its own, so
+/// its pages go back to the system as soon as it is freed (glibc `mallopt(M_MMAP_THRESHOLD)`).
+/// By default glibc raises that threshold, up to 32 MiB, each time a mapped block is freed;
+/// start-up's large temporary buffers (candidates, burial rays, stored start points) then
+/// come from the heap and leave holes between the blocks the server keeps, pages that stay
+/// resident (docs/BENCHMARKS.md, "The whole resident size"). A server calls it first thing,
+/// before start-up allocates. Returns whether the allocator took the setting (false without
+/// glibc).
+pub fn map_large_blocks_apart() -> bool {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes an allocator parameter; the value is a positive size
+    // that fits in a C int.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD as libc::c_int) == 1
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    false
+}
+
 /// Gives free pages back whenever the resident size has grown by more than a sixteenth since
 /// the last time: a server's frames allocate short-lived buffers (rays, hits, updates), which
 /// land in the holes start-up left in the heap and keep those pages resident after they are
@@ -134,6 +156,29 @@ mod tests {
         let after = resident().unwrap().bytes;
         assert!(after + 40_000_000 <= before, "{before} -> {after}");
         assert!(blocks.len() == 1000 && blocks.iter().all(|b| b[59_999] & 1 == 1));
+    }
+
+    #[test]
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    fn large_blocks_go_back_to_the_system_when_freed() {
+        let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+        assert!(map_large_blocks_apart());
+        // Freeing one mapped block would have raised glibc's default threshold past the
+        // blocks below; with the threshold fixed each block stays a mapping of its own.
+        drop(vec![1u8; 4 * MMAP_THRESHOLD]);
+        let mut blocks: Vec<Vec<u8>> = (0..128)
+            .map(|k| vec![k as u8 | 1; MMAP_THRESHOLD])
+            .collect();
+        let before = resident().unwrap().bytes;
+        let mut k = 0;
+        blocks.retain(|_| {
+            k += 1;
+            k % 2 == 0
+        });
+        // No trimming: the 64 freed blocks' pages (16 MiB) leave with them.
+        let after = resident().unwrap().bytes;
+        assert!(after + 14 * (1 << 20) <= before, "{before} -> {after}");
+        assert!(blocks.len() == 64 && blocks.iter().all(|b| b[MMAP_THRESHOLD - 1] & 1 == 1));
     }
 
     #[test]

@@ -57,6 +57,8 @@ pub struct LightingConfig {
 /// Most bounces a server path may take (each costs a closest-hit ray and a shadow ray per
 /// light per path).
 pub const MAX_BOUNCES: u32 = 8;
+/// Largest `max_samples`: a point's AO sample count is kept in 16 bits.
+pub const MAX_SAMPLES_LIMIT: u32 = u16::MAX as u32;
 
 impl Default for LightingConfig {
     /// One bounce (the bounce of the sun and of small lights), 4 paths per point and frame,
@@ -85,7 +87,8 @@ pub struct ServerConfig {
     pub rays_per_point: u32,
     /// Most rays traced in one server frame.
     pub ray_budget: u64,
-    /// Samples after which a point counts as converged and is no longer traced.
+    /// Samples after which a point counts as converged and is no longer traced (1 to
+    /// [`MAX_SAMPLES_LIMIT`]).
     pub max_samples: u32,
     /// Widening of the view frustum: the tangents of both half-angles are scaled by
     /// `1 + frustum_margin` (0.2 = 20 % wider).
@@ -144,6 +147,9 @@ impl ServerConfig {
         if self.max_samples == 0 {
             return bad("max_samples must be at least 1");
         }
+        if self.max_samples > MAX_SAMPLES_LIMIT {
+            return bad(&format!("max_samples must be at most {MAX_SAMPLES_LIMIT}"));
+        }
         if !(self.frustum_margin.is_finite() && self.frustum_margin >= 0.0) {
             return bad("frustum_margin must be finite and >= 0");
         }
@@ -164,5 +170,28 @@ impl ServerConfig {
             return bad("thresholds must be finite");
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn max_samples_is_bounded_by_the_counts_width() {
+        let with = |max_samples| ServerConfig {
+            max_samples,
+            ..ServerConfig::default()
+        };
+        assert!(with(1).validate().is_ok());
+        assert!(with(MAX_SAMPLES_LIMIT).validate().is_ok());
+        assert!(matches!(
+            with(MAX_SAMPLES_LIMIT + 1).validate(),
+            Err(ServerError::InvalidConfig(_))
+        ));
+        assert!(matches!(
+            with(0).validate(),
+            Err(ServerError::InvalidConfig(_))
+        ));
     }
 }

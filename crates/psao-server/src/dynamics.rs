@@ -353,7 +353,7 @@ impl Dynamics {
         for (inst, points) in instances.iter_mut().zip(&invalid) {
             for &(i, motion) in points {
                 let i = i as usize;
-                let count = inst.points.count[i];
+                let count = inst.points.samples(i);
                 let kept = (count as f32 * kept_fraction(motion, tolerance)) as u32;
                 // Irradiance follows the same rule as AO (docs/LIGHTING.md).
                 if let Some(light) = &mut inst.points.light {
@@ -364,7 +364,7 @@ impl Dynamics {
                 } else {
                     inst.points.sum[i] * kept as f32 / count as f32
                 };
-                inst.points.count[i] = kept;
+                inst.points.set_samples(i, kept);
             }
             stats.invalidated_points += points.len();
         }

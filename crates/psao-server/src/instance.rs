@@ -3,8 +3,7 @@
 
 use glam::{Affine3A, Mat3A, UVec3, Vec3};
 use psao_points::{
-    Bucket, Cell, GridLayout, InstanceGrid, InstancePoints, CELL_POINTS,
-    DEFAULT_INTERPOLATION_FACTOR,
+    Bucket, Cell, GridLayout, InstancePoints, MirrorGrid, CELL_POINTS, DEFAULT_INTERPOLATION_FACTOR,
 };
 
 use crate::alloc::CellAlloc;
@@ -32,8 +31,10 @@ pub(crate) struct InstanceState {
     pub poisson_radius: f32,
     /// Where every stored point lives (all points, whether published or not).
     pub alloc: CellAlloc,
-    /// The published grid: what clients mirror.
-    pub grid: InstanceGrid,
+    /// The published grid: what clients mirror, kept as a client keeps it (a [`MirrorGrid`]:
+    /// variable-length cells and one table of bucket entries, which costs what is published
+    /// rather than fixed-size cells per slot).
+    pub grid: MirrorGrid,
     /// Points (structure of arrays).
     pub points: Points,
     /// Server frame at which each published bucket / cell last changed (0 = never).
@@ -66,9 +67,10 @@ pub(crate) struct Points {
     /// Whether the point is stored in the allocation (in the cell containing its position,
     /// see [`InstanceState::slot_of`]); clear when it overflowed.
     pub stored: Bits,
-    /// Sum of AO samples and their number.
+    /// Sum of AO samples and their number (at most [`crate::MAX_SAMPLES_LIMIT`], so 16 bits: read
+    /// and write it through [`Points::samples`] and [`Points::set_samples`]).
     pub sum: Vec<f32>,
-    pub count: Vec<u32>,
+    pub count: Vec<u16>,
     /// Last published record (0 = never published), and whether it was published in the
     /// point's current slot (cleared when the point changes cell).
     pub published: Vec<u32>,
@@ -83,9 +85,22 @@ impl Points {
     #[inline]
     pub fn progress(&self, i: usize) -> u32 {
         match &self.light {
-            None => self.count[i],
-            Some(l) => self.count[i].min(l.progress(i)),
+            None => self.samples(i),
+            Some(l) => self.samples(i).min(l.progress(i)),
         }
+    }
+
+    /// Point `i`'s AO samples.
+    #[inline]
+    pub fn samples(&self, i: usize) -> u32 {
+        u32::from(self.count[i])
+    }
+
+    /// Set point `i`'s AO samples to `n`, which never exceeds the validated `max_samples`
+    /// (at most [`crate::MAX_SAMPLES_LIMIT`]); larger values are held at the limit.
+    #[inline]
+    pub fn set_samples(&mut self, i: usize, n: u32) {
+        self.count[i] = u16::try_from(n).unwrap_or(u16::MAX);
     }
 }
 
@@ -177,7 +192,7 @@ impl InstanceState {
             world_bounds: (Vec3::ZERO, Vec3::ZERO),
             slack: points.poisson_radius * DEFAULT_INTERPOLATION_FACTOR,
             poisson_radius: points.poisson_radius_local,
-            grid: InstanceGrid::new(layout),
+            grid: MirrorGrid::new(layout),
             bucket_stamp: vec![0; layout.bucket_count as usize],
             cell_stamp: vec![0; alloc.slot_count()],
             alloc,
@@ -372,5 +387,25 @@ fn world_bounds(positions: &[Vec3], transform: &Affine3A) -> (Vec3, Vec3) {
     } else {
         let t = transform.translation.into();
         (t, t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::MAX_SAMPLES_LIMIT;
+
+    #[test]
+    fn sample_counts_read_back_up_to_the_limit() {
+        let mut p = Points {
+            count: vec![0; 4],
+            ..Points::default()
+        };
+        for (i, n) in [0, 1, 256, MAX_SAMPLES_LIMIT].into_iter().enumerate() {
+            p.set_samples(i, n);
+            assert_eq!(p.samples(i), n);
+            assert_eq!(p.progress(i), n);
+        }
+        assert_eq!(std::mem::size_of_val(&p.count[0]), 2, "16 bits per count");
     }
 }

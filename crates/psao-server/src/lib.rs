@@ -30,7 +30,7 @@ mod trace;
 pub use blocks::morton_order;
 pub use bury::{BURIAL_MIN_INSIDE, BURIAL_RAYS};
 pub use clients::ClientId;
-pub use config::{LightingConfig, ServerConfig, Thresholds, MAX_BOUNCES};
+pub use config::{LightingConfig, ServerConfig, Thresholds, MAX_BOUNCES, MAX_SAMPLES_LIMIT};
 pub use dynamics::{Invalidation, MotionStats};
 pub use error::ServerError;
 pub use frustum::{Frustum, View};

@@ -16,7 +16,7 @@ use crate::Thresholds;
 /// AO and irradiance.
 pub(crate) fn republish(inst: &InstanceState, i: usize, t: &Thresholds) -> Option<u32> {
     let p = &inst.points;
-    let (count, old) = (p.count[i], p.published[i]);
+    let (count, old) = (p.samples(i), p.published[i]);
     if count == 0 && old == 0 {
         return None;
     }
@@ -84,7 +84,7 @@ pub(crate) fn apply(inst: &mut InstanceState, updates: &[(u32, u32)], frame: u64
         .collect();
     for (slot, cell, light) in cells {
         let light_changed = light.is_some_and(|l| l != inst.light_cell(slot));
-        if *inst.grid.cell(slot) != cell || light_changed {
+        if inst.grid.cell(slot) != cell || light_changed {
             inst.publish_cell(slot, cell, frame);
         }
         if let (true, Some(light)) = (light_changed, light) {

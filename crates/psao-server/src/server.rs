@@ -6,7 +6,7 @@ use std::time::Instant;
 use glam::{Affine3A, Vec3};
 use psao_delta::{InstanceDelta, InstanceInfo, Update};
 use psao_points::pack::unpack_ao;
-use psao_points::InstanceGrid;
+use psao_points::MirrorGrid;
 use psao_scene::{Motion, Scene};
 use psao_trace::ao::Medium;
 use psao_trace::{GeometryMode, Tracer};
@@ -347,7 +347,8 @@ impl Server {
             }
             let p = &mut self.instances[t.instance as usize].points;
             p.sum[t.index as usize] += t.sum;
-            p.count[t.index as usize] += t.rays;
+            let i = t.index as usize;
+            p.set_samples(i, p.samples(i) + t.rays);
             if let Some(light) = &mut p.light {
                 light.sum[t.index as usize] += t.light.sum;
                 light.count[t.index as usize] += t.light.paths;
@@ -681,7 +682,7 @@ impl Server {
     }
 
     /// The published (authoritative) grid of an instance: what clients mirror.
-    pub fn grid(&self, instance: usize) -> Option<&InstanceGrid> {
+    pub fn grid(&self, instance: usize) -> Option<&MirrorGrid> {
         self.instances.get(instance).map(|i| &i.grid)
     }
 
@@ -696,8 +697,8 @@ impl Server {
                 position: p.position[i],
                 normal: p.normal[i],
                 stored: p.stored.get(i),
-                samples: p.count[i],
-                ao: (p.count[i] > 0).then(|| p.sum[i] / p.count[i] as f32),
+                samples: p.samples(i),
+                ao: (p.samples(i) > 0).then(|| p.sum[i] / p.samples(i) as f32),
                 published: (p.published[i] != 0).then_some(p.published[i]),
             })
         })
@@ -745,7 +746,7 @@ fn delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> Instan
         (false, Some(changed)) => {
             let grid = &inst.grid;
             let cells: Vec<(u32, psao_points::Cell)> =
-                changed.cells.iter().map(|&s| (s, *grid.cell(s))).collect();
+                changed.cells.iter().map(|&s| (s, grid.cell(s))).collect();
             InstanceDelta {
                 instance: index,
                 buckets: changed
@@ -788,7 +789,7 @@ fn scan_delta(index: u32, inst: &InstanceState, snapshot: bool, since: u64) -> I
                     .is_some_and(|&t| changed_after(t, since))
             }
         })
-        .map(|(s, cell)| (s as u32, *cell))
+        .map(|(s, cell)| (s as u32, cell))
         .collect();
     InstanceDelta {
         instance: index,
@@ -814,6 +815,7 @@ mod tests {
     use super::*;
     use crate::blocks::PointOrder;
     use crate::Invalidation;
+    use psao_points::InstanceGrid;
     use psao_scene::{Camera, Instance, Material, Mesh};
 
     /// A 4 m floor and a 2 m wall standing on it.
@@ -954,7 +956,7 @@ mod tests {
                 for (i, grid) in mirror.iter().enumerate() {
                     let server_grid = server.grid(i).unwrap();
                     assert!(grid.buckets().eq(server_grid.buckets()));
-                    assert!(grid.cells().eq(server_grid.cells()));
+                    assert!(grid.cells().copied().eq(server_grid.cells()));
                 }
             }
         }
@@ -1024,10 +1026,10 @@ mod tests {
                     continue;
                 }
                 visible += 1;
-                if p.count[i] < max_samples {
+                if p.samples(i) < max_samples {
                     let tie = crate::blocks::tie_of(ii as u32, i as u32, server.config.seed);
                     keyed.push((
-                        (u64::from(p.count[i]) << 32) | u64::from(tie),
+                        (u64::from(p.samples(i)) << 32) | u64::from(tie),
                         ii as u32,
                         i as u32,
                     ));

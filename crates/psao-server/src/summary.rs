@@ -306,7 +306,7 @@ mod tests {
             stored: crate::instance::Bits::from_fn(n, |i| i % 7 != 3),
             sum: vec![0.0; n],
             count: (0..n as u64)
-                .map(|i| (hash64(i ^ 99) % 40) as u32)
+                .map(|i| (hash64(i ^ 99) % 40) as u16)
                 .collect(),
             published: vec![0; n],
             published_here: crate::instance::Bits::new(n),
@@ -326,8 +326,8 @@ mod tests {
                 .clone()
                 .filter_map(|k| {
                     let i = blocks.order.at(k) as usize;
-                    (p.stored.get(i) && p.count[i] < max)
-                        .then(|| entry(bin(p.count[i], blocks.tie(k)), k - range.start))
+                    (p.stored.get(i) && p.samples(i) < max)
+                        .then(|| entry(bin(p.samples(i), blocks.tie(k)), k - range.start))
                 })
                 .collect();
             expected.sort_unstable();
@@ -365,8 +365,8 @@ mod tests {
             for i in 0..n {
                 let h = hash64(i as u64 ^ (round << 40));
                 match h % 29 {
-                    0 | 1 => p.count[i] = (p.count[i] + 16).min(max),
-                    2 => p.count[i] = 0,
+                    0 | 1 => p.set_samples(i, (p.samples(i) + 16).min(max)),
+                    2 => p.set_samples(i, 0),
                     3 => p.stored.set(i, !p.stored.get(i)),
                     _ => continue,
                 }
@@ -385,13 +385,13 @@ mod tests {
         let few: Vec<u32> = (0..n as u32).step_by(97).collect();
         for &i in &few {
             let i = i as usize;
-            p.count[i] = if p.count[i] == 0 { 5 } else { 0 };
+            p.set_samples(i, if p.samples(i) == 0 { 5 } else { 0 });
         }
         s.refresh(&blocks, &p, &few);
         assert_consistent(&s, &blocks, &p, max);
         // A rebuild after changes nobody reported matches as well.
         for i in 0..n {
-            p.count[i] = (p.count[i] * 3 + 1) % (max + 2);
+            p.set_samples(i, (p.samples(i) * 3 + 1) % (max + 2));
         }
         s.rebuild(&blocks, &p);
         assert_consistent(&s, &blocks, &p, max);

@@ -440,7 +440,7 @@ pub(crate) fn trace(
     let job = |c: &Candidate| {
         let inst = &instances[c.instance as usize];
         let (origin, normal) = inst.world(c.index as usize);
-        let count = inst.points.count[c.index as usize];
+        let count = inst.points.samples(c.index as usize);
         Job {
             instance: c.instance,
             index: c.index,

@@ -339,7 +339,12 @@ fn skinned_points_follow_their_triangles_and_mirroring_stays_exact() {
         for e in bucket.entries.iter().filter(|e| e.key != 0) {
             let coord = layout.coord_of_id(e.key - 1).unwrap();
             assert_eq!(layout.bucket_of(e.key - 1), b);
-            for p in grid.cell_points(coord) {
+            let slot = grid.find_cell(coord).unwrap();
+            for p in grid
+                .records(slot)
+                .iter()
+                .filter_map(|&r| layout.unpack(coord, r))
+            {
                 decoded += 1;
                 let near = current
                     .iter()

@@ -24,7 +24,9 @@ use crate::run::{write_json, ServerTuning};
 use crate::scene_source::SceneInput;
 use psao_net::cpu_time::cpu_seconds;
 use psao_net::pipeline::CLIENT_HZ;
-use psao_net::process_memory::{malloc_stats, release_free_memory, resident, SlackTrimmer};
+use psao_net::process_memory::{
+    malloc_stats, map_large_blocks_apart, release_free_memory, resident, SlackTrimmer,
+};
 use psao_net::serve::{code, coding_plan, mean, percentile};
 
 /// Rays in the set `bench trace`'s reference rate is measured on.
@@ -151,6 +153,7 @@ pub fn run(args: &BenchStepArgs) -> Result<()> {
             args.load.hz
         );
     }
+    map_large_blocks_apart();
     let input = SceneInput::load(&args.load.scene)?;
     let path = input.camera_path(args.load.path.as_ref())?;
     let config = args

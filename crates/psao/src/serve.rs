@@ -57,6 +57,7 @@ pub struct ServeArgs {
 
 /// Runs `psao serve`.
 pub fn run(args: &ServeArgs) -> Result<()> {
+    psao_net::process_memory::map_large_blocks_apart();
     let tls = args.exposure.tls()?;
     let token = args.exposure.token.token()?;
     let input = SceneInput::load(&args.scene)?;

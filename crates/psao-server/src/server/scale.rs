@@ -130,7 +130,7 @@ impl Server {
                     p.sum[j] = if p.published[j] == 0 {
                         0.0
                     } else {
-                        unpack_ao(p.published[j]) * p.count[j] as f32
+                        unpack_ao(p.published[j]) * p.samples(j) as f32
                     };
                     adopted += 1;
                 }
@@ -231,7 +231,7 @@ impl Server {
                             index: j as u32,
                             bits: p.published[j],
                         },
-                        samples: p.count[j],
+                        samples: p.samples(j),
                     });
                 }
             }
@@ -255,8 +255,8 @@ impl Server {
             if p.published[j] == 0 {
                 continue;
             }
-            p.count[j] = s.samples.min(max);
-            p.sum[j] = unpack_ao(p.published[j]) * p.count[j] as f32;
+            p.set_samples(j, s.samples.min(max));
+            p.sum[j] = unpack_ao(p.published[j]) * p.samples(j) as f32;
             restored += 1;
         }
         for inst in &mut self.instances {
@@ -388,7 +388,7 @@ impl Server {
         let mut frame = run(&mine);
         frame.traced.extend(others.iter().map(|s| {
             let p = &self.instances[s.instance as usize].points;
-            let count = p.count[s.index as usize];
+            let count = p.samples(s.index as usize);
             // The paths the owner traces, so that selection stays in step across nodes.
             let paths =
                 (self.lighting.as_ref().zip(p.light.as_ref())).map_or(0, |(lighting, sums)| {

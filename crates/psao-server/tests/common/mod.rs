@@ -171,7 +171,7 @@ impl Mirror {
             assert!(mine.buckets().eq(theirs.buckets()), "instance {i} buckets");
             let n = mine.slot_count().max(theirs.slot_count()) as u32;
             for s in 0..n {
-                assert_eq!(mine.cell(s), theirs.cell(s), "instance {i} cell slot {s}");
+                assert_eq!(*mine.cell(s), theirs.cell(s), "instance {i} cell slot {s}");
             }
         }
     }
