@@ -27,9 +27,7 @@
 //! variance where interiors are brightest and an unbounded path length.)
 //!
 //! Random numbers are hashed from (seed, key, sample index, depth, purpose), so a sample is
-//! the same whichever thread traces it and a point can resume at any index. The first
-//! vertex's are stratified (an R2 sequence per purpose); deeper vertices take independent
-//! hashed numbers ([`numbers`]: why).
+//! the same whichever thread traces it and a point can resume at any index.
 
 use glam::Vec3;
 use psao_scene::{Light, LightShape, Scene, ScenePose};
@@ -174,7 +172,7 @@ impl<'a> DiffuseLighting<'a> {
                 self.direct(tracer, origin, n, face, (seed, key, depth, index), sharp);
             total += weight * direct;
             rays += shadow_rays + 1;
-            let (u1, u2) = numbers(seed, key, depth, 0, index);
+            let (u1, u2) = sample_2d(seed, stream(key, depth, 0), index);
             let ray = Ray::new(origin, cosine_hemisphere(n, u1, u2), f32::INFINITY);
             let mut hit = [None];
             tracer.intersect(std::slice::from_ref(&ray), &mut hit);
@@ -252,7 +250,7 @@ impl<'a> DiffuseLighting<'a> {
                     half_u,
                     half_v,
                 } => {
-                    let (a, b) = numbers(seed, key, depth, li as u32 + 1, index);
+                    let (a, b) = sample_2d(seed, stream(key, depth, li as u32 + 1), index);
                     let q = centre + (2.0 * a - 1.0) * half_u + (2.0 * b - 1.0) * half_v;
                     let normal_area = 4.0 * half_u.cross(half_v);
                     let d = q - origin;
@@ -280,72 +278,4 @@ impl<'a> DiffuseLighting<'a> {
 /// of point `key`'s paths.
 fn stream(key: u64, depth: u32, purpose: u32) -> u64 {
     hash64(key ^ hash64((u64::from(depth) << 32 | u64::from(purpose)) ^ 0x6769_5f70_6174_6873))
-}
-
-/// The two numbers in [0, 1) of one purpose at one depth of path `index` of point `key`.
-///
-/// At the first vertex, sample `index` of the purpose's own rotated R2 sequence
-/// ([`sample_2d`]): stratified over a point's paths, and the purposes at one vertex enter the
-/// path's sum as separate terms, so their joint distribution does not matter. Deeper, hashed
-/// independent numbers: every R2 sequence advances by the same step per index, so a second
-/// sequence of the same point is the first shifted by a constant (its rotation), and a deeper
-/// vertex's direction or light sample would be a fixed function of the first vertex's. A
-/// path's dimensions would then be dependent, and one seed's estimate of a bounce biased by
-/// an amount that no number of paths removes (it averages out only over seeds: measured in
-/// docs/LIGHTING.md, "Error budget").
-fn numbers(seed: u64, key: u64, depth: u32, purpose: u32, index: u32) -> (f32, f32) {
-    let stream = stream(key, depth, purpose);
-    if depth == 0 {
-        return sample_2d(seed, stream, index);
-    }
-    let h = hash64(hash64(seed ^ stream).wrapping_add(u64::from(index)));
-    // The top 24 bits of each half, exactly representable.
-    let unit = |x: u64| (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32);
-    (unit(h & 0xffff_ffff), unit(h >> 32))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The fraction of a point's first `n` paths whose numbers of `depth` and of the first
-    /// vertex's direction both fall below 1/2 on their first axis.
-    fn joint_low(seed: u64, key: u64, depth: u32, purpose: u32, n: u32) -> f64 {
-        let both = (0..n)
-            .filter(|&i| {
-                numbers(seed, key, 0, 0, i).0 < 0.5 && numbers(seed, key, depth, purpose, i).0 < 0.5
-            })
-            .count();
-        both as f64 / f64::from(n)
-    }
-
-    #[test]
-    fn deeper_numbers_are_independent_of_the_first_vertex() {
-        // Independent uniform numbers: both below 1/2 in a quarter of the paths (4096 paths:
-        // standard deviation 0.007). A constant shift c of the first vertex's sequence gives
-        // 1/2 − min(c, 1 − c) instead, far from 1/4 for most keys.
-        for key in 0..16 {
-            for (depth, purpose) in [(1, 0), (1, 1), (2, 0)] {
-                let f = joint_low(3, key, depth, purpose, 4096);
-                assert!(
-                    (f - 0.25).abs() < 0.03,
-                    "key {key}, depth {depth}, purpose {purpose}: {f}"
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn numbers_are_uniform_and_the_first_vertex_keeps_its_sequence() {
-        for depth in 0..3 {
-            let mut sum = (0.0, 0.0);
-            for i in 0..4096 {
-                let (a, b) = numbers(5, 11, depth, 0, i);
-                assert!((0.0..1.0).contains(&a) && (0.0..1.0).contains(&b));
-                sum = (sum.0 + f64::from(a), sum.1 + f64::from(b));
-            }
-            assert!((sum.0 / 4096.0 - 0.5).abs() < 0.02 && (sum.1 / 4096.0 - 0.5).abs() < 0.02);
-        }
-        assert_eq!(numbers(5, 11, 0, 2, 7), sample_2d(5, stream(11, 0, 2), 7));
-    }
 }

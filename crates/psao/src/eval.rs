@@ -53,12 +53,6 @@ pub struct EvalArgs {
     /// Rays per pixel of the few-spp per-pixel RTAO baseline.
     #[arg(long, default_value_t = 4)]
     pub rtao_spp: u32,
-    /// Paths per pixel of the reference lighting with `--lighting gi` (`--spp` is the
-    /// reference AO's). Its own noise bounds the PSNR any method can show against it: at
-    /// 128 paths it is 31 dB from a 2048-path reference on Sponza under the sun, at 1024
-    /// about 9 dB closer (docs/LIGHTING.md, "Error budget").
-    #[arg(long, default_value_t = 1024)]
-    pub gi_spp: u32,
     /// Server frames run at the first frame's time and camera before the measured range
     /// (not counted in any statistic), so the range starts from an accumulated state instead
     /// of a cold start.
@@ -93,12 +87,11 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     if args.every == 0 || args.points.is_empty() || args.server_hz.is_empty() {
         bail!("--every must be ≥ 1 and --points / --server-hz must not be empty");
     }
-    let max = crate::reference::MAX_SPP;
-    if [args.spp, args.rtao_spp, args.gi_spp]
-        .iter()
-        .any(|&n| n == 0 || n > max)
-    {
-        bail!("--spp, --rtao-spp and --gi-spp must be in 1..={max}");
+    if args.spp == 0 || args.spp > crate::reference::MAX_SPP || args.rtao_spp == 0 {
+        bail!(
+            "--spp and --rtao-spp must be in 1..={}",
+            crate::reference::MAX_SPP
+        );
     }
     // Checked before any work.
     args.lighting.config(Lighting::Ao)?;
@@ -178,11 +171,10 @@ fn prepare_frames(
         .join(reference_key(input, path, eval_frames, args)?);
     std::fs::create_dir_all(&cache_dir)
         .with_context(|| format!("cannot create {}", cache_dir.display()))?;
-    // The renderer's own spp is the reference lighting's; the AO traces pass `--spp`.
     let mut renderer = ReferenceRenderer::new(
         &input.scene,
         args.tuning.backend.unwrap_or_default(),
-        args.gi_spp,
+        args.spp,
         1,
     )?
     .with_medium(input.medium());
@@ -192,7 +184,7 @@ fn prepare_frames(
     let bar = progress::bar(per_frame * eval_frames.len() as u64, "references", "px");
     let gi_dir = match &lighting {
         Some(l) => {
-            let dir = cache_dir.join(gi_key(&input.scene, l.bounces, args.gi_spp));
+            let dir = cache_dir.join(gi_key(&input.scene, l.bounces));
             std::fs::create_dir_all(&dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
             Some((dir, l.bounces))
@@ -290,10 +282,10 @@ fn reference_key(
 }
 
 /// The cache folder name (inside the reference's) of the reference lighting with `bounces`
-/// bounces and `spp` paths per pixel: a hash of what lights the scene beyond its geometry (lights, sun keys, base
+/// bounces: a hash of what lights the scene beyond its geometry (lights, sun keys, base
 /// colours, environment: its constant, or its map's intensity, turn and radiance in 26
 /// directions).
-fn gi_key(scene: &Scene, bounces: u32, spp: u32) -> String {
+fn gi_key(scene: &Scene, bounces: u32) -> String {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     format!("{:?}{:?}", scene.lights, scene.sun_keys).hash(&mut h);
     for m in &scene.materials {
@@ -314,7 +306,7 @@ fn gi_key(scene: &Scene, bounces: u32, spp: u32) -> String {
             }
         }
     }
-    format!("gi{bounces}_{spp}spp_{:016x}", h.finish())
+    format!("gi{bounces}_{:016x}", h.finish())
 }
 
 fn composite_luma(scene: &Scene, gbuffer: &GBuffer, ao: &AoImage) -> AoImage {
