@@ -358,27 +358,9 @@ impl CompactModel {
         for (r, s) in stored.iter().enumerate() {
             let f = factors[s.row as usize] * s.scale;
             let at = s.offset as usize;
-            match (s.width, r == 0) {
-                (Width::Wide, true) => {
-                    for (o, &x) in out.iter_mut().zip(&self.wide[at..at + len]) {
-                        *o = f * x as f32;
-                    }
-                }
-                (Width::Wide, false) => {
-                    for (o, &x) in out.iter_mut().zip(&self.wide[at..at + len]) {
-                        *o += f * x as f32;
-                    }
-                }
-                (Width::Narrow, true) => {
-                    for (o, &x) in out.iter_mut().zip(&self.narrow[at..at + len]) {
-                        *o = f * x as f32;
-                    }
-                }
-                (Width::Narrow, false) => {
-                    for (o, &x) in out.iter_mut().zip(&self.narrow[at..at + len]) {
-                        *o += f * x as f32;
-                    }
-                }
+            match s.width {
+                Width::Wide => scale_row_into(out, &self.wide[at..at + len], f, r == 0),
+                Width::Narrow => scale_row_into(out, &self.narrow[at..at + len], f, r == 0),
             }
         }
     }
@@ -511,6 +493,21 @@ fn compact_block<'a>(
 /// The largest absolute value (0 when empty).
 fn max_abs(v: &[f32]) -> f32 {
     v.iter().fold(0.0f32, |a, x| a.max(x.abs()))
+}
+
+/// `out = f · row` when `first`, else `out += f · row`, element by element (a stored row of
+/// either width into a block's outputs).
+#[inline(always)]
+fn scale_row_into<T: Copy + Into<f32>>(out: &mut [f32], row: &[T], f: f32, first: bool) {
+    if first {
+        for (o, &x) in out.iter_mut().zip(row) {
+            *o = f * x.into();
+        }
+    } else {
+        for (o, &x) in out.iter_mut().zip(row) {
+            *o += f * x.into();
+        }
+    }
 }
 
 #[cfg(test)]

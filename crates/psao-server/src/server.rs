@@ -346,12 +346,12 @@ impl Server {
                 retrace_rays += u64::from(t.rays);
             }
             let p = &mut self.instances[t.instance as usize].points;
-            p.sum[t.index as usize] += t.sum;
             let i = t.index as usize;
+            p.sum[i] += t.sum;
             p.set_samples(i, p.samples(i) + t.rays);
             if let Some(light) = &mut p.light {
-                light.sum[t.index as usize] += t.light.sum;
-                light.count[t.index as usize] += t.light.paths;
+                light.sum[i] += t.light.sum;
+                light.count[i] += t.light.paths;
             }
         }
         // `traced` is in (instance, index) order.

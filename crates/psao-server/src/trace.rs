@@ -425,7 +425,8 @@ struct Job {
 /// Trace up to `rays_per_point` new samples (never beyond `max_samples`) for each selected
 /// point, in spatially coherent batches (runs of `selected`, whose points are numbered in
 /// Morton order of position) on the rayon pool, through `medium` if any (one medium sampler
-/// per work item). Results are in the order of `selected` and do not depend on the number of threads.
+/// per work item). Results are in the order of `selected` and do not depend on the number
+/// of threads.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn trace(
     tracer: &Tracer,
